@@ -1,0 +1,37 @@
+# glradial: two commands do all set-up on a fresh machine: `make demo` and `make test`.
+PY ?= python3
+STAMP := .setup.stamp
+
+.PHONY: setup system-deps demo test bench train evaluate clean
+
+system-deps:
+	@bash scripts/install_system_deps.sh
+
+$(STAMP): pyproject.toml scripts/install_system_deps.sh
+	@bash scripts/install_system_deps.sh
+	$(PY) -m pip install --quiet torch==2.13.0
+	$(PY) -m pip install --quiet -e ".[train,test,bench]"
+	@touch $(STAMP)
+
+setup: $(STAMP)
+
+demo: $(STAMP)
+	$(PY) -m glradial demo --out out/demo
+
+test: $(STAMP)
+	$(PY) -m pytest -q tests
+
+bench: $(STAMP)
+	$(PY) bench/bench_correct.py
+	$(PY) bench/bench_crops.py
+	$(PY) bench/bench_stadium.py
+	$(PY) bench/bench_estimate.py
+
+train: $(STAMP)
+	$(PY) -m net.train --config net/configs/shipped.json --out runs/shipped
+
+evaluate: $(STAMP)
+	$(PY) -m net.evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval
+
+clean:
+	rm -rf $(STAMP) out build dist *.egg-info .pytest_cache

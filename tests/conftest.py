@@ -1,0 +1,50 @@
+"""Shared fixtures: one headless EGL context for the session, the GL error flag checked around
+each test that uses it, and the real photographs of tests/data (copies of ../shared/data)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+DATA = Path(__file__).parent / "data"
+
+
+@pytest.fixture(scope="session")
+def gl_ctx():
+    """The test thread's glradial context (the one the module-level functions use)."""
+    from glradial.glcontext import thread_context
+
+    return thread_context()
+
+
+@pytest.fixture()
+def ctx(gl_ctx):
+    """The session context, with the GL error flag required clean before and after the test."""
+    assert gl_ctx.error == "GL_NO_ERROR", "GL error flag was set before the test"
+    yield gl_ctx
+    assert gl_ctx.error == "GL_NO_ERROR", "test left the GL error flag set"
+
+
+def read_rgb(name: str) -> np.ndarray:
+    """A test photo as H×W×3 uint8 RGB."""
+    image = cv2.imread(str(DATA / name), cv2.IMREAD_COLOR)
+    assert image is not None, f"cannot read {DATA / name}"
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+@pytest.fixture(scope="session")
+def chessboard() -> np.ndarray:
+    return read_rgb("chessboard_calibration2.jpg")
+
+
+@pytest.fixture(scope="session")
+def road() -> np.ndarray:
+    return read_rgb("road_straight_lines1.jpg")
+
+
+@pytest.fixture(scope="session")
+def field_panorama() -> np.ndarray:
+    return read_rgb("panorama_field_2048x1024.jpg")
