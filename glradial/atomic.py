@@ -1,0 +1,72 @@
+"""Atomic file writing: an output either appears complete or not at all.
+
+Convention: the data is written to a temporary file in the *same folder* as the target (so that the
+final ``os.replace`` is a rename on one file system, atomic on POSIX and Windows), whose name keeps
+the target's extension (encoders such as OpenCV's choose the format from it). The temporary file is
+removed on any exception, ``KeyboardInterrupt`` included, so an error or Ctrl-C leaves neither a
+half-written output nor a stray temporary file. An existing target is only replaced on success.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_folder"]
+
+
+def check_output_folder(path: str | os.PathLike) -> Path:
+    """Return ``path`` as a ``Path`` after checking that its folder exists and it is not a folder.
+
+    Raises ``FileNotFoundError`` / ``IsADirectoryError`` naming the path.
+    """
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise FileNotFoundError(f"output folder {str(folder)!r} does not exist (for {str(target)!r})")
+    if target.is_dir():
+        raise IsADirectoryError(f"output {str(target)!r} is a folder, expected a file name")
+    return target
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path next to ``path``; on success it is renamed to ``path``.
+
+    The temporary name is ``.<name>.<random>.tmp<suffix>`` (hidden, same suffix as ``path``). The
+    body writes the file at the yielded path (with any library); if the body raises, or writes
+    nothing, the temporary file is removed and ``path`` is left untouched.
+    """
+    target = check_output_folder(path)
+    fd, tmp_name = tempfile.mkstemp(
+        prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent if str(target.parent) else "."
+    )
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        yield tmp
+        if not tmp.is_file() or tmp.stat().st_size == 0:
+            raise OSError(f"nothing was written for {str(target)!r}")
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        raise
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (fsync before the rename) and return the path."""
+    with atomic_path(path) as tmp:
+        with open(tmp, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+    return Path(path)
+
+
+def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
+    """Write ``text`` to ``path`` atomically and return the path."""
+    return atomic_write_bytes(path, text.encode(encoding))

@@ -1,0 +1,126 @@
+"""The ``glradial`` command: argparse front end over ``glradial/commands/<name>.py``.
+
+Every subcommand module exposes ``add_parser(subparsers)`` and ``run(args) -> int`` (see
+:mod:`glradial.commands`). A module that is missing or fails to import does not break the others:
+its subcommand is still listed and says why it cannot run.
+
+Exit status: 0 success, 1 bad input or failed work (one line ``glradial: error: ...`` on stderr),
+2 wrong usage (argparse errors and conflicting options), 130 interrupted (Ctrl-C; outputs are
+written atomically, so nothing half-written is left). Set ``GLRADIAL_DEBUG=1`` to get tracebacks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import re
+import sys
+from typing import Sequence
+
+from . import __version__
+from .commands import CliError, UsageError
+
+__all__ = ["main", "build_parser", "COMMANDS"]
+
+#: subcommands in the order ``glradial --help`` lists them
+COMMANDS = ("correct", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
+
+PROG = "glradial"
+
+
+class _Parser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are one line: ``glradial: error: ... (see 'PROG --help')``, and
+    which takes negative numbers in exponent notation (``-8.1e-08``) as values, not options."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self._negative_number_matcher = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        self.exit(2, f"{PROG}: error: {message} (see '{self.prog} --help')\n")
+
+
+def _one_line(text: object) -> str:
+    return " ".join(str(text).split())
+
+
+def _unavailable(name: str, reason: str):
+    def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+        parser = subparsers.add_parser(name, help=f"(unavailable: {reason})", description=f"unavailable: {reason}")
+        parser.add_argument("rest", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
+        return parser
+
+    def run(args: argparse.Namespace) -> int:
+        raise CliError(f"the '{name}' command is unavailable: {reason}")
+
+    return add_parser, run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full parser; each subparser's ``func`` default is its module's ``run``."""
+    parser = _Parser(
+        prog=PROG,
+        description=(
+            "Radial lens distortion for sports-broadcast video: correct frames and videos, estimate the "
+            "lens with the bundled CNN, convert coefficients, export STMaps, render training crops. "
+            "Coefficients (k1, k2) are width-normalised: image width = 1, origin at the image centre, "
+            "p_d = p_u (1 + k1 r^2 + k2 r^4)."
+        ),
+        epilog="Run 'glradial COMMAND --help' for the options of a command. GLRADIAL_DEBUG=1 shows tracebacks.",
+    )
+    parser.add_argument("--version", action="version", version=f"glradial {__version__}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="no progress bars (they are drawn only on a terminal anyway)")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"{__package__}.commands.{name}")
+            add_parser, run = module.add_parser, module.run
+        except ModuleNotFoundError as err:
+            if err.name != f"{__package__}.commands.{name}":
+                add_parser, run = _unavailable(name, f"missing module {err.name}")
+            elif name == "evaluate":
+                continue  # optional command
+            else:
+                add_parser, run = _unavailable(name, "not installed in this build")
+        except Exception as err:  # a broken module must not break the other commands
+            add_parser, run = _unavailable(name, f"{type(err).__name__}: {_one_line(err)}")
+        sub = add_parser(subparsers)
+        sub.set_defaults(func=run, _subparser=sub)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line ``argv`` (default ``sys.argv[1:]``) and return the exit status."""
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as stop:  # --help, --version, usage errors
+        return stop.code if isinstance(stop.code, int) else (0 if stop.code is None else 2)
+    if not getattr(args, "command", None):
+        parser.print_help(sys.stderr)
+        return 2
+    debug = bool(os.environ.get("GLRADIAL_DEBUG"))
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        sys.stderr.write(f"\n{PROG}: interrupted\n")
+        return 130
+    except UsageError as err:
+        sys.stderr.write(f"{PROG}: error: {_one_line(err)} (see '{args._subparser.prog} --help')\n")
+        return 2
+    except BrokenPipeError:
+        return 1
+    except Exception as err:
+        if debug:
+            raise
+        if isinstance(err, (CliError, ValueError, TypeError, OSError)):
+            message = _one_line(err)
+        else:
+            message = f"{type(err).__name__}: {_one_line(err)}"
+        sys.stderr.write(f"{PROG}: error: {message}\n")
+        return 1
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

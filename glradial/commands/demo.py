@@ -1,0 +1,280 @@
+"""``glradial demo``: the whole pipeline on a procedural stadium, with a figure like the paper's.
+
+Renders a stadium panorama, a broadcast-like 16:9 frame from it with a known lens, estimates the
+lens with the bundled CNN, corrects the frame, and writes ``DIR/demo.png``: the distorted frame with
+the straight chords between the ends of each visible pitch line (the painted lines bow away from
+them), the corrected frame with the pitch lines' true straight positions (the painted lines lie on
+them when the estimate is right), and close-ups of the four corners of both. Prints the true and
+estimated coefficients and the maximum displacement error in pixels of a 1920-wide frame.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import finite_float, parse_size, positive_float, positive_int
+
+DESCRIPTION = __doc__.split("\n\n", 1)[1]
+
+#: the demo's default camera (degrees) and lens; k2 near the Lopez-Antequera manifold of k1
+DEFAULT_K1 = -0.32
+DEFAULT_K2 = 0.019 * DEFAULT_K1 + 0.805 * DEFAULT_K1**2
+#: a stadium of the held-out test split (seed % 10 == 9)
+DEFAULT_SEED = 9
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "demo", help="render a stadium frame with a known lens, estimate it, correct it, draw a figure",
+        description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--out", default="out/demo", metavar="DIR", help="output folder, created if missing (default: out/demo)")
+    parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"stadium seed (default {DEFAULT_SEED}, a test-split stadium)")
+    parser.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH", help="frame size in pixels (default 1280x720)")
+    parser.add_argument("--panorama-width", type=positive_int, default=4096, metavar="PX",
+                        help="width of the rendered panorama in pixels, height = width / 2 (default 4096)")
+    parser.add_argument("--k1", type=finite_float, default=DEFAULT_K1, help=f"true k1 of the frame (width-normalised; default {DEFAULT_K1})")
+    parser.add_argument("--k2", type=finite_float, default=DEFAULT_K2, help=f"true k2 of the frame (width-normalised; default {DEFAULT_K2:.4f})")
+    parser.add_argument("--hfov", type=positive_float, default=50.0, help="horizontal field of view of the frame in degrees (default 50)")
+    parser.add_argument("--target", type=finite_float, nargs=2, default=(-18.0, 6.0), metavar=("X", "Y"),
+                        help="pitch point the camera aims at, metres from the centre spot along / across the pitch (default -18 6)")
+    parser.add_argument("--model", metavar="ONNX", help="ONNX model to use instead of the bundled one")
+    return parser
+
+
+# -- geometry -----------------------------------------------------------------------------------
+def pitch_lines() -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """The straight pitch markings as (name, start, end) scene points in metres (z = 0)."""
+    from ..stadium_style import HALF_LENGTH as L, HALF_WIDTH as W
+
+    box_x, box_y = L - 16.5, 20.16
+    area_x, area_y = L - 5.5, 9.16
+    lines = [("touchline", (-L, W), (L, W)), ("touchline", (-L, -W), (L, -W)), ("halfway line", (0, -W), (0, W))]
+    for s in (-1.0, 1.0):
+        lines += [
+            ("goal line", (s * L, -W), (s * L, W)),
+            ("penalty box", (s * box_x, -box_y), (s * box_x, box_y)),
+            ("penalty box", (s * box_x, box_y), (s * L, box_y)),
+            ("penalty box", (s * box_x, -box_y), (s * L, -box_y)),
+            ("goal area", (s * area_x, -area_y), (s * area_x, area_y)),
+        ]
+    return [(name, np.array([*a, 0.0]), np.array([*b, 0.0])) for name, a, b in lines]
+
+
+def world_to_crop_world(style, points: np.ndarray) -> np.ndarray:
+    """Scene points (N, 3, metres) -> rays in the crop convention's world axes (x toward longitude
+    +90°, y down, z toward longitude 0 on the horizon), from the panorama camera."""
+    yaw = math.radians(style.yaw)
+    forward = np.array([math.cos(yaw), math.sin(yaw), 0.0])
+    right = np.array([math.sin(yaw), -math.cos(yaw), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    v = np.asarray(points, dtype=np.float64) - np.asarray(style.camera, dtype=np.float64)
+    return np.stack([v @ right, -(v @ up), v @ forward], axis=-1)
+
+
+def aim(style, target_xy: tuple[float, float]) -> tuple[float, float]:
+    """(pan, tilt) in degrees that put the scene point (x, y, 0) at the frame centre."""
+    w = world_to_crop_world(style, np.array([[target_xy[0], target_xy[1], 0.0]]))[0]
+    pan = math.degrees(math.atan2(w[0], w[2]))
+    tilt = math.degrees(math.atan2(-w[1], math.hypot(w[0], w[2])))
+    return pan, tilt
+
+
+def project_undistorted(params, style, points: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Scene points -> undistorted lens points p_u (N, 2) of the crop; NaN behind the camera."""
+    rays = world_to_crop_world(style, points) @ params.rotation()  # R^T w for each row
+    with np.errstate(divide="ignore", invalid="ignore"):
+        p = params.focal * rays[:, :2] / rays[:, 2:3]
+    p[rays[:, 2] <= 1e-6] = np.nan
+    return p
+
+
+def _lens_to_px(p: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    width, height = size
+    return np.stack([p[:, 0] * width + width / 2 - 0.5, p[:, 1] * width + height / 2 - 0.5], axis=-1)
+
+
+def _visible_run(px: np.ndarray, size: tuple[int, int], margin: float = 2.0) -> np.ndarray | None:
+    """The longest run of consecutive points inside the frame, or None if shorter than 20 % of it."""
+    width, height = size
+    inside = np.all(np.isfinite(px), axis=1) & (px[:, 0] >= margin) & (px[:, 0] <= width - 1 - margin)
+    inside &= (px[:, 1] >= margin) & (px[:, 1] <= height - 1 - margin)
+    best, start = (0, 0), None
+    for i, ok in enumerate(list(inside) + [False]):
+        if ok and start is None:
+            start = i
+        elif not ok and start is not None:
+            if i - start > best[1] - best[0]:
+                best = (start, i)
+            start = None
+    run = px[best[0] : best[1]]
+    if len(run) < 2 or np.hypot(*(run[-1] - run[0])) < 0.2 * width:
+        return None
+    return run
+
+
+# -- figure -------------------------------------------------------------------------------------
+def _draw_segments(image: np.ndarray, segments: list[np.ndarray], scale: float, offset: tuple[float, float] = (0.0, 0.0),
+                   color=(255, 40, 40), thickness: int = 1) -> np.ndarray:
+    """Draw straight segments (first to last point of each, frame pixels) on a resized view of the
+    frame: view pixel = (frame pixel + 0.5 - offset) * scale - 0.5."""
+    import cv2
+
+    out = image.copy()
+    for seg in segments:
+        a, b = ((np.asarray(point) + 0.5 - np.asarray(offset)) * scale - 0.5 for point in (seg[0], seg[-1]))
+        cv2.line(out, tuple(int(round(v * 16)) for v in a), tuple(int(round(v * 16)) for v in b), color, thickness,
+                 cv2.LINE_AA, shift=4)
+    return out
+
+
+def _label(panel: np.ndarray, text: str, height: int = 28) -> np.ndarray:
+    import cv2
+
+    bar = np.full((height, panel.shape[1], 3), 24, np.uint8)
+    cv2.putText(bar, text, (8, height - 9), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (240, 240, 240), 1, cv2.LINE_AA)
+    return np.vstack([bar, panel])
+
+
+def _corners(image: np.ndarray, segments: list[np.ndarray], fraction: float, tile_width: int) -> np.ndarray:
+    """The four corners (``fraction`` of the width and height each), enlarged to ``tile_width``,
+    with the segments drawn at the enlarged scale."""
+    import cv2
+
+    height, width = image.shape[:2]
+    cw, ch = int(round(width * fraction)), int(round(height * fraction))
+    scale = tile_width / cw
+    tiles = []
+    for x0, y0 in ((0, 0), (width - cw, 0), (0, height - ch), (width - cw, height - ch)):
+        crop = cv2.resize(image[y0 : y0 + ch, x0 : x0 + cw], (tile_width, int(round(ch * scale))), interpolation=cv2.INTER_CUBIC)
+        crop = _draw_segments(crop, segments, scale, (x0, y0), thickness=2)
+        crop[:, -2:] = 24
+        tiles.append(crop)
+    return np.hstack(tiles)
+
+
+def compose_figure(distorted: np.ndarray, corrected: np.ndarray, chords: list[np.ndarray], straight: list[np.ndarray],
+                   labels: tuple[str, str, str, str], panel_width: int = 960) -> np.ndarray:
+    """Figure (RGB uint8): both frames with their reference lines, then the corner close-ups of each."""
+    import cv2
+
+    height, width = distorted.shape[:2]
+    scale = panel_width / width
+    panel = (panel_width, int(round(height * scale)))
+    top = np.hstack([
+        _label(_draw_segments(cv2.resize(distorted, panel, interpolation=cv2.INTER_AREA), chords, scale), labels[0]),
+        _label(_draw_segments(cv2.resize(corrected, panel, interpolation=cv2.INTER_AREA), straight, scale), labels[1]),
+    ])
+    close_a = _label(_corners(distorted, chords, 0.25, panel_width // 2), labels[2])
+    close_b = _label(_corners(corrected, straight, 0.25, panel_width // 2), labels[3])
+    return np.vstack([top, close_a, close_b])
+
+
+# -- run ----------------------------------------------------------------------------------------
+def _find_model(explicit: str | None) -> Path | None:
+    if explicit:
+        path = Path(explicit)
+        if not path.is_file():
+            raise FileNotFoundError(f"model file {explicit!r} does not exist")
+        return path
+    folder = Path(__file__).resolve().parent.parent / "models"
+    models = sorted(folder.glob("*.onnx"))
+    return models[0] if models else None
+
+
+def displacement_error_px(true: tuple[float, float], estimate: tuple[float, float], size: tuple[int, int]) -> float:
+    """``1920 · max_r |P(r, true) − P(r, estimate)|`` for r up to the frame's corner radius."""
+    from ..lens import corner_radius
+
+    r = np.linspace(0.0, corner_radius(size), 512)
+    d = (true[0] - estimate[0]) * r**3 + (true[1] - estimate[1]) * r**5
+    return float(1920.0 * np.max(np.abs(d)))
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..crops import CropParams, render_crops
+    from ..lens import Lens
+    from ..remap import correct
+    from ..stadium import stadium_panorama
+    from ..stadium_style import sample_style
+    from ..video import write_image
+
+    start = time.monotonic()
+    size = args.size
+    true_lens = Lens(args.k1, args.k2)
+    true_lens.check_frame(size)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    def log(text: str) -> None:
+        print(f"[{time.monotonic() - start:5.1f}s] {text}", flush=True)
+
+    style = sample_style(args.seed)
+    pano_size = (args.panorama_width, args.panorama_width // 2)
+    panorama = stadium_panorama(args.seed, pano_size)
+    log(f"stadium {args.seed}: {pano_size[0]}x{pano_size[1]} panorama, camera '{style.camera_kind}' at "
+        f"({style.camera[0]:.0f}, {style.camera[1]:.0f}, {style.camera[2]:.0f}) m")
+    pan, tilt = aim(style, tuple(args.target))
+    params = CropParams(pan=pan, tilt=tilt, roll=0.7, hfov=args.hfov, k1=true_lens.k1, k2=true_lens.k2)
+    frame = render_crops(panorama, [params], size=size)[0]
+    log(f"frame {size[0]}x{size[1]}: pan {pan:.1f}°, tilt {tilt:.1f}°, roll 0.7°, hfov {args.hfov:g}°, "
+        f"true k1={true_lens.k1:.4f} k2={true_lens.k2:.4f}")
+
+    model = _find_model(args.model)
+    if model is None:
+        print("glradial demo: no model shipped (no glradial/models/*.onnx): skipping estimation and "
+              "correcting with the true lens", flush=True)
+        used, source = (true_lens.k1, true_lens.k2), "true"
+    else:
+        from ..estimate import Estimator
+
+        estimate = Estimator(model).estimate(frame)
+        used = (float(estimate.k1), float(estimate.k2)) if hasattr(estimate, "k1") else tuple(map(float, estimate))
+        source = "estimated"
+        error = displacement_error_px((true_lens.k1, true_lens.k2), used, size)
+        log(f"estimated with {model.name}: k1={used[0]:.4f} k2={used[1]:.4f}")
+        print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
+        print(f"estimated k1={used[0]:+.4f} k2={used[1]:+.4f}")
+        print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
+
+    corrected = correct(frame, used[0], used[1], fit="same")
+    chords, straight = [], []
+    for _name, a, b in pitch_lines():
+        points = a + np.linspace(0.0, 1.0, 400)[:, None] * (b - a)
+        p_u = project_undistorted(params, style, points, size)
+        finite = np.all(np.isfinite(p_u), axis=1)
+        p_d = np.full_like(p_u, np.nan)
+        p_d[finite] = true_lens.distort_points(_lens_to_px(p_u[finite], size), size)
+        run_d = _visible_run(p_d, size)
+        if run_d is not None:
+            chords.append(run_d)
+        # corrected frame (fit "same"): the ideal picture shows the line at p_u; keep the part whose
+        # source lies inside the distorted frame
+        px_u = _lens_to_px(p_u, size)
+        px_u[~np.all(np.isfinite(p_d), axis=1) | ~_inside(p_d, size)] = np.nan
+        run_u = _visible_run(px_u, size)
+        if run_u is not None:
+            straight.append(run_u)
+    labels = (
+        f"distorted frame, k1={true_lens.k1:.3f} k2={true_lens.k2:.3f}; red: chords between line ends",
+        f"corrected ({source} k1={used[0]:.3f} k2={used[1]:.3f}); red: true straight pitch lines",
+        "distorted: corner close-ups",
+        "corrected: corner close-ups",
+    )
+    figure = compose_figure(frame, corrected, chords, straight, labels)
+    write_image(out / "distorted.png", frame)
+    write_image(out / "corrected.png", corrected)
+    write_image(out / "demo.png", figure)
+    log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
+    return 0
+
+
+def _inside(px: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    width, height = size
+    with np.errstate(invalid="ignore"):
+        return (px[:, 0] >= 0) & (px[:, 0] <= width - 1) & (px[:, 1] >= 0) & (px[:, 1] <= height - 1)

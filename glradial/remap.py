@@ -1,0 +1,488 @@
+"""Lens correction and distortion of whole frames: GLSL shaders (``correct.frag``,
+``distort.frag``) or the same maps through ``cv2.remap``.
+
+Convention (DESIGN.md): a lens is ``(k1, k2)`` in width-normalised lens units, principal point at the
+frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k2 r_u⁴)``.
+
+* :func:`correct` (undistortion): output pixel ``q`` shows the undistorted point ``p_u = s q`` and
+  samples the input at ``p_d = P(p_u)``; no inverse is needed. With ``fit="same"`` it equals
+  ``cv2.undistort(frame, K, (k1, k2, 0, 0))`` with ``K = [[W, 0, (W-1)/2], [0, W, (H-1)/2], [0, 0, 1]]``.
+* :func:`distort`: output pixel ``q`` is the distorted point ``p_d = q`` and samples the undistorted
+  input at ``P⁻¹(q) / s`` (``inverse="exact"``: bounded Newton, or ``"drap"``: the paper's
+  polynomial). ``distort`` with scale ``s`` is the inverse of ``correct`` with the same ``s``.
+* ``s`` is :func:`fit_scale` (see :meth:`glradial.Lens.fit_scale`): ``"same"`` -> 1, ``"crop"`` ->
+  every output pixel has a source, ``"full"`` -> the whole input stays visible, or a positive number
+  taken as ``s``. A distortion's "crop" is a correction's "full": ``correct(distort(x, fit="crop"),
+  fit="full") ≈ x``.
+* Frames: NumPy ``H×W`` or ``H×W×C`` with ``C`` in (1, 3, 4); dtype uint8, uint16 or float32; the
+  result has the same shape and dtype, channels in the same order (nothing is swapped).
+* ``fill``: the value of output pixels with no source, a scalar or one value per channel, in the
+  frame's units. No source: the source position lies outside the input's area (pixel coordinates
+  outside ``[-0.5, W-0.5] × [-0.5, H-0.5]``) or, for distortion, no undistorted point maps there.
+  Such pixels get ``fill`` exactly; every other pixel is interpolated with taps beyond the edge
+  repeating the edge pixel (``BORDER_REPLICATE``), so the fill never bleeds into valid pixels
+  (OpenCV's ``cv2.undistort`` instead blends the outermost ring with black).
+* ``interpolation``: ``"nearest"``, ``"linear"`` (bilinear) or ``"cubic"`` (Keys, a = -0.75, the
+  kernel of OpenCV's ``INTER_CUBIC``).
+* ``backend``: ``"gl"`` (the shaders, through :class:`Remapper` on the thread's EGL context),
+  ``"cpu"`` (:meth:`glradial.Lens.maps` converted to OpenCV's fixed-point maps, cached, then
+  ``cv2.remap``), ``"auto"``: ``"cpu"`` when the GL renderer is a software rasteriser (Mesa llvmpipe,
+  softpipe, ...), when no EGL context can be made, or when the frame exceeds the GL texture limit;
+  ``"gl"`` otherwise. A CPU round trip through llvmpipe is slower than ``cv2.remap`` on the same cores.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import os
+import threading
+from collections import OrderedDict
+from typing import Literal, Sequence
+
+import cv2
+import moderngl
+import numpy as np
+
+from . import glcontext
+from .lens import DIRECTIONS, FITS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
+from .shaderlib import build_program
+
+Interpolation = Literal["nearest", "linear", "cubic"]
+Backend = Literal["auto", "gl", "cpu"]
+INTERPOLATIONS = ("nearest", "linear", "cubic")
+BACKENDS = ("auto", "gl", "cpu")
+INVERSES = ("exact", "drap")
+
+#: frame dtype -> (moderngl texture dtype, largest value: the texture's 1.0)
+_TEXTURE_DTYPES = {
+    np.dtype(np.uint8): ("f1", 255.0),
+    np.dtype(np.uint16): ("nu2", 65535.0),
+    np.dtype(np.float32): ("f4", 1.0),
+}
+_CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
+_GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}
+#: cv2.remap writes at most SHRT_MAX - 1 pixels per side.
+CPU_MAX_SIDE = 32766
+#: fixed-point maps kept by the CPU backend (each 1080p entry is ~12 MB).
+CPU_MAP_CACHE_SIZE = 8
+
+
+# -- validation ---------------------------------------------------------------------------------
+def _check_frame(frame: object) -> tuple[int, int, int]:
+    """Validate a frame and return ``(H, W, C)``."""
+    if not isinstance(frame, np.ndarray):
+        raise TypeError(f"frame must be a NumPy array, got {type(frame).__name__}")
+    if frame.dtype not in _TEXTURE_DTYPES:
+        raise TypeError(f"frame dtype must be uint8, uint16 or float32, got {frame.dtype}")
+    if frame.ndim == 2:
+        height, width = frame.shape
+        channels = 1
+    elif frame.ndim == 3:
+        height, width, channels = frame.shape
+    else:
+        raise ValueError(f"frame must be H×W or H×W×C with C in (1, 3, 4), got a {frame.ndim}-D array of shape {frame.shape}")
+    if height == 0 or width == 0:
+        raise ValueError(f"frame is empty: shape {frame.shape}")
+    if channels not in (1, 3, 4):
+        raise ValueError(f"frame must be H×W×C with C in (1, 3, 4), got shape {frame.shape} ({channels} channels)")
+    return height, width, channels
+
+
+def _check_fill(fill: object, channels: int, dtype: np.dtype) -> tuple[float, ...]:
+    """Fill value(s) in frame units -> a tuple of ``channels`` floats."""
+    values = fill if isinstance(fill, (list, tuple, np.ndarray)) else [fill]
+    values = list(np.asarray(values).ravel()) if isinstance(values, np.ndarray) else list(values)
+    if len(values) == 1:
+        values = values * channels
+    if len(values) != channels:
+        raise ValueError(f"fill must be a scalar or {channels} values (one per channel), got {fill!r}")
+    out = []
+    for value in values:
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.integer, np.floating)):
+            raise TypeError(f"fill must be real numbers, got {fill!r}")
+        number = float(value)
+        if not math.isfinite(number):
+            raise ValueError(f"fill must be finite, got {fill!r}")
+        if dtype.kind == "u" and not 0 <= number <= np.iinfo(dtype).max:
+            raise ValueError(f"fill {fill!r} is outside the range of {dtype} (0..{np.iinfo(dtype).max})")
+        out.append(number)
+    return tuple(out)
+
+
+def _lens(k1: object, k2: object) -> Lens:
+    return Lens(k1, k2)  # type: ignore[arg-type]
+
+
+def fit_scale(
+    lens: Lens | tuple[float, float],
+    size: tuple[int, int],
+    fit: Fit = "same",
+    direction: Direction = "undistort",
+) -> float:
+    """The scale ``s`` a fit uses on a ``(W, H)`` frame (closed form, see
+    :meth:`glradial.Lens.fit_scale`): correction shows ``p_u = s q`` at output lens point ``q``,
+    distortion samples the input at ``P⁻¹(q) / s``. ``s > 1`` zooms out, ``s < 1`` zooms in."""
+    if not isinstance(lens, Lens):
+        try:
+            k1, k2 = lens  # type: ignore[misc]
+        except (TypeError, ValueError):
+            raise TypeError(f"lens must be a Lens or (k1, k2), got {lens!r}") from None
+        lens = _lens(k1, k2)
+    return lens.fit_scale(size, fit, direction)
+
+
+# -- GL backend -----------------------------------------------------------------------------------
+class Remapper:
+    """Owns the GL programs, textures and framebuffer that correct and distort frames.
+
+    ``Remapper()`` makes its own headless EGL context (released with it); ``Remapper(ctx)`` works on
+    a caller's moderngl context (left alone on release), e.g. to embed in a graphics pipeline with
+    :meth:`render_texture`, which never leaves the GPU. Programs are compiled on first use per
+    (direction, interpolation, inverse); the source/target textures and framebuffer are kept while
+    the frame size, channel count and dtype stay the same, and frames are read back into a NumPy
+    array (``out=`` to reuse one). Use on the thread that made the context; ``release()`` or
+    ``with Remapper() as r:`` frees everything.
+    """
+
+    def __init__(self, ctx: moderngl.Context | None = None) -> None:
+        self._owns_context = ctx is None
+        self.ctx: moderngl.Context = glcontext.create_context() if ctx is None else ctx
+        self.max_texture_size = glcontext.max_texture_size(self.ctx)
+        self._programs: dict[tuple[str, str, str], tuple[moderngl.Program, moderngl.VertexArray]] = {}
+        self._frame_key: tuple[int, int, int, np.dtype] | None = None
+        self._source: moderngl.Texture | None = None
+        self._target: moderngl.Texture | None = None
+        self._fbo: moderngl.Framebuffer | None = None
+        self._released = False
+
+    # -- public API ------------------------------------------------------------------------------
+    def correct(
+        self,
+        frame: np.ndarray,
+        k1: float,
+        k2: float,
+        *,
+        fit: Fit = "same",
+        interpolation: Interpolation = "linear",
+        fill: float | Sequence[float] = 0,
+        out: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Undistort ``frame`` on the GPU; see the module docstring. ``out``: an array of the
+        frame's shape and dtype to read the result into (returned)."""
+        return self._remap(frame, _lens(k1, k2), "undistort", fit, interpolation, fill, "exact", out)
+
+    def distort(
+        self,
+        frame: np.ndarray,
+        k1: float,
+        k2: float,
+        *,
+        fit: Fit = "same",
+        interpolation: Interpolation = "linear",
+        fill: float | Sequence[float] = 0,
+        inverse: InverseMethod = "exact",
+        out: np.ndarray | None = None,
+    ) -> np.ndarray:
+        """Apply the lens to an undistorted ``frame`` on the GPU; see the module docstring."""
+        return self._remap(frame, _lens(k1, k2), "distort", fit, interpolation, fill, inverse, out)
+
+    def render_texture(
+        self,
+        source: moderngl.Texture,
+        target: moderngl.Framebuffer,
+        k1: float,
+        k2: float,
+        *,
+        direction: Direction = "undistort",
+        fit: Fit = "same",
+        scale: float | None = None,
+        interpolation: Interpolation = "linear",
+        fill: Sequence[float] = (0.0, 0.0, 0.0, 0.0),
+        inverse: InverseMethod = "exact",
+        viewport: tuple[int, int, int, int] | None = None,
+        texture_unit: int = 0,
+    ) -> None:
+        """Draw ``source`` corrected (``direction="undistort"``) or distorted into ``target``,
+        both on this Remapper's context; nothing goes through the CPU.
+
+        Convention: texture row 0 is the top of the image and is drawn to framebuffer row 0
+        (``gl_FragCoord.y = 0.5``), no flip; a window's default framebuffer shows row 0 at the
+        bottom. ``viewport = (x, y, width, height)`` in ``target`` pixels (default: all of it) is
+        the output frame; its size sets the fit and the fold-over check. ``fill`` is RGBA in
+        texture units (0..1 for normalized textures). ``scale`` overrides ``fit``. The caller's
+        blend, scissor and other state apply; the sampler state of ``source`` is ignored (taps
+        are texelFetch).
+        """
+        self._check_alive()
+        lens = _lens(k1, k2)
+        direction = _choice("direction", direction, DIRECTIONS)
+        interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
+        inverse = _choice("inverse", inverse, INVERSES)
+        if viewport is None:
+            viewport = (0, 0, target.width, target.height)
+        x0, y0, width, height = (int(v) for v in viewport)
+        size = frame_size((width, height))
+        s = lens.fit_scale(size, fit, direction) if scale is None else _positive("scale", scale)
+        lens.check_frame(size, s)
+        rgba = _check_fill(fill, 4, np.dtype(np.float32))
+        self._draw(source, target, (x0, y0, width, height), lens, direction, s, interpolation, inverse, rgba, texture_unit)
+
+    def release(self) -> None:
+        """Free every GL object (and the context if this Remapper made it). Idempotent."""
+        if self._released:
+            return
+        self._release_frame_objects()
+        for program, vao in self._programs.values():
+            glcontext.release_objects(self.ctx, vao, program)
+        self._programs.clear()
+        if self._owns_context:
+            self.ctx.release()
+        self._released = True
+
+    def __enter__(self) -> "Remapper":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+    @property
+    def texture_ids(self) -> tuple[int, int] | None:
+        """GL names of the current source and target textures (None before the first frame)."""
+        if self._source is None or self._target is None:
+            return None
+        return self._source.glo, self._target.glo
+
+    # -- internals -------------------------------------------------------------------------------
+    def _check_alive(self) -> None:
+        if self._released:
+            raise RuntimeError("this Remapper has been released")
+
+    def _program(self, direction: str, interpolation: str, inverse: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
+        key = (direction, interpolation, inverse)
+        entry = self._programs.get(key)
+        if entry is None:
+            defines: dict[str, object] = {"SAMPLING_INTERPOLATION": _GLSL_INTERPOLATION[interpolation]}
+            if direction == "distort":
+                defines["LENS_INVERSE_EXACT"] = int(inverse == "exact")
+            fragment = "correct.frag" if direction == "undistort" else "distort.frag"
+            program = build_program(self.ctx, "fullscreen.vert", fragment, defines)
+            entry = (program, self.ctx.vertex_array(program, []))
+            self._programs[key] = entry
+        return entry
+
+    def _release_frame_objects(self) -> None:
+        glcontext.release_objects(self.ctx, self._fbo, self._target, self._source)
+        self._fbo = self._target = self._source = None
+        self._frame_key = None
+
+    def _frame_objects(self, width: int, height: int, channels: int, dtype: np.dtype) -> None:
+        key = (width, height, channels, dtype)
+        if key == self._frame_key:
+            return
+        self._release_frame_objects()
+        texture_dtype = _TEXTURE_DTYPES[dtype][0]
+        self._source = self.ctx.texture((width, height), channels, dtype=texture_dtype, alignment=1)
+        self._target = self.ctx.texture((width, height), channels, dtype=texture_dtype, alignment=1)
+        self._fbo = self.ctx.framebuffer(color_attachments=[self._target])
+        self._frame_key = key
+
+    def _draw(
+        self,
+        source: moderngl.Texture,
+        target: moderngl.Framebuffer,
+        rect: tuple[int, int, int, int],
+        lens: Lens,
+        direction: str,
+        scale: float,
+        interpolation: str,
+        inverse: str,
+        fill_rgba: tuple[float, ...],
+        texture_unit: int,
+    ) -> None:
+        program, vao = self._program(direction, interpolation, inverse)
+        x0, y0, width, height = rect
+        source.use(location=texture_unit)
+        program["u_source"] = texture_unit
+        program["u_k"] = (lens.k1, lens.k2)
+        program["u_scale"] = scale
+        program["u_out_rect"] = (float(x0), float(y0), float(width), float(height))
+        program["u_aspect_out"] = height / width
+        program["u_aspect_in"] = source.height / source.width
+        program["u_fill"] = tuple(fill_rgba) + (0.0,) * (4 - len(fill_rgba))
+        target.use()
+        target.viewport = (x0, y0, width, height)
+        vao.render(mode=moderngl.TRIANGLES, vertices=3)
+
+    def _remap(
+        self,
+        frame: np.ndarray,
+        lens: Lens,
+        direction: str,
+        fit: str,
+        interpolation: str,
+        fill: object,
+        inverse: str,
+        out: np.ndarray | None,
+    ) -> np.ndarray:
+        self._check_alive()
+        height, width, channels = _check_frame(frame)
+        interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
+        inverse = _choice("inverse", inverse, INVERSES)
+        fill_values = _check_fill(fill, channels, frame.dtype)
+        if max(width, height) > self.max_texture_size:
+            raise ValueError(
+                f"frame {width}×{height} exceeds this GL driver's texture limit of {self.max_texture_size} "
+                f"pixels per side (GL_MAX_TEXTURE_SIZE); use backend='cpu' for it"
+            )
+        scale = lens.fit_scale((width, height), fit, direction)
+        lens.check_frame((width, height), scale)
+        if out is None:
+            out = np.empty(frame.shape, frame.dtype)
+        elif not (isinstance(out, np.ndarray) and out.shape == frame.shape and out.dtype == frame.dtype and out.flags.c_contiguous):
+            raise ValueError(f"out must be a C-contiguous {frame.dtype} array of shape {frame.shape}")
+        self._frame_objects(width, height, channels, frame.dtype)
+        assert self._source is not None and self._fbo is not None
+        self._source.write(np.ascontiguousarray(frame))
+        unit = _TEXTURE_DTYPES[frame.dtype][1]
+        rgba = tuple(v / unit for v in fill_values)
+        self._draw(self._source, self._fbo, (0, 0, width, height), lens, direction, scale, interpolation, inverse, rgba, 0)
+        self._fbo.read_into(out, components=channels, alignment=1, dtype=_TEXTURE_DTYPES[frame.dtype][0])
+        return out
+
+
+# -- CPU backend ----------------------------------------------------------------------------------
+_map_cache: "OrderedDict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]]" = OrderedDict()
+_map_lock = threading.Lock()
+
+
+def cpu_maps(
+    lens: Lens, size: tuple[int, int], direction: str, scale: float, inverse: str, nearest: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """OpenCV fixed-point maps (``CV_16SC2`` + ``CV_16UC1``) of :meth:`Lens.maps` and the flat
+    indices of the output pixels with no source (outside the input's area, or no inverse), cached
+    (LRU of :data:`CPU_MAP_CACHE_SIZE`) by lens, size, direction, scale, inverse and nearest."""
+    key = (lens.k1, lens.k2, size, direction, scale, inverse if direction == "distort" else "", nearest)
+    with _map_lock:
+        maps = _map_cache.get(key)
+        if maps is not None:
+            _map_cache.move_to_end(key)
+            return maps
+    map_x, map_y = lens.maps(size, direction, inverse=inverse, scale=scale)
+    width, height = size
+    outside = (map_x < -0.5) | (map_x > width - 0.5) | (map_y < -0.5) | (map_y > height - 0.5)
+    map1, map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2, nninterpolation=nearest)
+    maps = (map1, map2, np.flatnonzero(outside))
+    with _map_lock:
+        _map_cache[key] = maps
+        while len(_map_cache) > CPU_MAP_CACHE_SIZE:
+            _map_cache.popitem(last=False)
+    return maps
+
+
+def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpolation: str, fill: object, inverse: str) -> np.ndarray:
+    height, width, channels = _check_frame(frame)
+    interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
+    inverse = _choice("inverse", inverse, INVERSES)
+    fill_values = _check_fill(fill, channels, frame.dtype)
+    if max(width, height) > CPU_MAX_SIDE:
+        raise ValueError(f"frame {width}×{height} exceeds cv2.remap's limit of {CPU_MAX_SIDE} pixels per side")
+    scale = lens.fit_scale((width, height), fit, direction)
+    lens.check_frame((width, height), scale)
+    map1, map2, outside = cpu_maps(lens, (width, height), direction, scale, inverse, interpolation == "nearest")
+    result = cv2.remap(frame, map1, map2, _CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
+    result = result.reshape(frame.shape)
+    if outside.size:
+        result.reshape(height * width, channels)[outside] = np.asarray(fill_values, frame.dtype)
+    return result
+
+
+# -- module-level functions -----------------------------------------------------------------------
+_local = threading.local()
+_auto_lock = threading.Lock()
+_auto_choice: dict[int, str] = {}
+
+
+def _thread_remapper() -> Remapper:
+    """The calling thread's Remapper on :func:`glcontext.thread_context` (one per thread and process)."""
+    pid = os.getpid()
+    remapper = getattr(_local, "remapper", None)
+    if remapper is None or getattr(_local, "pid", None) != pid:
+        _local.remapper = Remapper(glcontext.thread_context())
+        _local.pid = pid
+    return _local.remapper
+
+
+def auto_backend() -> str:
+    """What ``backend="auto"`` picks in this process: ``"cpu"`` if no EGL context can be made or
+    the renderer is a software rasteriser (llvmpipe, softpipe, swrast, lavapipe), else ``"gl"``."""
+    pid = os.getpid()
+    with _auto_lock:
+        choice = _auto_choice.get(pid)
+    if choice is None:
+        try:
+            ctx = glcontext.thread_context()
+        except glcontext.GLUnavailableError:
+            choice = "cpu"
+        else:
+            choice = "cpu" if glcontext.is_software_renderer(ctx) else "gl"
+        with _auto_lock:
+            _auto_choice[pid] = choice
+    return choice
+
+
+def _run(frame, k1, k2, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
+    lens = _lens(k1, k2)
+    backend = _choice("backend", backend, BACKENDS)
+    if backend == "auto":
+        backend = auto_backend()
+        if backend == "gl":
+            height, width, _ = _check_frame(frame)
+            if max(width, height) > _thread_remapper().max_texture_size:
+                backend = "cpu"
+    if backend == "cpu":
+        return _remap_cpu(frame, lens, direction, fit, interpolation, fill, inverse)
+    return _thread_remapper()._remap(frame, lens, direction, fit, interpolation, fill, inverse, None)
+
+
+def correct(
+    frame: np.ndarray,
+    k1: float,
+    k2: float,
+    *,
+    fit: Fit = "same",
+    interpolation: Interpolation = "linear",
+    fill: float | Sequence[float] = 0,
+    backend: Backend = "auto",
+) -> np.ndarray:
+    """Remove the lens ``(k1, k2)`` from ``frame``; a new array of the same shape and dtype.
+
+    Convention: see the module docstring (lens units, fit scale, frames, fill, interpolation,
+    backends). ``fit="same"`` equals ``cv2.undistort(frame, K, (k1, k2, 0, 0))`` with
+    ``K = [[W, 0, (W-1)/2], [0, W, (H-1)/2], [0, 0, 1]]``. Raises ``ValueError`` when the lens
+    folds over inside the (fitted) frame, for bad shapes and unknown option values, ``TypeError``
+    for non-array frames, unsupported dtypes and non-real coefficients.
+    """
+    return _run(frame, k1, k2, "undistort", fit, interpolation, fill, "exact", backend)
+
+
+def distort(
+    frame: np.ndarray,
+    k1: float,
+    k2: float,
+    *,
+    fit: Fit = "same",
+    interpolation: Interpolation = "linear",
+    fill: float | Sequence[float] = 0,
+    inverse: InverseMethod = "exact",
+    backend: Backend = "auto",
+) -> np.ndarray:
+    """Apply the lens ``(k1, k2)`` to an undistorted ``frame``; a new array, same shape and dtype.
+
+    Each output pixel samples the input at the inverse of the lens (``inverse="exact"``: bounded
+    Newton, pixels the lens never reaches get ``fill``; ``"drap"``: the paper's four-term
+    polynomial, up to ~0.002 lens units off at the extremes of its k1 range). Same conventions and
+    errors as :func:`correct`; ``correct(distort(x, k1, k2), k1, k2) ≈ x`` for the same scale
+    (``fit="same"``, the same number, or "crop" here with "full" there).
+    """
+    return _run(frame, k1, k2, "distort", fit, interpolation, fill, inverse, backend)

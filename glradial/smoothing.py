@@ -1,0 +1,231 @@
+"""Per-shot smoothing of per-frame lens estimates, and shot-cut detection.
+
+A broadcast camera's lens changes only with zoom (``k̃ = k (W/f)^2``, DESIGN.md), so within one shot
+the true ``(k1, k2)`` is a slow function of time, while per-frame CNN estimates are noisy and now and
+then wrong. Two pieces:
+
+* :class:`ShotDetector` finds cuts: a frame starts a new shot when it differs from the previous
+  frame much more than recent frames differed from theirs (colour-histogram distance and a
+  thumbnail difference, both compared against fixed floors and against the median of the last
+  ``window`` scores).
+* :func:`smooth_track` smooths each shot on its own (nothing is carried across a cut): a robust
+  local-linear regression (LOWESS with tricube time weights and bisquare robustness weights). The
+  local line follows a zoom; samples whose lens is far from the local fit get weight 0.
+
+Convention: times are frame indices (integers, 0 = first frame); coefficients are width-normalised
+``(k1, k2)`` (DESIGN.md). The distance between two lenses is the maximum radial displacement
+``max_r |P(r, a) - P(r, b)|`` in lens units (image widths) over ``r`` in ``[0, radius]``, with
+``P(r, k) = r (1 + k1 r^2 + k2 r^4)``; multiply by the frame width for pixels.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import cv2
+import numpy as np
+
+__all__ = ["ShotDetector", "detect_cuts", "lens_distance", "smooth_shot", "smooth_track", "shot_ids"]
+
+#: corner radius of a 16:9 frame in lens units, the default extent of :func:`lens_distance`
+RADIUS_16_9 = 0.5 * float(np.hypot(1.0, 9.0 / 16.0))
+
+
+def lens_distance(a: np.ndarray, b: np.ndarray, radius: float = RADIUS_16_9, samples: int = 64) -> np.ndarray:
+    """Maximum radial displacement between lenses ``a`` and ``b`` (arrays ``(..., 2)`` of k1, k2)
+    over ``r`` in ``[0, radius]``, in lens units (image widths)."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    r = np.linspace(0.0, radius, samples)
+    d = a - b
+    displacement = d[..., 0:1] * r**3 + d[..., 1:2] * r**5
+    return np.max(np.abs(displacement), axis=-1)
+
+
+# -- shot cuts --------------------------------------------------------------------------------
+@dataclass
+class ShotDetector:
+    """Causal cut detector fed one frame at a time (``H x W x 3`` uint8, any channel order).
+
+    A frame starts a new shot when its score exceeds ``threshold`` and ``ratio`` times the median
+    of the previous ``window`` scores, and at least ``min_shot`` frames have passed since the last
+    cut. The score is the larger of the Bhattacharyya distance between the frames' HSV histograms
+    (0 = identical, 1 = disjoint) and ``thumb_gain`` x the mean absolute difference of 32x18 grey
+    thumbnails (in [0, 1] of the full scale). The first frame always starts shot 0.
+    """
+
+    threshold: float = 0.3
+    ratio: float = 3.0
+    window: int = 12
+    min_shot: int = 4
+    thumb_gain: float = 4.0
+    _previous: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
+    _recent: deque = field(default_factory=lambda: deque(maxlen=64), repr=False)
+    _since_cut: int = field(default=0, repr=False)
+    scores: list[float] = field(default_factory=list, repr=False)
+
+    def _features(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        frame = np.asarray(frame)
+        if frame.ndim == 2:
+            frame = np.repeat(frame[:, :, None], 3, axis=2)
+        if frame.ndim != 3 or frame.shape[2] < 3:
+            raise ValueError(f"frames must be H×W×3, got shape {frame.shape}")
+        frame = frame[:, :, :3]
+        if frame.dtype != np.uint8:
+            scale = 255.0 / (65535.0 if frame.dtype == np.uint16 else 1.0)
+            frame = np.clip(frame.astype(np.float32) * scale, 0, 255).astype(np.uint8)
+        small = cv2.resize(frame, (64, 36), interpolation=cv2.INTER_AREA)
+        hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
+        hist = cv2.calcHist([hsv], [0, 1, 2], None, [16, 4, 4], [0, 180, 0, 256, 0, 256])
+        hist = cv2.normalize(hist, None).astype(np.float32)
+        thumb = cv2.resize(cv2.cvtColor(small, cv2.COLOR_BGR2GRAY), (32, 18), interpolation=cv2.INTER_AREA)
+        return hist, thumb.astype(np.float32) / 255.0
+
+    def score(self, a: tuple[np.ndarray, np.ndarray], b: tuple[np.ndarray, np.ndarray]) -> float:
+        hist = float(cv2.compareHist(a[0], b[0], cv2.HISTCMP_BHATTACHARYYA))
+        thumb = float(np.mean(np.abs(a[1] - b[1]))) * self.thumb_gain
+        return max(hist, thumb)
+
+    def update(self, frame: np.ndarray) -> bool:
+        """Feed the next frame; True when it starts a new shot (always True for the first frame)."""
+        features = self._features(frame)
+        previous, self._previous = self._previous, features
+        if previous is None:
+            self._since_cut = 1
+            return True
+        value = self.score(previous, features)
+        self.scores.append(value)
+        recent = list(self._recent)[-self.window :]
+        baseline = float(np.median(recent)) if recent else 0.0
+        cut = value > self.threshold and value > self.ratio * baseline and self._since_cut >= self.min_shot
+        if cut:
+            self._since_cut = 1
+            self._recent.clear()
+        else:
+            self._since_cut += 1
+            self._recent.append(value)
+        return cut
+
+
+def detect_cuts(frames, **kwargs: object) -> list[int]:
+    """Frame indices that start a shot (always including 0) for an iterable of frames."""
+    detector = ShotDetector(**kwargs)  # type: ignore[arg-type]
+    return [index for index, frame in enumerate(frames) if detector.update(frame)]
+
+
+def shot_ids(cuts: list[int] | np.ndarray, n_frames: int) -> np.ndarray:
+    """Shot id (0, 1, ...) of every frame, from the frames that start a shot."""
+    starts = np.zeros(n_frames, dtype=np.int64)
+    for cut in cuts:
+        if 0 < cut < n_frames:
+            starts[cut] = 1
+    return np.cumsum(starts)
+
+
+# -- smoothing ----------------------------------------------------------------------------------
+def _tricube(u: np.ndarray) -> np.ndarray:
+    u = np.clip(np.abs(u), 0.0, 1.0)
+    return (1.0 - u**3) ** 3
+
+
+def smooth_shot(
+    times: np.ndarray,
+    lenses: np.ndarray,
+    query: np.ndarray,
+    *,
+    half_window: float,
+    iterations: int = 3,
+    min_scale: float = 5e-4,
+    radius: float = RADIUS_16_9,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Robust local-linear fit of the samples ``lenses`` (N x 2) at ``times`` (N), evaluated at
+    ``query`` (M). Returns ``(smoothed (M x 2), weights (N,))``; weight 0 marks a rejected sample.
+
+    Each query point fits ``k(t) = a + b (t - q)`` with weights ``tricube((t - q) / h) * w_i``, where
+    ``h`` is ``half_window`` frames (widened so that at least 3 samples count) and ``w_i`` are bisquare
+    robustness weights from the samples' residual distance (:func:`lens_distance`) over
+    ``6 * max(MAD, min_scale)`` (``min_scale`` in lens units: residuals below ~ it are never
+    rejected). Queries outside the sampled span take the fit at the nearest sampled time (no
+    extrapolation).
+    """
+    times = np.asarray(times, dtype=np.float64)
+    lenses = np.asarray(lenses, dtype=np.float64).reshape(-1, 2)
+    query = np.asarray(query, dtype=np.float64)
+    n = len(times)
+    if n == 0:
+        raise ValueError("a shot needs at least one lens sample")
+    if n != len(lenses):
+        raise ValueError(f"times and lenses differ in length: {n} and {len(lenses)}")
+    if half_window <= 0:
+        raise ValueError(f"half_window must be positive (frames), got {half_window}")
+    if n == 1:
+        return np.repeat(lenses, len(query), axis=0), np.ones(1)
+    robust = np.ones(n)
+
+    def fit(at: np.ndarray) -> np.ndarray:
+        out = np.empty((len(at), 2))
+        for j, q in enumerate(at):
+            dt = times - q
+            h = half_window
+            nearest = np.sort(np.abs(dt))
+            h = max(h, nearest[min(2, n - 1)] * 1.0001 + 1e-9)
+            w = _tricube(dt / h) * robust
+            if np.count_nonzero(w > 0) == 0:
+                w = _tricube(dt / h) + 1e-12
+            sw = w.sum()
+            mean_t = (w * dt).sum() / sw
+            var_t = (w * (dt - mean_t) ** 2).sum() / sw
+            mean_k = (w[:, None] * lenses).sum(axis=0) / sw
+            if var_t > 1e-9 * h * h and np.count_nonzero(w > 1e-6) >= 3:
+                slope = (w[:, None] * (dt - mean_t)[:, None] * (lenses - mean_k)).sum(axis=0) / (sw * var_t)
+                out[j] = mean_k - slope * mean_t
+            else:
+                out[j] = mean_k
+        return out
+
+    for _ in range(iterations):
+        residual = lens_distance(lenses, fit(times), radius)
+        mad = float(np.median(residual))
+        u = residual / (6.0 * max(mad, min_scale))
+        robust = np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0)
+    clamped = np.clip(query, times.min(), times.max())
+    return fit(clamped), robust
+
+
+def smooth_track(
+    times: np.ndarray,
+    lenses: np.ndarray,
+    shots: np.ndarray,
+    *,
+    half_window: float = 25.0,
+    iterations: int = 3,
+    min_scale: float = 5e-4,
+    radius: float = RADIUS_16_9,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Smooth per-frame estimates shot by shot and return a lens for every frame.
+
+    ``shots`` is the shot id of every frame (length = frame count, :func:`shot_ids`); ``times``
+    (N, frame indices, strictly increasing) and ``lenses`` (N x 2) are the estimated frames. Every
+    shot must hold at least one estimate. Returns ``(per-frame lenses (n_frames x 2), sample weights
+    (N,))``. Each shot is smoothed with :func:`smooth_shot` independently, so a cut resets it.
+    """
+    shots = np.asarray(shots)
+    times = np.asarray(times, dtype=np.int64)
+    lenses = np.asarray(lenses, dtype=np.float64).reshape(-1, 2)
+    if len(times) and (times.min() < 0 or times.max() >= len(shots)):
+        raise ValueError(f"estimate times must lie in [0, {len(shots) - 1}], got {times.min()}..{times.max()}")
+    if np.any(np.diff(times) <= 0):
+        raise ValueError("estimate times must be strictly increasing")
+    out = np.empty((len(shots), 2))
+    weights = np.ones(len(times))
+    for shot in np.unique(shots):
+        frames = np.flatnonzero(shots == shot)
+        mine = np.flatnonzero(shots[times] == shot)
+        if len(mine) == 0:
+            raise ValueError(f"shot {shot} (frames {frames[0]}..{frames[-1]}) has no estimate")
+        out[frames], weights[mine] = smooth_shot(
+            times[mine], lenses[mine], frames, half_window=half_window, iterations=iterations,
+            min_scale=min_scale, radius=radius,
+        )
+    return out, weights

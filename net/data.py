@@ -1,0 +1,299 @@
+"""Training and test data for the estimator: panoramas, a background crop producer, a reuse pool.
+
+Convention: crops are uint8 RGB ``N x h x w x 3`` at the network input size ``out_size = (w, h)``,
+rendered by :class:`glradial.crops.CropRenderer` with the frame geometry ``size`` (1280 x 720, 16:9)
+that the labels refer to; labels are float32 ``N x 2`` = ``(k1, k2)`` in width-normalised lens
+units, drawn from the paper's distribution (:func:`glradial.crops.sample_crop_params`).
+
+Panoramas: procedural stadiums (:func:`glradial.stadium.stadium_panorama`) rendered once per seed
+and size and cached as ``.npy`` under a cache folder (``data_cache/`` by default, git-ignored);
+train / val / test seeds follow :func:`glradial.stadium_style.split_seeds`. ``synthetic_panorama``
+is a fast stand-in (random lines and blobs) for tests.
+
+Throughput on a CPU-only machine: rendering a crop (llvmpipe) costs about as much as a training
+step on it, so the trainer keeps a pool of recent crops and, each step, pulls a fixed number of
+fresh crops from a producer process (which renders ahead, in parallel) and samples its batch from
+the pool. The number of fresh crops per step is fixed, so a run is deterministic per seed no matter
+how fast the producer is.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import queue as queue_mod
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator, Sequence
+
+import numpy as np
+
+#: Frame geometry the labels refer to (the paper's 1280 x 720 crops).
+FRAME_SIZE = (1280, 720)
+
+
+# --- panoramas ------------------------------------------------------------------------------------
+
+
+def split_seeds(split: str, n: int, start: int = 0) -> list[int]:
+    """The first ``n`` stadium seeds of ``split`` ("train", "val", "test")."""
+    from glradial.stadium_style import split_seeds as _split_seeds
+
+    return _split_seeds(split, n, start)
+
+
+def synthetic_panorama(seed: int, size: tuple[int, int] = (512, 256)) -> np.ndarray:
+    """A fast procedural stand-in panorama (green ground, white lines, coloured blocks), uint8 RGB."""
+    import cv2
+
+    width, height = size
+    rng = np.random.default_rng(seed)
+    pano = np.zeros((height, width, 3), np.uint8)
+    pano[: height // 2] = rng.integers(60, 200, 3)
+    pano[height // 2 :] = (40, int(rng.integers(100, 160)), 40)
+    for _ in range(40):
+        x0, y0 = int(rng.integers(0, width)), int(rng.integers(0, height))
+        x1, y1 = int(rng.integers(0, width)), int(rng.integers(0, height))
+        colour = tuple(int(c) for c in rng.integers(0, 256, 3))
+        if rng.random() < 0.5:
+            cv2.line(pano, (x0, y0), (x1, y1), (255, 255, 255), max(1, width // 512))
+        else:
+            cv2.rectangle(pano, (x0, y0), (x0 + width // 40, y0 + height // 40), colour, -1)
+    return pano
+
+
+def stadium_panorama_cached(seed: int, size: tuple[int, int], cache_dir: str | Path | None) -> np.ndarray:
+    """The stadium panorama of ``seed`` at ``size = (W, H)``, rendered once and cached as ``.npy``."""
+    if cache_dir is not None:
+        path = Path(cache_dir) / f"stadium_{seed}_{size[0]}x{size[1]}.npy"
+        if path.exists():
+            return np.load(path)
+    from glradial.stadium import stadium_panorama
+
+    pano = np.ascontiguousarray(stadium_panorama(seed, size=tuple(size)))
+    if pano.ndim != 3 or pano.shape[:2] != (size[1], size[0]) or pano.dtype != np.uint8:
+        raise RuntimeError(f"stadium_panorama({seed}) returned {pano.dtype} {pano.shape}, expected {size[1]}x{size[0]}x3 uint8")
+    pano = pano[:, :, :3]
+    if cache_dir is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".tmp{os.getpid()}.npy")
+        np.save(tmp, pano)
+        os.replace(tmp, path)
+    return pano
+
+
+@dataclass
+class PanoramaSource:
+    """Where a producer gets panoramas: ``kind`` "stadium" (seeds) or "synthetic" (seeds) or "files"."""
+
+    kind: str
+    seeds: Sequence[int] = ()
+    size: tuple[int, int] = (2048, 1024)
+    cache_dir: str | None = "data_cache"
+    files: Sequence[str] = ()
+
+    def load(self) -> list[np.ndarray]:
+        if self.kind == "stadium":
+            return [stadium_panorama_cached(int(s), tuple(self.size), self.cache_dir) for s in self.seeds]
+        if self.kind == "synthetic":
+            return [synthetic_panorama(int(s), tuple(self.size)) for s in self.seeds]
+        if self.kind == "files":
+            import cv2
+
+            out = []
+            for f in self.files:
+                img = cv2.imread(str(f), cv2.IMREAD_COLOR)
+                if img is None:
+                    raise FileNotFoundError(f"cannot read panorama {f}")
+                out.append(np.ascontiguousarray(img[:, :, ::-1]))
+            return out
+        raise ValueError(f"panorama source kind must be 'stadium', 'synthetic' or 'files', got {self.kind!r}")
+
+
+# --- crop stream ----------------------------------------------------------------------------------
+
+
+def crop_stream(
+    panoramas: Sequence[np.ndarray],
+    chunk: int,
+    seed: int,
+    *,
+    out_size: tuple[int, int],
+    size: tuple[int, int] = FRAME_SIZE,
+    ranges: dict | None = None,
+    panoramas_per_batch: int = 4,
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Endless deterministic stream of ``(images, labels)`` chunks of ``chunk`` crops, rendered in
+    the calling process by :func:`glradial.crop_stream.crop_batches` (every panorama stays uploaded)."""
+    from glradial.crop_stream import crop_batches
+
+    stream = crop_batches(panoramas, chunk, seed=seed, size=size, out_size=out_size, workers=0, ranges=ranges,
+                          panoramas_per_batch=panoramas_per_batch, cache=max(1, len(panoramas)))
+    try:
+        for batch in stream:
+            yield np.ascontiguousarray(batch.images), np.ascontiguousarray(batch.labels, dtype=np.float32)
+    finally:
+        stream.close()
+
+
+def _producer_main(out_queue, source: PanoramaSource, chunk: int, seed: int, out_size, ranges, threads: int) -> None:
+    os.environ.setdefault("LP_NUM_THREADS", str(threads))
+    try:
+        panoramas = source.load()
+        for images, labels in crop_stream(panoramas, chunk, seed, out_size=out_size, ranges=ranges):
+            out_queue.put((images, labels))
+    except KeyboardInterrupt:
+        pass
+    except BaseException as err:  # report to the trainer instead of dying silently
+        out_queue.put(("error", repr(err)))
+        raise
+
+
+class CropProducer:
+    """A background process running :func:`crop_stream` into a bounded queue.
+
+    ``take(n)`` returns exactly the next ``n`` crops of the stream (blocking), whatever the chunking.
+    The process makes its own EGL context after it starts (spawn start method).
+    """
+
+    def __init__(self, source: PanoramaSource, *, seed: int, out_size: tuple[int, int], chunk: int = 64,
+                 ranges: dict | None = None, threads: int = 1, prefetch: int = 8):
+        ctx = mp.get_context("spawn")
+        self._queue = ctx.Queue(maxsize=prefetch)
+        env_before = os.environ.get("LP_NUM_THREADS")
+        os.environ["LP_NUM_THREADS"] = str(threads)
+        try:
+            self._proc = ctx.Process(
+                target=_producer_main, args=(self._queue, source, chunk, seed, tuple(out_size), ranges, threads), daemon=True
+            )
+            self._proc.start()
+        finally:
+            if env_before is None:
+                os.environ.pop("LP_NUM_THREADS", None)
+            else:
+                os.environ["LP_NUM_THREADS"] = env_before
+        self._images: np.ndarray | None = None
+        self._labels: np.ndarray | None = None
+        self._pos = 0
+        self.wait_s = 0.0
+
+    def _next_chunk(self, timeout: float) -> None:
+        t0 = time.monotonic()
+        while True:
+            try:
+                item = self._queue.get(timeout=1.0)
+                break
+            except queue_mod.Empty:
+                if not self._proc.is_alive():
+                    raise RuntimeError(f"crop producer died (exit code {self._proc.exitcode})") from None
+                if time.monotonic() - t0 > timeout:
+                    raise TimeoutError(f"no crops from the producer in {timeout:.0f} s") from None
+        self.wait_s += time.monotonic() - t0
+        if isinstance(item[0], str):
+            raise RuntimeError(f"crop producer failed: {item[1]}")
+        self._images, self._labels = item
+        self._pos = 0
+
+    def take(self, n: int, timeout: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
+        images, labels = [], []
+        while n > 0:
+            if self._images is None or self._pos >= len(self._images):
+                self._next_chunk(timeout)
+            k = min(n, len(self._images) - self._pos)
+            images.append(self._images[self._pos : self._pos + k])
+            labels.append(self._labels[self._pos : self._pos + k])
+            self._pos += k
+            n -= k
+        return np.concatenate(images), np.concatenate(labels)
+
+    def close(self) -> None:
+        if self._proc.is_alive():
+            self._proc.terminate()
+        self._proc.join(timeout=10)
+        self._queue.close()
+
+    def __enter__(self) -> "CropProducer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class CropPool:
+    """Ring buffer of the most recent ``capacity`` crops; batches are sampled uniformly from it."""
+
+    def __init__(self, capacity: int, out_size: tuple[int, int]):
+        w, h = out_size
+        self.images = np.zeros((capacity, h, w, 3), np.uint8)
+        self.labels = np.zeros((capacity, 2), np.float32)
+        self.capacity = capacity
+        self.count = 0
+        self._next = 0
+
+    def add(self, images: np.ndarray, labels: np.ndarray) -> None:
+        for img, lab in zip(images, labels):
+            self.images[self._next] = img
+            self.labels[self._next] = lab
+            self._next = (self._next + 1) % self.capacity
+            self.count = min(self.count + 1, self.capacity)
+
+    def sample(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        if self.count == 0:
+            raise RuntimeError("the crop pool is empty")
+        idx = rng.integers(0, self.count, n)
+        return self.images[idx], self.labels[idx]
+
+    def state(self) -> dict:
+        return {"count": self.count, "next": self._next}
+
+
+def render_test_set(
+    source: PanoramaSource, n: int, seed: int, out_size: tuple[int, int], *, ranges: dict | None = None,
+    per_panorama: int | None = None,
+) -> tuple[np.ndarray, np.ndarray, list]:
+    """Render ``n`` crops (no augmentation) spread evenly over ``source``'s panoramas, in this process.
+
+    Returns ``(images, labels, params)``; ``params`` are the :class:`CropParams` (for error by field
+    of view). Deterministic per ``seed``.
+    """
+    from glradial.crops import CropRenderer, sample_crop_params
+
+    panoramas = source.load()
+    counts = [n // len(panoramas) + (1 if i < n % len(panoramas) else 0) for i in range(len(panoramas))]
+    images, params_all = [], []
+    for j, (pano, count) in enumerate(zip(panoramas, counts)):
+        if count == 0:
+            continue
+        params = sample_crop_params(count, seed * 1000 + j, size=FRAME_SIZE, **(ranges or {}))
+        with CropRenderer(pano, size=FRAME_SIZE, out_size=out_size) as renderer:
+            images.append(np.ascontiguousarray(renderer.render(params)[..., :3]))
+        params_all += params
+    labels = np.array([(p.k1, p.k2) for p in params_all], np.float32)
+    return np.concatenate(images), labels, params_all
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m net.data --split train --n 32 --size 4096 2048``: render + cache stadium panoramas."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python -m net.data", description=main.__doc__)
+    parser.add_argument("--split", action="append", required=True, help="train / val / test (repeatable)")
+    parser.add_argument("--n", type=int, action="append", required=True, help="panoramas per --split")
+    parser.add_argument("--size", type=int, nargs=2, default=(4096, 2048))
+    parser.add_argument("--cache-dir", default="data_cache")
+    args = parser.parse_args(argv)
+    for split, n in zip(args.split, args.n):
+        for seed in split_seeds(split, n):
+            t0 = time.monotonic()
+            existed = (Path(args.cache_dir) / f"stadium_{seed}_{args.size[0]}x{args.size[1]}.npy").exists()
+            stadium_panorama_cached(seed, tuple(args.size), args.cache_dir)
+            if not existed:
+                print(f"{split} seed {seed}: {time.monotonic() - t0:.1f} s", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

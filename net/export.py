@@ -1,0 +1,177 @@
+"""Export a trained estimator to ONNX with its metadata; check it against torch.
+
+Usage::
+
+    python -m net.export --checkpoint runs/shipped/best.pt --out glradial/models/glradial_k1k2.onnx \
+        [--metrics runs/shipped/eval.json] [--run-config runs/shipped/config.json]
+
+Graph (opset 17). Input ``image``: uint8 ``N x H x W x 3`` RGB (NHWC), the 16:9 frame already
+resized (area interpolation) to the network input ``input_size = (W, H)``. The graph does the rest
+of the preprocessing itself: cast to float, ``/ 255``, (grayscale models: BT.601 luma), minus
+``mean``, divided by ``std``, NHWC -> NCHW. Output ``k``: float32 ``N x 2`` = ``(k1, k2)`` in
+width-normalised lens units. ``N`` is dynamic.
+
+Metadata (``metadata_props``, all strings; JSON where structured): ``glradial_format`` ("1"),
+``model_config`` (the :class:`~.model.ModelConfig` dict), ``input_size`` ("W,H"), ``input_layout``
+("NHWC uint8 RGB"), ``preprocessing`` (prose), ``output`` (prose), ``training`` (JSON: data, steps,
+wall time), ``metrics`` (JSON), ``version`` (glradial version), ``onnx_check`` (the agreement
+measured here).
+
+Check: the ONNX checker, then onnxruntime against torch on the same random uint8 batch; they must
+agree within ``ATOL`` (1e-4 lens units = 0.19 px at 1920 wide; float32 round-off between two
+kernel libraries is ~1e-6).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch import nn
+
+from .model import LUMA_WEIGHTS, DistortionNet, ModelConfig
+
+#: Largest |torch - onnxruntime| (lens units) accepted by :func:`check_agreement`.
+ATOL = 1e-4
+OPSET = 17
+PREPROCESSING = (
+    "Resize the whole 16:9 RGB frame to input_size (W, H) with area interpolation "
+    "(cv2.INTER_AREA; the aspect ratio is squashed if input_size is not 16:9), keep uint8 RGB, "
+    "stack N x H x W x 3. The graph casts to float, divides by 255, applies (x - mean) / std per "
+    "channel and transposes to NCHW."
+)
+OUTPUT = "k: float32 N x 2 = (k1, k2), width-normalised lens units (image width = 1, origin at the centre)"
+
+
+class ExportWrapper(nn.Module):
+    """uint8 NHWC RGB -> normalised NCHW -> (k1, k2); the graph that ships."""
+
+    def __init__(self, model: DistortionNet):
+        super().__init__()
+        self.model = model
+        cfg = model.config
+        self.register_buffer("mean", torch.tensor(cfg.mean, dtype=torch.float32).view(1, -1, 1, 1))
+        self.register_buffer("scale", 1.0 / torch.tensor(cfg.std, dtype=torch.float32).view(1, -1, 1, 1))
+        self.register_buffer("luma", torch.tensor(LUMA_WEIGHTS, dtype=torch.float32).view(1, 3, 1, 1))
+        self.grey = cfg.channels == 1
+
+    def forward(self, image: torch.Tensor) -> torch.Tensor:
+        x = image.permute(0, 3, 1, 2).to(torch.float32) * (1.0 / 255.0)
+        if self.grey:
+            x = (x * self.luma).sum(dim=1, keepdim=True)
+        return self.model((x - self.mean) * self.scale)
+
+
+def load_checkpoint(path: str | Path, which: str = "auto") -> DistortionNet:
+    """Rebuild the model of a ``.pt`` checkpoint (``best.pt``: EMA weights; ``last.pt``: EMA if
+    ``which`` is "auto" or "ema", raw if "raw")."""
+    state = torch.load(path, map_location="cpu", weights_only=False)
+    model = DistortionNet(ModelConfig.from_dict(state["model_config"]))
+    if "ema" in state and which in ("auto", "ema"):
+        weights = state["ema"]
+    else:
+        weights = state["model"]
+    model.load_state_dict(weights)
+    return model.eval()
+
+
+def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = None) -> Path:
+    """Write ``model`` (eval mode) as ONNX with the preprocessing graph and metadata; returns the path."""
+    import onnx
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    model = model.eval()
+    wrapper = ExportWrapper(model).eval()
+    width, height = model.config.input_size
+    dummy = torch.zeros(1, height, width, 3, dtype=torch.uint8)
+    tmp = path.with_suffix(".tmp.onnx")
+    torch.onnx.export(
+        wrapper, (dummy,), str(tmp), dynamo=False, input_names=["image"], output_names=["k"],
+        dynamic_axes={"image": {0: "N"}, "k": {0: "N"}}, opset_version=OPSET, do_constant_folding=True,
+    )
+    proto = onnx.load(str(tmp))
+    props = {
+        "glradial_format": "1",
+        "model_config": json.dumps(model.config.to_dict()),
+        "input_size": f"{width},{height}",
+        "input_layout": "NHWC uint8 RGB",
+        "preprocessing": PREPROCESSING,
+        "output": OUTPUT,
+    }
+    try:
+        from glradial import __version__
+
+        props["version"] = __version__
+    except Exception:  # pragma: no cover
+        props["version"] = "unknown"
+    for key, value in (metadata or {}).items():
+        props[key] = value if isinstance(value, str) else json.dumps(value)
+    del proto.metadata_props[:]
+    for key, value in props.items():
+        entry = proto.metadata_props.add()
+        entry.key, entry.value = key, value
+    proto.doc_string = "glradial radial distortion estimator: " + OUTPUT
+    onnx.checker.check_model(proto)
+    onnx.save(proto, str(tmp))
+    tmp.replace(path)
+    return path
+
+
+def check_agreement(model: DistortionNet, onnx_path: str | Path, n: int = 8, seed: int = 0) -> float:
+    """Max |torch - onnxruntime| over a random uint8 batch; raises AssertionError beyond :data:`ATOL`."""
+    import onnxruntime as ort
+
+    width, height = model.config.input_size
+    images = np.random.default_rng(seed).integers(0, 256, (n, height, width, 3), dtype=np.uint8)
+    with torch.no_grad():
+        ref = ExportWrapper(model.eval())(torch.from_numpy(images)).numpy()
+    session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
+    got = session.run(None, {"image": images})[0]
+    err = float(np.abs(ref - got).max())
+    if not err <= ATOL:
+        raise AssertionError(f"onnxruntime and torch disagree by {err:.3g} > {ATOL} lens units")
+    return err
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m net.export", description="Export a checkpoint to ONNX.")
+    parser.add_argument("--checkpoint", required=True)
+    parser.add_argument("--out", required=True, help="the .onnx file to write")
+    parser.add_argument("--metrics", help="JSON file of evaluation metrics to embed")
+    parser.add_argument("--run-config", help="the run's config.json (training data description) to embed")
+    parser.add_argument("--training", help="JSON string or file with training facts (steps, wall time, hardware)")
+    parser.add_argument("--weights", choices=["auto", "ema", "raw"], default="auto")
+    args = parser.parse_args(argv)
+    model = load_checkpoint(args.checkpoint, args.weights)
+    state = torch.load(args.checkpoint, map_location="cpu", weights_only=False)
+    training: dict = {"steps": state.get("step"), "train_time_s": state.get("train_time")}
+    if args.run_config:
+        run = json.loads(Path(args.run_config).read_text())
+        training["data"] = {k: run.get(k) for k in ("panoramas", "augment", "batch_size", "seed")}
+    if args.training:
+        text = Path(args.training).read_text() if Path(args.training).exists() else args.training
+        training.update(json.loads(text))
+    metadata: dict = {"training": training}
+    if args.metrics:
+        metadata["metrics"] = json.loads(Path(args.metrics).read_text())
+    elif "val" in state:
+        metadata["metrics"] = {"validation": state["val"]}
+    path = export_onnx(model, args.out, metadata)
+    err = check_agreement(model, path)
+    import onnx
+
+    proto = onnx.load(str(path))
+    entry = proto.metadata_props.add()
+    entry.key, entry.value = "onnx_check", json.dumps({"max_abs_diff_vs_torch": err, "atol": ATOL})
+    onnx.save(proto, str(path))
+    print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB); torch vs onnxruntime max |diff| {err:.2e} (atol {ATOL})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

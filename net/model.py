@@ -1,0 +1,210 @@
+"""The distortion estimator: a light ResNet-like CNN with inverted residual blocks, two regressors.
+
+Convention:
+    input   float32 tensor ``N x C x H x W`` (NCHW), C = 3 (RGB, in that order) or 1 (grayscale,
+            ITU-R BT.601 luma of the RGB frame); pixel values are ``(x / 255 - mean) / std`` with
+            ``mean``/``std`` from :class:`ModelConfig`. The frame is the whole 16:9 frame the lens
+            refers to, resized (area interpolation) to ``input_size = (W, H)``; the aspect ratio is
+            not kept when ``W / H != 16 / 9`` (the paper squashes 16:9 into 224 x 224).
+    output  float32 ``N x 2``: ``(k1, k2)`` in width-normalised lens units (DESIGN.md).
+
+Architecture (timm-style: ``forward_features`` -> pooled features, ``forward_head`` -> (k1, k2)):
+a 3x3 stride-2 stem, stages of MobileNetV2 inverted residual blocks (expand 1x1, depthwise 3x3,
+project 1x1, identity shortcut when stride is 1 and channels match), optionally three coordinate
+channels (x, y, r in lens units) concatenated to the stem input (CoordConv: the distortion is radial,
+so where a curved line sits matters), a 1x1 conv to ``feature_channels``, global average pooling,
+and two heads ``Linear(F, 32) -> BatchNorm1d -> LeakyReLU -> Linear(32, 1)`` for k1 and k2.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import torch
+from torch import nn
+
+#: ITU-R BT.601 luma weights (R, G, B) used by the grayscale variant.
+LUMA_WEIGHTS = (0.299, 0.587, 0.114)
+
+
+@dataclass
+class ModelConfig:
+    """Everything needed to rebuild the network and feed it (saved beside the model and in ONNX).
+
+    ``input_size`` is ``(W, H)`` like every size in glradial. ``stages`` lists
+    ``(expansion, out_channels, blocks, stride)``. ``mean``/``std`` apply to ``x / 255`` per
+    channel in ``channel_order`` ("RGB" or "L").
+    """
+
+    input_size: tuple[int, int] = (224, 224)
+    channels: int = 3
+    stem_channels: int = 16
+    stages: list[tuple[int, int, int, int]] = field(
+        default_factory=lambda: [(1, 16, 1, 1), (4, 24, 2, 2), (4, 32, 2, 2), (4, 48, 2, 2), (4, 64, 2, 2)]
+    )
+    feature_channels: int = 256
+    head_hidden: int = 32
+    coord_channels: bool = True
+    k_init: tuple[float, float] = (-0.2, 0.1)
+    mean: tuple[float, ...] = (0.5, 0.5, 0.5)
+    std: tuple[float, ...] = (0.25, 0.25, 0.25)
+
+    def __post_init__(self) -> None:
+        self.input_size = tuple(int(v) for v in self.input_size)  # type: ignore[assignment]
+        self.stages = [tuple(int(v) for v in s) for s in self.stages]  # type: ignore[misc]
+        self.mean = tuple(float(v) for v in self.mean)
+        self.std = tuple(float(v) for v in self.std)
+        self.k_init = tuple(float(v) for v in self.k_init)  # type: ignore[assignment]
+        if self.channels not in (1, 3):
+            raise ValueError(f"channels must be 1 (grayscale) or 3 (RGB), got {self.channels}")
+        if len(self.input_size) != 2 or min(self.input_size) < 16:
+            raise ValueError(f"input_size must be (W, H) with both >= 16, got {self.input_size}")
+        if len(self.mean) != self.channels or len(self.std) != self.channels:
+            raise ValueError(
+                f"mean/std need {self.channels} values, got mean={self.mean} std={self.std}"
+            )
+        if any(s <= 0 for s in self.std):
+            raise ValueError(f"std must be positive, got {self.std}")
+        for stage in self.stages:
+            if len(stage) != 4 or min(stage) < 1:
+                raise ValueError(f"a stage is (expansion, out_channels, blocks, stride) >= 1, got {stage}")
+
+    @property
+    def channel_order(self) -> str:
+        return "RGB" if self.channels == 3 else "L"
+
+    def to_dict(self) -> dict[str, Any]:
+        out = dataclasses.asdict(self)
+        out["channel_order"] = self.channel_order
+        out["layout"] = "NCHW"
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "ModelConfig":
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in data.items() if k in names})
+
+    def save(self, path: str | Path) -> None:
+        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+
+    @classmethod
+    def load(cls, path: str | Path) -> "ModelConfig":
+        return cls.from_dict(json.loads(Path(path).read_text()))
+
+
+class ConvBNAct(nn.Sequential):
+    def __init__(self, cin: int, cout: int, kernel: int, stride: int = 1, groups: int = 1, act: bool = True):
+        layers: list[nn.Module] = [
+            nn.Conv2d(cin, cout, kernel, stride, kernel // 2, groups=groups, bias=False),
+            nn.BatchNorm2d(cout),
+        ]
+        if act:
+            layers.append(nn.ReLU6(inplace=True))
+        super().__init__(*layers)
+
+
+class InvertedResidual(nn.Module):
+    """MobileNetV2 block: expand 1x1 -> depthwise 3x3 (stride) -> project 1x1 (linear)."""
+
+    def __init__(self, cin: int, cout: int, stride: int, expansion: int):
+        super().__init__()
+        hidden = cin * expansion
+        layers: list[nn.Module] = []
+        if expansion != 1:
+            layers.append(ConvBNAct(cin, hidden, 1))
+        layers += [ConvBNAct(hidden, hidden, 3, stride, groups=hidden), ConvBNAct(hidden, cout, 1, act=False)]
+        self.block = nn.Sequential(*layers)
+        self.residual = stride == 1 and cin == cout
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = self.block(x)
+        return x + y if self.residual else y
+
+
+class RegressionHead(nn.Module):
+    """``Linear(F, hidden) -> BatchNorm1d -> LeakyReLU -> Linear(hidden, 1)``."""
+
+    def __init__(self, features: int, hidden: int, init: float):
+        super().__init__()
+        self.net = nn.Sequential(
+            nn.Linear(features, hidden), nn.BatchNorm1d(hidden), nn.LeakyReLU(0.1), nn.Linear(hidden, 1)
+        )
+        nn.init.zeros_(self.net[-1].weight)
+        nn.init.constant_(self.net[-1].bias, init)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+
+def coordinate_grid(width: int, height: int) -> torch.Tensor:
+    """``1 x 3 x H x W`` channels (x, y, r) in lens units of the 16:9 frame (x in [-0.5, 0.5])."""
+    aspect = 9.0 / 16.0
+    xs = (torch.arange(width, dtype=torch.float32) + 0.5) / width - 0.5
+    ys = ((torch.arange(height, dtype=torch.float32) + 0.5) / height - 0.5) * aspect
+    gy, gx = torch.meshgrid(ys, xs, indexing="ij")
+    r = torch.sqrt(gx * gx + gy * gy)
+    # scaled to unit-ish range like the normalised pixels
+    return torch.stack([gx * 4.0, gy * 4.0, r * 4.0])[None]
+
+
+class DistortionNet(nn.Module):
+    """Estimates ``(k1, k2)`` from a normalised frame tensor; see the module docstring."""
+
+    def __init__(self, config: ModelConfig | None = None):
+        super().__init__()
+        self.config = config = config or ModelConfig()
+        width, height = config.input_size
+        cin = config.channels
+        if config.coord_channels:
+            self.register_buffer("coords", coordinate_grid(width, height), persistent=False)
+            cin += 3
+        else:
+            self.coords = None
+        self.stem = ConvBNAct(cin, config.stem_channels, 3, 2)
+        blocks: list[nn.Module] = []
+        channels = config.stem_channels
+        for expansion, cout, count, stride in config.stages:
+            for i in range(count):
+                blocks.append(InvertedResidual(channels, cout, stride if i == 0 else 1, expansion))
+                channels = cout
+        self.blocks = nn.Sequential(*blocks)
+        self.conv_head = ConvBNAct(channels, config.feature_channels, 1)
+        self.pool = nn.AdaptiveAvgPool2d(1)
+        self.head_k1 = RegressionHead(config.feature_channels, config.head_hidden, config.k_init[0])
+        self.head_k2 = RegressionHead(config.feature_channels, config.head_hidden, config.k_init[1])
+        for m in self.modules():
+            if isinstance(m, nn.Conv2d):
+                nn.init.kaiming_normal_(m.weight, mode="fan_out")
+
+    def forward_features(self, x: torch.Tensor) -> torch.Tensor:
+        """``N x C x H x W`` normalised input -> ``N x feature_channels`` pooled features."""
+        if self.coords is not None:
+            x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
+        x = self.conv_head(self.blocks(self.stem(x)))
+        return torch.flatten(self.pool(x), 1)
+
+    def forward_head(self, features: torch.Tensor) -> torch.Tensor:
+        """Pooled features -> ``N x 2`` (k1, k2)."""
+        return torch.cat([self.head_k1(features), self.head_k2(features)], dim=1)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.forward_head(self.forward_features(x))
+
+
+def count_parameters(model: nn.Module) -> int:
+    return sum(p.numel() for p in model.parameters())
+
+
+def normalise_batch(images: torch.Tensor, config: ModelConfig) -> torch.Tensor:
+    """uint8 ``N x H x W x 3`` RGB (already at ``input_size``) -> normalised float ``N x C x H x W``."""
+    x = images.permute(0, 3, 1, 2).float().div_(255.0)
+    if config.channels == 1:
+        w = torch.tensor(LUMA_WEIGHTS, dtype=x.dtype, device=x.device).view(1, 3, 1, 1)
+        x = (x * w).sum(dim=1, keepdim=True)
+    mean = torch.tensor(config.mean, dtype=x.dtype, device=x.device).view(1, -1, 1, 1)
+    std = torch.tensor(config.std, dtype=x.dtype, device=x.device).view(1, -1, 1, 1)
+    return (x - mean) / std

@@ -1,0 +1,335 @@
+"""Train the distortion estimator (single process or ``torchrun`` / DistributedDataParallel).
+
+Usage::
+
+    python -m net.train --config net/configs/shipped.json --out runs/shipped [--resume]
+    torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
+
+Data path per rank: a :class:`~.data.CropProducer` process renders crops from the training
+panoramas ahead of time with its own EGL context and its own seed (``seed * 1000 + rank``); every
+step takes exactly ``fresh_per_step`` new crops from it into a :class:`~.data.CropPool` and samples
+the batch from the pool, then applies :func:`~.augment.augment_batch` (photometric + flips).
+Loss: :func:`~.loss.training_loss` (the paper's). AdamW, linear warm-up then cosine decay; the
+schedule's progress is ``step / steps`` or, with ``time_budget_s``, the training wall time spent
+over the budget (so a run ends on time on a shared machine; then the run is not bit-reproducible).
+An exponential moving average (EMA) of the weights is kept and is what validation, the "best"
+checkpoint and export use.
+
+Outputs in ``--out``: ``train.csv`` (one row per log interval), ``last.pt`` (every
+``checkpoint_s`` seconds and at the end; ``--resume`` continues from it), ``best.pt`` (best
+validation median max-displacement), ``config.json`` (the full run config, model config included).
+Uses CUDA when ``torch.cuda.is_available()`` (NCCL for DDP) and the CPU otherwise (gloo).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import csv
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.distributed as dist
+
+from .augment import AugmentConfig, augment_batch
+from .data import CropPool, CropProducer, PanoramaSource, render_test_set
+from .loss import max_displacement, training_loss, distortion_loss
+from .model import DistortionNet, ModelConfig, count_parameters, normalise_batch
+
+#: Width (pixels) at which displacement errors are reported.
+REPORT_WIDTH = 1920
+#: 16:9 corner radius in lens units.
+CORNER_RADIUS_16_9 = 0.5 * math.hypot(1.0, 9.0 / 16.0)
+
+
+@dataclass
+class TrainConfig:
+    """Full description of a run (a JSON file; unknown keys are an error)."""
+
+    model: dict = field(default_factory=dict)
+    augment: dict = field(default_factory=dict)
+    seed: int = 0
+    batch_size: int = 64
+    steps: int = 1000
+    time_budget_s: float | None = None
+    lr: float = 2e-3
+    min_lr_ratio: float = 0.02
+    warmup_steps: int = 200
+    weight_decay: float = 1e-4
+    ema_decay: float = 0.998
+    fresh_per_step: int = 16
+    pool_capacity: int = 8192
+    pool_min: int = 1024
+    producer_chunk: int = 64
+    producer_threads: int = 1
+    panoramas: dict = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "train", "n": 16}, "size": [2048, 1024]})
+    val_panoramas: dict | None = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "val", "n": 4}, "size": [2048, 1024]})
+    val_size: int = 256
+    val_every_s: float = 300.0
+    checkpoint_s: float = 300.0
+    log_every: int = 20
+    threads: int = 2
+    cache_dir: str = "data_cache"
+
+    @classmethod
+    def from_json(cls, path: str | Path) -> "TrainConfig":
+        data = json.loads(Path(path).read_text())
+        names = set(cls.__dataclass_fields__)
+        unknown = set(data) - names
+        if unknown:
+            raise ValueError(f"unknown keys in {path}: {sorted(unknown)}")
+        return cls(**data)
+
+
+def panorama_source(spec: dict, cache_dir: str) -> PanoramaSource:
+    """Build a :class:`PanoramaSource` from a config entry (``seeds`` a list or ``{split, n, start}``)."""
+    seeds = spec.get("seeds", [])
+    if isinstance(seeds, dict):
+        from .data import split_seeds
+
+        seeds = split_seeds(seeds["split"], int(seeds["n"]), int(seeds.get("start", 0)))
+    return PanoramaSource(kind=spec["kind"], seeds=list(seeds), size=tuple(spec.get("size", (2048, 1024))),
+                          cache_dir=cache_dir, files=spec.get("files", ()))
+
+
+def lr_factor(progress: float, step: int, cfg: TrainConfig) -> float:
+    warm = min(1.0, (step + 1) / max(1, cfg.warmup_steps))
+    progress = min(max(progress, 0.0), 1.0)
+    cosine = cfg.min_lr_ratio + (1 - cfg.min_lr_ratio) * 0.5 * (1 + math.cos(math.pi * progress))
+    return warm * cosine
+
+
+def evaluate_arrays(pred: np.ndarray, labels: np.ndarray) -> dict:
+    """Metrics of predictions ``N x 2`` against labels ``N x 2`` (see net.evaluate for the definitions)."""
+    from .evaluate import metrics
+
+    return metrics(pred, labels)
+
+
+def predict(model: torch.nn.Module, images: np.ndarray, config: ModelConfig, device, batch: int = 128) -> np.ndarray:
+    model.eval()
+    out = []
+    with torch.no_grad():
+        for i in range(0, len(images), batch):
+            x = normalise_batch(torch.from_numpy(images[i : i + batch]).to(device), config)
+            out.append(model(x.contiguous(memory_format=torch.channels_last)).float().cpu().numpy())
+    return np.concatenate(out)
+
+
+class EMA:
+    """Exponential moving average of a model's parameters and buffers."""
+
+    def __init__(self, model: torch.nn.Module, decay: float):
+        self.decay = decay
+        self.model = copy.deepcopy(model).eval()
+        for p in self.model.parameters():
+            p.requires_grad_(False)
+
+    @torch.no_grad()
+    def update(self, model: torch.nn.Module, step: int) -> None:
+        d = min(self.decay, (1 + step) / (10 + step))
+        for e, m in zip(self.model.state_dict().values(), model.state_dict().values()):
+            if e.dtype.is_floating_point:
+                e.mul_(d).add_(m.detach(), alpha=1 - d)
+            else:
+                e.copy_(m)
+
+
+def save_checkpoint(path: Path, **state) -> None:
+    tmp = path.with_suffix(".tmp")
+    torch.save(state, tmp)
+    os.replace(tmp, path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
+    parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig)")
+    parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")
+    parser.add_argument("--resume", action="store_true", help="continue from OUT/last.pt if present")
+    parser.add_argument("--steps", type=int, help="override the config's step count")
+    parser.add_argument("--time-budget-s", type=float, help="override the config's time budget")
+    parser.add_argument("--threads", type=int, help="torch threads per process")
+    args = parser.parse_args(argv)
+
+    cfg = TrainConfig.from_json(args.config)
+    if args.steps is not None:
+        cfg.steps = args.steps
+    if args.time_budget_s is not None:
+        cfg.time_budget_s = args.time_budget_s
+    if args.threads is not None:
+        cfg.threads = args.threads
+
+    distributed = "WORLD_SIZE" in os.environ and int(os.environ["WORLD_SIZE"]) > 1
+    cuda = torch.cuda.is_available()
+    if distributed:
+        dist.init_process_group("nccl" if cuda else "gloo")
+        rank, world = dist.get_rank(), dist.get_world_size()
+    else:
+        rank, world = 0, 1
+    if cuda:
+        local = int(os.environ.get("LOCAL_RANK", 0))
+        torch.cuda.set_device(local)
+        device = torch.device("cuda", local)
+    else:
+        device = torch.device("cpu")
+    torch.set_num_threads(max(1, cfg.threads))
+    torch.manual_seed(cfg.seed)
+    out = Path(args.out)
+    is_main = rank == 0
+
+    def log(msg: str) -> None:
+        if is_main:
+            print(time.strftime("%H:%M:%S"), msg, flush=True)
+
+    model_cfg = ModelConfig.from_dict(cfg.model)
+    model = DistortionNet(model_cfg).to(device).to(memory_format=torch.channels_last)
+    ema = EMA(model, cfg.ema_decay)
+    decay, no_decay = [], []
+    for name, p in model.named_parameters():
+        (no_decay if p.ndim <= 1 else decay).append(p)
+    optimizer = torch.optim.AdamW(
+        [{"params": decay, "weight_decay": cfg.weight_decay}, {"params": no_decay, "weight_decay": 0.0}], lr=cfg.lr
+    )
+    step, train_time, best = 0, 0.0, math.inf
+    if args.resume and (out / "last.pt").exists():
+        state = torch.load(out / "last.pt", map_location=device, weights_only=False)
+        model.load_state_dict(state["model"])
+        ema.model.load_state_dict(state["ema"])
+        optimizer.load_state_dict(state["optimizer"])
+        step, train_time, best = state["step"], state["train_time"], state.get("best", math.inf)
+        log(f"resumed from {out / 'last.pt'} at step {step} ({train_time:.0f} s trained)")
+    if is_main:
+        out.mkdir(parents=True, exist_ok=True)
+        full = asdict(cfg)
+        full["model"] = model_cfg.to_dict()
+        (out / "config.json").write_text(json.dumps(full, indent=2) + "\n")
+        model_cfg.save(out / "model_config.json")
+    train_model = torch.nn.parallel.DistributedDataParallel(model) if distributed else model
+    log(f"model {count_parameters(model)} parameters, input {model_cfg.input_size}, device {device}, world {world}")
+
+    source = panorama_source(cfg.panoramas, cfg.cache_dir)
+    t0 = time.monotonic()
+    if is_main:
+        source.load()  # render + cache once before the producers start (they then read the cache)
+    if distributed:
+        dist.barrier()
+    log(f"{len(source.seeds)} training panoramas ready ({time.monotonic() - t0:.1f} s)")
+    val = None
+    if is_main and cfg.val_panoramas and cfg.val_size > 0:
+        vsrc = panorama_source(cfg.val_panoramas, cfg.cache_dir)
+        t0 = time.monotonic()
+        val = render_test_set(vsrc, cfg.val_size, seed=10_000 + cfg.seed, out_size=model_cfg.input_size)
+        log(f"validation set: {len(val[0])} crops from {len(vsrc.seeds)} panoramas ({time.monotonic() - t0:.1f} s)")
+
+    # the stream restarts from a seed derived from the step on resume (never repeats the same crops)
+    producer = CropProducer(source, seed=cfg.seed * 1000 + rank + 7919 * step, out_size=model_cfg.input_size,
+                            chunk=cfg.producer_chunk, threads=cfg.producer_threads)
+    rng = np.random.default_rng([cfg.seed, rank, step])
+    aug_cfg = AugmentConfig(**cfg.augment)
+    pool = CropPool(cfg.pool_capacity, model_cfg.input_size)
+    writer = None
+    if is_main:
+        new = not (out / "train.csv").exists() or not args.resume
+        csv_file = open(out / "train.csv", "w" if new else "a", newline="")
+        writer = csv.writer(csv_file)
+        if new:
+            writer.writerow(["step", "train_s", "lr", "loss", "k1_mae", "k2_mae", "img_per_s", "producer_wait_s",
+                             "val_dl", "val_median_px", "val_p90_px", "val_a_beats_b"])
+    try:
+        t_fill = time.monotonic()
+        need = max(cfg.pool_min, cfg.batch_size)
+        while pool.count < need:
+            pool.add(*producer.take(min(cfg.producer_chunk, need - pool.count)))
+        log(f"pool filled with {pool.count} crops ({time.monotonic() - t_fill:.1f} s)")
+        last_ckpt = last_val = time.monotonic()
+        window_loss, window_k, window_n, window_t = 0.0, np.zeros(2), 0, 0.0
+        wait_before = producer.wait_s
+        while True:
+            if distributed and cfg.time_budget_s:  # every rank follows the slowest clock: same step count
+                clock = torch.tensor([train_time], dtype=torch.float64)
+                dist.all_reduce(clock, op=dist.ReduceOp.MAX)
+                train_time = float(clock)
+            progress = train_time / cfg.time_budget_s if cfg.time_budget_s else step / max(1, cfg.steps)
+            if progress >= 1.0:
+                break
+            ts = time.monotonic()
+            pool.add(*producer.take(cfg.fresh_per_step))
+            images, labels = pool.sample(cfg.batch_size, rng)
+            images = augment_batch(images, rng, aug_cfg)
+            x = normalise_batch(torch.from_numpy(images).to(device), model_cfg).contiguous(memory_format=torch.channels_last)
+            y = torch.from_numpy(labels).to(device)
+            factor = lr_factor(progress, step, cfg)
+            for group in optimizer.param_groups:
+                group["lr"] = cfg.lr * factor
+            train_model.train()
+            pred = train_model(x)
+            loss = training_loss(y, pred)
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            ema.update(model, step)
+            step += 1
+            dt = time.monotonic() - ts
+            train_time += dt
+            window_loss += loss.item()
+            window_k += (pred.detach() - y).abs().mean(dim=0).cpu().numpy()
+            window_n += 1
+            window_t += dt
+            now = time.monotonic()
+            do_val = val is not None and (now - last_val >= cfg.val_every_s)
+            done = (not distributed or not cfg.time_budget_s) and (
+                (train_time / cfg.time_budget_s if cfg.time_budget_s else step / max(1, cfg.steps)) >= 1.0)
+            if is_main and (step % cfg.log_every == 0 or do_val or done):
+                vm = {}
+                if do_val or (done and val is not None):
+                    vm = evaluate_arrays(predict(ema.model, val[0], model_cfg, device), val[1])
+                    last_val = time.monotonic()
+                    if vm["median_max_px"] < best:
+                        best = vm["median_max_px"]
+                        save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
+                                        step=step, train_time=train_time, val=vm)
+                wait = producer.wait_s - wait_before
+                wait_before = producer.wait_s
+                row = [step, round(train_time, 1), f"{cfg.lr * factor:.3g}", f"{window_loss / window_n:.4g}",
+                       f"{window_k[0] / window_n:.4f}", f"{window_k[1] / window_n:.4f}",
+                       f"{window_n * cfg.batch_size * world / max(window_t, 1e-9):.1f}", f"{wait:.1f}",
+                       f"{vm.get('mean_dl', float('nan')):.4g}", f"{vm.get('median_max_px', float('nan')):.2f}",
+                       f"{vm.get('p90_max_px', float('nan')):.2f}", f"{vm.get('a_beats_b', float('nan')):.3f}"]
+                writer.writerow(row)
+                csv_file.flush()
+                log("step {} t {}s lr {} loss {} |dk1| {} |dk2| {} img/s {} wait {}s val DL {} med {}px p90 {}px A>B {}".format(*row))
+                window_loss, window_k, window_n, window_t = 0.0, np.zeros(2), 0, 0.0
+            if is_main and (now - last_ckpt >= cfg.checkpoint_s or done):
+                save_checkpoint(out / "last.pt", model=model.state_dict(), ema=ema.model.state_dict(),
+                                optimizer=optimizer.state_dict(), step=step, train_time=train_time, best=best,
+                                model_config=model_cfg.to_dict())
+                last_ckpt = time.monotonic()
+            if done:
+                break
+        if is_main:
+            save_checkpoint(out / "last.pt", model=model.state_dict(), ema=ema.model.state_dict(),
+                            optimizer=optimizer.state_dict(), step=step, train_time=train_time, best=best,
+                            model_config=model_cfg.to_dict())
+            if val is not None and not (out / "best.pt").exists():
+                vm = evaluate_arrays(predict(ema.model, val[0], model_cfg, device), val[1])
+                save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
+                                step=step, train_time=train_time, val=vm)
+    finally:
+        producer.close()
+        if writer is not None:
+            csv_file.close()
+        if distributed:
+            dist.destroy_process_group()
+    log(f"done: {step} steps, {train_time:.0f} s of training")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,287 @@
+"""The glradial command: correct (images, videos, --auto on video with a stand-in estimator),
+convert, help texts, and the handling of every kind of bad input (one line on stderr, non-zero exit,
+no output left behind)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+import glradial
+from glradial import Lens
+from glradial.cli import build_parser, main
+from glradial.video import VideoReader, VideoWriter, probe_video, read_image, write_image
+
+from conftest import DATA
+
+K1, K2 = -0.25, 0.05
+
+
+def _names(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir())
+
+
+def _error_line(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1, err
+    assert lines[0].startswith("glradial: error: "), err
+    assert "Traceback" not in err
+    return lines[0]
+
+
+# -- correct: images ------------------------------------------------------------------------------
+def test_correct_real_jpeg_matches_library_and_opencv(tmp_path):
+    out = tmp_path / "road_corrected.png"
+    assert main(["correct", str(DATA / "road_straight_lines1.jpg"), str(out), "--k1", str(K1), "--k2", str(K2),
+                 "--backend", "cpu"]) == 0
+    image = read_image(DATA / "road_straight_lines1.jpg")
+    result = read_image(out)
+    np.testing.assert_array_equal(result, glradial.correct(image, K1, K2, backend="cpu"))
+    # independent oracle (DESIGN.md): cv2.undistort with f = W; equal up to fixed-point rounding
+    h, w = image.shape[:2]
+    camera = np.array([[w, 0, (w - 1) / 2], [0, w, (h - 1) / 2], [0, 0, 1]], np.float64)
+    expected = cv2.undistort(image, camera, np.array([K1, K2, 0, 0], np.float64))
+    assert np.abs(result.astype(int) - expected.astype(int)).mean() < 0.1
+
+
+def test_correct_16bit_tiff_keeps_depth_and_options(tmp_path):
+    rng = np.random.default_rng(4)
+    base = cv2.resize(read_image(DATA / "chessboard_calibration2.jpg"), (160, 90), interpolation=cv2.INTER_AREA)
+    image16 = base.astype(np.uint16) * 257 + rng.integers(0, 257, base.shape, dtype=np.uint16)
+    source, out = tmp_path / "in16.tif", tmp_path / "out16.tif"
+    write_image(source, image16)
+    assert main(["correct", str(source), str(out), "--k1", "0.15", "--k2", "0.02", "--fit", "crop",
+                 "--interpolation", "cubic", "--backend", "cpu"]) == 0
+    result = read_image(out)
+    assert result.dtype == np.uint16 and result.shape == image16.shape
+    np.testing.assert_array_equal(result, glradial.correct(image16, 0.15, 0.02, fit="crop", interpolation="cubic", backend="cpu"))
+    # the low byte survived: a 16-bit result, not an 8-bit one scaled up
+    assert np.any(result % 257 != 0)
+
+
+def test_correct_k2_defaults_to_zero(tmp_path):
+    source, out = tmp_path / "in.png", tmp_path / "out.png"
+    write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
+    assert main(["-q", "correct", str(source), str(out), "--k1", "-0.2", "--backend", "cpu"]) == 0
+    np.testing.assert_array_equal(read_image(out), glradial.correct(read_image(source), -0.2, 0.0, backend="cpu"))
+
+
+# -- correct: videos --------------------------------------------------------------------------------
+def _pan_video(path: Path, panorama: np.ndarray, n: int = 30, fps: float = 12.5, cut: int | None = None,
+               marker: bool = False, lenses: np.ndarray | None = None) -> None:
+    """160×90 frames panning over the real field panorama; optional cut to another area; optional
+    frame index written into pixel (0, 0) (lossless .mkv only); optional per-frame lens applied."""
+    with VideoWriter(path, (160, 90), fps) as writer:
+        for i in range(n):
+            x0, y0, step = (200, 420, 4) if cut is None or i < cut else (1100, 380, -3)
+            j = i if cut is None or i < cut else i - cut
+            crop = panorama[y0 : y0 + 270, x0 + j * step : x0 + j * step + 480]
+            frame = cv2.resize(crop, (160, 90), interpolation=cv2.INTER_AREA)
+            if lenses is not None:
+                frame = glradial.distort(frame, *lenses[i], backend="cpu")
+            if marker:
+                frame[0, 0] = (i, 255 - i, 0)
+            writer.write(frame)
+
+
+def test_correct_video_keeps_count_fps_size(tmp_path, field_panorama):
+    source, out = tmp_path / "in.mp4", tmp_path / "out.avi"
+    _pan_video(source, field_panorama, n=30, fps=12.5)
+    assert main(["correct", str(source), str(out), "--k1", str(K1), "--k2", str(K2), "--backend", "cpu"]) == 0
+    info = probe_video(out)
+    assert (info.size, info.frame_count) == ((160, 90), 30)
+    assert info.fps == pytest.approx(12.5, rel=1e-3)
+    with VideoReader(source) as a, VideoReader(out) as b:
+        for i, (frame_in, frame_out) in enumerate(zip(a, b)):
+            if i % 10 == 0:
+                expected = glradial.correct(frame_in, K1, K2, backend="cpu")
+                # MJPG re-encoding: a few levels on average
+                assert np.abs(frame_out.astype(int) - expected.astype(int)).mean() < 4.0
+    assert _names(tmp_path) == ["in.mp4", "out.avi"]
+
+
+def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypatch):
+    """--auto on a video with known, slowly changing lenses and a cut, with a stand-in estimator
+    (the truth + CNN-like noise + 10 % gross outliers, keyed on the frame index stored losslessly in
+    pixel (0, 0)): the cut is found, the sidecar lists the shots, the smoothed lens is closer to the
+    truth than the raw estimates, and each frame is corrected with its smoothed lens."""
+    n, cut = 48, 30
+    k1 = np.where(np.arange(n) < cut, np.linspace(-0.30, -0.22, n), 0.12)
+    truth = np.stack([k1, 0.019 * k1 + 0.805 * k1**2], 1)
+    rng = np.random.default_rng(7)
+    noise = rng.normal(0, [0.02, 0.01], (n, 2))
+    noise[rng.random(n) < 0.1] += rng.normal(0, 0.3, 2)
+    calls = []
+
+    def fake_estimator(_model=None):
+        def estimate(frame):
+            assert frame.dtype == np.uint8 and frame.shape == (90, 160, 3)
+            index = int(frame[0, 0, 0])
+            calls.append(index)
+            return tuple(truth[index] + noise[index])
+
+        return estimate
+
+    monkeypatch.setattr("glradial.auto.default_estimator", fake_estimator)
+    source, out = tmp_path / "in.mkv", tmp_path / "out.mkv"
+    _pan_video(source, field_panorama, n=n, fps=25, cut=cut, marker=True, lenses=truth)
+    assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--window", "0.5", "--backend", "cpu"]) == 0
+    sidecar = tmp_path / "out.mkv.lens.csv"
+    assert _names(tmp_path) == ["in.mkv", "out.mkv", "out.mkv.lens.csv"]
+    assert calls == sorted(set(range(0, cut, 2)) | set(range(cut, n, 2)))
+    rows = np.genfromtxt(sidecar, delimiter=",", names=True)
+    assert len(rows) == n
+    assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)
+    from glradial.smoothing import lens_distance
+
+    est = ~np.isnan(rows["k1_raw"])
+    smooth = np.stack([rows["k1"], rows["k2"]], 1)
+    raw = np.stack([rows["k1_raw"], rows["k2_raw"]], 1)
+    raw_error = lens_distance(raw[est], truth[est]).mean()
+    smooth_error = lens_distance(smooth[est], truth[est]).mean()
+    assert smooth_error < 0.5 * raw_error, (smooth_error, raw_error)
+    # the cut resets: frames right after it follow shot 1's lens, not a blend with shot 0's
+    assert lens_distance(smooth[cut : cut + 3], truth[cut : cut + 3]).max() * 1920 < 15
+    with VideoReader(source) as a, VideoReader(out) as b:
+        pairs = list(zip(a, b))
+    assert len(pairs) == n
+    for i in (3, cut + 1):
+        expected = glradial.correct(pairs[i][0], *smooth[i], backend="cpu")
+        assert np.abs(pairs[i][1].astype(int) - expected.astype(int)).max() <= 1  # FFV1 is lossless
+
+
+def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
+    monkeypatch.setattr("glradial.auto.default_estimator", lambda model=None: (lambda frame: Lens(-0.2, 0.03)))
+    source, out = tmp_path / "in.png", tmp_path / "out.png"
+    write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
+    assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0
+    assert "k1=-0.200000 k2=0.030000" in capsys.readouterr().out
+    np.testing.assert_array_equal(read_image(out), glradial.correct(read_image(source), -0.2, 0.03, backend="cpu"))
+
+
+def test_ctrl_c_leaves_no_output(tmp_path, field_panorama, monkeypatch):
+    source, out = tmp_path / "in.mp4", tmp_path / "out.mp4"
+    _pan_video(source, field_panorama, n=12)
+    real = glradial.remap.correct
+    count = {"n": 0}
+
+    def interrupted(*args, **kwargs):
+        count["n"] += 1
+        if count["n"] == 5:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr("glradial.remap.correct", interrupted)
+    assert main(["correct", str(source), str(out), "--k1", "-0.1", "--backend", "cpu"]) == 130
+    assert _names(tmp_path) == ["in.mp4"]
+
+
+# -- bad input --------------------------------------------------------------------------------------
+def _bad_cases(tmp: Path) -> list[tuple[list[str], str, int]]:
+    road = str(DATA / "road_straight_lines1.jpg")
+    (tmp / "broken.mp4").write_bytes(bytes(range(256)) * 20)
+    (tmp / "broken.png").write_bytes(b"\x89PNG\r\n\x1a\n but then nothing")
+    return [
+        (["correct", str(tmp / "missing.jpg"), str(tmp / "o.png"), "--k1", "0.1"], "does not exist", 1),
+        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1"], "cannot read video", 1),
+        (["correct", str(tmp / "broken.png"), str(tmp / "o.png"), "--k1", "0.1"], "cannot decode image", 1),
+        (["correct", road, str(tmp / "o.xyz"), "--k1", "0.1"], "unknown file extension '.xyz'", 1),
+        (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--auto"], "--auto cannot be combined", 2),
+        (["correct", road, str(tmp / "o.png")], "give the lens with --k1", 2),
+        (["correct", road, str(tmp / "o.mp4"), "--k1", "0.1"], "INPUT is an image but OUTPUT", 2),
+        (["correct", road, str(tmp / "nofolder" / "o.png"), "--k1", "0.1"], "output folder", 1),
+        (["correct", road, str(tmp / "o.png"), "--k1", "-3"], "folds over", 1),
+        (["correct", road, str(tmp / "o.png"), "--k1", "abc"], "expected a number", 2),
+        (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--fit", "zoom"], "invalid choice: 'zoom'", 2),
+        (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--sidecar", str(tmp / "s.csv")], "--sidecar needs --auto", 2),
+        (["correct", road, str(tmp / "o.jpg"), "--k1", "0.1", "--every", "0"], "positive integer", 2),
+        (["convert", "--from", "opencv", "--to", "width", "--size", "1920x1080", "-0.1", "0.01"], "needs --focal", 2),
+        (["convert", "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "900", "-0.1", "0.01", "0.001", "0"],
+         "cannot represent: p1=0.001", 1),
+        (["convert", "--from", "width", "--to", "ffmpeg", "--size", "1920x1080", "-4", "0"], "accepts k1 in [-1, 1]", 1),
+        (["frobnicate"], "invalid choice: 'frobnicate'", 2),
+    ]
+
+
+def test_every_bad_input_gets_one_clear_line_and_no_output(tmp_path, capsys):
+    for argv, message, status in _bad_cases(tmp_path):
+        before = _names(tmp_path)
+        assert main(argv) == status, argv
+        line = _error_line(capsys)
+        assert message in line, (argv, line)
+        assert _names(tmp_path) == before, argv  # nothing written, no temporary file left
+
+
+def test_same_input_and_output_is_refused(tmp_path, capsys):
+    source = tmp_path / "a.png"
+    write_image(source, np.zeros((8, 8, 3), np.uint8))
+    assert main(["correct", str(source), str(source), "--k1", "0.1"]) == 2
+    assert "OUTPUT must differ from INPUT" in _error_line(capsys)
+
+
+# -- convert ---------------------------------------------------------------------------------------
+def _convert(capsys, *argv: str) -> tuple[float, float]:
+    assert main(["convert", *argv]) == 0
+    k1, k2 = capsys.readouterr().out.split()
+    return float(k1), float(k2)
+
+
+def test_convert_known_answers(capsys):
+    w, h = 1920, 1080
+    # OpenCV with f = W: the same numbers (DESIGN.md); with f = W/2: k1 (W/f)^2 = 4 k1, k2 (W/f)^4 = 16 k2
+    assert _convert(capsys, "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "1920", "-0.1", "0.01") == pytest.approx((-0.1, 0.01))
+    assert _convert(capsys, "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "960", "-0.1", "0.01") == pytest.approx((-0.4, 0.16))
+    # pixel units: k1 / W^2, k2 / W^4
+    assert _convert(capsys, "--from", "width", "--to", "pixel", "--size", "1920x1080", "-0.2", "0.05") == pytest.approx((-0.2 / w**2, 0.05 / w**4))
+    # height-normalised: r' = r W / H -> k1 (H/W)^2
+    assert _convert(capsys, "--from", "glradial", "--to", "height", "--size", "1920x1080", "-0.2", "0.05") == pytest.approx((-0.2 * (h / w) ** 2, 0.05 * (h / w) ** 4))
+    # ffmpeg: radius / half diagonal; lensfun: radius / half the shorter side
+    corner = 0.5 * np.hypot(1, h / w)
+    assert _convert(capsys, "--from", "width", "--to", "ffmpeg", "--size", "1920x1080", "-0.2", "0.05") == pytest.approx((-0.2 * corner**2, 0.05 * corner**4))
+    half_short = 0.5 * h / w
+    assert _convert(capsys, "--from", "width", "--to", "lensfun", "--size", "1920x1080", "-0.2", "0.05") == pytest.approx((-0.2 * half_short**2, 0.05 * half_short**4))
+
+
+@pytest.mark.parametrize("convention", ["opencv", "ffmpeg", "lensfun", "pixel", "height", "width"])
+def test_convert_round_trips(capsys, convention):
+    extra = ["--focal", "1500"] if convention == "opencv" else []
+    there = _convert(capsys, "--from", "width", "--to", convention, "--size", "1280x720", *extra, "-0.31", "0.07")
+    back = _convert(capsys, "--from", convention, "--to", "width", "--size", "1280x720", *extra, repr(there[0]), repr(there[1]))
+    assert back == pytest.approx((-0.31, 0.07), rel=1e-10)
+
+
+def test_convert_json_and_opencv_matrix(capsys):
+    assert main(["convert", "--from", "width", "--to", "opencv", "--size", "1280x720", "--json", "-0.2", "0.04"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert document["camera_matrix"] == [[1280.0, 0.0, 639.5], [0.0, 1280.0, 359.5], [0.0, 0.0, 1.0]]
+    assert document["dist_coeffs"][:2] == pytest.approx([-0.2, 0.04])
+
+
+# -- help --------------------------------------------------------------------------------------------
+def test_every_option_is_documented():
+    parser = build_parser()
+    subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name in ("correct", "convert", "stmap"):
+        sub = subparsers.choices[name]
+        for action in sub._actions:
+            assert action.help and action.help != argparse.SUPPRESS or action.dest == "help", (name, action.dest)
+    correct_help = subparsers.choices["correct"].format_help()
+    for unit in ("seconds", "frames", "width-normalised"):
+        assert unit in correct_help
+
+
+def test_python_dash_m_runs():
+    done = subprocess.run([sys.executable, "-m", "glradial", "--help"], capture_output=True, text=True, timeout=60,
+                          cwd=Path(__file__).resolve().parent.parent)
+    assert done.returncode == 0 and "correct" in done.stdout and "stmap" in done.stdout
+    done = subprocess.run([sys.executable, "-m", "glradial", "correct", "x.png", "y.png", "--k1", "1", "--auto"],
+                          capture_output=True, text=True, timeout=60, cwd=Path(__file__).resolve().parent.parent)
+    assert done.returncode == 2 and done.stderr.count("\n") == 1 and done.stderr.startswith("glradial: error:")

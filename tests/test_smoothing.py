@@ -1,0 +1,128 @@
+"""Per-shot smoothing of per-frame lens estimates and shot-cut detection (glradial.smoothing)."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from glradial.smoothing import ShotDetector, detect_cuts, lens_distance, shot_ids, smooth_shot, smooth_track
+
+WIDTH_PX = 1920  # errors are reported in pixels of a 1920-wide frame, as in DESIGN.md
+
+
+def manifold(k1):
+    return 0.019 * k1 + 0.805 * k1**2
+
+
+def synthetic_track(seed: int = 0, n: int = 240, cut: int = 140, every: int = 3):
+    """Known lenses: shot 0 zooms slowly (k1 -0.35 -> -0.20), shot 1 zooms the other way from a
+    very different lens (k1 0.10 -> 0.05). Estimates every `every` frames + the first frame of each
+    shot, with CNN-like noise (sigma 0.02 on k1, 0.01 on k2) and 10 % gross outliers (sigma 0.3)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    k1 = np.where(t < cut, -0.35 + 0.15 * t / cut, 0.10 - 0.05 * (t - cut) / (n - cut))
+    truth = np.stack([k1, manifold(k1)], 1)
+    times = np.union1d(np.arange(0, n, every), [cut])
+    raw = truth[times] + rng.normal(0.0, [0.02, 0.01], (len(times), 2))
+    outliers = rng.random(len(times)) < 0.10
+    raw[outliers] += rng.normal(0.0, 0.3, (outliers.sum(), 2))
+    return truth, times, raw, outliers, shot_ids([0, cut], n), cut
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_smoothing_beats_raw_and_rejects_outliers(seed):
+    truth, times, raw, outliers, shots, _ = synthetic_track(seed)
+    smoothed, weights = smooth_track(times, raw, shots, half_window=20)
+    raw_error = lens_distance(raw, truth[times]) * WIDTH_PX
+    smooth_error = lens_distance(smoothed[times], truth[times]) * WIDTH_PX
+    # the noise alone is ~2-4 px (sigma 0.02 on k1 at r = 0.57: 0.02 * 0.19 * 1920 ~ 7 px);
+    # averaging ~13 samples per window must at least halve the median error, and the mean
+    # (dominated by outliers in the raw data) must drop by more than 3x
+    assert np.median(smooth_error) < 0.5 * np.median(raw_error)
+    assert smooth_error.mean() < raw_error.mean() / 3
+    # every frame (not only the estimated ones) is close to the truth
+    all_error = lens_distance(smoothed, truth) * WIDTH_PX
+    assert np.percentile(all_error, 95) < 6.0, np.percentile(all_error, 95)
+    # gross outliers (> 40 px away, 10x the noise) get weight 0 (bisquare cut at 6 MAD ~ 20-25 px)
+    gross = outliers & (raw_error > 40)
+    assert gross.any() and np.all(weights[gross] == 0.0)
+    assert np.mean(weights[~outliers] > 0) > 0.95
+
+
+def test_cut_resets_the_smoother():
+    truth, times, raw, _, shots, cut = synthetic_track(seed=3)
+    smoothed, _ = smooth_track(times, raw, shots, half_window=20)
+    jump = lens_distance(truth[cut - 1], truth[cut]) * WIDTH_PX
+    assert jump > 100  # the two shots' lenses differ by > 100 px of displacement
+    # frames on both sides of the cut follow their own shot: a smoother across the cut would mix
+    # the two lenses and be off by a good fraction of the 100+ px jump
+    near = np.arange(cut - 3, cut + 3)
+    error = lens_distance(smoothed[near], truth[near]) * WIDTH_PX
+    assert error.max() < 12.0, error
+    # the same data smoothed as one shot (no reset) is visibly wrong near the cut: the check above can fail
+    one_shot, _ = smooth_track(times, raw, np.zeros_like(shots), half_window=20)
+    assert (lens_distance(one_shot[near], truth[near]) * WIDTH_PX).max() > 30.0
+
+
+def test_smoothing_follows_a_zoom_without_lag():
+    """Noise-free linear zoom: the local-linear fit reproduces it (a moving average would not at
+    the ends)."""
+    n = 100
+    k1 = np.linspace(-0.4, -0.1, n)
+    truth = np.stack([k1, manifold(k1)], 1)
+    times = np.arange(0, n, 4)
+    smoothed, _ = smooth_shot(times, truth[times], np.arange(n), half_window=15)
+    inside = slice(0, times[-1] + 1)
+    # k2 is quadratic in k1, so a line through it is off by its curvature over the window only
+    assert (lens_distance(smoothed[inside], truth[inside]) * WIDTH_PX).max() < 0.5
+
+
+def test_smoothing_input_errors():
+    with pytest.raises(ValueError, match="no estimate"):
+        smooth_track(np.array([0, 1]), np.zeros((2, 2)), np.array([0, 0, 1, 1]))
+    with pytest.raises(ValueError, match="strictly increasing"):
+        smooth_track(np.array([1, 0]), np.zeros((2, 2)), np.array([0, 0]))
+    with pytest.raises(ValueError, match="half_window"):
+        smooth_shot(np.array([0.0]), np.zeros((1, 2)), np.array([0.0]), half_window=0)
+
+
+def _pan_frames(panorama: np.ndarray, x0: int, y0: int, n: int, step: int, window=(480, 270), out=(160, 90)):
+    frames = []
+    for i in range(n):
+        x = x0 + i * step
+        crop = panorama[y0 : y0 + window[1], x : x + window[0]]
+        frames.append(cv2.resize(crop, out, interpolation=cv2.INTER_AREA))
+    return frames
+
+
+def test_cut_detected_in_a_synthetic_video(field_panorama, tmp_path):
+    """A slow pan over the real field panorama (4 px of panorama per frame), then a cut to another
+    part of it, written to and read back from an .mp4: exactly one cut, at the right frame."""
+    from glradial.video import VideoReader, VideoWriter
+
+    pano = field_panorama
+    shot_a = _pan_frames(pano, 200, 420, 18, 4)
+    shot_b = _pan_frames(pano, 1100, 380, 12, -3)
+    path = tmp_path / "cut.mp4"
+    with VideoWriter(path, (160, 90), 25) as writer:
+        for frame in shot_a + shot_b:
+            writer.write(frame)
+    with VideoReader(path) as reader:
+        cuts = detect_cuts(reader)
+    assert cuts == [0, len(shot_a)]
+
+
+def test_fast_pan_is_not_a_cut(field_panorama):
+    """A pan 4x faster (16 px per frame) inside one shot stays one shot."""
+    frames = _pan_frames(field_panorama, 100, 420, 40, 16)
+    assert detect_cuts(frames) == [0]
+
+
+def test_detector_scores_flag_the_cut_clearly(field_panorama):
+    frames = _pan_frames(field_panorama, 200, 420, 10, 4) + _pan_frames(field_panorama, 1100, 380, 5, 4)
+    detector = ShotDetector()
+    for frame in frames:
+        detector.update(frame)
+    scores = np.array(detector.scores)
+    assert scores[9] > detector.threshold and scores[9] > 5 * np.median(np.delete(scores, 9))
