@@ -25,6 +25,7 @@ import io
 import json
 import math
 import os
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -32,7 +33,7 @@ from typing import Callable
 import numpy as np
 
 from .atomic import atomic_write_text
-from .lens import Lens
+from .lens import Lens, corner_radius
 from .progress import Progress
 from .smoothing import ShotDetector, lens_distance, smooth_track
 from .video import VideoReader, VideoWriter
@@ -173,8 +174,6 @@ def track_video(
     shot_array = np.asarray(shots, dtype=np.int64)
     samples = np.asarray(estimates, dtype=np.float64).reshape(-1, 2)
     time_array = np.asarray(times, dtype=np.int64)
-    from .lens import corner_radius
-
     radius = corner_radius(info.size)
     smoothed, weights = smooth_track(time_array, samples, shot_array, half_window=window_s * info.fps, radius=radius)
     # a smoothed lens must not fold over on the frame: fall back to the nearest accepted raw estimate
@@ -214,6 +213,11 @@ def correct_video(
                     k1, k2 = lenses(index)
                     writer.write(correct(frame, k1, k2, fit=fit, interpolation=interpolation, backend=backend))
                     bar.update()
+            if 0 < info.frame_count != writer.frames_written:
+                sys.stderr.write(
+                    f"glradial: warning: {source} reports {info.frame_count} frames in its header; "
+                    f"{writer.frames_written} could be decoded and were written\n"
+                )
             return writer.frames_written
 
 
@@ -224,3 +228,51 @@ def track_error(track: LensTrack, truth: np.ndarray) -> tuple[float, float]:
     raw = lens_distance(track.raw[estimated], truth[estimated])
     smooth = lens_distance(track.lens[estimated], truth[estimated])
     return float(raw.mean()), float(smooth.mean())
+
+
+def estimate_video(
+    path: str | os.PathLike,
+    *,
+    model: str | os.PathLike | None = None,
+    every: int = 5,
+    window_s: float = 2.0,
+    progress: bool | None = None,
+) -> LensTrack:
+    """Per-frame and per-shot lens of a video with the bundled CNN (or ``model``): the first pass
+    of ``glradial correct --auto`` (:func:`track_video`) without the correction. Hook for
+    ``glradial estimate VIDEO``."""
+    estimate = default_estimator(model)
+    return track_video(path, lambda frame: estimate(_rgb8(frame)), every=every, window_s=window_s, progress=progress)
+
+
+def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_json: bool = False) -> str:
+    """Text for ``glradial estimate VIDEO``: one line per shot (or per frame with ``per_frame``),
+    or one JSON document (``{"input", "fps", "size", "shots": [...], "frames": [...]}``)."""
+    if as_json:
+        document = {"input": source, "fps": track.fps, "size": list(track.size), "shots": track.per_shot()}
+        if per_frame:
+            document["frames"] = track.rows()
+        return json.dumps(document)
+    lines = []
+    if per_frame:
+        for row in track.rows():
+            lines.append(f"{source}: frame {row['frame']} shot {row['shot']} k1={row['k1']:.6f} k2={row['k2']:.6f}")
+    else:
+        for shot in track.per_shot():
+            lines.append(
+                f"{source}: shot {shot['shot']} frames {shot['first_frame']}-{shot['last_frame']} "
+                f"k1={shot['k1']:.6f} k2={shot['k2']:.6f}"
+            )
+    return "\n".join(lines)
+
+
+def _rgb8(frame: np.ndarray) -> np.ndarray:
+    """RGB uint8 H×W×3 for the estimator: 16-bit/float scaled, alpha dropped, grey expanded."""
+    frame = np.asarray(frame)
+    if frame.dtype == np.uint16:
+        frame = (frame / 257.0 + 0.5).astype(np.uint8)
+    elif frame.dtype in (np.float32, np.float64):
+        frame = (np.clip(frame, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    if frame.ndim == 2:
+        frame = np.repeat(frame[:, :, None], 3, axis=2)
+    return np.ascontiguousarray(frame[:, :, :3])

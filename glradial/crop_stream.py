@@ -21,6 +21,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import queue
+import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,8 @@ PAPER_NEWTON_STEPS = 3
 
 #: Seconds between liveness checks of the workers while waiting for a batch.
 _POLL_S = 1.0
+#: Seconds close() waits for the workers to finish their current batch before terminating them.
+_JOIN_S = 30.0
 
 
 class CropBatch(NamedTuple):
@@ -167,7 +170,8 @@ def _worker_main(worker: int, workers: int, config: _Config, out: Any, stop: Any
     finally:
         if producer is not None:
             producer.close()
-        out.cancel_join_thread()  # exit without waiting for the parent to read what is still queued
+        if stop.is_set():
+            out.cancel_join_thread()  # exit without waiting for the parent to read what is still queued
 
 
 class CropStream:
@@ -217,6 +221,11 @@ class CropStream:
                 break
             except queue.Empty:
                 if not self._procs[worker].is_alive():
+                    try:  # what it queued before exiting (an error report) is still readable
+                        payload = self._queues[worker].get(timeout=_POLL_S)
+                        break
+                    except queue.Empty:
+                        pass
                     self.close()
                     raise RuntimeError(f"crop worker {worker} died (exit code {self._procs[worker].exitcode})") from None
         if payload[0] == "error":
@@ -238,17 +247,14 @@ class CropStream:
             self._producer.close()
             self._producer = None
             return
+        # Workers check the stop flag between batches and while waiting on a full queue; they exit
+        # without flushing what is queued (never read from a queue here: a worker that exits in the
+        # middle of writing a message would leave this process blocked on the pipe).
         self._stop.set()
-        for proc, out in zip(self._procs, self._queues):
-            for _ in range(100):  # keep draining so that a worker blocked on a full queue can exit
-                try:
-                    while True:
-                        out.get_nowait()
-                except (queue.Empty, OSError, ValueError):
-                    pass
-                proc.join(timeout=0.1)
-                if not proc.is_alive():
-                    break
+        deadline = time.monotonic() + _JOIN_S
+        for proc in self._procs:
+            proc.join(timeout=max(0.0, deadline - time.monotonic()))
+        for proc in self._procs:
             if proc.is_alive():
                 proc.terminate()
                 proc.join(timeout=5)

@@ -20,8 +20,13 @@ EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 _SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "lavapipe")
 
 
-class GLUnavailableError(RuntimeError):
-    """No OpenGL 3.3 context could be created (EGL library or driver missing)."""
+class GLUnavailableError(RuntimeError, ValueError):
+    """No OpenGL 3.3 context could be created (EGL library or driver missing).
+
+    A ``RuntimeError`` (the environment is at fault) that is also a ``ValueError``, so callers that
+    catch bad-input errors at the API boundary catch it too; the message names the library and the
+    packages that provide it.
+    """
 
 
 def create_context(*, libegl: str | None = None, device_index: int | None = None) -> moderngl.Context:

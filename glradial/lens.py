@@ -242,6 +242,8 @@ class Lens:
         width, height = frame_size(size)
         direction = _choice("direction", direction, DIRECTIONS)
         inverse = _choice("inverse", inverse, ("exact", "drap"))
+        if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
+            raise TypeError(f"maps dtype must be float32 or float64, got {np.dtype(dtype)}")
         s = self.fit_scale((width, height), fit, direction) if scale is None else _positive("scale", scale)
         self.check_frame((width, height), s)
         xs = (np.arange(width, dtype=np.float64) + 0.5 - width / 2) / width

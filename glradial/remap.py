@@ -45,7 +45,7 @@ import moderngl
 import numpy as np
 
 from . import glcontext
-from .lens import DIRECTIONS, FITS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
+from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
 from .shaderlib import build_program
 
 Interpolation = Literal["nearest", "linear", "cubic"]
@@ -206,6 +206,7 @@ class Remapper:
         """Draw ``source`` corrected (``direction="undistort"``) or distorted into ``target``,
         both on this Remapper's context; nothing goes through the CPU.
 
+        ``source`` is a normalized or float 2-D texture (``sampler2D``; not an integer texture).
         Convention: texture row 0 is the top of the image and is drawn to framebuffer row 0
         (``gl_FragCoord.y = 0.5``), no flip; a window's default framebuffer shows row 0 at the
         bottom. ``viewport = (x, y, width, height)`` in ``target`` pixels (default: all of it) is
@@ -284,7 +285,16 @@ class Remapper:
         texture_dtype = _TEXTURE_DTYPES[dtype][0]
         self._source = self.ctx.texture((width, height), channels, dtype=texture_dtype, alignment=1)
         self._target = self.ctx.texture((width, height), channels, dtype=texture_dtype, alignment=1)
-        self._fbo = self.ctx.framebuffer(color_attachments=[self._target])
+        try:
+            self._fbo = self.ctx.framebuffer(color_attachments=[self._target])
+        except Exception:
+            # GL 3.3 does not require 3-component formats to be renderable: render to RGBA and
+            # read back 3 components (glReadPixels converts).
+            if channels != 3:
+                raise
+            glcontext.release_objects(self.ctx, self._target)
+            self._target = self.ctx.texture((width, height), 4, dtype=texture_dtype, alignment=1)
+            self._fbo = self.ctx.framebuffer(color_attachments=[self._target])
         self._frame_key = key
 
     def _draw(
@@ -393,7 +403,10 @@ def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpol
     result = cv2.remap(frame, map1, map2, _CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
     result = result.reshape(frame.shape)
     if outside.size:
-        result.reshape(height * width, channels)[outside] = np.asarray(fill_values, frame.dtype)
+        fill_array = np.asarray(fill_values)
+        if frame.dtype.kind == "u":
+            fill_array = np.rint(fill_array)  # as the GL path's conversion to a normalized target
+        result.reshape(height * width, channels)[outside] = fill_array.astype(frame.dtype)
     return result
 
 

@@ -53,13 +53,19 @@ class ShotDetector:
     cut. The score is the larger of the Bhattacharyya distance between the frames' HSV histograms
     (0 = identical, 1 = disjoint) and ``thumb_gain`` x the mean absolute difference of 32x18 grey
     thumbnails (in [0, 1] of the full scale). The first frame always starts shot 0.
+
+    Tuning (measured on procedural-stadium crops, 160-320 px wide): inside a shot, slow pans and
+    zooms score 0.01-0.05 and a fast pan (7 % of the frame width per frame) 0.04-0.07; cuts between
+    two cameras of the same stadium (mostly green, similar histograms) score 0.16-0.27. A missed cut
+    smooths two lenses together, a false one only shortens the smoothing, hence the low threshold.
+    Gradual transitions (dissolves, wipes) are not detected.
     """
 
-    threshold: float = 0.3
+    threshold: float = 0.12
     ratio: float = 3.0
     window: int = 12
     min_shot: int = 4
-    thumb_gain: float = 4.0
+    thumb_gain: float = 2.5
     _previous: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False)
     _recent: deque = field(default_factory=lambda: deque(maxlen=64), repr=False)
     _since_cut: int = field(default=0, repr=False)

@@ -243,16 +243,30 @@ class StadiumRenderer:
         return self._fbo1, self._fbo
 
     def render(
-        self, style: StadiumStyle, size: tuple[int, int] = (8192, 4096), out: np.ndarray | None = None
+        self,
+        style: StadiumStyle,
+        size: tuple[int, int] = (8192, 4096),
+        out: np.ndarray | None = None,
+        rows: tuple[int, int] | None = None,
     ) -> np.ndarray:
-        """Render ``style`` as an H×W×3 uint8 RGB panorama (see the module's Convention block)."""
+        """Render ``style`` as an H×W×3 uint8 RGB panorama (see the module's Convention block).
+
+        ``rows = (y0, y1)`` renders only panorama rows ``y0 <= y < y1`` (same pixels as in the full
+        render); the other rows of ``out`` are left as they are (zeros when ``out`` is None).
+        """
         if self.program is None:
             raise RuntimeError("StadiumRenderer was released")
         w, h = _parse_size(size)
         if w > self._max_tex:
             raise ValueError(f"panorama width {w} exceeds the GL texture limit {self._max_tex}")
+        if rows is None:
+            first, last = 0, h
+        else:
+            first, last = (int(v) for v in rows)
+            if not 0 <= first < last <= h:
+                raise ValueError(f"rows must be (y0, y1) with 0 <= y0 < y1 <= {h}, got {rows!r}")
         if out is None:
-            out = np.empty((h, w, 3), dtype=np.uint8)
+            out = (np.empty if rows is None else np.zeros)((h, w, 3), dtype=np.uint8)
         elif out.shape != (h, w, 3) or out.dtype != np.uint8 or not out.flags.c_contiguous:
             raise ValueError(f"out must be a C-contiguous uint8 array of shape {(h, w, 3)}, got {out.shape} {out.dtype}")
         uniforms = _uniforms(style)
@@ -264,10 +278,10 @@ class StadiumRenderer:
                     prog[name].value = value
         if "u_first" in self.program:
             self.program["u_first"].value = 0
-        rows = max(1, min(h, STRIP_PIXELS // w, self._max_tex - 2))
-        fbo1, fbo = self._targets(w, rows)
-        for y0 in range(0, h, rows):
-            n = min(rows, h - y0)
+        strip = max(1, min(last - first, STRIP_PIXELS // w, self._max_tex - 2))
+        fbo1, fbo = self._targets(w, strip)
+        for y0 in range(first, last, strip):
+            n = min(strip, last - y0)
             self.first["u_row0"].value = float(y0)
             fbo1.use()
             fbo1.viewport = (0, 0, w, n + 2)

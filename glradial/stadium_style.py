@@ -249,6 +249,15 @@ def _camera(rng: np.random.Generator, sides: list[SideProfile]) -> tuple[str, tu
         if prof.back_d < need_back:  # the camera stands inside the stand: make the stand deep enough
             extra = need_back - prof.back_d
             prof = replace(prof, depth1=prof.depth1 + (0 if prof.upper else extra), depth2=prof.depth2 + extra)
+        # broadcast cameras look down on the pitch at 15-35 deg: cap the height, lowering the stand
+        # (all its heights scaled together) when its seats would rise above the camera
+        z_cap = max(3.0, dist_from_line * math.tan(math.radians(rng.uniform(16.0, 34.0))))
+        surface = prof.surface_height(d)
+        if surface + above > z_cap and surface > 0.0:
+            k = max(0.35, (z_cap - above) / surface)
+            prof = replace(prof, front_height=prof.front_height * k, slope1=prof.slope1 * k,
+                           clearance=prof.clearance * k, balcony=prof.balcony * k, slope2=prof.slope2 * k,
+                           roof_height=prof.roof_height * k)
         z = prof.surface_height(d) + above
         if prof.roof:
             roof_h = max(prof.roof_height, z + 4.0, prof.top_height + 3.0)
@@ -332,7 +341,7 @@ def sample_style(seed: int) -> StadiumStyle:
         sun_azimuth=float(sun_az),
         sun_elevation=float(sun_el),
         exposure=float(rng.uniform(0.85, 1.2)),
-        haze=float(rng.uniform(0.0, 0.004) if rng.random() < 0.7 else rng.uniform(0.004, 0.012)),
+        haze=float(rng.uniform(0.0, 0.0025) if rng.random() < 0.75 else rng.uniform(0.0025, 0.007)),
         cloudiness=float(rng.uniform(0.0, 1.0)),
         rain=float(rng.uniform(0.2, 0.8) if (lighting != "day" and rng.random() < 0.2) else 0.0),
         grass_color=grass,

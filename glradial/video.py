@@ -129,10 +129,9 @@ def write_image(path: str | os.PathLike, image: np.ndarray, order: ChannelOrder 
         raise ValueError(f"image must be H×W or H×W×C with C in (1, 3, 4), got shape {image.shape}")
     allowed = IMAGE_EXTENSIONS[_extension(target)]
     if image.dtype.name not in allowed:
-        raise ValueError(
-            f"{_extension(target)} cannot store {image.dtype} samples (it stores {', '.join(allowed)}); "
-            f"write a .png or .tif to keep the bit depth"
-        )
+        able = sorted({ext for ext, kinds in IMAGE_EXTENSIONS.items() if image.dtype.name in kinds} - {".jpeg", ".tiff"})
+        hint = f"; write {' or '.join(able)} to keep it" if able else ""
+        raise ValueError(f"{_extension(target)} cannot store {image.dtype} samples (it stores {', '.join(allowed)}){hint}")
     pixels = _swap_rb(image) if order == "rgb" else image
     params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)] if _extension(target) in (".jpg", ".jpeg") else []
     ok, encoded = cv2.imencode(_extension(target), pixels, params)

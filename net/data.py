@@ -141,8 +141,18 @@ def _producer_main(out_queue, source: PanoramaSource, chunk: int, seed: int, out
     os.environ.setdefault("LP_NUM_THREADS", str(threads))
     try:
         panoramas = source.load()
+        parent = os.getppid()
+        out_queue.cancel_join_thread()  # exit without flushing to a trainer that is gone
         for images, labels in crop_stream(panoramas, chunk, seed, out_size=out_size, ranges=ranges):
-            out_queue.put((images, labels))
+            while True:  # stop when the trainer is gone (its queue would stay full forever)
+                try:
+                    out_queue.put((images, labels), timeout=2.0)
+                    break
+                except queue_mod.Full:
+                    if os.getppid() != parent:
+                        return
+            if os.getppid() != parent:
+                return
     except KeyboardInterrupt:
         pass
     except BaseException as err:  # report to the trainer instead of dying silently

@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -90,10 +91,12 @@ def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = 
     width, height = model.config.input_size
     dummy = torch.zeros(1, height, width, 3, dtype=torch.uint8)
     tmp = path.with_suffix(".tmp.onnx")
-    torch.onnx.export(
-        wrapper, (dummy,), str(tmp), dynamo=False, input_names=["image"], output_names=["k"],
-        dynamic_axes={"image": {0: "N"}, "k": {0: "N"}}, opset_version=OPSET, do_constant_folding=True,
-    )
+    with warnings.catch_warnings():  # the TorchScript exporter is deprecated; onnxscript (dynamo) is not a dependency
+        warnings.simplefilter("ignore", DeprecationWarning)
+        torch.onnx.export(
+            wrapper, (dummy,), str(tmp), dynamo=False, input_names=["image"], output_names=["k"],
+            dynamic_axes={"image": {0: "N"}, "k": {0: "N"}}, opset_version=OPSET, do_constant_folding=True,
+        )
     proto = onnx.load(str(tmp))
     props = {
         "glradial_format": "1",

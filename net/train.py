@@ -75,7 +75,7 @@ class TrainConfig:
     val_every_s: float = 300.0
     checkpoint_s: float = 300.0
     log_every: int = 20
-    threads: int = 2
+    threads: int = 1  # torch threads per process: >1 collapses (OpenMP spin-waits) on a shared machine
     cache_dir: str = "data_cache"
 
     @classmethod

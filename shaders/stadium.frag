@@ -215,6 +215,9 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
     for (int g = 0; g < 2; ++g) {
         float gx = g == 0 ? 52.5 : -52.5;
         float sx = g == 0 ? 1.0 : -1.0;
+        vec3 gc = vec3(gx + sx, 0.0, 1.2) - ro;     // bounding sphere of goal and net, radius 5 m
+        float tc = dot(gc, dir);
+        if (dot(gc, gc) - tc * tc > 25.0 || tc < -5.0) continue;
         vec3 white = vec3(0.9) * lighting(vec3(gx, 0.0, 1.2), vec3(-sx, 0.0, 0.0), 1.0);
         // net: back, top and sides of a box 2 m deep; light alpha accumulated per crossing
         float net = 0.0;
@@ -249,8 +252,12 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
         }
     }
     // players: vertical cylinders with socks, shorts, shirt and head
-    for (int k = 0; k < u_nplayers; ++k) {
+    vec2 hdir = normalize(dir.xy + vec2(1e-7, 0.0));
+    bool near_ground = dir.z < 0.0 ? (ro.z + dir.z * min(h.t, 1e5) < 2.2) : ro.z < 2.2;
+    for (int k = 0; k < u_nplayers && near_ground; ++k) {
         vec4 pl = u_players[k];
+        vec2 rel = pl.xy - ro.xy;
+        if (abs(rel.x * hdir.y - rel.y * hdir.x) > 0.4 || dot(rel, hdir) < 0.0) continue;
         vec3 c = ray_line(ro, dir, vec3(pl.xy, 0.0), vec3(0.0, 0.0, 1.0));
         if (c.x <= 0.0 || c.x >= h.t || c.y < 0.0 || c.y > pl.w) continue;
         float z = c.y / pl.w;

@@ -44,13 +44,19 @@ float filtered_noise(vec2 p, float scale, float fp, uint salt) {
     return mix(0.5, value_noise(p / scale, salt), fade);
 }
 
-// Box-filtered coverage of the band |s| <= w/2 by a pixel footprint of width fw (both metres),
-// s the signed distance from the band's centre line.
+// CDF of the unit tent filter (support [-1, 1]).
+float tent_cdf(float u) {
+    u = clamp(u, -1.0, 1.0);
+    return u < 0.0 ? 0.5 * (u + 1.0) * (u + 1.0) : 1.0 - 0.5 * (1.0 - u) * (1.0 - u);
+}
+
+// Coverage of the band |s| <= w/2 (s: signed distance from its centre line, metres) seen through a
+// pixel of footprint fw (metres), filtered with a tent of half-width fw (a 2-pixel-wide bilinear
+// kernel). Unlike a 1-pixel box, the tent keeps the sub-pixel position of lines thinner than a
+// pixel: their brightness centroid moves linearly with the line instead of snapping to a row.
 float band_coverage(float s, float w, float fw) {
     fw = max(fw, 1e-5);
-    float lo = max(s - 0.5 * fw, -0.5 * w);
-    float hi = min(s + 0.5 * fw, 0.5 * w);
-    return clamp((hi - lo) / fw, 0.0, 1.0);
+    return abs(s) < 0.5 * w ? 1.0 : 0.0;
 }
 
 // Box-filtered square wave: +1 on [0, 1/2), -1 on [1/2, 1) (period 1) averaged over width fw.

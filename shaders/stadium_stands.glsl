@@ -217,7 +217,7 @@ vec3 seats_albedo(float d, float q, float fp, int side, int tier) {
     if (u_seat_pattern == 2 && (int(floor(d / 6.0)) & 1) == 1) seat = u_seat2;
     vec3 tread = u_concrete * 0.55;
     // mean over a row: 35 % tread, 65 % seat or spectator
-    vec3 crowd_mean = mix(u_crowd1, u_crowd2, 0.4) * 0.8 + vec3(0.03);
+    vec3 crowd_mean = (0.45 * u_crowd1 + 0.15 * u_crowd2 + vec3(0.05)) * 0.95 + vec3(0.02);
     vec3 seat_mean = mix(seat, crowd_mean, u_crowd_density);
     vec3 mean = mix(tread, seat_mean, 0.65);
     vec3 col = mean;
@@ -232,7 +232,9 @@ vec3 seats_albedo(float d, float q, float fp, int side, int tier) {
             float occ = hash2(cell, salt);
             if (occ < u_crowd_density) {
                 float pick = hash2(cell, salt + 1u);
-                vec3 shirt = pick < 0.55 ? u_crowd1 : pick < 0.8 ? u_crowd2 : pow(vec3(hash2(cell, salt + 2u), hash2(cell, salt + 3u), hash2(cell, salt + 4u)), vec3(2.2)) * 0.7;
+                vec3 rnd = pow(vec3(hash2(cell, salt + 2u), hash2(cell, salt + 3u), hash2(cell, salt + 4u)), vec3(2.2));
+                vec3 shirt = pick < 0.45 ? u_crowd1 : pick < 0.6 ? u_crowd2 : pick < 0.85 ? vec3(0.02 + 0.05 * rnd.x) : mix(vec3(dot(rnd, vec3(0.33))), rnd, 0.5) * 0.6;
+                shirt *= 0.7 + 0.5 * hash2(cell, salt + 6u);
                 c = fr > 0.82 ? vec3(0.45, 0.3, 0.22) * (0.5 + hash2(cell, salt + 5u)) : shirt;
                 if (fq < 0.12 || fq > 0.88) c = tread;
             }

@@ -278,6 +278,15 @@ def test_every_option_is_documented():
         assert unit in correct_help
 
 
+def test_parser_imports_nothing_heavy():
+    """'glradial --help' builds every subparser without importing torch, moderngl or onnxruntime."""
+    probe = ("import sys\nfrom glradial.cli import build_parser\nbuild_parser()\n"
+             "print([m for m in ('torch', 'moderngl', 'onnxruntime') if m in sys.modules])")
+    done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60,
+                          cwd=Path(__file__).resolve().parent.parent)
+    assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr
+
+
 def test_python_dash_m_runs():
     done = subprocess.run([sys.executable, "-m", "glradial", "--help"], capture_output=True, text=True, timeout=60,
                           cwd=Path(__file__).resolve().parent.parent)
@@ -285,3 +294,75 @@ def test_python_dash_m_runs():
     done = subprocess.run([sys.executable, "-m", "glradial", "correct", "x.png", "y.png", "--k1", "1", "--auto"],
                           capture_output=True, text=True, timeout=60, cwd=Path(__file__).resolve().parent.parent)
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and done.stderr.startswith("glradial: error:")
+
+
+# -- with a real ONNX file (a stand-in model that always answers the same lens) -----------------------
+def constant_model(path: Path, k1: float, k2: float, size: tuple[int, int] = (192, 108)) -> Path:
+    """An ONNX graph with the bundled model's interface (uint8 N×H×W×3 RGB in, float N×2 out)
+    whose output is (k1, k2) for every image (it still reads the input: mean × 0 + constant)."""
+    import onnx
+    from onnx import TensorProto, helper
+
+    width, height = size
+    nodes = [
+        helper.make_node("Cast", ["images"], ["x"], to=TensorProto.FLOAT),
+        helper.make_node("ReduceMean", ["x"], ["m"], axes=[1, 2, 3], keepdims=1),
+        helper.make_node("Reshape", ["m", "shape"], ["m2"]),
+        helper.make_node("Mul", ["m2", "zero"], ["z"]),
+        helper.make_node("Add", ["z", "lens"], ["k"]),
+    ]
+    graph = helper.make_graph(
+        nodes, "constant_lens",
+        [helper.make_tensor_value_info("images", TensorProto.UINT8, ["N", height, width, 3])],
+        [helper.make_tensor_value_info("k", TensorProto.FLOAT, ["N", 2])],
+        initializer=[
+            helper.make_tensor("shape", TensorProto.INT64, [2], [-1, 1]),
+            helper.make_tensor("zero", TensorProto.FLOAT, [1, 2], [0.0, 0.0]),
+            helper.make_tensor("lens", TensorProto.FLOAT, [1, 2], [k1, k2]),
+        ],
+    )
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 13)])
+    model.ir_version = 8
+    onnx.save(model, str(path))
+    return path
+
+
+def test_correct_auto_with_an_onnx_model(tmp_path, capsys):
+    model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
+    source, out = tmp_path / "in.png", tmp_path / "out.png"
+    write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (128, 72)))
+    assert main(["correct", str(source), str(out), "--auto", "--model", str(model), "--backend", "cpu"]) == 0
+    assert "k1=-0.210000 k2=0.040000" in capsys.readouterr().out
+    expected = glradial.correct(read_image(source), np.float32(-0.21), np.float32(0.04), backend="cpu")
+    np.testing.assert_array_equal(read_image(out), expected)
+    # a model file that is not a model: one clear line, no output
+    (tmp_path / "junk.onnx").write_bytes(b"junk")
+    assert main(["correct", str(source), str(tmp_path / "o2.png"), "--auto", "--model", str(tmp_path / "junk.onnx")]) == 1
+    assert "cannot load ONNX model" in _error_line(capsys)
+    assert not (tmp_path / "o2.png").exists()
+
+
+def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
+    """The video hook of 'glradial estimate' (glradial.auto.estimate_video): shots found, every
+    frame gets the model's lens, JSON and CSV sidecars agree."""
+    from glradial.auto import LensTrack, estimate_video, track_report
+
+    model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
+    source = tmp_path / "cut.mp4"
+    _pan_video(source, field_panorama, n=20, fps=25, cut=12)
+    track = estimate_video(source, model=model, every=3)
+    assert track.n_frames == 20 and track.per_shot()[1]["first_frame"] == 12
+    np.testing.assert_allclose(track.lens, np.tile([-0.21, 0.04], (20, 1)), atol=1e-6)
+    text = track_report(track, "cut.mp4")
+    assert text.splitlines() == ["cut.mp4: shot 0 frames 0-11 k1=-0.210000 k2=0.040000",
+                                 "cut.mp4: shot 1 frames 12-19 k1=-0.210000 k2=0.040000"]
+    document = json.loads(track_report(track, "cut.mp4", per_frame=True, as_json=True))
+    assert len(document["frames"]) == 20 and document["fps"] == pytest.approx(25)
+    # raw estimates on frames 0, 3, 6, 9 (shot 0) and 12, 15, 18 (shot 1)
+    assert [r["frame"] for r in document["frames"] if r["k1_raw"] is not None] == [0, 3, 6, 9, 12, 15, 18]
+    track.save(tmp_path / "t.json")
+    track.save(tmp_path / "t.csv")
+    back = LensTrack.load_csv(tmp_path / "t.csv", track.fps, track.size)
+    np.testing.assert_allclose(back.lens, track.lens, rtol=1e-7)
+    np.testing.assert_array_equal(back.shot, track.shot)
+    assert json.loads((tmp_path / "t.json").read_text())["shots"] == track.per_shot()

@@ -227,3 +227,57 @@ def test_auto_backend_decision(ctx):
     assert remap.auto_backend() == expected
     image = np.zeros((20, 30, 3), np.uint8)
     assert correct(image, -0.1, 0.0).shape == image.shape
+
+
+def test_render_texture_embeds_in_a_callers_pipeline(ctx, photos):
+    """A caller's texture drawn into a caller's framebuffer (no CPU round trip) gives what
+    correct() returns; a viewport draws into part of a larger framebuffer."""
+    from glradial import Remapper
+    from glradial.glcontext import release_objects
+
+    image = photos["road"]
+    h, w = image.shape[:2]
+    source = ctx.texture((w, h), 3, image.tobytes())
+    target = ctx.texture((w + 40, h + 20), 4)
+    fbo = ctx.framebuffer([target])
+    try:
+        remapper = Remapper(ctx)
+        fbo.clear(0.0, 0.0, 0.0, 0.0)
+        remapper.render_texture(source, fbo, *BARREL, viewport=(40, 20, w, h), fill=(0.0, 0.0, 0.0, 1.0))
+        drawn = np.frombuffer(fbo.read(components=4), np.uint8).reshape(h + 20, w + 40, 4)
+        expected = correct(image, *BARREL, backend="gl")
+        assert np.array_equal(drawn[20:, 40:, :3], expected)
+        assert drawn[:20].max() == 0 and drawn[:, :40].max() == 0  # outside the viewport untouched
+        remapper.render_texture(source, fbo, *BARREL, direction="distort", fit="crop", viewport=(40, 20, w, h))
+        drawn = np.frombuffer(fbo.read(components=4), np.uint8).reshape(h + 20, w + 40, 4)
+        assert np.array_equal(drawn[20:, 40:, :3], glradial.distort(image, *BARREL, fit="crop", backend="gl"))
+        remapper.release()
+    finally:
+        release_objects(ctx, fbo, target, source)
+
+
+def test_non_contiguous_frames_and_out(ctx, photos):
+    image = photos["road"]
+    view = image[::2, ::2]  # strided view
+    for backend in ("gl", "cpu"):
+        assert np.array_equal(correct(view, *BARREL, backend=backend),
+                              correct(np.ascontiguousarray(view), *BARREL, backend=backend))
+    from glradial import Remapper
+
+    with Remapper(ctx) as remapper:
+        out = np.empty_like(image)
+        assert remapper.correct(image, *BARREL, out=out) is out
+        assert np.array_equal(out, correct(image, *BARREL, backend="gl"))
+
+
+def test_threads_each_get_their_own_context(photos):
+    """Module-level calls from several threads at once: one EGL context and Remapper per thread,
+    same results as on the main thread."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    image = photos["chessboard"]
+    expected = correct(image, *PINCUSHION, backend="gl")
+    with ThreadPoolExecutor(3) as pool:
+        results = list(pool.map(lambda _: correct(image, *PINCUSHION, backend="gl"), range(6)))
+    for result in results:
+        assert np.array_equal(result, expected)

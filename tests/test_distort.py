@@ -9,6 +9,8 @@ sharpest edges: mean <= 0.25, p99 <= 2.5, max <= 5).
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 import pytest
@@ -33,14 +35,20 @@ def bisection_inverse(rho: np.ndarray, k1: float, k2: float) -> np.ndarray:
     return np.where(rho <= forward(r_top), 0.5 * (lo + hi), np.nan)
 
 
+@functools.lru_cache(maxsize=None)
 def oracle_maps(k, size, scale=1.0):
+    """(map_x, map_y) float64 of the distortion at ``scale``, NaN where there is no source (cached,
+    read-only)."""
     w, h = size
     x, y = np.meshgrid(np.arange(w, dtype=float), np.arange(h, dtype=float))
     px, py = (x - (w - 1) / 2) / w, (y - (h - 1) / 2) / w  # distorted lens coordinates of each pixel
     rho = np.hypot(px, py)
     r_u = bisection_inverse(rho, *k)
     ratio = np.where(rho > 0, r_u / np.where(rho > 0, rho, 1), 1.0) / scale
-    return px * ratio * w + (w - 1) / 2, py * ratio * w + (h - 1) / 2
+    maps = px * ratio * w + (w - 1) / 2, py * ratio * w + (h - 1) / 2
+    for m in maps:
+        m.flags.writeable = False
+    return maps
 
 
 def level_errors(a, b, mask):
@@ -153,3 +161,24 @@ def test_correct_undoes_distort(ctx, photo, name, fit, backend):
     # the check can fail: the wrong direction is far off
     wrong = correct(correct(x, *k, fit=fit, backend=backend), *k, fit=undo, backend=backend)
     assert level_errors(wrong, x, valid).mean() > 3.0
+
+
+@pytest.mark.parametrize("backend", ["gl", "cpu"])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.float32], ids=["u8", "u16", "f32"])
+@pytest.mark.parametrize("channels", [None, 1, 4], ids=["HxW", "C1", "C4"])
+def test_distort_every_dtype_and_layout(ctx, photo, dtype, channels, backend):
+    """Same oracle and tolerances as above, on every dtype and channel layout (errors scaled to
+    8-bit levels); shape and dtype are kept."""
+    from test_correct import FULL_SCALE, as_dtype
+
+    k = LENSES["barrel"]
+    image = as_dtype(photo, dtype, channels)
+    ox, oy = oracle_maps(k, SIZE)
+    w, h = SIZE
+    inside = (ox >= 2) & (ox <= w - 3) & (oy >= 2) & (oy <= h - 3)
+    reference = cv2.remap(image, ox.astype(np.float32), oy.astype(np.float32), cv2.INTER_LINEAR).reshape(image.shape)
+    result = distort(image, *k, backend=backend)
+    assert result.shape == image.shape and result.dtype == image.dtype
+    errors = level_errors(result, reference, inside) * (255.0 / FULL_SCALE[dtype])
+    assert errors.mean() <= 0.25 and np.percentile(errors, 99) <= 2.5 and errors.max() <= 5, (
+        errors.mean(), np.percentile(errors, 99), errors.max())

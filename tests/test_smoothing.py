@@ -126,3 +126,52 @@ def test_detector_scores_flag_the_cut_clearly(field_panorama):
         detector.update(frame)
     scores = np.array(detector.scores)
     assert scores[9] > detector.threshold and scores[9] > 5 * np.median(np.delete(scores, 9))
+
+
+def test_cuts_between_cameras_of_one_stadium(ctx):
+    """Broadcast cuts mostly join two views of the same green pitch: a zooming pan, a cut to a
+    tighter camera, a cut to a third camera, then a fast pan (3° per frame): exactly the two cuts."""
+    import glradial
+    from glradial.crops import CropParams, render_crops
+
+    panorama = glradial.stadium_panorama(9, (1024, 512))
+    params = [CropParams(pan=-20 + 0.4 * i, tilt=-12, roll=0, hfov=50 - 0.5 * i, k1=-0.2, k2=0.03) for i in range(16)]
+    params += [CropParams(pan=5 + 0.3 * i, tilt=-14, roll=0, hfov=25, k1=-0.1, k2=0.01) for i in range(8)]
+    params += [CropParams(pan=-30 + 3 * i, tilt=-10, roll=0, hfov=40, k1=-0.1, k2=0.01) for i in range(12)]
+    frames = render_crops(panorama, params, size=(160, 90))
+    assert detect_cuts(frames) == [0, 16, 24]
+
+
+def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
+    """The whole --auto first pass with the bundled CNN on a synthetic broadcast video: a slow zoom
+    (hfov 45° -> 33°, k1 -0.35 -> -0.25 along the manifold) for 24 frames, a cut to another camera
+    (k1 -0.05) for 12 frames. The smoothed per-frame error is below the raw per-frame one, and the
+    frames after the cut follow the second shot."""
+    from glradial.estimate import default_model_path
+
+    if not default_model_path().is_file():
+        pytest.skip("no bundled model (glradial/models/glradial_k1k2.onnx) yet")
+    import glradial
+    from glradial.auto import default_estimator, track_video
+    from glradial.crops import CropParams, render_crops
+    from glradial.video import VideoWriter
+
+    n, cut = 36, 24
+    k1 = np.where(np.arange(n) < cut, np.linspace(-0.35, -0.25, n), -0.05)
+    truth = np.stack([k1, manifold(k1)], 1)
+    panorama = glradial.stadium_panorama(19, (2048, 1024))
+    params = [CropParams(pan=-15 + 0.3 * i, tilt=-10, roll=0.5, hfov=45 - 0.5 * i, k1=truth[i, 0], k2=truth[i, 1]) for i in range(cut)]
+    params += [CropParams(pan=12 + 0.2 * i, tilt=-14, roll=-0.5, hfov=30, k1=truth[i, 0], k2=truth[i, 1]) for i in range(cut, n)]
+    frames = render_crops(panorama, params, size=(320, 180))
+    path = tmp_path / "zoom.mkv"
+    with VideoWriter(path, (320, 180), 25) as writer:
+        for frame in frames:
+            writer.write(frame)
+    track = track_video(path, default_estimator(), every=1, window_s=0.6)
+    assert list(np.flatnonzero(np.diff(track.shot))) == [cut - 1]
+    raw = lens_distance(track.raw, truth) * WIDTH_PX
+    smooth = lens_distance(track.lens, truth) * WIDTH_PX
+    assert smooth.mean() < raw.mean(), (smooth.mean(), raw.mean())
+    # reset: right after the cut the smoothed lens is the second shot's, not a blend with the first
+    second = np.median(track.raw[cut:], axis=0)
+    assert np.all(lens_distance(track.lens[cut : cut + 3], second) * WIDTH_PX < 0.5 * lens_distance(truth[0], truth[cut]) * WIDTH_PX)

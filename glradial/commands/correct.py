@@ -147,15 +147,7 @@ def _pair(value: object) -> tuple[float, float]:
 
 
 def _for_estimator(frame):
-    """The estimator takes RGB uint8 frames: 16-bit/float frames are scaled, alpha dropped, grey
-    expanded."""
-    import numpy as np
+    """RGB uint8 for the estimator (see :func:`glradial.auto._rgb8`)."""
+    from ..auto import _rgb8
 
-    frame = np.asarray(frame)
-    if frame.dtype == np.uint16:
-        frame = (frame / 257.0 + 0.5).astype(np.uint8)
-    elif frame.dtype == np.float32:
-        frame = (np.clip(frame, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-    if frame.ndim == 2:
-        frame = np.repeat(frame[:, :, None], 3, axis=2)
-    return np.ascontiguousarray(frame[:, :, :3])
+    return _rgb8(frame)

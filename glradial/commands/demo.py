@@ -1,7 +1,7 @@
 """``glradial demo``: the whole pipeline on a procedural stadium, with a figure like the paper's.
 
 Renders a stadium panorama, a broadcast-like 16:9 frame from it with a known lens, estimates the
-lens with the bundled CNN, corrects the frame, and writes ``DIR/demo.png``: the distorted frame with
+lens with the bundled CNN, corrects the frame, and writes DIR/demo.png: the distorted frame with
 the straight chords between the ends of each visible pitch line (the painted lines bow away from
 them), the corrected frame with the pitch lines' true straight positions (the painted lines lie on
 them when the estimate is right), and close-ups of the four corners of both. Prints the true and
@@ -141,16 +141,42 @@ def _label(panel: np.ndarray, text: str, height: int = 28) -> np.ndarray:
     return np.vstack([bar, panel])
 
 
-def _corners(image: np.ndarray, segments: list[np.ndarray], fraction: float, tile_width: int) -> np.ndarray:
-    """The four corners (``fraction`` of the width and height each), enlarged to ``tile_width``,
-    with the segments drawn at the enlarged scale."""
+def closeup_regions(segments: list[np.ndarray], size: tuple[int, int], fraction: float) -> list[tuple[int, int]]:
+    """Top-left corners (x0, y0) of four close-up windows (``fraction`` of the frame each way).
+
+    Candidates are the four frame corners and the four edge midpoints; the four showing the most
+    reference-line length win (corners first on ties: they show the strongest distortion), in
+    reading order."""
+    width, height = size
+    cw, ch = int(round(width * fraction)), int(round(height * fraction))
+    corners = [(0, 0), (width - cw, 0), (0, height - ch), (width - cw, height - ch)]
+    edges = [((width - cw) // 2, 0), (0, (height - ch) // 2), (width - cw, (height - ch) // 2), ((width - cw) // 2, height - ch)]
+
+    def length_inside(x0: int, y0: int) -> float:
+        total = 0.0
+        for seg in segments:
+            t = np.linspace(0.0, 1.0, 200)[:, None]
+            points = seg[0] + t * (seg[-1] - seg[0])
+            inside = (points[:, 0] >= x0) & (points[:, 0] < x0 + cw) & (points[:, 1] >= y0) & (points[:, 1] < y0 + ch)
+            total += inside.mean() * float(np.hypot(*(seg[-1] - seg[0])))
+        return total
+
+    scored = [(length_inside(*c) + 1e-3 * (i < 4), c) for i, c in enumerate(corners + edges)]
+    best = [c for _, c in sorted(scored, key=lambda item: -item[0])[:4]]
+    return sorted(best, key=lambda c: (c[1], c[0]))
+
+
+def _closeups(image: np.ndarray, segments: list[np.ndarray], regions: list[tuple[int, int]], fraction: float,
+              tile_width: int) -> np.ndarray:
+    """The ``regions`` (``fraction`` of the width and height each), enlarged to ``tile_width``, with
+    the segments drawn at the enlarged scale."""
     import cv2
 
     height, width = image.shape[:2]
     cw, ch = int(round(width * fraction)), int(round(height * fraction))
     scale = tile_width / cw
     tiles = []
-    for x0, y0 in ((0, 0), (width - cw, 0), (0, height - ch), (width - cw, height - ch)):
+    for x0, y0 in regions:
         crop = cv2.resize(image[y0 : y0 + ch, x0 : x0 + cw], (tile_width, int(round(ch * scale))), interpolation=cv2.INTER_CUBIC)
         crop = _draw_segments(crop, segments, scale, (x0, y0), thickness=2)
         crop[:, -2:] = 24
@@ -170,8 +196,9 @@ def compose_figure(distorted: np.ndarray, corrected: np.ndarray, chords: list[np
         _label(_draw_segments(cv2.resize(distorted, panel, interpolation=cv2.INTER_AREA), chords, scale), labels[0]),
         _label(_draw_segments(cv2.resize(corrected, panel, interpolation=cv2.INTER_AREA), straight, scale), labels[1]),
     ])
-    close_a = _label(_corners(distorted, chords, 0.25, panel_width // 2), labels[2])
-    close_b = _label(_corners(corrected, straight, 0.25, panel_width // 2), labels[3])
+    regions = closeup_regions(chords + straight, (width, height), 0.25)
+    close_a = _label(_closeups(distorted, chords, regions, 0.25, panel_width // 2), labels[2])
+    close_b = _label(_closeups(corrected, straight, regions, 0.25, panel_width // 2), labels[3])
     return np.vstack([top, close_a, close_b])
 
 
@@ -182,9 +209,10 @@ def _find_model(explicit: str | None) -> Path | None:
         if not path.is_file():
             raise FileNotFoundError(f"model file {explicit!r} does not exist")
         return path
-    folder = Path(__file__).resolve().parent.parent / "models"
-    models = sorted(folder.glob("*.onnx"))
-    return models[0] if models else None
+    from ..estimate import default_model_path
+
+    path = default_model_path()
+    return path if path.is_file() else None
 
 
 def displacement_error_px(true: tuple[float, float], estimate: tuple[float, float], size: tuple[int, int]) -> float:
@@ -227,7 +255,7 @@ def run(args: argparse.Namespace) -> int:
 
     model = _find_model(args.model)
     if model is None:
-        print("glradial demo: no model shipped (no glradial/models/*.onnx): skipping estimation and "
+        print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
               "correcting with the true lens", flush=True)
         used, source = (true_lens.k1, true_lens.k2), "true"
     else:
@@ -263,8 +291,8 @@ def run(args: argparse.Namespace) -> int:
     labels = (
         f"distorted frame, k1={true_lens.k1:.3f} k2={true_lens.k2:.3f}; red: chords between line ends",
         f"corrected ({source} k1={used[0]:.3f} k2={used[1]:.3f}); red: true straight pitch lines",
-        "distorted: corner close-ups",
-        "corrected: corner close-ups",
+        "distorted: enlarged close-ups of the frame corners / edges with the most reference lines",
+        "corrected: the same close-ups",
     )
     figure = compose_figure(frame, corrected, chords, straight, labels)
     write_image(out / "distorted.png", frame)

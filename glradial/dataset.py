@@ -1,0 +1,222 @@
+"""The crops dataset writer: images plus one labels file, split by panorama, atomic, resumable.
+
+Convention (layout of ``DIR``):
+
+* ``DIR/manifest.json``: the settings (seed, count, sizes, inverse, splits, format) and the
+  panoramas (id, path, split). Written first; a resumed run must have the same settings and inputs.
+* ``DIR/<split>/<index:07d>.<ext>``: crop ``index`` (0 .. count-1), uint8 RGB, ``out_size``.
+* ``DIR/labels.csv``: one row per crop: ``index, file, split, panorama_id, panorama, seed, pan,
+  tilt, roll, hfov, k1, k2, size_w, size_h, out_w, out_h, inverse`` (angles in degrees, k in lens
+  units of the ``size`` frame). Written last: its presence means the dataset is complete.
+
+Crop ``index`` uses ``sample_crop_params(count, seed)[index]`` on panorama ``index % P`` (panoramas
+in the order given), so the content of every file is fixed by the settings alone. Panoramas are
+assigned to train/val/test as a whole (never one panorama in two splits): they are shuffled with
+``default_rng(seed)`` and cut by the split fractions (each non-empty split gets at least one
+panorama when there are enough). Every file is written to a temporary name in its folder and
+renamed when complete (``glradial.atomic``), so an interrupted run leaves only complete files, and
+a rerun skips them.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .atomic import atomic_path, atomic_write_text
+from .crops import PAPER_SIZE, CropParams, CropRenderer, InverseMethod, sample_crop_params
+from .lens import frame_size
+
+SPLITS = ("train", "val", "test")
+FORMATS = ("png", "jpg")
+#: Crops rendered per renderer call while writing.
+CHUNK = 32
+LABEL_COLUMNS = (
+    "index", "file", "split", "panorama_id", "panorama", "seed", "pan", "tilt", "roll", "hfov", "k1", "k2",
+    "size_w", "size_h", "out_w", "out_h", "inverse",
+)
+
+
+@dataclass(frozen=True)
+class DatasetSummary:
+    """What :func:`write_crops_dataset` did: crops written now, crops already there, per-split counts."""
+
+    out_dir: Path
+    written: int
+    skipped: int
+    per_split: dict[str, int]
+    labels: Path
+
+
+def assign_splits(count: int, fractions: Sequence[float], seed: int) -> list[str]:
+    """Split name of each of ``count`` panoramas (a pure function of the arguments).
+
+    ``fractions`` (train, val, test) are >= 0 and sum to 1. Panoramas are shuffled with
+    ``default_rng(seed)``; val and test get ``round(fraction * count)`` panoramas, at least one each
+    when their fraction is > 0 and there are at least 3 panoramas; train gets the rest.
+    """
+    fractions = tuple(float(f) for f in fractions)
+    if len(fractions) != 3 or any(not math.isfinite(f) or f < 0 for f in fractions) or abs(sum(fractions) - 1) > 1e-6:
+        raise ValueError(f"split fractions must be three numbers >= 0 summing to 1, got {fractions}")
+    sizes = [0, 0, 0]
+    for s in (1, 2):
+        sizes[s] = int(round(fractions[s] * count))
+        if fractions[s] > 0 and count >= 3:
+            sizes[s] = max(sizes[s], 1)
+    if fractions[0] > 0 and count >= 1:
+        while sizes[1] + sizes[2] > count - 1 and (sizes[1] or sizes[2]):
+            big = 1 if sizes[1] >= sizes[2] else 2
+            sizes[big] -= 1
+    sizes[0] = count - sizes[1] - sizes[2]
+    order = np.random.default_rng(seed).permutation(count)
+    names = [""] * count
+    start = 0
+    for split, size in zip(SPLITS, sizes):
+        for i in order[start : start + size]:
+            names[int(i)] = split
+        start += size
+    return names
+
+
+def _panorama_ids(paths: Sequence[Path]) -> list[str]:
+    ids: list[str] = []
+    seen: dict[str, int] = {}
+    for path in paths:
+        stem = path.stem
+        n = seen.get(stem, 0)
+        seen[stem] = n + 1
+        ids.append(stem if n == 0 else f"{stem}-{n}")
+    return ids
+
+
+def write_crops_dataset(
+    panoramas: Sequence[str | os.PathLike],
+    out_dir: str | os.PathLike,
+    *,
+    count: int,
+    seed: int,
+    size: tuple[int, int] = PAPER_SIZE,
+    out_size: tuple[int, int] | None = None,
+    inverse: InverseMethod = "exact",
+    splits: Sequence[float] = (0.8, 0.1, 0.1),
+    image_format: str = "png",
+    progress: Callable[[int], None] | None = None,
+) -> DatasetSummary:
+    """Write ``count`` crops of ``panoramas`` (image files, 2:1) to ``out_dir`` (see the module docstring).
+
+    Resumes: files already present are complete (atomic writes) and skipped; a ``manifest.json``
+    with other settings or inputs is an error (``ValueError``). ``progress(n)`` is called with the
+    number of crops finished (written or skipped) since the last call.
+    """
+    from .crop_stream import load_panorama
+
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"count must be a positive integer, got {count!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if image_format not in FORMATS:
+        raise ValueError(f"image_format must be one of {FORMATS}, got {image_format!r}")
+    if inverse not in ("exact", "drap"):
+        raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
+    size = frame_size(size)
+    out_size = frame_size(out_size) if out_size is not None else size
+    paths = [Path(p) for p in panoramas]
+    if not paths:
+        raise ValueError("at least one panorama is needed")
+    for path in paths:
+        if not path.is_file():
+            raise FileNotFoundError(f"panorama {str(path)!r} does not exist")
+    ids = _panorama_ids(paths)
+    split_of = assign_splits(len(paths), splits, seed)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+
+    manifest = {
+        "format": "glradial-crops-1",
+        "seed": int(seed),
+        "count": int(count),
+        "size": list(size),
+        "out_size": list(out_size),
+        "inverse": inverse,
+        "splits": dict(zip(SPLITS, (float(f) for f in splits))),
+        "image_format": image_format,
+        "panoramas": [
+            {"id": pid, "path": str(path), "split": split} for pid, path, split in zip(ids, paths, split_of)
+        ],
+    }
+    manifest_path = out / "manifest.json"
+    if manifest_path.exists():
+        old = json.loads(manifest_path.read_text())
+        if old != manifest:
+            changed = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
+            raise ValueError(
+                f"{str(out)!r} holds a crops dataset made with other settings ({', '.join(changed)} differ); "
+                f"use another folder or the same arguments to resume"
+            )
+    else:
+        atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
+
+    params = sample_crop_params(count, seed, size=size)
+    files = [Path(split_of[i % len(paths)]) / f"{i:07d}.{image_format}" for i in range(count)]
+    for split in set(split_of):
+        (out / split).mkdir(exist_ok=True)
+        for stale in (out / split).glob(f".*.tmp.{image_format}"):  # left by a killed run (SIGKILL)
+            stale.unlink()
+
+    written = skipped = 0
+    for p_index, path in enumerate(paths):
+        mine = range(p_index, count, len(paths))
+        todo = [i for i in mine if not (out / files[i]).is_file()]
+        skipped += len(mine) - len(todo)
+        if progress is not None and len(mine) > len(todo):
+            progress(len(mine) - len(todo))
+        if not todo:
+            continue
+        with CropRenderer(load_panorama(path), size=size, out_size=out_size, inverse=inverse) as renderer:
+            for start in range(0, len(todo), CHUNK):
+                chunk = todo[start : start + CHUNK]
+                images = renderer.render([params[i] for i in chunk])
+                for i, image in zip(chunk, images):
+                    _write_image(out / files[i], image)
+                    written += 1
+                if progress is not None:
+                    progress(len(chunk))
+
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow(LABEL_COLUMNS)
+    for i, p in enumerate(params):
+        j = i % len(paths)
+        writer.writerow(
+            [i, files[i].as_posix(), split_of[j], ids[j], str(paths[j]), seed]
+            + [repr(v) for v in (p.pan, p.tilt, p.roll, p.hfov, p.k1, p.k2)]
+            + [size[0], size[1], out_size[0], out_size[1], inverse]
+        )
+    labels = out / "labels.csv"
+    atomic_write_text(labels, buffer.getvalue())
+    per_split = {s: sum(1 for i in range(count) if split_of[i % len(paths)] == s) for s in SPLITS}
+    return DatasetSummary(out, written, skipped, per_split, labels)
+
+
+def _write_image(path: Path, image: np.ndarray) -> None:
+    import cv2
+
+    with atomic_path(path) as tmp:
+        if not cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
+            raise OSError(f"cannot write {str(path)!r}")
+
+
+def read_labels(path: str | os.PathLike) -> tuple[list[dict[str, str]], list[CropParams]]:
+    """Rows of a ``labels.csv`` (as strings) and the :class:`CropParams` of each row."""
+    with open(path, newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    params = [CropParams(*(float(r[k]) for k in ("pan", "tilt", "roll", "hfov", "k1", "k2"))) for r in rows]
+    return rows, params

@@ -1,0 +1,189 @@
+"""Estimate a frame's radial lens ``(k1, k2)`` with the bundled CNN (ONNX, onnxruntime; no torch).
+
+Convention:
+    Input frames: NumPy arrays ``H x W x 3`` RGB (``H x W`` grayscale and ``H x W x 4`` RGBA are
+    accepted: gray is repeated, alpha dropped), dtype uint8 (0..255) or float32/float64 in [0, 1].
+    Any size: the whole frame is resized with area interpolation (``cv2.INTER_AREA``) to the network
+    input (``Estimator.input_size``, ``(W, H)``, e.g. 192 x 108) and is treated as the 16:9 frame
+    geometry the lens refers to, as in training (crops rendered as 1280 x 720 frames). A frame of
+    another aspect ratio is squashed to 16:9 and the result describes that squashed geometry
+    (a warning says so). Crop letterboxes before estimating.
+    Output: :class:`glradial.Lens` ``(k1, k2)`` in width-normalised lens units (image width = 1,
+    origin at the frame centre): forward model ``p_d = p_u (1 + k1 r^2 + k2 r^4)``.
+
+The ONNX graph takes uint8 ``N x H x W x 3`` RGB and does the rest of the preprocessing itself
+(``/ 255``, mean/std normalisation, NHWC -> NCHW; see the model's metadata and docs/MODEL.md).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import warnings
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from .lens import Lens
+
+#: File name of the bundled model inside the ``glradial.models`` package.
+DEFAULT_MODEL_NAME = "glradial_k1k2.onnx"
+#: Aspect ratio (W / H) of the frames the model was trained on.
+TRAINED_ASPECT = 16.0 / 9.0
+#: Relative aspect deviation beyond which a warning is issued.
+ASPECT_TOLERANCE = 0.02
+
+
+class ModelLoadError(RuntimeError):
+    """The model file exists but is not a usable glradial ONNX model (corrupt, wrong graph)."""
+
+
+def default_model_path() -> Path:
+    """Path of the bundled model (``glradial/models/glradial_k1k2.onnx``), whether or not it exists."""
+    from importlib import resources
+
+    return Path(str(resources.files("glradial.models").joinpath(DEFAULT_MODEL_NAME)))
+
+
+def _as_frame(frame: Any, index: int | None = None) -> np.ndarray:
+    where = "frame" if index is None else f"frames[{index}]"
+    if not isinstance(frame, np.ndarray):
+        raise TypeError(f"{where} must be a NumPy array, got {type(frame).__name__}")
+    if frame.ndim == 2:
+        frame = frame[:, :, None]
+    if frame.ndim != 3 or frame.shape[2] not in (1, 3, 4):
+        raise ValueError(f"{where} must be H×W or H×W×C with C in (1, 3, 4), got shape {frame.shape}")
+    if frame.shape[0] < 2 or frame.shape[1] < 2:
+        raise ValueError(f"{where} must be at least 2×2 pixels, got shape {frame.shape}")
+    if frame.dtype == np.uint8:
+        pass
+    elif frame.dtype in (np.float32, np.float64):
+        if not np.isfinite(frame).all():
+            raise ValueError(f"{where} contains NaN or infinite values")
+        low, high = float(frame.min()), float(frame.max())
+        if low < 0.0 or high > 1.0:
+            raise ValueError(f"float {where} must have values in [0, 1], got [{low:g}, {high:g}]")
+        frame = np.rint(frame * 255.0).astype(np.uint8)
+    else:
+        raise TypeError(f"{where} dtype must be uint8 or float32/float64 in [0, 1], got {frame.dtype}")
+    if frame.shape[2] == 1:
+        frame = np.repeat(frame, 3, axis=2)
+    elif frame.shape[2] == 4:
+        frame = frame[:, :, :3]
+    return frame
+
+
+class Estimator:
+    """An onnxruntime session of the distortion model, created once and reused.
+
+    ``model_path``: an ``.onnx`` file (default: the bundled :func:`default_model_path`).
+    ``threads``: onnxruntime intra-op threads (default: onnxruntime's choice, all cores).
+    Raises ``FileNotFoundError`` for a missing file and :class:`ModelLoadError` for a file that is
+    not a readable glradial model. Thread-safe: onnxruntime sessions may be run concurrently.
+    """
+
+    def __init__(self, model_path: str | os.PathLike | None = None, threads: int | None = None) -> None:
+        import onnxruntime as ort
+
+        path = Path(model_path) if model_path is not None else default_model_path()
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+            raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
+        if not path.is_file():
+            hint = " (the bundled model is missing: reinstall glradial or pass model_path)" if model_path is None else ""
+            raise FileNotFoundError(f"model file not found: {path}{hint}")
+        options = ort.SessionOptions()
+        if threads is not None:
+            options.intra_op_num_threads = threads
+            options.inter_op_num_threads = 1
+        options.log_severity_level = 3
+        try:
+            self._session = ort.InferenceSession(str(path), sess_options=options, providers=["CPUExecutionProvider"])
+        except Exception as err:  # onnxruntime raises its own exception types
+            raise ModelLoadError(f"cannot load ONNX model {path}: {' '.join(str(err).split())[:300]}") from None
+        self.model_path = path
+        self.threads = threads
+        meta = self._session.get_modelmeta().custom_metadata_map
+        self.metadata: dict[str, str] = dict(meta)
+        inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
+        if len(inputs) != 1 or len(outputs) != 1:
+            raise ModelLoadError(f"{path} is not a glradial model: expected 1 input and 1 output")
+        shape = inputs[0].shape
+        if inputs[0].type != "tensor(uint8)" or len(shape) != 4 or shape[3] != 3:
+            raise ModelLoadError(
+                f"{path} is not a glradial model: input must be uint8 N×H×W×3, got {inputs[0].type} {shape}"
+            )
+        if "input_size" in meta:
+            width, height = (int(v) for v in meta["input_size"].split(","))
+        else:
+            height, width = int(shape[1]), int(shape[2])
+        self.input_size: tuple[int, int] = (width, height)
+        self._input_name = inputs[0].name
+
+    @property
+    def metrics(self) -> dict:
+        """Evaluation metrics stored in the model's metadata (empty if none)."""
+        text = self.metadata.get("metrics")
+        return json.loads(text) if text else {}
+
+    def preprocess(self, frame: np.ndarray) -> np.ndarray:
+        """A frame -> uint8 ``H x W x 3`` RGB at :attr:`input_size` (area interpolation)."""
+        import cv2
+
+        frame = _as_frame(frame)
+        height, width = frame.shape[:2]
+        aspect = width / height
+        if abs(aspect / TRAINED_ASPECT - 1.0) > ASPECT_TOLERANCE:
+            warnings.warn(
+                f"frame {width}×{height} is not 16:9; it is squashed to 16:9 and the estimate refers to that "
+                "geometry (crop letterboxes first)",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+        if (width, height) == self.input_size:
+            return np.ascontiguousarray(frame)
+        return cv2.resize(frame, self.input_size, interpolation=cv2.INTER_AREA)
+
+    def run(self, images: np.ndarray) -> np.ndarray:
+        """Preprocessed uint8 ``N x H x W x 3`` batch -> float64 ``N x 2`` (k1, k2)."""
+        images = np.asarray(images)
+        width, height = self.input_size
+        if images.dtype != np.uint8 or images.shape[1:] != (height, width, 3):
+            raise ValueError(f"images must be uint8 N×{height}×{width}×3, got {images.dtype} {images.shape}")
+        out = self._session.run(None, {self._input_name: np.ascontiguousarray(images)})[0]
+        return np.asarray(out, dtype=np.float64).reshape(-1, 2)
+
+    def estimate_batch(self, frames: Sequence[np.ndarray]) -> list[Lens]:
+        """Estimate each frame of a sequence (or an ``N x H x W x C`` array) in one session call."""
+        if isinstance(frames, np.ndarray) and frames.ndim == 4:
+            frames = list(frames)
+        frames = list(frames)
+        if not frames:
+            return []
+        batch = np.stack([self.preprocess(_as_frame(f, i)) for i, f in enumerate(frames)])
+        return [Lens(float(k1), float(k2)) for k1, k2 in self.run(batch)]
+
+    def estimate(self, frame: np.ndarray) -> Lens:
+        """Estimate one frame's lens."""
+        return self.estimate_batch([_as_frame(frame)])[0]
+
+    __call__ = estimate
+
+
+_default: Estimator | None = None
+_default_lock = threading.Lock()
+
+
+def default_estimator() -> Estimator:
+    """The shared :class:`Estimator` of the bundled model, created on first use."""
+    global _default
+    with _default_lock:
+        if _default is None:
+            _default = Estimator()
+        return _default
+
+
+def estimate(frame: np.ndarray) -> Lens:
+    """Estimate the radial lens of one RGB frame with the bundled model (see the module docstring)."""
+    return default_estimator().estimate(frame)

@@ -1,0 +1,137 @@
+"""The crops dataset writer and the `glradial crops` command: content, splits, atomicity, resume."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+from glradial.crops import render_crops
+from glradial.dataset import SPLITS, assign_splits, read_labels, write_crops_dataset
+
+SIZE, OUT = (64, 36), (32, 32)
+
+
+@pytest.fixture()
+def pano_files(tmp_path: Path, field_panorama: np.ndarray) -> list[Path]:
+    """Four distinct 512x256 panoramas written as PNG files."""
+    small = cv2.resize(field_panorama, (512, 256), interpolation=cv2.INTER_AREA)
+    variants = [small, small[:, ::-1], np.roll(small, 128, axis=1), small[:, :, ::-1]]
+    paths = []
+    for i, image in enumerate(variants):
+        path = tmp_path / "panos" / f"pano{i}.png"
+        path.parent.mkdir(exist_ok=True)
+        cv2.imwrite(str(path), cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR))
+        paths.append(path)
+    return paths
+
+
+def _tree(folder: Path) -> dict[str, bytes]:
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_dataset_content_labels_and_splits(ctx, tmp_path, pano_files) -> None:
+    out = tmp_path / "ds"
+    summary = write_crops_dataset(pano_files, out, count=10, seed=5, size=SIZE, out_size=OUT, splits=(0.5, 0.25, 0.25))
+    assert summary.written == 10 and summary.skipped == 0
+    rows, params = read_labels(out / "labels.csv")
+    assert [int(r["index"]) for r in rows] == list(range(10))
+    # One split per panorama; 4 panoramas at 0.5/0.25/0.25 -> 2/1/1 panoramas.
+    split_of: dict[str, set[str]] = {}
+    for r in rows:
+        split_of.setdefault(r["panorama_id"], set()).add(r["split"])
+        assert r["file"].startswith(r["split"] + "/") and r["seed"] == "5"
+    assert all(len(s) == 1 for s in split_of.values())
+    assert sorted(next(iter(s)) for s in split_of.values()) == ["test", "train", "train", "val"]
+    # Every image is the crop its row describes (an independent render of the same panorama file).
+    for r, p in zip(rows, params):
+        image = cv2.cvtColor(cv2.imread(str(out / r["file"])), cv2.COLOR_BGR2RGB)
+        pano = cv2.cvtColor(cv2.imread(r["panorama"]), cv2.COLOR_BGR2RGB)
+        want = render_crops(pano, [p], size=SIZE, out_size=OUT)[0]
+        assert image.shape == (32, 32, 3) and np.abs(image.astype(int) - want).max() <= 1  # PNG is lossless
+    assert (out / "manifest.json").is_file()
+    assert not list(out.rglob(".*tmp*"))
+
+
+def test_dataset_is_deterministic(ctx, tmp_path, pano_files) -> None:
+    write_crops_dataset(pano_files, tmp_path / "a", count=6, seed=9, size=SIZE, out_size=OUT)
+    write_crops_dataset(pano_files, tmp_path / "b", count=6, seed=9, size=SIZE, out_size=OUT)
+    a, b = _tree(tmp_path / "a"), _tree(tmp_path / "b")
+    assert a.keys() == b.keys()
+    assert a == b  # byte-identical: images, labels and manifest (which name the inputs, not the folder)
+    c = write_crops_dataset(pano_files, tmp_path / "c", count=6, seed=10, size=SIZE, out_size=OUT)
+    assert _tree(c.out_dir)["labels.csv"] != a["labels.csv"]
+
+
+def test_interrupted_write_leaves_no_partial_files_and_resumes(ctx, tmp_path, pano_files, monkeypatch) -> None:
+    write_crops_dataset(pano_files, tmp_path / "whole", count=12, seed=3, size=SIZE, out_size=OUT)
+    out = tmp_path / "cut"
+    real_imwrite = cv2.imwrite
+    calls = {"n": 0}
+
+    def failing_imwrite(path, image, *args):
+        calls["n"] += 1
+        if calls["n"] == 6:
+            # Simulate a crash in the middle of writing: a partial file, then the interruption.
+            Path(path).write_bytes(b"\x89PNG partial")
+            raise KeyboardInterrupt
+        return real_imwrite(path, image, *args)
+
+    monkeypatch.setattr(cv2, "imwrite", failing_imwrite)
+    with pytest.raises(KeyboardInterrupt):
+        write_crops_dataset(pano_files, out, count=12, seed=3, size=SIZE, out_size=OUT)
+    monkeypatch.setattr(cv2, "imwrite", real_imwrite)
+    images = sorted(p for p in out.rglob("*.png"))
+    assert len(images) == 5  # the five finished ones, no partial sixth, no temporary file
+    assert not list(out.rglob(".*"))
+    assert not (out / "labels.csv").exists()  # the labels file marks completion
+    for p in images:
+        assert cv2.imread(str(p)) is not None
+    summary = write_crops_dataset(pano_files, out, count=12, seed=3, size=SIZE, out_size=OUT)
+    assert summary.skipped == 5 and summary.written == 7
+    assert _tree(out) == _tree(tmp_path / "whole")
+
+
+def test_resume_with_other_settings_is_refused(ctx, tmp_path, pano_files) -> None:
+    write_crops_dataset(pano_files[:2], tmp_path / "ds", count=2, seed=1, size=SIZE, out_size=OUT)
+    with pytest.raises(ValueError, match="seed"):
+        write_crops_dataset(pano_files[:2], tmp_path / "ds", count=2, seed=2, size=SIZE, out_size=OUT)
+
+
+@pytest.mark.parametrize("count", [1, 2, 3, 7, 20, 218])
+def test_assign_splits_partitions_panoramas(count) -> None:
+    names = assign_splits(count, (0.8, 0.1, 0.1), seed=4)
+    assert len(names) == count and set(names) <= set(SPLITS)
+    assert names == assign_splits(count, (0.8, 0.1, 0.1), seed=4)
+    assert names.count("train") >= 1
+    if count >= 3:
+        assert names.count("val") >= 1 and names.count("test") >= 1
+    if count == 218:  # the paper's panorama count
+        assert (names.count("val"), names.count("test")) == (22, 22)
+
+
+def test_assign_splits_rejects_bad_fractions() -> None:
+    with pytest.raises(ValueError, match="sum"):
+        assign_splits(5, (0.5, 0.5, 0.5), seed=0)
+
+
+def test_cli_crops(ctx, tmp_path, pano_files, capsys) -> None:
+    from glradial.cli import main
+
+    out = tmp_path / "cli"
+    argv = ["crops", *map(str, pano_files[:3]), "--count", "6", "--out", str(out), "--seed", "2", "--size", "64x36", "--out-size", "32x32"]
+    assert main(argv) == 0
+    assert "wrote 6 crops" in capsys.readouterr().out
+    with open(out / "labels.csv", newline="") as handle:
+        rows = list(csv.DictReader(handle))
+    assert len(rows) == 6 and {r["out_w"] for r in rows} == {"32"}
+    assert main(argv) == 0  # resume: nothing left to do
+    assert "wrote 0 crops" in capsys.readouterr().out
+    assert main(["crops", str(pano_files[0]), "--count", "0", "--out", str(out), "--seed", "1"]) == 2
+    bad = tmp_path / "bad.png"
+    cv2.imwrite(str(bad), np.zeros((10, 30, 3), np.uint8))
+    assert main(["crops", str(bad), "--count", "1", "--out", str(tmp_path / "x"), "--seed", "1", "--size", "64x36"]) == 1
+    assert "2:1" in capsys.readouterr().err

@@ -1,0 +1,98 @@
+"""glradial.estimate: the onnxruntime Estimator (errors, preprocessing) and the shipped model's quality."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import glradial
+from glradial.estimate import Estimator, ModelLoadError, default_model_path
+
+SHIPPED = default_model_path()
+needs_shipped = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped model in glradial/models")
+
+
+def test_missing_model_file_is_a_clear_error(tmp_path):
+    with pytest.raises(FileNotFoundError, match="model file not found"):
+        Estimator(tmp_path / "nope.onnx")
+
+
+def test_corrupt_model_file_is_a_clear_error(tmp_path):
+    bad = tmp_path / "bad.onnx"
+    bad.write_bytes(b"\x08\x07this is not a protobuf" * 10)
+    with pytest.raises(ModelLoadError, match="cannot load ONNX model"):
+        Estimator(bad)
+
+
+def test_bad_threads_argument(tmp_path):
+    with pytest.raises(ValueError, match="threads"):
+        Estimator(tmp_path / "x.onnx", threads=0)
+
+
+@needs_shipped
+def test_shipped_model_metadata_and_bad_frames():
+    est = Estimator(threads=1)
+    width, height = est.input_size
+    assert est.metadata["input_layout"] == "NHWC uint8 RGB"
+    assert abs(width / height - 16 / 9) < 0.05
+    assert SHIPPED.stat().st_size < 30e6
+    with pytest.raises(TypeError, match="NumPy array"):
+        est.estimate([[1, 2], [3, 4]])
+    with pytest.raises(ValueError, match="H×W or H×W×C"):
+        est.estimate(np.zeros((10, 10, 2), np.uint8))
+    with pytest.raises(TypeError, match="dtype"):
+        est.estimate(np.zeros((90, 160, 3), np.int32))
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        est.estimate(np.full((90, 160, 3), 2.0, np.float32))
+    with pytest.warns(RuntimeWarning, match="not 16:9"):
+        est.estimate(np.zeros((100, 100, 3), np.uint8))
+
+
+@needs_shipped
+def test_shipped_model_gives_finite_lens_and_consistent_paths(field_panorama):
+    frame = np.ascontiguousarray(field_panorama[300:300 + 405, 500:500 + 720])  # a 16:9 view of a real photo
+    est = Estimator(threads=1)
+    lens = est(frame)
+    assert isinstance(lens, glradial.Lens)
+    assert np.isfinite([lens.k1, lens.k2]).all()
+    assert -1.5 < lens.k1 < 1.0
+    # batch, float input and the module-level function give the same numbers
+    batch = est.estimate_batch([frame, frame[::-1]])
+    assert batch[0] == lens
+    assert glradial.estimate(frame).k1 == pytest.approx(lens.k1, abs=1e-6)
+    as_float = est(frame.astype(np.float32) / 255.0)
+    assert as_float.k1 == pytest.approx(lens.k1, abs=1e-6)
+
+
+@needs_shipped
+def test_shipped_model_beats_the_mean_baseline_on_held_out_stadiums():
+    """A real check: on crops of a test-split stadium (never trained on), the model's distortion
+    loss must be well below that of always predicting the training mean."""
+    from glradial.crops import CropRenderer, sample_crop_params
+    from glradial.stadium import split_seeds, stadium_panorama
+
+    # A 2048x1024 stadium (the training ones are 4096x2048) is cheap to render; hfov >= 30 deg keeps
+    # its crops as sharp as the network input needs (30 deg of 2048 px ~ 170 px ~ the input width).
+    seed = split_seeds("test", 1)[0]
+    pano = stadium_panorama(seed, size=(2048, 1024))
+    params = sample_crop_params(40, 123, size=(1280, 720), hfov=(30.0, 60.0))
+    with CropRenderer(pano, size=(1280, 720), out_size=(384, 216)) as renderer:
+        frames = renderer.render(params)[..., :3]
+    labels = np.array([(p.k1, p.k2) for p in params])
+    pred = np.array([(lens.k1, lens.k2) for lens in Estimator(threads=1).estimate_batch(list(frames))])
+    radii = np.linspace(0.0, 0.7, 64)
+
+    def dl(y, k):
+        d = radii * radii * radii * (y[:, :1] - k[:, :1]) + radii**5 * (y[:, 1:] - k[:, 1:])
+        return (d * d).sum(axis=1)
+
+    # the paper's distribution's mean: k1 ~ U[-0.7, 0.3], k2 = 0.019 k1 + 0.805 k1^2 (+ zero-mean noise)
+    mean = np.array([[-0.2, 0.019 * -0.2 + 0.805 * (0.04 + 1 / 12)]])
+    model_dl, baseline_dl = dl(labels, pred).mean(), dl(labels, np.repeat(mean, len(labels), 0)).mean()
+    # an untrained or broken model sits at ~1x the baseline; require a clear margin (the shipped
+    # model reaches well below 0.5x on its evaluation set, see docs/MODEL.md)
+    assert model_dl < 0.5 * baseline_dl, (model_dl, baseline_dl)
+    assert np.median(np.abs(pred[:, 0] - labels[:, 0])) < 0.1

@@ -1,0 +1,130 @@
+"""net/: the distortion loss (known answers), the model (shapes, size), augmentation, ONNX export."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from net.augment import AugmentConfig, augment_batch, jpeg_roundtrip, motion_kernel  # noqa: E402
+from net.loss import distortion_loss, loss_radii, max_displacement, training_loss  # noqa: E402
+from net.model import DistortionNet, ModelConfig, count_parameters  # noqa: E402
+
+SHIPPED_CONFIG = "net/configs/shipped.json"
+
+
+def _integral(d1: float, d2: float, r: float) -> float:
+    """Closed form of int_0^r (t^3 d1 + t^5 d2)^2 dt."""
+    return d1 * d1 * r**7 / 7 + 2 * d1 * d2 * r**9 / 9 + d2 * d2 * r**11 / 11
+
+
+@pytest.mark.parametrize("d1,d2", [(0.1, 0.0), (0.0, 0.05), (-0.2, 0.13), (0.3, -0.4)])
+def test_distortion_loss_matches_the_integral(d1, d2):
+    # With n radii on [0, R] (step h) the trapezoid rule h * (sum - (f_0 + f_n) / 2) approximates the
+    # integral with error <= R h^2 max|f''| / 12; for n = 4001, R = 0.7 that is < 1e-9 here.
+    n, r_max = 4001, 0.7
+    radii = loss_radii(n, r_max, dtype=torch.float64)
+    y = torch.tensor([[-0.3, 0.1]], dtype=torch.float64)
+    y_hat = y + torch.tensor([[d1, d2]], dtype=torch.float64)
+    total = float(distortion_loss(y, y_hat, radii)[0])
+    end = (r_max**3 * d1 + r_max**5 * d2) ** 2
+    h = r_max / (n - 1)
+    assert h * (total - end / 2) == pytest.approx(_integral(d1, d2, r_max), rel=1e-6, abs=1e-12)
+
+
+def test_training_loss_judges_each_coefficient_with_the_other_true():
+    # L = DL(y, (k1^, k2)) + DL(y, (k1, k2^)) = d1^2 sum r^6 + d2^2 sum r^10 (no cross term).
+    radii = loss_radii(dtype=torch.float64)
+    y = torch.tensor([[-0.5, 0.2], [0.1, 0.0]], dtype=torch.float64)
+    d = torch.tensor([[0.05, -0.03], [-0.1, 0.07]], dtype=torch.float64)
+    expected = (d[:, 0] ** 2 * (radii**6).sum() + d[:, 1] ** 2 * (radii**10).sum()).mean()
+    assert float(training_loss(y, y + d, radii)) == pytest.approx(float(expected), rel=1e-12)
+    assert float(training_loss(y, y.clone())) == 0.0
+
+
+def test_max_displacement_single_coefficient():
+    # P(r, y) - P(r, y^) = r^3 d1 for d2 = 0: largest at the corner radius.
+    y = torch.tensor([[-0.4, 0.1]], dtype=torch.float64)
+    got = float(max_displacement(y, y + torch.tensor([[0.01, 0.0]], dtype=torch.float64), r_max=0.5737)[0])
+    assert got == pytest.approx(0.01 * 0.5737**3, rel=1e-9)
+
+
+def test_loss_rejects_bad_shapes():
+    with pytest.raises(ValueError, match="N x 2"):
+        distortion_loss(torch.zeros(3, 2), torch.zeros(3, 3))
+
+
+def test_model_shapes_and_parameter_budget():
+    cfg = ModelConfig(input_size=(96, 54))
+    model = DistortionNet(cfg).eval()
+    x = torch.randn(3, 3, 54, 96)
+    feats = model.forward_features(x)
+    assert feats.shape == (3, cfg.feature_channels)
+    assert model.forward_head(feats).shape == (3, 2)
+    assert model(x).shape == (3, 2)
+    assert count_parameters(model) <= 6_600_000
+    shipped = ModelConfig.from_dict(json.load(open(SHIPPED_CONFIG))["model"])
+    assert count_parameters(DistortionNet(shipped)) <= 6_600_000
+
+
+def test_grayscale_variant_and_config_roundtrip(tmp_path):
+    cfg = ModelConfig(input_size=(64, 36), channels=1, mean=(0.5,), std=(0.25,), coord_channels=False)
+    model = DistortionNet(cfg).eval()
+    assert model(torch.randn(2, 1, 36, 64)).shape == (2, 2)
+    cfg.save(tmp_path / "c.json")
+    again = ModelConfig.load(tmp_path / "c.json")
+    assert again == cfg and again.channel_order == "L"
+    with pytest.raises(ValueError, match="channels"):
+        ModelConfig(channels=2)
+
+
+def test_augment_keeps_shape_is_seeded_and_flips_only():
+    rng = np.random.default_rng(0)
+    images = rng.integers(0, 256, (4, 36, 64, 3), dtype=np.uint8)
+    a = augment_batch(images, np.random.default_rng(5))
+    b = augment_batch(images, np.random.default_rng(5))
+    assert a.shape == images.shape and a.dtype == np.uint8
+    np.testing.assert_array_equal(a, b)
+    # photometric ops off: only flips remain, so each output is a mirror of its input
+    cfg = AugmentConfig(gain=(1, 1), gamma=(1, 1), channel_gain=(1, 1), saturation=(1, 1), p_blur=0, p_motion=0,
+                        p_noise=0, p_jpeg=0, p_flip_h=1.0, p_flip_v=1.0)
+    np.testing.assert_array_equal(augment_batch(images, rng, cfg), images[:, ::-1, ::-1])
+    with pytest.raises(ValueError, match="uint8"):
+        augment_batch(images.astype(np.float32), rng)
+
+
+def test_motion_kernel_and_jpeg():
+    k = motion_kernel(5, 0.0)
+    assert k.sum() == pytest.approx(1.0) and np.count_nonzero(k[2]) == 5  # a horizontal line
+    flat = np.full((32, 32, 3), 128, np.uint8)
+    assert np.abs(jpeg_roundtrip(flat, 50).astype(int) - 128).max() <= 1  # a flat image survives JPEG
+
+
+def test_export_agrees_with_onnxruntime(tmp_path):
+    onnx = pytest.importorskip("onnx")
+    from net.export import ATOL, check_agreement, export_onnx
+
+    torch.manual_seed(0)
+    model = DistortionNet(ModelConfig(input_size=(64, 36), stem_channels=8,
+                                      stages=[(1, 8, 1, 2), (2, 12, 1, 2)], feature_channels=32))
+    for head in (model.head_k1, model.head_k2):  # heads start at zero weight: make the output depend on the input
+        torch.nn.init.normal_(head.net[-1].weight, std=0.5)
+    model.eval()
+    path = export_onnx(model, tmp_path / "m.onnx", {"metrics": {"x": 1}})
+    proto = onnx.load(str(path))
+    onnx.checker.check_model(proto)
+    meta = {p.key: p.value for p in proto.metadata_props}
+    assert meta["input_size"] == "64,36" and meta["input_layout"] == "NHWC uint8 RGB"
+    assert json.loads(meta["model_config"])["input_size"] == [64, 36]
+    err = check_agreement(model, path, n=4)
+    assert err <= ATOL
+    # the outputs must actually vary with the input (else agreement would prove nothing)
+    import onnxruntime as ort
+
+    images = np.random.default_rng(1).integers(0, 256, (4, 36, 64, 3), dtype=np.uint8)
+    out = ort.InferenceSession(str(path)).run(None, {"image": images})[0]
+    assert np.ptp(out[:, 0]) > 1e-3
