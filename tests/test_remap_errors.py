@@ -158,6 +158,7 @@ def test_egl_unavailable_names_library_and_cpu_still_works(ctx, monkeypatch):
     with pytest.raises(glcontext.GLUnavailableError) as info:
         glcontext.create_context(libegl="libnonexistent.so")
     message = str(info.value)
+    assert isinstance(info.value, ValueError), "bad environment must reach callers that catch ValueError"
     assert "libnonexistent.so" in message and glcontext.EGL_PACKAGES in message and "backend='cpu'" in message
 
     def no_egl():
