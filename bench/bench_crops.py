@@ -4,8 +4,9 @@ Usage: python bench/bench_crops.py [--panorama PATH] [--width 4096] [--count 292
 
 The panorama (default: tests/data/panorama_field_2048x1024.jpg resized to --width × --width/2) is
 uploaded once. Cases:
-  * 224×224 outputs from 1280×720 lens geometry (anti-aliased: 2×2 supersampled trilinear, the
-    stream's default), exact inverse with 8 and with 3 Newton steps, and the Drap inverse;
+  * 224×224 outputs from 1280×720 lens geometry, anti-aliased (2×1 supersampled trilinear, the
+    default; 2×2; and a single trilinear read for reference), exact inverse with 8 (the renderer's
+    default) and 3 (crop_batches' default for the paper's distribution) Newton steps, Drap inverse;
   * 1280×720 outputs (trilinear mipmaps, exact inverse).
 py360convert.e2p (bilinear, no anti-aliasing, no lens distortion, CPU) renders the same poses with
 the same output sizes. Prints crops/s and the ratio glradial / py360convert.
@@ -68,10 +69,12 @@ def main() -> int:
 
     results = {}
     cases = [
-        ("224x224 exact (8 Newton steps)", dict(out_size=(224, 224)), args.count),
-        ("224x224 exact (3 Newton steps)", dict(out_size=(224, 224), newton_steps=3), args.count),
-        ("224x224 drap", dict(out_size=(224, 224), inverse="drap"), args.count),
-        ("1280x720 exact", dict(), max(1, args.count // 8)),
+        ("224x224 exact-8, AA 2x1 (default)", dict(out_size=(224, 224)), args.count),
+        ("224x224 exact-3, AA 2x1 (stream)", dict(out_size=(224, 224), newton_steps=3), args.count),
+        ("224x224 exact-3, AA 2x2", dict(out_size=(224, 224), newton_steps=3, supersample=2), args.count),
+        ("224x224 exact-3, 1x1 trilinear", dict(out_size=(224, 224), newton_steps=3, supersample=1), args.count),
+        ("224x224 drap, AA 2x1", dict(out_size=(224, 224), inverse="drap"), args.count),
+        ("1280x720 exact-8, trilinear", dict(), max(1, args.count // 8)),
     ]
     for name, kwargs, count in cases:
         with CropRenderer(pano, size=(1280, 720), **kwargs) as renderer:
@@ -79,6 +82,8 @@ def main() -> int:
             results[name] = rate(lambda n: renderer.render(params[:n], out=out[:n]), count, args.seconds)
     ref224 = rate(e2p((224, 224)), 8, args.seconds)
     ref1280 = rate(e2p((720, 1280)), 4, args.seconds)
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    print(f"load average before the py360convert runs: {load:.1f}")
     print(f"{'case':34s} {'crops/s':>9s} {'vs py360convert.e2p':>20s}")
     for name, value in results.items():
         ref = ref224 if name.startswith("224") else ref1280

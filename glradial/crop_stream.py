@@ -24,7 +24,6 @@ import queue
 import time
 import traceback
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Iterator, Mapping, NamedTuple, Sequence
 
 import numpy as np
@@ -315,7 +314,7 @@ def crop_batches(
         raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
     if lp_num_threads is not None and (not isinstance(lp_num_threads, int) or lp_num_threads < 0):
         raise ValueError(f"lp_num_threads must be a non-negative integer, got {lp_num_threads!r}")
-    items = [str(Path(item)) if isinstance(item, (str, os.PathLike)) else load_panorama(item) for item in items]
+    items = [os.path.abspath(item) if isinstance(item, (str, os.PathLike)) else load_panorama(item) for item in items]
     config = _Config(
         panoramas=items,
         batch_size=int(batch_size),

@@ -259,6 +259,16 @@ def _camera(rng: np.random.Generator, sides: list[SideProfile]) -> tuple[str, tu
                            clearance=prof.clearance * k, balcony=prof.balcony * k, slope2=prof.slope2 * k,
                            roof_height=prof.roof_height * k)
         z = prof.surface_height(d) + above
+        # a clear line of sight over the tiers in front of the camera down to the near pitch line
+        # (broadcast gantries hang at the front of a tier or under the roof)
+        if d > 0.0:
+            corners = [(0.0, prof.front_height), (prof.depth1, prof.lower_top)]
+            if prof.upper:
+                corners.append((prof.upper_front_d, prof.upper_base + prof.balcony))
+            run = d + prof.margin
+            for cd, cz in corners:
+                if cd < d - 0.5:
+                    z = max(z, (cz + 0.8) * run / (cd + prof.margin))
         if prof.roof:
             roof_h = max(prof.roof_height, z + 4.0, prof.top_height + 3.0)
             roof_front = min(prof.roof_front, d - 2.0) if d > 0 else prof.roof_front

@@ -101,3 +101,17 @@ def augment_batch(images: np.ndarray, rng: np.random.Generator, config: AugmentC
             img = img[::-1]
         out[i] = img
     return out
+
+
+def augment_pairs(images: np.ndarray, rng: np.random.Generator, config: AugmentConfig | None = None) -> np.ndarray:
+    """Like :func:`augment_batch`, but images ``2i`` and ``2i + 1`` get exactly the same operations
+    (same draws, same noise), so that within a pair only the lens differs."""
+    images = np.asarray(images)
+    if images.ndim != 4 or images.shape[0] % 2:
+        raise ValueError(f"pairs need an even N x H x W x 3 batch, got shape {images.shape}")
+    out = np.empty_like(images)
+    for i in range(0, images.shape[0], 2):
+        seed = int(rng.integers(2**63))
+        out[i] = augment_batch(images[i : i + 1], np.random.default_rng(seed), config)[0]
+        out[i + 1] = augment_batch(images[i + 1 : i + 2], np.random.default_rng(seed), config)[0]
+    return out

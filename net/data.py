@@ -137,13 +137,56 @@ def crop_stream(
         stream.close()
 
 
-def _producer_main(out_queue, source: PanoramaSource, chunk: int, seed: int, out_size, ranges, threads: int) -> None:
+def paired_crop_stream(
+    panoramas: Sequence[np.ndarray],
+    chunk: int,
+    seed: int,
+    *,
+    out_size: tuple[int, int],
+    size: tuple[int, int] = FRAME_SIZE,
+    ranges: dict | None = None,
+) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Like :func:`crop_stream`, but crops come in pairs ``(2i, 2i + 1)`` that share panorama, pan,
+    tilt, roll and field of view and differ only in the lens (two independent draws of the paper's
+    ``(k1, k2)``): within a pair, only the lens explains the difference between the images, which
+    makes the lens signal stand out from the scene early in training. ``chunk`` must be even.
+    """
+    from glradial.crops import CropParams, CropRenderer, sample_crop_params
+
+    if chunk % 2:
+        raise ValueError(f"chunk must be even for pairs, got {chunk}")
+    renderers: dict[int, CropRenderer] = {}
+    try:
+        index = 0
+        while True:
+            rng = np.random.default_rng([seed, index, 0xA1])
+            j = int(rng.integers(len(panoramas)))
+            if j not in renderers:
+                renderers[j] = CropRenderer(panoramas[j], size=size, out_size=out_size)
+            half = chunk // 2
+            first = sample_crop_params(half, int(rng.integers(2**62)), size=size, **(ranges or {}))
+            lenses = sample_crop_params(half, int(rng.integers(2**62)), size=size, **(ranges or {}))
+            params = []
+            for a, b in zip(first, lenses):
+                params += [a, CropParams(a.pan, a.tilt, a.roll, a.hfov, b.k1, b.k2)]
+            images = renderers[j].render(params)[..., :3]
+            labels = np.array([(p.k1, p.k2) for p in params], np.float32)
+            yield np.ascontiguousarray(images), labels
+            index += 1
+    finally:
+        for r in renderers.values():
+            r.release()
+
+
+def _producer_main(out_queue, source: PanoramaSource, chunk: int, seed: int, out_size, ranges, threads: int,
+                   paired: bool = False) -> None:
     os.environ.setdefault("LP_NUM_THREADS", str(threads))
     try:
         panoramas = source.load()
         parent = os.getppid()
         out_queue.cancel_join_thread()  # exit without flushing to a trainer that is gone
-        for images, labels in crop_stream(panoramas, chunk, seed, out_size=out_size, ranges=ranges):
+        stream = paired_crop_stream if paired else crop_stream
+        for images, labels in stream(panoramas, chunk, seed, out_size=out_size, ranges=ranges):
             while True:  # stop when the trainer is gone (its queue would stay full forever)
                 try:
                     out_queue.put((images, labels), timeout=2.0)
@@ -168,14 +211,15 @@ class CropProducer:
     """
 
     def __init__(self, source: PanoramaSource, *, seed: int, out_size: tuple[int, int], chunk: int = 64,
-                 ranges: dict | None = None, threads: int = 1, prefetch: int = 8):
+                 ranges: dict | None = None, threads: int = 1, prefetch: int = 8, paired: bool = False):
         ctx = mp.get_context("spawn")
         self._queue = ctx.Queue(maxsize=prefetch)
         env_before = os.environ.get("LP_NUM_THREADS")
         os.environ["LP_NUM_THREADS"] = str(threads)
         try:
             self._proc = ctx.Process(
-                target=_producer_main, args=(self._queue, source, chunk, seed, tuple(out_size), ranges, threads), daemon=True
+                target=_producer_main, args=(self._queue, source, chunk, seed, tuple(out_size), ranges, threads, paired),
+                daemon=True
             )
             self._proc.start()
         finally:
@@ -248,10 +292,15 @@ class CropPool:
             self._next = (self._next + 1) % self.capacity
             self.count = min(self.count + 1, self.capacity)
 
-    def sample(self, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    def sample(self, n: int, rng: np.random.Generator, paired: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """``n`` crops drawn uniformly; ``paired``: ``n / 2`` pairs ``(2i, 2i + 1)`` kept adjacent."""
         if self.count == 0:
             raise RuntimeError("the crop pool is empty")
-        idx = rng.integers(0, self.count, n)
+        if paired:
+            first = 2 * rng.integers(0, self.count // 2, n // 2)
+            idx = np.stack([first, first + 1], axis=1).reshape(-1)
+        else:
+            idx = rng.integers(0, self.count, n)
         return self.images[idx], self.labels[idx]
 
     def state(self) -> dict:

@@ -10,7 +10,8 @@ Convention:
 
 Architecture (timm-style: ``forward_features`` -> pooled features, ``forward_head`` -> (k1, k2)):
 a 3x3 stride-2 stem, stages of MobileNetV2 inverted residual blocks (expand 1x1, depthwise 3x3,
-project 1x1, identity shortcut when stride is 1 and channels match), optionally three coordinate
+project 1x1, identity shortcut when stride is 1 and channels match; early stages may use the
+fused variant, a full 3x3 expand conv then project 1x1), optionally three coordinate
 channels (x, y, r in lens units) concatenated to the stem input (CoordConv: the distortion is radial,
 so where a curved line sits matters), a 1x1 conv to ``feature_channels``, global average pooling,
 and two heads ``Linear(F, 32) -> BatchNorm1d -> LeakyReLU -> Linear(32, 1)`` for k1 and k2.
@@ -35,8 +36,11 @@ LUMA_WEIGHTS = (0.299, 0.587, 0.114)
 class ModelConfig:
     """Everything needed to rebuild the network and feed it (saved beside the model and in ONNX).
 
-    ``input_size`` is ``(W, H)`` like every size in glradial. ``stages`` lists
-    ``(expansion, out_channels, blocks, stride)``. ``mean``/``std`` apply to ``x / 255`` per
+    ``input_size`` is ``(W, H)`` like every size in glradial. ``pool_grid`` 1 is global average
+    pooling; g > 1 concatenates global pooling with a g x g grid of average pools (the heads then
+    know in which part of the frame a feature was seen). ``stages`` lists
+    ``(expansion, out_channels, blocks, stride[, fused])`` (fused = 1: Fused-MBConv, a full 3x3
+    expand conv instead of 1x1 + depthwise; faster to train in early stages). ``mean``/``std`` apply to ``x / 255`` per
     channel in ``channel_order`` ("RGB" or "L").
     """
 
@@ -49,6 +53,7 @@ class ModelConfig:
     feature_channels: int = 256
     head_hidden: int = 32
     coord_channels: bool = True
+    pool_grid: int = 1
     k_init: tuple[float, float] = (-0.2, 0.1)
     mean: tuple[float, ...] = (0.5, 0.5, 0.5)
     std: tuple[float, ...] = (0.25, 0.25, 0.25)
@@ -61,6 +66,8 @@ class ModelConfig:
         self.k_init = tuple(float(v) for v in self.k_init)  # type: ignore[assignment]
         if self.channels not in (1, 3):
             raise ValueError(f"channels must be 1 (grayscale) or 3 (RGB), got {self.channels}")
+        if self.pool_grid < 1:
+            raise ValueError(f"pool_grid must be >= 1, got {self.pool_grid}")
         if len(self.input_size) != 2 or min(self.input_size) < 16:
             raise ValueError(f"input_size must be (W, H) with both >= 16, got {self.input_size}")
         if len(self.mean) != self.channels or len(self.std) != self.channels:
@@ -70,8 +77,8 @@ class ModelConfig:
         if any(s <= 0 for s in self.std):
             raise ValueError(f"std must be positive, got {self.std}")
         for stage in self.stages:
-            if len(stage) != 4 or min(stage) < 1:
-                raise ValueError(f"a stage is (expansion, out_channels, blocks, stride) >= 1, got {stage}")
+            if len(stage) not in (4, 5) or min(stage[:4]) < 1:
+                raise ValueError(f"a stage is (expansion, out_channels, blocks, stride[, fused]) >= 1, got {stage}")
 
     @property
     def channel_order(self) -> str:
@@ -125,6 +132,20 @@ class InvertedResidual(nn.Module):
         return x + y if self.residual else y
 
 
+class FusedInvertedResidual(nn.Module):
+    """Fused-MBConv block (EfficientNetV2): full 3x3 expand conv (stride) -> project 1x1 (linear)."""
+
+    def __init__(self, cin: int, cout: int, stride: int, expansion: int):
+        super().__init__()
+        hidden = cin * expansion
+        self.block = nn.Sequential(ConvBNAct(cin, hidden, 3, stride), ConvBNAct(hidden, cout, 1, act=False))
+        self.residual = stride == 1 and cin == cout
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        y = self.block(x)
+        return x + y if self.residual else y
+
+
 class RegressionHead(nn.Module):
     """``Linear(F, hidden) -> BatchNorm1d -> LeakyReLU -> Linear(hidden, 1)``."""
 
@@ -167,25 +188,33 @@ class DistortionNet(nn.Module):
         self.stem = ConvBNAct(cin, config.stem_channels, 3, 2)
         blocks: list[nn.Module] = []
         channels = config.stem_channels
-        for expansion, cout, count, stride in config.stages:
+        for stage in config.stages:
+            expansion, cout, count, stride = stage[:4]
+            block = FusedInvertedResidual if len(stage) > 4 and stage[4] else InvertedResidual
             for i in range(count):
-                blocks.append(InvertedResidual(channels, cout, stride if i == 0 else 1, expansion))
+                blocks.append(block(channels, cout, stride if i == 0 else 1, expansion))
                 channels = cout
         self.blocks = nn.Sequential(*blocks)
         self.conv_head = ConvBNAct(channels, config.feature_channels, 1)
         self.pool = nn.AdaptiveAvgPool2d(1)
-        self.head_k1 = RegressionHead(config.feature_channels, config.head_hidden, config.k_init[0])
-        self.head_k2 = RegressionHead(config.feature_channels, config.head_hidden, config.k_init[1])
+        self.grid_pool = nn.AdaptiveAvgPool2d(config.pool_grid) if config.pool_grid > 1 else None
+        features = config.feature_channels * (1 + (config.pool_grid**2 if config.pool_grid > 1 else 0))
+        self.num_features = features
+        self.head_k1 = RegressionHead(features, config.head_hidden, config.k_init[0])
+        self.head_k2 = RegressionHead(features, config.head_hidden, config.k_init[1])
         for m in self.modules():
             if isinstance(m, nn.Conv2d):
                 nn.init.kaiming_normal_(m.weight, mode="fan_out")
 
     def forward_features(self, x: torch.Tensor) -> torch.Tensor:
-        """``N x C x H x W`` normalised input -> ``N x feature_channels`` pooled features."""
+        """``N x C x H x W`` normalised input -> ``N x num_features`` pooled features."""
         if self.coords is not None:
             x = torch.cat([x, self.coords.expand(x.shape[0], -1, -1, -1)], dim=1)
         x = self.conv_head(self.blocks(self.stem(x)))
-        return torch.flatten(self.pool(x), 1)
+        pooled = torch.flatten(self.pool(x), 1)
+        if self.grid_pool is not None:
+            pooled = torch.cat([pooled, torch.flatten(self.grid_pool(x), 1)], dim=1)
+        return pooled
 
     def forward_head(self, features: torch.Tensor) -> torch.Tensor:
         """Pooled features -> ``N x 2`` (k1, k2)."""

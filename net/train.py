@@ -38,7 +38,7 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from .augment import AugmentConfig, augment_batch
+from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, PanoramaSource, render_test_set
 from .loss import max_displacement, training_loss, distortion_loss
 from .model import DistortionNet, ModelConfig, count_parameters, normalise_batch
@@ -69,6 +69,7 @@ class TrainConfig:
     pool_min: int = 1024
     producer_chunk: int = 64
     producer_threads: int = 1
+    paired: bool = False
     panoramas: dict = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "train", "n": 16}, "size": [2048, 1024]})
     val_panoramas: dict | None = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "val", "n": 4}, "size": [2048, 1024]})
     val_size: int = 256
@@ -85,7 +86,10 @@ class TrainConfig:
         unknown = set(data) - names
         if unknown:
             raise ValueError(f"unknown keys in {path}: {sorted(unknown)}")
-        return cls(**data)
+        cfg = cls(**data)
+        if cfg.paired and (cfg.batch_size % 2 or cfg.fresh_per_step % 2 or cfg.producer_chunk % 2 or cfg.pool_capacity % 2):
+            raise ValueError("paired training needs even batch_size, fresh_per_step, producer_chunk and pool_capacity")
+        return cfg
 
 
 def panorama_source(spec: dict, cache_dir: str) -> PanoramaSource:
@@ -230,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
 
     # the stream restarts from a seed derived from the step on resume (never repeats the same crops)
     producer = CropProducer(source, seed=cfg.seed * 1000 + rank + 7919 * step, out_size=model_cfg.input_size,
-                            chunk=cfg.producer_chunk, threads=cfg.producer_threads)
+                            chunk=cfg.producer_chunk, threads=cfg.producer_threads, paired=cfg.paired)
     rng = np.random.default_rng([cfg.seed, rank, step])
     aug_cfg = AugmentConfig(**cfg.augment)
     pool = CropPool(cfg.pool_capacity, model_cfg.input_size)
@@ -246,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
         t_fill = time.monotonic()
         need = max(cfg.pool_min, cfg.batch_size)
         while pool.count < need:
-            pool.add(*producer.take(min(cfg.producer_chunk, need - pool.count)))
+            pool.add(*producer.take(cfg.producer_chunk))
         log(f"pool filled with {pool.count} crops ({time.monotonic() - t_fill:.1f} s)")
         last_ckpt = last_val = time.monotonic()
         window_loss, window_k, window_n, window_t = 0.0, np.zeros(2), 0, 0.0
@@ -261,8 +265,8 @@ def main(argv: list[str] | None = None) -> int:
                 break
             ts = time.monotonic()
             pool.add(*producer.take(cfg.fresh_per_step))
-            images, labels = pool.sample(cfg.batch_size, rng)
-            images = augment_batch(images, rng, aug_cfg)
+            images, labels = pool.sample(cfg.batch_size, rng, paired=cfg.paired)
+            images = (augment_pairs if cfg.paired else augment_batch)(images, rng, aug_cfg)
             x = normalise_batch(torch.from_numpy(images).to(device), model_cfg).contiguous(memory_format=torch.channels_last)
             y = torch.from_numpy(labels).to(device)
             factor = lr_factor(progress, step, cfg)

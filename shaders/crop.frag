@@ -15,15 +15,18 @@
 //
 // Anti-aliasing: the footprint of the output pixel is the change of the world ray across it
 // (dFdx/dFdy of the ray, smooth everywhere, so there is no seam at +-180 degrees), turned into
-// d(u, v) analytically. CROP_SUPERSAMPLE x CROP_SUPERSAMPLE samples on a regular sub-pixel grid,
+// d(u, v) analytically. CROP_SUPERSAMPLE_X x CROP_SUPERSAMPLE_Y samples on a regular sub-pixel grid,
 // placed with that local linear map, each read from the mipmapped panorama with textureGrad at a
 // sub-pixel footprint, are averaged: a box (area) filter over the output pixel. The texture repeats
 // in u (u may leave [0, 1] near the seam), clamps in v. The validity of the pixel centre decides.
 
 #include "common.glsl"
 
-#ifndef CROP_SUPERSAMPLE
-#define CROP_SUPERSAMPLE 1
+#ifndef CROP_SUPERSAMPLE_X
+#define CROP_SUPERSAMPLE_X 1
+#endif
+#ifndef CROP_SUPERSAMPLE_Y
+#define CROP_SUPERSAMPLE_Y 1
 #endif
 #ifndef CROP_INVERSE_DRAP
 #define CROP_INVERSE_DRAP 0
@@ -74,21 +77,22 @@ void main() {
     vec2 tex = vec2(0.5) + lonlat * scale;
     vec2 tx = gx * scale;
     vec2 ty = gy * scale;
-#if CROP_SUPERSAMPLE == 1
+#if CROP_SUPERSAMPLE_X == 1 && CROP_SUPERSAMPLE_Y == 1
     vec4 acc = textureGrad(u_panorama, tex, tx, ty);
 #else
-    // Samples at the centres of an S x S grid of sub-pixels, placed with the local linear map
+    // Samples at the centres of an SX x SY grid of sub-pixels, placed with the local linear map
     // (first-order Taylor expansion of the mapping across the pixel), footprint one sub-pixel each.
-    vec2 sx = tx / float(CROP_SUPERSAMPLE);
-    vec2 sy = ty / float(CROP_SUPERSAMPLE);
+    const vec2 count = vec2(CROP_SUPERSAMPLE_X, CROP_SUPERSAMPLE_Y);
+    vec2 sx = tx / count.x;
+    vec2 sy = ty / count.y;
     vec4 acc = vec4(0.0);
-    for (int j = 0; j < CROP_SUPERSAMPLE; ++j) {
-        for (int i = 0; i < CROP_SUPERSAMPLE; ++i) {
-            vec2 o = (vec2(i, j) + 0.5) / float(CROP_SUPERSAMPLE) - 0.5;
+    for (int j = 0; j < CROP_SUPERSAMPLE_Y; ++j) {
+        for (int i = 0; i < CROP_SUPERSAMPLE_X; ++i) {
+            vec2 o = (vec2(i, j) + 0.5) / count - 0.5;
             acc += textureGrad(u_panorama, tex + o.x * tx + o.y * ty, sx, sy);
         }
     }
-    acc /= float(CROP_SUPERSAMPLE * CROP_SUPERSAMPLE);
+    acc /= count.x * count.y;
 #endif
     frag_color = w.w > 0.5 ? acc : vec4(0.0);
 }

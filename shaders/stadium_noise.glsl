@@ -56,7 +56,7 @@ float tent_cdf(float u) {
 // pixel: their brightness centroid moves linearly with the line instead of snapping to a row.
 float band_coverage(float s, float w, float fw) {
     fw = max(fw, 1e-5);
-    return abs(s) < 0.5 * w ? 1.0 : 0.0;
+    return tent_cdf((0.5 * w - s) / fw) - tent_cdf((-0.5 * w - s) / fw);
 }
 
 // Box-filtered square wave: +1 on [0, 1/2), -1 on [1/2, 1) (period 1) averaged over width fw.

@@ -269,13 +269,20 @@ def test_convert_json_and_opencv_matrix(capsys):
 def test_every_option_is_documented():
     parser = build_parser()
     subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    for name in ("correct", "convert", "stmap"):
-        sub = subparsers.choices[name]
+    for name, sub in subparsers.choices.items():
         for action in sub._actions:
             assert action.help and action.help != argparse.SUPPRESS or action.dest == "help", (name, action.dest)
     correct_help = subparsers.choices["correct"].format_help()
     for unit in ("seconds", "frames", "width-normalised"):
         assert unit in correct_help
+
+
+def test_every_command_is_installed():
+    parser = build_parser()
+    subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    assert set(subparsers.choices) == {"correct", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate"}
+    for name, sub in subparsers.choices.items():
+        assert "unavailable" not in (sub.description or ""), (name, sub.description)
 
 
 def test_parser_imports_nothing_heavy():

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,7 @@ from glradial import lensfuncs
 from glradial.crop_stream import PAPER_NEWTON_STEPS, crop_batches, plan_batch
 from glradial.crops import CropRenderer, render_crops, sample_crop_params
 
-PANO = "tests/data/panorama_field_2048x1024.jpg"
+PANO = str(Path(__file__).parent / "data" / "panorama_field_2048x1024.jpg")
 
 
 def test_stream_is_deterministic_and_labelled(ctx, field_panorama) -> None:

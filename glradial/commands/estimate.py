@@ -1,0 +1,53 @@
+"""``glradial estimate``: estimate the lens (k1, k2) of images with the bundled CNN."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from . import CliError, positive_int
+
+DESCRIPTION = """\
+Estimate the radial lens of each INPUT image with the bundled CNN (ONNX, onnxruntime). Each image
+is read as RGB, treated as a whole 16:9 broadcast frame and resized with area interpolation to the
+network input. Prints one line per image: the path, k1 and k2 (width-normalised: image width = 1,
+origin at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel), or with --json
+one JSON object per line {"path", "k1", "k2"}. Images of another aspect ratio are squashed to 16:9
+(a warning says so). Videos: see 'glradial correct --auto'."""
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "estimate", help="estimate the lens (k1, k2) of images with the bundled CNN", description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("inputs", metavar="INPUT", nargs="+", help="image files (PNG, JPEG, TIFF, ...)")
+    parser.add_argument("--json", action="store_true", help="one JSON object per line instead of text")
+    parser.add_argument("--model", metavar="ONNX", help="use this ONNX model instead of the bundled one")
+    parser.add_argument("--threads", type=positive_int, help="onnxruntime threads (default: all cores)")
+    return parser
+
+
+def _read_rgb(path: str):
+    import cv2
+
+    if not Path(path).is_file():
+        raise FileNotFoundError(f"input file {path!r} does not exist")
+    image = cv2.imread(path, cv2.IMREAD_COLOR)
+    if image is None:
+        raise CliError(f"cannot read image {path!r} (not an image format OpenCV reads)")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..estimate import Estimator
+
+    estimator = Estimator(args.model, threads=args.threads)
+    for path in args.inputs:
+        lens = estimator.estimate(_read_rgb(path))
+        if args.json:
+            print(json.dumps({"path": path, "k1": lens.k1, "k2": lens.k2}), flush=True)
+        else:
+            print(f"{path}\tk1={lens.k1:.6f}\tk2={lens.k2:.6f}", flush=True)
+    return 0

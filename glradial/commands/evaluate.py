@@ -1,0 +1,42 @@
+"""``glradial evaluate``: evaluate an estimator model on held-out procedural stadiums (needs torch-free
+glradial only; it runs ``net.evaluate``, which ships as ``glradial.net.evaluate``)."""
+
+from __future__ import annotations
+
+import argparse
+
+from . import positive_int
+
+DESCRIPTION = """\
+Render crops of held-out (test split) procedural stadiums and of the real test panorama, estimate
+their lens with MODEL (default: the bundled one) and write metrics.json, results.md and PNG plots
+to --out: median and 90th percentile of the maximum displacement error (pixels of a 1920-wide
+frame), mean distortion loss, k1/k2 errors, the share of crops where both net coefficients beat the
+net's k1 with the manifold k2 (the paper's 61.2 %), errors by k1 range and field of view."""
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "evaluate", help="evaluate the estimator on held-out stadium crops", description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--model", metavar="ONNX", help="model to evaluate (default: the bundled one)")
+    parser.add_argument("--out", default="eval", help="output folder (default: ./eval)")
+    parser.add_argument("--n", type=positive_int, default=800, help="test crops (default 800)")
+    parser.add_argument("--test-panoramas", type=positive_int, default=8, help="held-out stadiums (default 8)")
+    parser.add_argument("--threads", type=positive_int, help="onnxruntime threads (default: all cores)")
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..estimate import default_model_path
+
+    try:
+        from ..net.evaluate import main
+    except ImportError:  # running from a source checkout: net/ is not under glradial/
+        from net.evaluate import main  # type: ignore[no-redef]
+    argv = ["--model", str(args.model or default_model_path()), "--out", args.out, "--n", str(args.n),
+            "--test-panoramas", str(args.test_panoramas)]
+    if args.threads:
+        argv += ["--threads", str(args.threads)]
+    return main(argv)
