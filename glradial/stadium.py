@@ -139,6 +139,7 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
         "u_grass_noise": style.grass_noise,
         "u_wear": style.wear,
         "u_surround": style.surround,
+        "u_track": int(style.track),
         "u_line_width": style.line_width,
         "u_line_brightness": style.line_brightness,
         "u_board_height": style.board_height,

@@ -37,6 +37,13 @@ STRIPE_PATTERNS = ("across", "along", "checker", "diagonal", "none")
 CAMERA_KINDS = ("main", "tribune", "behind_goal", "pitch_side")
 SPLITS = ("train", "val", "test")
 MAX_PLAYERS = 24
+#: athletics track: straights' half length, inner bend radius, width of 8 lanes (metres)
+TRACK_HALF_STRAIGHT = 42.195
+TRACK_RADIUS = 36.5
+TRACK_WIDTH = 9.76
+#: clearance from the pitch lines to the track's outer edge, behind the touchlines and the goal lines
+TRACK_SIDE_CLEAR = TRACK_RADIUS + TRACK_WIDTH - HALF_WIDTH
+TRACK_END_CLEAR = TRACK_HALF_STRAIGHT + TRACK_RADIUS + TRACK_WIDTH - HALF_LENGTH
 
 
 def stadium_split(seed: int) -> str:
@@ -311,6 +318,13 @@ def sample_style(seed: int) -> StadiumStyle:
     if sym:
         sides[1] = sides[0]
         sides[2] = replace(sides[3])
+    # an athletics track (400 m, 8 lanes) around the pitch pushes the stands and boards back
+    track = bool(rng.random() < 0.12)
+    if track:
+        for i, p in enumerate(sides):
+            end = i < 2
+            sides[i] = replace(p, margin=rng.uniform(38.5, 44.0) if end else rng.uniform(14.5, 18.0),
+                               board_offset=(TRACK_END_CLEAR if end else TRACK_SIDE_CLEAR) + rng.uniform(0.3, 1.2))
     kind, cam, sides = _camera(rng, sides)
     yaw = math.degrees(math.atan2(-cam[1], -cam[0]))
 
@@ -336,10 +350,6 @@ def sample_style(seed: int) -> StadiumStyle:
         (float(rng.uniform(-50, 50)), float(rng.uniform(-32, 32)), float(i % 2), float(rng.uniform(1.7, 1.95)))
         for i in range(n_players)
     )
-    track = bool(rng.random() < 0.12)
-    if track:
-        sides = [replace(p, margin=p.margin + (10.0 if i >= 2 else 14.0),
-                         board_offset=p.board_offset) for i, p in enumerate(sides)]
     surround = _hsv(0.03, 0.6, 0.45) if track else (grass if rng.random() < 0.7 else _hsv(0.1, 0.1, 0.5))
     return StadiumStyle(
         seed=seed,

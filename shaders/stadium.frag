@@ -43,6 +43,7 @@ uniform vec3 u_grass2;
 uniform float u_grass_noise;
 uniform float u_wear;
 uniform vec3 u_surround;
+uniform int u_track;
 uniform float u_line_width;
 uniform float u_line_brightness;
 
@@ -191,9 +192,7 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
             float fpg = max(length(jx), length(jy));
             vec2 g = p.xy;
             vec2 v = normalize(dir.xy);
-            albedo = grass_albedo(g, jx, jy, v, fpg);
-            float lines = markings(g, jx, jy, u_line_width);
-            albedo = mix(albedo, vec3(u_line_brightness), lines);
+            albedo = ground_albedo(g, jx, jy, v, fpg);
             float dmax;
             owner_side(g, dmax);
             open_sky = 1.0 - 0.35 * exp(dmax / 12.0);
@@ -270,6 +269,16 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
         col = mix(col, alb * lighting(vec3(pl.xy, 1.0), n, 1.0), cov);
     }
 
+    // night: glare around the floodlight heads (seen through everything, as in a lens)
+    if (u_lighting == 2 && u_masts != 0) {
+        for (int c = 0; c < 4; ++c) {
+            vec3 head = vec3(u_mast_pos * vec2((c & 1) == 0 ? 1.0 : -1.0, (c & 2) == 0 ? 1.0 : -1.0), u_mast_height);
+            vec3 to = head - ro;
+            float cosang = dot(dir, to) / length(to);
+            float a2 = max(1.0 - cosang, 0.0) * 2.0;   // angle squared (small angles)
+            col += vec3(1.0, 0.95, 0.85) * (1.5 * exp(-a2 / 0.0004) + 0.08 * exp(-sqrt(a2) / 0.08));
+        }
+    }
     id = (h.mat + 1) * 4 + h.side;
     // haze / rain veil along the ray
     if (h.mat != MAT_SKY) {

@@ -119,8 +119,33 @@ vec3 grass_albedo(vec2 g, vec2 jx, vec2 jy, vec2 v, float fp) {
     return col;
 }
 
-// Ground beyond the grass surround (running track or concrete), with lane lines on a track.
-vec3 surround_albedo(vec2 g, vec2 jx, vec2 jy, float fp) {
-    vec3 col = u_surround * (0.9 + 0.2 * filtered_noise(g, 1.3, fp, 7u));
-    return col;
+#define TRACK_HALF_STRAIGHT 42.195
+#define TRACK_RADIUS 36.5
+#define TRACK_LANE 1.22
+#define TRACK_LANES 8.0
+
+// Ground albedo: grass, or an athletics track (tartan with lane lines) around it, or the surface
+// behind the boards. g ground point, jx jy footprint, v horizontal view direction, fp footprint.
+vec3 ground_albedo(vec2 g, vec2 jx, vec2 jy, vec2 v, float fp) {
+    if (u_track != 0) {
+        vec2 q = vec2(max(abs(g.x) - TRACK_HALF_STRAIGHT, 0.0), g.y);
+        float rr = length(q);
+        float lane = rr - TRACK_RADIUS;
+        if (lane >= 0.0) {
+            vec3 col = u_surround * (0.9 + 0.2 * filtered_noise(g, 1.3, fp, 7u));
+            if (lane < TRACK_LANES * TRACK_LANE + 0.1) {
+                vec2 n = vec2(q.x * sign(g.x), q.y) / max(rr, 1e-4);  // gradient of rr
+                float fw = footprint_along(n, jx, jy);
+                float k = clamp(floor(lane / TRACK_LANE + 0.5), 0.0, TRACK_LANES);
+                col = mix(col, vec3(0.8), band_coverage(lane - k * TRACK_LANE, 0.05, fw));
+            } else {
+                col *= 0.8;
+            }
+            return col;
+        }
+    } else if (abs(g.x) > u_side_d[0].z + 0.3 || abs(g.y) > u_side_d[2].z + 0.3) {
+        return u_surround * (0.9 + 0.2 * filtered_noise(g, 1.3, fp, 7u));
+    }
+    vec3 col = grass_albedo(g, jx, jy, v, fp);
+    return mix(col, vec3(u_line_brightness), markings(g, jx, jy, u_line_width));
 }
