@@ -80,7 +80,7 @@ def _profile_segments(p: SideProfile) -> list[tuple[tuple[float, float, float, f
         segs.append(((back, top, back, top + 2.0), MAT_BACK))
         segs.append(((back - 0.3, top + 2.0, back, top + 2.0), MAT_BACK))
     while len(segs) < NSEG:
-        segs.append(((0.0, 0.0, 0.0, 0.0), MAT_BACK))  # degenerate: never hit
+        segs.append(((0.0, 0.0, 0.0, 0.0), MAT_BACK))  # padding after the u_nseg used ones
     if len(segs) > NSEG:
         raise AssertionError(f"profile has {len(segs)} segments, NSEG is {NSEG}")
     return segs
@@ -140,6 +140,7 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
         "u_wear": style.wear,
         "u_surround": style.surround,
         "u_track": int(style.track),
+        "u_open_corner": [int(c) for c in style.open_corners],
         "u_line_width": style.line_width,
         "u_line_brightness": style.line_brightness,
         "u_board_height": style.board_height,
@@ -159,7 +160,7 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
         "u_team2": style.team_colors[1],
     }
     u.update(_lighting_params(style))
-    a, b, c, d, seg, mat = [], [], [], [], [], []
+    a, b, c, d, seg, mat, nseg = [], [], [], [], [], [], []
     for i, p in enumerate(style.sides):
         a.append((SIDE_LINE[i] + p.margin, p.front_height, p.slope1, p.depth1))
         b.append((float(p.upper), p.upper_front_d, p.upper_base, p.balcony))
@@ -167,9 +168,21 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
         other = style.sides[2] if i < 2 else style.sides[0]
         half = (HALF_WIDTH if i < 2 else HALF_LENGTH) + 0.6 * other.margin
         d.append((p.roof_front, p.fascia, SIDE_LINE[i] + p.board_offset, half))
-        for s, m in _profile_segments(p):
+        segments = _profile_segments(p)
+        nseg.append(1 + max(k for k, (s, _) in enumerate(segments) if s[:2] != s[2:]))
+        for s, m in segments:
             seg.append(s)
             mat.append(float(m))
+    corners = []
+    for p in style.sides:
+        env = [(0.0, p.front_height), (p.depth1, p.lower_top)]
+        env.append((p.upper_front_d, p.upper_base + p.balcony) if p.upper else env[-1])
+        env.append((p.back_d, p.top_height))
+        env.append((p.roof_front, p.roof_height + p.fascia) if p.roof else env[-1])
+        env.append((p.back_d, p.roof_height + p.fascia) if p.roof else env[-1])
+        corners += env
+    u["u_shadow_corners"] = corners
+    u["u_nseg"] = nseg
     u.update({"u_side_a": a, "u_side_b": b, "u_side_c": c, "u_side_d": d, "u_seg": seg, "u_segmat": mat})
     x0 = HALF_LENGTH + style.sides[0].margin + 0.5 * style.sides[0].back_d
     y0 = HALF_WIDTH + style.sides[2].margin + 0.5 * style.sides[2].back_d
@@ -177,7 +190,7 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
     u["u_masts"] = int(style.masts)
     u["u_mast_pos"] = (x0, y0)
     u["u_mast_height"] = max(style.mast_height, roof_top + 10.0)
-    players = list(style.players)[:MAX_PLAYERS]
+    players = sorted(style.players, key=lambda pl: pl[0])[:MAX_PLAYERS]  # the shader stops past the ray's x range
     u["u_nplayers"] = len(players)
     u["u_players"] = [tuple(pl) for pl in players] + [(0.0, 0.0, 0.0, 0.0)] * (MAX_PLAYERS - len(players))
     return u

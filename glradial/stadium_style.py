@@ -178,6 +178,7 @@ class StadiumStyle:
     track: bool
     players: tuple[tuple[float, float, float, float], ...] = field(default=())  # (x, y, team, height)
     team_colors: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.8, 0.05, 0.05), (0.9, 0.9, 0.9))
+    open_corners: tuple[bool, bool, bool, bool] = (False, False, False, False)  # corner c: x-side c & 1, y-side 2 + (c >> 1)
     supersample: int = 2
 
     def with_overrides(self, **style: Any) -> "StadiumStyle":
@@ -351,7 +352,7 @@ def sample_style(seed: int) -> StadiumStyle:
         for i in range(n_players)
     )
     surround = _hsv(0.03, 0.6, 0.45) if track else (grass if rng.random() < 0.7 else _hsv(0.1, 0.1, 0.5))
-    return StadiumStyle(
+    style = StadiumStyle(
         seed=seed,
         camera_kind=kind,
         camera=cam,
@@ -392,3 +393,7 @@ def sample_style(seed: int) -> StadiumStyle:
         players=players,
         team_colors=team,
     )
+    # some stadiums (older grounds) have open corners between their stands
+    if rng.random() < 0.3:
+        style = replace(style, open_corners=tuple(bool(rng.random() < 0.8) for _ in range(4)))  # type: ignore[arg-type]
+    return style

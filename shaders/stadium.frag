@@ -53,6 +53,9 @@ uniform vec4 u_side_c[4];   // slope2, back d, roof?, roof height
 uniform vec4 u_side_d[4];   // roof front d, fascia height, board distance, board half length
 uniform vec4 u_seg[40];     // profile segments (d0, z0, d1, z1), NSEG per side
 uniform float u_segmat[40]; // their materials
+uniform int u_nseg[4];      // segments in use per side
+uniform int u_open_corner[4]; // 1 where the two stands stop short of the corner
+uniform vec2 u_shadow_corners[24]; // 6 corners (d, z) of each side's upper envelope
 
 uniform float u_board_height;
 uniform uint u_board_seed;
@@ -103,27 +106,19 @@ float sun_visibility(vec3 p) {
         vec2 n = side_normal(i);
         float sn = dot(u_sun_dir.xy, n);
         float dp = dot(p.xy, n) - u_side_a[i].x;
-        vec4 a = u_side_a[i];
-        vec4 b = u_side_b[i];
         vec4 c = u_side_c[i];
         vec4 dd = u_side_d[i];
+        if (sn <= 1e-4 && (c.z < 0.5 || dp <= dd.x)) continue;
         float slope = u_sun_dir.z / max(abs(sn), 1e-4);
         if (sn > 1e-4) {
             // corners of the stand's upper envelope, each blocks if the sun ray passes below it
             float worst = 1e9;
-            vec2 corners[6];
-            corners[0] = vec2(0.0, a.y);
-            corners[1] = vec2(a.w, a.y + a.z * a.w);
-            corners[2] = b.x > 0.5 ? vec2(b.y, b.z + b.w) : corners[1];
-            corners[3] = vec2(c.y, side_surface(i, c.y));
-            corners[4] = c.z > 0.5 ? vec2(dd.x, c.w + dd.y) : corners[3];
-            corners[5] = c.z > 0.5 ? vec2(c.y, c.w + dd.y) : corners[3];
+            float inv_sn = 1.0 / sn;
             for (int k = 0; k < 6; ++k) {
-                float run = corners[k].x - dp;
+                vec2 corner = u_shadow_corners[i * 6 + k];
+                float run = corner.x - dp;
                 if (run <= 0.05) continue;
-                float z = p.z + slope * run;
-                float dist = run / max(abs(sn), 1e-4);
-                worst = min(worst, (z - corners[k].y) / (0.0093 * dist + 0.05));
+                worst = min(worst, (p.z + slope * run - corner.y) / (0.0093 * run * inv_sn + 0.05));
             }
             vis = min(vis, smoothstep(-0.5, 0.5, worst));
         } else if (c.z > 0.5 && dp > dd.x && sn < -1e-4) {
@@ -164,13 +159,18 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
         int side = owner_side(p.xy, dmax);
         if (dmax < 0.0) {
             h.t = tg; h.mat = MAT_GROUND; ground = true;
-        } else if (dmax > u_side_c[side].y + 1.0) {
+        } else if (dmax > u_side_c[side].y + 1.0 || corner_open(p.xy)) {
             h.t = tg; h.mat = MAT_OUTSIDE;
         }
     }
+    // stands: a ray that lands on the field can only have met the camera's own stand or a roof
+    // overhanging the field's edge on its way down
+    vec2 land = ro.xy + dir.xy * min(h.t, 1e6);
     for (int i = 0; i < 4; ++i) {
         vec2 n = side_normal(i);
-        if (dot(dir.xy, n) > 0.0 || side_d(i, ro.xy) > -2.0) hit_side(i, ro, dir, h);
+        bool own = side_d(i, ro.xy) > -2.0;
+        bool ahead = dot(dir.xy, n) > 0.0 && (!ground || side_d(i, land) > min(u_side_d[i].x, 0.0) - 1.0);
+        if (own || ahead) hit_side(i, ro, dir, h);
     }
     hit_corners(ro, dir, h);
     hit_boards(ro, dir, h);
@@ -251,10 +251,18 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
         }
     }
     // players: vertical cylinders with socks, shorts, shirt and head
+    // the part of the ray below head height, as an x range (players are sorted by x)
     vec2 hdir = normalize(dir.xy + vec2(1e-7, 0.0));
-    bool near_ground = dir.z < 0.0 ? (ro.z + dir.z * min(h.t, 1e5) < 2.2) : ro.z < 2.2;
-    for (int k = 0; k < u_nplayers && near_ground; ++k) {
+    float t_top = dir.z < 0.0 ? max((ro.z - 2.2) / -dir.z, 0.0) : (ro.z < 2.2 ? 0.0 : 1e9);
+    float t_end = min(h.t, dir.z > 0.0 ? max((2.2 - ro.z) / dir.z, 0.0) : 1e5);
+    float xa = ro.x + dir.x * t_top;
+    float xb = ro.x + dir.x * t_end;
+    float xlo = min(xa, xb) - 0.5;
+    float xhi = max(xa, xb) + 0.5;
+    for (int k = 0; k < u_nplayers && t_top < t_end; ++k) {
         vec4 pl = u_players[k];
+        if (pl.x < xlo) continue;
+        if (pl.x > xhi) break;
         vec2 rel = pl.xy - ro.xy;
         if (abs(rel.x * hdir.y - rel.y * hdir.x) > 0.4 || dot(rel, hdir) < 0.0) continue;
         vec3 c = ray_line(ro, dir, vec3(pl.xy, 0.0), vec3(0.0, 0.0, 1.0));

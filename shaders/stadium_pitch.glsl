@@ -110,6 +110,7 @@ vec3 grass_albedo(vec2 g, vec2 jx, vec2 jy, vec2 v, float fp) {
     col *= shade * (1.0 + u_grass_noise * 0.35 * n);
     // wear: goal mouths, penalty spots, centre circle, linesmen's strips
     vec2 p = abs(g);
+    if (u_wear <= 0.0 || (p.x < HALF_L - 20.0 && length(p) > 16.0 && abs(p.y - HALF_W - 1.5) > 3.0)) return col;
     float wear = exp(-dot(p - vec2(HALF_L - 3.0, 0.0), p - vec2(HALF_L - 3.0, 0.0)) / 18.0)
                + 0.6 * exp(-dot(p - vec2(HALF_L - 11.0, 0.0), p - vec2(HALF_L - 11.0, 0.0)) / 8.0)
                + 0.4 * exp(-dot(p, p) / 40.0)

@@ -31,6 +31,15 @@ vec3 sky_color(vec3 dir, float fp_angle) {
         col = mix(vec3(0.03, 0.03, 0.04), vec3(0.004, 0.006, 0.018), pow(up, 0.4));
         col += vec3(0.02, 0.012, 0.004) * cloud;
     }
+    // distant skyline (buildings and trees), seen through open corners and over low stands
+    float az = atan(dir.y, dir.x);
+    float cell = floor(az * 30.0);
+    float hb = hash1(int(cell) + 1000, 21u);
+    float skyline = 0.004 + (hb > 0.55 ? 0.035 * hb * hb : 0.0) + 0.012 * value_noise(vec2(az * 40.0, 0.5), 22u);
+    if (dir.z < skyline) {
+        vec3 far = u_lighting == 2 ? vec3(0.006, 0.006, 0.008) : (u_lighting == 1 ? vec3(0.32, 0.34, 0.36) : vec3(0.2, 0.24, 0.3));
+        col = mix(far, col, 0.35);
+    }
     if (dir.z < 0.0) col *= 0.6;
     return col;
 }

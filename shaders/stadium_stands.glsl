@@ -48,6 +48,20 @@ int owner_side(vec2 p, out float dmax) {
     return best;
 }
 
+// Corner index of a point in a corner quadrant (beyond two stand fronts), or -1.
+// Corner c joins x-side (c & 1) and y-side 2 + (c >> 1).
+int corner_of(vec2 p) {
+    int ix = p.x < 0.0 ? 1 : 0;
+    int iy = p.y < 0.0 ? 3 : 2;
+    if (side_d(ix, p) > 0.0 && side_d(iy, p) > 0.0) return ix + 2 * (iy - 2);
+    return -1;
+}
+
+bool corner_open(vec2 p) {
+    int c = corner_of(p);
+    return c >= 0 && u_open_corner[c] != 0;
+}
+
 float cross2(vec2 a, vec2 b) { return a.x * b.y - a.y * b.x; }
 
 struct Hit {
@@ -62,7 +76,7 @@ void hit_side(int i, vec3 ro, vec3 rd, inout Hit h) {
     vec2 n = side_normal(i);
     vec2 o = vec2(dot(ro.xy, n) - u_side_a[i].x, ro.z);
     vec2 r = vec2(dot(rd.xy, n), rd.z);
-    for (int k = 0; k < NSEG; ++k) {
+    for (int k = 0; k < u_nseg[i]; ++k) {
         vec4 s = u_seg[i * NSEG + k];
         vec2 a = s.xy;
         vec2 e = s.zw - s.xy;
@@ -75,6 +89,7 @@ void hit_side(int i, vec3 ro, vec3 rd, inout Hit h) {
         vec3 p = ro + t * rd;
         float dmax;
         if (owner_side(p.xy, dmax) != i && side_d(i, p.xy) < dmax - 1e-3) continue;
+        if (corner_open(p.xy)) continue;
         h.t = t;
         h.mat = int(u_segmat[i * NSEG + k] + 0.5);
         h.side = i;
@@ -84,13 +99,33 @@ void hit_side(int i, vec3 ro, vec3 rd, inout Hit h) {
     }
 }
 
-// Vertical miter faces between adjacent sides, where one stand is higher than its neighbour.
+// Closed corners: vertical miter faces between adjacent sides where one stand is higher than its
+// neighbour. Open corners: the vertical end faces of the two stands that stop there.
 void hit_corners(vec3 ro, vec3 rd, inout Hit h) {
     for (int c = 0; c < 4; ++c) {
         int ix = c & 1;            // side 0 or 1
         int iy = 2 + (c >> 1);     // side 2 or 3
         vec2 nx = side_normal(ix);
         vec2 ny = side_normal(iy);
+        if (u_open_corner[c] != 0) {
+            for (int e = 0; e < 2; ++e) {
+                // e = 0: end of side iy on the plane d_ix = 0; e = 1: end of side ix on d_iy = 0
+                int cut = e == 0 ? ix : iy;
+                int stand = e == 0 ? iy : ix;
+                float rn = dot(rd.xy, side_normal(cut));
+                if (abs(rn) < 1e-9) continue;
+                float t = -side_d(cut, ro.xy) / rn;
+                if (t <= 1e-3 || t >= h.t) continue;
+                vec3 p = ro + t * rd;
+                float d = side_d(stand, p.xy);
+                if (d < 0.0 || d > u_side_c[stand].y || p.z < 0.0 || p.z > side_surface(stand, d)) continue;
+                h.t = t;
+                h.mat = MAT_BACK;
+                h.side = stand;
+                h.n = vec3(side_normal(cut) * (rn > 0.0 ? -1.0 : 1.0), 0.0);
+            }
+            continue;
+        }
         // f(t) = d_x - d_y along the ray
         float f0 = side_d(ix, ro.xy) - side_d(iy, ro.xy);
         float f1 = dot(rd.xy, nx) - dot(rd.xy, ny);
@@ -206,7 +241,7 @@ vec3 ad_pattern(float q, float z01, float fp, int salt, float panel_len) {
 // Seats and crowd on a tier; d (profile metres), q (lateral metres), fp footprint (metres).
 vec3 seats_albedo(float d, float q, float fp, int side, int tier) {
     uint salt = uint(side * 2 + tier) * 101u + 17u;
-    float detail = 1.0 - smoothstep(0.12, 0.55, fp);
+    float detail = 1.0 - smoothstep(0.15, 0.5, fp);  // single seats and spectators
     float row_len = 0.8;
     float seat_w = 0.52;
     // sections between aisles
@@ -216,31 +251,31 @@ vec3 seats_albedo(float d, float q, float fp, int side, int tier) {
     if (u_seat_pattern == 1 && (section & 1) == 1) seat = u_seat2;
     if (u_seat_pattern == 2 && (int(floor(d / 6.0)) & 1) == 1) seat = u_seat2;
     vec3 tread = u_concrete * 0.55;
-    // mean over a row: 35 % tread, 65 % seat or spectator
+    // mean of the seat part of a row: empty seats and spectators
     vec3 crowd_mean = (0.45 * u_crowd1 + 0.15 * u_crowd2 + vec3(0.05)) * 0.95 + vec3(0.02);
-    vec3 seat_mean = mix(seat, crowd_mean, u_crowd_density);
-    vec3 mean = mix(tread, seat_mean, 0.65);
-    vec3 col = mean;
+    vec3 col = mix(seat * 0.9, crowd_mean, u_crowd_density);
+    float rf = d / row_len;
+    float fr = fract(rf);
     if (detail > 0.0) {
-        float rf = d / row_len;
         ivec2 cell = ivec2(int(floor(q / seat_w)), int(floor(rf)));
-        float fr = fract(rf);
         float fq = fract(q / seat_w);
-        vec3 c = tread;
-        if (fr > 0.35) {
-            c = seat * (fq > 0.08 && fq < 0.92 ? 1.0 : 0.6);
-            float occ = hash2(cell, salt);
-            if (occ < u_crowd_density) {
-                float pick = hash2(cell, salt + 1u);
-                vec3 rnd = pow(vec3(hash2(cell, salt + 2u), hash2(cell, salt + 3u), hash2(cell, salt + 4u)), vec3(2.2));
-                vec3 shirt = pick < 0.45 ? u_crowd1 : pick < 0.6 ? u_crowd2 : pick < 0.85 ? vec3(0.02 + 0.05 * rnd.x) : mix(vec3(dot(rnd, vec3(0.33))), rnd, 0.5) * 0.6;
-                shirt *= 0.7 + 0.5 * hash2(cell, salt + 6u);
-                c = fr > 0.82 ? vec3(0.45, 0.3, 0.22) * (0.5 + hash2(cell, salt + 5u)) : shirt;
-                if (fq < 0.12 || fq > 0.88) c = tread;
-            }
+        vec3 c = seat * (fq > 0.08 && fq < 0.92 ? 1.0 : 0.6);
+        float occ = hash2(cell, salt);
+        if (occ < u_crowd_density) {
+            float pick = hash2(cell, salt + 1u);
+            vec3 rnd = pow(vec3(hash2(cell, salt + 2u), hash2(cell, salt + 3u), hash2(cell, salt + 4u)), vec3(2.2));
+            vec3 shirt = pick < 0.45 ? u_crowd1 : pick < 0.6 ? u_crowd2 : pick < 0.85 ? vec3(0.02 + 0.05 * rnd.x) : mix(vec3(dot(rnd, vec3(0.33))), rnd, 0.5) * 0.6;
+            shirt *= 0.7 + 0.5 * hash2(cell, salt + 6u);
+            c = fr > 0.82 ? vec3(0.45, 0.3, 0.22) * (0.5 + hash2(cell, salt + 5u)) : shirt;
+            if (fq < 0.12 || fq > 0.88) c = tread;
         }
-        col = mix(mean, c, detail);
+        col = mix(col, c, detail);
     }
+    // rows: the tread (35 % of each 0.8 m row, straight lines along the stand), filtered by the
+    // footprint and faded to its mean share once a row is thinner than a pixel
+    float tr = band_coverage((fract(rf - 0.175 + 0.5) - 0.5) * row_len, 0.35 * row_len, max(fp, 1e-3));
+    tr = mix(tr, 0.35, smoothstep(0.4 * row_len, row_len, fp));
+    col = mix(col, tread, tr);
     // aisles (stairs) between sections, filtered by the footprint
     float ap = fract(q / sec_len + 0.5) - 0.5;
     float aisle = band_coverage(ap * sec_len, 1.2, max(fp, 1e-3));

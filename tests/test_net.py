@@ -128,3 +128,30 @@ def test_export_agrees_with_onnxruntime(tmp_path):
     images = np.random.default_rng(1).integers(0, 256, (4, 36, 64, 3), dtype=np.uint8)
     out = ort.InferenceSession(str(path)).run(None, {"image": images})[0]
     assert np.ptp(out[:, 0]) > 1e-3
+
+
+def test_pool_keeps_pairs_adjacent():
+    from net.data import CropPool
+
+    pool = CropPool(8, (4, 2))
+    images = np.arange(10, dtype=np.uint8)[:, None, None, None] * np.ones((10, 2, 4, 3), np.uint8)
+    pool.add(images, np.stack([np.arange(10), np.arange(10)], 1).astype(np.float32))
+    assert pool.count == 8  # ring buffer: items 8, 9 overwrote 0, 1
+    _, labels = pool.sample(6, np.random.default_rng(0), paired=True)
+    first = labels[0::2, 0].astype(int)
+    assert np.all(first % 2 == 0) and np.all(labels[1::2, 0] == first + 1)
+
+
+def test_paired_crops_share_the_view_and_differ_in_the_lens(ctx):
+    # Radial distortion fixes the frame centre (p_d = p_u at r = 0 with unit slope), so the two crops
+    # of a pair (same pose and field of view, different lens) agree there and differ towards the corners.
+    from net.data import paired_crop_stream, synthetic_panorama
+
+    pano = synthetic_panorama(3, (1024, 512))
+    images, labels = next(paired_crop_stream([pano], 4, seed=1, out_size=(160, 90)))
+    assert images.shape == (4, 90, 160, 3) and labels.shape == (4, 2)
+    for a, b in ((0, 1), (2, 3)):
+        assert not np.allclose(labels[a], labels[b])
+        centre = np.abs(images[a, 40:50, 75:85].astype(int) - images[b, 40:50, 75:85].astype(int)).mean()
+        corner = np.abs(images[a, :15, :25].astype(int) - images[b, :15, :25].astype(int)).mean()
+        assert centre < 3.0 and (corner > centre or corner == 0.0), (centre, corner)

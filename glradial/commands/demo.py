@@ -24,8 +24,8 @@ DESCRIPTION = __doc__.split("\n\n", 1)[1]
 #: the demo's default camera (degrees) and lens; k2 near the Lopez-Antequera manifold of k1
 DEFAULT_K1 = -0.32
 DEFAULT_K2 = 0.019 * DEFAULT_K1 + 0.805 * DEFAULT_K1**2
-#: a stadium of the held-out test split (seed % 10 == 9)
-DEFAULT_SEED = 9
+#: a stadium of the held-out test split (seed % 10 == 9) seen from its main broadcast camera
+DEFAULT_SEED = 89
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
