@@ -37,8 +37,8 @@ def _size(text: str) -> tuple[int, int]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 3, 5, 7, 8, 13, 24])
-    parser.add_argument("--crop-seeds", type=int, nargs="+", default=[8, 3, 4, 1])
+    parser.add_argument("--seeds", type=int, nargs="+", default=[2, 3, 4, 0, 13, 20, 32, 45])
+    parser.add_argument("--crop-seeds", type=int, nargs="+", default=[2, 45, 9, 13])
     parser.add_argument("--pano-size", type=_size, default=(1024, 512))
     parser.add_argument("--crop-pano", type=_size, default=(4096, 2048))
     args = parser.parse_args()

@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import json
 import os
+import sys
+import types
 import threading
 import warnings
 from pathlib import Path
@@ -72,7 +74,7 @@ def _as_frame(frame: Any, index: int | None = None) -> np.ndarray:
         frame = np.repeat(frame, 3, axis=2)
     elif frame.shape[2] == 4:
         frame = frame[:, :, :3]
-    return frame
+    return np.ascontiguousarray(frame)
 
 
 class Estimator:
@@ -187,3 +189,15 @@ def default_estimator() -> Estimator:
 def estimate(frame: np.ndarray) -> Lens:
     """Estimate the radial lens of one RGB frame with the bundled model (see the module docstring)."""
     return default_estimator().estimate(frame)
+
+
+class _CallableModule(types.ModuleType):
+    """``glradial.estimate`` names both this module and its :func:`estimate` function: once the
+    module is imported, Python binds the package attribute to the module, which would shadow the
+    lazily exported function. Calling the module therefore calls the function."""
+
+    def __call__(self, frame: np.ndarray) -> Lens:
+        return estimate(frame)
+
+
+sys.modules[__name__].__class__ = _CallableModule

@@ -183,6 +183,8 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
         corners += env
     u["u_shadow_corners"] = corners
     u["u_nseg"] = nseg
+    u["u_pillars"] = [int(v) for v in style.pillars]
+    u["u_pillar_spacing"] = style.pillar_spacing
     u.update({"u_side_a": a, "u_side_b": b, "u_side_c": c, "u_side_d": d, "u_seg": seg, "u_segmat": mat})
     x0 = HALF_LENGTH + style.sides[0].margin + 0.5 * style.sides[0].back_d
     y0 = HALF_WIDTH + style.sides[2].margin + 0.5 * style.sides[2].back_d

@@ -179,6 +179,8 @@ class StadiumStyle:
     players: tuple[tuple[float, float, float, float], ...] = field(default=())  # (x, y, team, height)
     team_colors: tuple[tuple[float, float, float], tuple[float, float, float]] = ((0.8, 0.05, 0.05), (0.9, 0.9, 0.9))
     open_corners: tuple[bool, bool, bool, bool] = (False, False, False, False)  # corner c: x-side c & 1, y-side 2 + (c >> 1)
+    pillars: tuple[bool, bool, bool, bool] = (False, False, False, False)  # roof columns in front of a stand
+    pillar_spacing: float = 16.0  # metres between roof columns
     supersample: int = 2
 
     def with_overrides(self, **style: Any) -> "StadiumStyle":
@@ -362,7 +364,7 @@ def sample_style(seed: int) -> StadiumStyle:
         sun_azimuth=float(sun_az),
         sun_elevation=float(sun_el),
         exposure=float(rng.uniform(0.85, 1.2)),
-        haze=float(rng.uniform(0.0, 0.0025) if rng.random() < 0.75 else rng.uniform(0.0025, 0.007)),
+        haze=float(rng.uniform(0.0, 0.0015) if rng.random() < 0.75 else rng.uniform(0.0015, 0.004)),  # per metre
         cloudiness=float(rng.uniform(0.0, 1.0)),
         rain=float(rng.uniform(0.2, 0.8) if (lighting != "day" and rng.random() < 0.2) else 0.0),
         grass_color=grass,
@@ -396,4 +398,15 @@ def sample_style(seed: int) -> StadiumStyle:
     # some stadiums (older grounds) have open corners between their stands
     if rng.random() < 0.3:
         style = replace(style, open_corners=tuple(bool(rng.random() < 0.8) for _ in range(4)))  # type: ignore[arg-type]
+    # older roofs stand on columns at the front of the stand (never in front of the camera)
+    cam_side = _camera_side(cam)
+    pillars = tuple(bool(p.roof and i != cam_side and rng.random() < 0.3) for i, p in enumerate(style.sides))
+    style = replace(style, pillars=pillars, pillar_spacing=float(rng.uniform(11.0, 22.0)))  # type: ignore[arg-type]
     return style
+
+
+def _camera_side(cam: tuple[float, float, float]) -> int:
+    """The stand side the camera stands on or in front of (largest outward coordinate)."""
+    x, y, _ = cam
+    scores = [x - HALF_LENGTH, -x - HALF_LENGTH, y - HALF_WIDTH, -y - HALF_WIDTH]
+    return int(np.argmax(scores))

@@ -55,6 +55,8 @@ uniform vec4 u_seg[40];     // profile segments (d0, z0, d1, z1), NSEG per side
 uniform float u_segmat[40]; // their materials
 uniform int u_nseg[4];      // segments in use per side
 uniform int u_open_corner[4]; // 1 where the two stands stop short of the corner
+uniform int u_pillars[4];   // 1 where the roof stands on columns at the front of the stand
+uniform float u_pillar_spacing;
 uniform vec2 u_shadow_corners[24]; // 6 corners (d, z) of each side's upper envelope
 
 uniform float u_board_height;
@@ -130,8 +132,27 @@ float sun_visibility(vec3 p) {
     return vis;
 }
 
+// Sunlight left on ground point g by the players' shadows (1 = none): each player's shadow is the
+// segment from its feet away from the sun, 0.4 m wide, box-filtered by the footprint fp (metres).
+float player_shadows(vec2 g, float fp) {
+    if (u_lighting != 0 || u_nplayers == 0 || u_sun_dir.z <= 0.0) return 1.0;
+    vec2 away = -u_sun_dir.xy / u_sun_dir.z;   // shadow offset per metre of height
+    float vis = 1.0;
+    for (int k = 0; k < u_nplayers; ++k) {
+        vec4 pl = u_players[k];
+        vec2 tip = pl.xy + away * pl.w;
+        if (g.x < pl.x + min(away.x, 0.0) * 2.0 - 0.5) break;  // players are sorted by x ...
+        if (g.x > max(pl.x, tip.x) + 0.5) continue;  // ... but a shadow may reach back
+        vec2 ab = tip - pl.xy;
+        float hh = clamp(dot(g - pl.xy, ab) / max(dot(ab, ab), 1e-6), 0.0, 1.0);
+        float dist = length(g - pl.xy - hh * ab);
+        vis = min(vis, 1.0 - 0.85 * band_coverage(dist, 0.4, max(fp, 1e-3)));
+    }
+    return vis;
+}
+
 // Light arriving at a point (linear RGB), given its normal and whether it is on the pitch.
-vec3 lighting(vec3 p, vec3 n, float open_sky) {
+vec3 lighting(vec3 p, vec3 n, float open_sky, float shade_vis) {
     if (u_lighting == 2) {
         // floodlights: bright over the pitch, falling off into the stands
         float dx = max(abs(p.x) - 55.0, 0.0);
@@ -140,7 +161,7 @@ vec3 lighting(vec3 p, vec3 n, float open_sky) {
         float facing = 0.55 + 0.45 * max(n.z, 0.0);
         return u_sun_color * (0.25 + 0.75 * fall) * facing + u_ambient * open_sky;
     }
-    float lit = u_lighting == 0 ? sun_visibility(p) * max(dot(n, u_sun_dir), 0.0) : 0.0;
+    float lit = u_lighting == 0 ? shade_vis * sun_visibility(p) * max(dot(n, u_sun_dir), 0.0) : 0.0;
     return u_sun_color * lit + u_ambient * open_sky * (0.6 + 0.4 * max(n.z, 0.0));
 }
 
@@ -191,7 +212,7 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
             vec2 jy = (h.t * (dlat - dir * (dlat.z / dir.z))).xy;
             float fpg = max(length(jx), length(jy));
             vec2 g = p.xy;
-            vec2 v = normalize(dir.xy);
+            vec2 v = normalize(dir.xy + vec2(1e-6, 0.0));
             albedo = ground_albedo(g, jx, jy, v, fpg);
             float dmax;
             owner_side(g, dmax);
@@ -207,7 +228,35 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
                 if (u_side_b[h.side].x > 0.5 && h.mat == MAT_SEAT1 && dd > u_side_b[h.side].y) open_sky = 0.25;
             }
         }
-        col = albedo * lighting(p, h.n, open_sky) + emit;
+        col = albedo * lighting(p, h.n, open_sky, ground ? player_shadows(p.xy, fp) : 1.0) + emit;
+    }
+
+    // roof columns: vertical cylinders (radius 0.25 m) standing on the seats 1 m behind the roof
+    // front, every u_pillar_spacing metres; the three nearest to where the ray crosses their row
+    for (int i = 0; i < 4; ++i) {
+        if (u_pillars[i] == 0) continue;
+        vec2 n = side_normal(i);
+        vec2 lat_axis = vec2(-n.y, n.x);
+        float dcol = max(u_side_d[i].x + 1.0, 0.5);
+        float rn = dot(dir.xy, n);
+        if (abs(rn) < 1e-6) continue;
+        float tc = (u_side_a[i].x + dcol - dot(ro.xy, n)) / rn;
+        if (tc <= 0.0) continue;
+        float qc = dot(ro.xy + tc * dir.xy, lat_axis);
+        float half_len = i < 2 ? u_side_a[2].x : u_side_a[0].x;
+        float base = side_surface(i, dcol);
+        float top = u_side_c[i].w;
+        for (int j = -1; j <= 1; ++j) {
+            float qk = (round(qc / u_pillar_spacing) + float(j)) * u_pillar_spacing;
+            if (abs(qk) > half_len - 2.0) continue;
+            vec3 axis = vec3(n * (u_side_a[i].x + dcol) + lat_axis * qk, 0.0);
+            vec3 c = ray_line(ro, dir, axis, vec3(0.0, 0.0, 1.0));
+            if (c.x <= 0.0 || c.x >= h.t || c.y < base || c.y > top) continue;
+            float cov = band_coverage(c.z, 0.5, max(c.x * pix, 1e-4));
+            if (cov <= 0.0) continue;
+            vec3 cn = vec3(normalize((ro + c.x * dir - axis).xy + 1e-6), 0.0);
+            col = mix(col, u_fascia * 0.8 * lighting(vec3(axis.xy, c.y), cn, 0.5, 1.0), cov);
+        }
     }
 
     // goals: posts and crossbars (thin cylinders, coverage from the footprint), nets
@@ -217,7 +266,7 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
         vec3 gc = vec3(gx + sx, 0.0, 1.2) - ro;     // bounding sphere of goal and net, radius 5 m
         float tc = dot(gc, dir);
         if (dot(gc, gc) - tc * tc > 25.0 || tc < -5.0) continue;
-        vec3 white = vec3(0.9) * lighting(vec3(gx, 0.0, 1.2), vec3(-sx, 0.0, 0.0), 1.0);
+        vec3 white = vec3(0.9) * lighting(vec3(gx, 0.0, 1.2), vec3(-sx, 0.0, 0.0), 1.0, 1.0);
         // net: back, top and sides of a box 2 m deep; light alpha accumulated per crossing
         float net = 0.0;
         for (int k = 0; k < 4; ++k) {
@@ -273,8 +322,8 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
         if (cov <= 0.0) continue;
         vec3 shirt = pl.z < 0.5 ? u_team1 : u_team2;
         vec3 alb = z > 0.86 ? vec3(0.35, 0.22, 0.15) : z > 0.5 ? shirt : z > 0.3 ? shirt * 0.7 + vec3(0.05) : z > 0.05 ? vec3(0.8) * shirt + vec3(0.1) : vec3(0.05);
-        vec3 n = vec3(-normalize(dir.xy), 0.0);
-        col = mix(col, alb * lighting(vec3(pl.xy, 1.0), n, 1.0), cov);
+        vec3 n = vec3(-hdir, 0.0);
+        col = mix(col, alb * lighting(vec3(pl.xy, 1.0), n, 1.0, 1.0), cov);
     }
 
     // night: glare around the floodlight heads (seen through everything, as in a lens)
@@ -292,6 +341,21 @@ vec3 shade(vec3 dir, vec3 dlon, vec3 dlat, float pix, out int id) {
     if (h.mat != MAT_SKY) {
         float fog = 1.0 - exp(-h.t * u_haze);
         col = mix(col, u_fog, fog);
+    }
+    // rain: thin near-vertical streaks in direction space (cells 1.1 deg wide, 9 deg tall),
+    // box-filtered across by the pixel footprint
+    if (u_rain > 0.0) {
+        float az = atan(dir.y, dir.x);
+        float el = asin(clamp(dir.z, -1.0, 1.0));
+        vec2 cellf = vec2(az / 0.02, el / 0.16);
+        ivec2 cell = ivec2(floor(cellf));
+        float present = step(hash2(cell, 31u), 0.5 * u_rain);
+        float x0 = 0.15 + 0.7 * hash2(cell, 32u);
+        float y0 = hash2(cell, 33u);
+        float along = fract(cellf.y) - y0;
+        float len = step(0.0, along) * step(along, 0.45);
+        float cov = band_coverage((fract(cellf.x) - x0) * 0.02 * max(cos(el), 0.05), 0.0007, pix);
+        col = mix(col, u_fog * 1.6 + vec3(0.04), 0.35 * present * len * cov);
     }
     return col;
 }

@@ -178,7 +178,7 @@ def _closeups(image: np.ndarray, segments: list[np.ndarray], regions: list[tuple
     tiles = []
     for x0, y0 in regions:
         crop = cv2.resize(image[y0 : y0 + ch, x0 : x0 + cw], (tile_width, int(round(ch * scale))), interpolation=cv2.INTER_CUBIC)
-        crop = _draw_segments(crop, segments, scale, (x0, y0), thickness=2)
+        crop = _draw_segments(crop, segments, scale, (x0, y0), thickness=1)
         crop[:, -2:] = 24
         tiles.append(crop)
     return np.hstack(tiles)
@@ -279,8 +279,9 @@ def run(args: argparse.Namespace) -> int:
         p_d = np.full_like(p_u, np.nan)
         p_d[finite] = true_lens.distort_points(_lens_to_px(p_u[finite], size), size)
         run_d = _visible_run(p_d, size)
-        if run_d is not None:
-            chords.append(run_d)
+        if run_d is None or painted_fraction(frame, run_d) < 0.5:
+            continue  # out of the frame, too short, or hidden (behind a stand): no reference line
+        chords.append(run_d)
         # corrected frame (fit "same"): the ideal picture shows the line at p_u; keep the part whose
         # source lies inside the distorted frame
         px_u = _lens_to_px(p_u, size)
@@ -300,6 +301,29 @@ def run(args: argparse.Namespace) -> int:
     write_image(out / "demo.png", figure)
     log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
     return 0
+
+
+def painted_fraction(frame: np.ndarray, px: np.ndarray, offset: float = 5.0, contrast: float = 3.0) -> float:
+    """Share of the points ``px`` (N x 2, frame pixels, along one line) where ``frame`` is brighter
+    by more than ``contrast`` grey levels than ``offset`` pixels to both sides of the line: near 1
+    for a painted line that is in view, near 0 where the line is hidden (behind a stand)."""
+    import cv2
+
+    grey = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY).astype(np.float32) if frame.ndim == 3 else frame.astype(np.float32)
+    px = px[np.all(np.isfinite(px), axis=1)]
+    if len(px) < 3:
+        return 0.0
+    tangent = np.gradient(px, axis=0)
+    normal = np.stack([-tangent[:, 1], tangent[:, 0]], 1)
+    normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-9)
+
+    def sample(points: np.ndarray) -> np.ndarray:
+        return cv2.remap(grey, points[:, 0:1].astype(np.float32), points[:, 1:2].astype(np.float32),
+                         cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)[:, 0]
+
+    on = sample(px)
+    off = np.maximum(sample(px + offset * normal), sample(px - offset * normal))
+    return float(np.mean(on - off > contrast))
 
 
 def _inside(px: np.ndarray, size: tuple[int, int]) -> np.ndarray:
