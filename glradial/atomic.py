@@ -32,6 +32,17 @@ def check_output_folder(path: str | os.PathLike) -> Path:
     return target
 
 
+def _final_mode(target: Path) -> int:
+    """Permissions for the finished file: those of the file it replaces, else ``0o666 & ~umask``
+    (what ``open(path, "w")`` would give; ``mkstemp`` makes its files ``0o600``)."""
+    try:
+        return target.stat().st_mode & 0o7777
+    except OSError:
+        mask = os.umask(0)
+        os.umask(mask)
+        return 0o666 & ~mask
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path next to ``path``; on success it is renamed to ``path``.
@@ -50,6 +61,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         yield tmp
         if not tmp.is_file() or tmp.stat().st_size == 0:
             raise OSError(f"nothing was written for {str(target)!r}")
+        os.chmod(tmp, _final_mode(target))
         os.replace(tmp, target)
     except BaseException:
         with contextlib.suppress(OSError):

@@ -40,14 +40,8 @@ import torch.distributed as dist
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, PanoramaSource, render_test_set
-from .loss import max_displacement, training_loss, distortion_loss
+from .loss import training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, normalise_batch
-
-#: Width (pixels) at which displacement errors are reported.
-REPORT_WIDTH = 1920
-#: 16:9 corner radius in lens units.
-CORNER_RADIUS_16_9 = 0.5 * math.hypot(1.0, 9.0 / 16.0)
-
 
 @dataclass
 class TrainConfig:

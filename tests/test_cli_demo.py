@@ -33,9 +33,12 @@ def test_demo_small_end_to_end(tmp_path, capsys):
 
 def test_demo_without_model_says_so(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(demo, "_find_model", lambda explicit: None)
-    assert main(["demo", "--out", str(tmp_path), "--size", "160x90", "--panorama-width", "512"]) == 0
-    assert "no model shipped" in capsys.readouterr().out
+    assert main(["demo", "--out", str(tmp_path), "--size", "320x180", "--panorama-width", "1024"]) == 0
+    printed = capsys.readouterr().out
+    assert "no model shipped" in printed
     assert (tmp_path / "demo.png").is_file()
+    # corrected with the true lens, the pitch lines are exactly straight again (exact inverse)
+    assert "px from straight in the distorted frame, 0.0 px after correction" in printed, printed
 
 
 def test_reference_lines_lie_on_the_rendered_pitch_lines():

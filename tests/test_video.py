@@ -149,3 +149,17 @@ def test_atomic_helpers(tmp_path):
         with atomic_path(tmp_path / "empty.txt"):
             pass
     assert _files(tmp_path) == ["t.txt"]
+
+
+def test_outputs_get_ordinary_permissions(tmp_path):
+    """Temporary files are private (0600); the finished file gets what open() would give, or the
+    mode of the file it replaces."""
+    mask = os.umask(0o022)
+    try:
+        write_image(tmp_path / "a.png", np.zeros((4, 4, 3), np.uint8))
+        assert (tmp_path / "a.png").stat().st_mode & 0o777 == 0o644
+        os.chmod(tmp_path / "a.png", 0o640)
+        write_image(tmp_path / "a.png", np.ones((4, 4, 3), np.uint8))
+        assert (tmp_path / "a.png").stat().st_mode & 0o777 == 0o640
+    finally:
+        os.umask(mask)

@@ -271,7 +271,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
 
     corrected = correct(frame, used[0], used[1], fit="same")
+    used_lens = Lens(*used)
     chords, straight = [], []
+    bow, residual = 0.0, 0.0
     for _name, a, b in pitch_lines():
         points = a + np.linspace(0.0, 1.0, 400)[:, None] * (b - a)
         p_u = project_undistorted(params, style, points, size)
@@ -289,12 +291,22 @@ def run(args: argparse.Namespace) -> int:
         run_u = _visible_run(px_u, size)
         if run_u is not None:
             straight.append(run_u)
+        # how far the painted line is from straight: before (distance of the distorted points from
+        # their chord) and after correction (where the corrected frame shows each point, against
+        # where a perfect lens would put it)
+        bow = max(bow, _distance_to_chord(run_d))
+        visible = np.all(np.isfinite(px_u), axis=1)
+        shown = used_lens.undistort_points(p_d[visible], size)
+        residual = max(residual, float(np.nanmax(np.hypot(*(shown - px_u[visible]).T))) if visible.any() else 0.0)
     labels = (
         f"distorted frame, k1={true_lens.k1:.3f} k2={true_lens.k2:.3f}; red: chords between line ends",
         f"corrected ({source} k1={used[0]:.3f} k2={used[1]:.3f}); red: true straight pitch lines",
         "distorted: enlarged close-ups of the frame corners / edges with the most reference lines",
         "corrected: the same close-ups",
     )
+    if chords:
+        print(f"pitch lines: up to {bow:.1f} px from straight in the distorted frame, "
+              f"{residual:.1f} px after correction ({size[0]}x{size[1]} pixels)")
     figure = compose_figure(frame, corrected, chords, straight, labels)
     write_image(out / "distorted.png", frame)
     write_image(out / "corrected.png", corrected)
@@ -324,6 +336,14 @@ def painted_fraction(frame: np.ndarray, px: np.ndarray, offset: float = 5.0, con
     on = sample(px)
     off = np.maximum(sample(px + offset * normal), sample(px - offset * normal))
     return float(np.mean(on - off > contrast))
+
+
+def _distance_to_chord(points: np.ndarray) -> float:
+    """Largest distance (pixels) of a polyline's points from the straight line through its ends."""
+    a, b = points[0], points[-1]
+    direction = (b - a) / max(float(np.hypot(*(b - a))), 1e-9)
+    offset = points - a
+    return float(np.max(np.abs(offset[:, 0] * direction[1] - offset[:, 1] * direction[0])))
 
 
 def _inside(px: np.ndarray, size: tuple[int, int]) -> np.ndarray:
