@@ -29,7 +29,7 @@ import moderngl
 import numpy as np
 
 from . import lensfuncs
-from .lens import Lens, corner_radius, frame_size
+from .lens import Lens, corner_radius, frame_size, real_number
 
 InverseMethod = Literal["exact", "drap"]
 
@@ -52,15 +52,6 @@ def manifold_k2(k1: float | np.ndarray) -> float | np.ndarray:
     return 0.019 * k1 + 0.805 * k1 * k1
 
 
-def _real(name: str, value: object) -> float:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ValueError(f"{name} must be finite, got {number}")
-    return number
-
-
 @dataclass(frozen=True)
 class CropParams:
     """One crop: camera pose, horizontal field of view and lens.
@@ -79,7 +70,7 @@ class CropParams:
 
     def __post_init__(self) -> None:
         for item in fields(self):
-            object.__setattr__(self, item.name, _real(item.name, getattr(self, item.name)))
+            object.__setattr__(self, item.name, real_number(item.name, getattr(self, item.name)))
         if not -90.0 <= self.tilt <= 90.0:
             raise ValueError(f"tilt must be within [-90, 90] degrees, got {self.tilt}")
         if not 0.0 < self.hfov < 180.0:
@@ -138,13 +129,13 @@ def lens_covers_frame(k1: float, k2: float, size: tuple[int, int] = PAPER_SIZE) 
 
 def _range(name: str, value: object) -> tuple[float, float]:
     if isinstance(value, (numbers.Real, np.floating, np.integer)) and not isinstance(value, bool):
-        number = _real(name, value)
+        number = real_number(name, value)
         return number, number
     try:
         lo, hi = value  # type: ignore[misc]
     except (TypeError, ValueError):
         raise TypeError(f"range {name} must be a number or (low, high), got {value!r}") from None
-    lo, hi = _real(f"{name} low", lo), _real(f"{name} high", hi)
+    lo, hi = real_number(f"{name} low", lo), real_number(f"{name} high", hi)
     if lo > hi:
         raise ValueError(f"range {name} must have low <= high, got ({lo}, {hi})")
     return lo, hi
@@ -175,7 +166,7 @@ def sample_crop_params(
     if unknown:
         raise TypeError(f"unknown range(s) {sorted(unknown)}; known: {sorted(PAPER_RANGES)}")
     size = frame_size(size)
-    k2_noise = _real("k2_noise", k2_noise)
+    k2_noise = real_number("k2_noise", k2_noise)
     if k2_noise < 0:
         raise ValueError(f"k2_noise must be >= 0, got {k2_noise}")
     bounds = {name: _range(name, ranges.get(name, default)) for name, default in PAPER_RANGES.items()}

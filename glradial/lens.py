@@ -22,7 +22,9 @@ from . import lensfuncs
 InverseMethod = Literal["exact", "drap"]
 
 
-def _coefficient(name: str, value: object) -> float:
+def real_number(name: str, value: object) -> float:
+    """Validate a finite real scalar (``bool`` refused) and return it as ``float``; the error names
+    ``name`` and the received value."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
         raise TypeError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
     number = float(value)
@@ -85,8 +87,8 @@ class Lens:
     k2: float = 0.0
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "k1", _coefficient("k1", self.k1))
-        object.__setattr__(self, "k2", _coefficient("k2", self.k2))
+        object.__setattr__(self, "k1", real_number("k1", self.k1))
+        object.__setattr__(self, "k2", real_number("k2", self.k2))
 
     # -- radial maps -------------------------------------------------------------------------
     def forward_radius(self, r_u: np.ndarray | float) -> np.ndarray:
@@ -427,7 +429,7 @@ def _choice(name: str, value: object, allowed: tuple[str, ...]) -> str:
 
 
 def _positive(name: str, value: object) -> float:
-    number = _coefficient(name, value)
+    number = real_number(name, value)
     if number <= 0.0:
         raise ValueError(f"{name} must be positive, got {number:g}")
     return number
