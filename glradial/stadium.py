@@ -29,7 +29,6 @@ from .stadium_style import (
     HALF_WIDTH,
     MAX_PLAYERS,
     SIDE_LINE,
-    SIDE_NORMALS,
     SideProfile,
     StadiumStyle,
     sample_style,
