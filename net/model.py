@@ -28,6 +28,8 @@ from typing import Any
 import torch
 from torch import nn
 
+#: Lopez-Antequera manifold of real lenses, ``k2 = MANIFOLD[0] k1 + MANIFOLD[1] k1^2``.
+MANIFOLD = (0.019, 0.805)
 #: ITU-R BT.601 luma weights (R, G, B) used by the grayscale variant.
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)
 
@@ -38,7 +40,9 @@ class ModelConfig:
 
     ``input_size`` is ``(W, H)`` like every size in glradial. ``pool_grid`` 1 is global average
     pooling; g > 1 concatenates global pooling with a g x g grid of average pools (the heads then
-    know in which part of the frame a feature was seen). ``stages`` lists
+    know in which part of the frame a feature was seen). ``k2_residual``: the k2 head predicts the
+    deviation from the Lopez-Antequera manifold of the predicted k1, ``k2 = 0.019 k1 + 0.805 k1^2 +
+    head_k2`` (the manifold term does not pass gradients back to k1). ``stages`` lists
     ``(expansion, out_channels, blocks, stride[, fused])`` (fused = 1: Fused-MBConv, a full 3x3
     expand conv instead of 1x1 + depthwise; faster to train in early stages). ``mean``/``std`` apply to ``x / 255`` per
     channel in ``channel_order`` ("RGB" or "L").
@@ -54,6 +58,7 @@ class ModelConfig:
     head_hidden: int = 32
     coord_channels: bool = True
     pool_grid: int = 1
+    k2_residual: bool = False
     k_init: tuple[float, float] = (-0.2, 0.1)
     mean: tuple[float, ...] = (0.5, 0.5, 0.5)
     std: tuple[float, ...] = (0.25, 0.25, 0.25)
@@ -218,7 +223,12 @@ class DistortionNet(nn.Module):
 
     def forward_head(self, features: torch.Tensor) -> torch.Tensor:
         """Pooled features -> ``N x 2`` (k1, k2)."""
-        return torch.cat([self.head_k1(features), self.head_k2(features)], dim=1)
+        k1 = self.head_k1(features)
+        k2 = self.head_k2(features)
+        if self.config.k2_residual:
+            prior = k1.detach()
+            k2 = k2 + MANIFOLD[0] * prior + MANIFOLD[1] * prior * prior
+        return torch.cat([k1, k2], dim=1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.forward_head(self.forward_features(x))

@@ -154,6 +154,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, help="override the config's step count")
     parser.add_argument("--time-budget-s", type=float, help="override the config's time budget")
     parser.add_argument("--threads", type=int, help="torch threads per process")
+    parser.add_argument("--init", help="start from this checkpoint's (EMA) weights; new optimizer and schedule "
+                        "(fine-tuning; keys missing from it keep their initialisation)")
+    parser.add_argument("--zero-k2-head", action="store_true",
+                        help="with --init: zero the k2 head's last layer (a k2_residual model then starts on the manifold)")
     args = parser.parse_args(argv)
 
     cfg = TrainConfig.from_json(args.config)
@@ -196,6 +200,16 @@ def main(argv: list[str] | None = None) -> int:
         [{"params": decay, "weight_decay": cfg.weight_decay}, {"params": no_decay, "weight_decay": 0.0}], lr=cfg.lr
     )
     step, train_time, best = 0, 0.0, math.inf
+    if args.init:
+        state = torch.load(args.init, map_location=device, weights_only=False)
+        weights = state.get("ema", state["model"])
+        missing, unexpected = model.load_state_dict(weights, strict=False)
+        if args.zero_k2_head:
+            with torch.no_grad():
+                model.head_k2.net[-1].weight.zero_()
+                model.head_k2.net[-1].bias.zero_()
+        ema.model.load_state_dict(model.state_dict())
+        log(f"initialised from {args.init} (missing {missing}, unexpected {unexpected})")
     if args.resume and (out / "last.pt").exists():
         state = torch.load(out / "last.pt", map_location=device, weights_only=False)
         model.load_state_dict(state["model"])

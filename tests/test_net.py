@@ -154,3 +154,18 @@ def test_paired_crops_share_the_view_and_differ_in_the_lens(ctx):
         centre = np.abs(images[a, 40:50, 75:85].astype(int) - images[b, 40:50, 75:85].astype(int)).mean()
         corner = np.abs(images[a, :15, :25].astype(int) - images[b, :15, :25].astype(int)).mean()
         assert centre < 3.0 and (corner > centre or corner == 0.0), (centre, corner)
+
+
+def test_k2_residual_head_starts_on_the_manifold():
+    # With k2_residual the k2 head adds to 0.019 k1 + 0.805 k1^2 of the predicted k1; a zeroed head
+    # therefore reproduces the paper's method B exactly.
+    model = DistortionNet(ModelConfig(input_size=(64, 36), stem_channels=8, stages=[(1, 8, 1, 2)],
+                                      feature_channels=16, k2_residual=True)).eval()
+    torch.nn.init.normal_(model.head_k1.net[-1].weight, std=0.5)
+    with torch.no_grad():
+        model.head_k2.net[-1].weight.zero_()
+        model.head_k2.net[-1].bias.zero_()
+        out = model(torch.randn(4, 3, 36, 64)).double()
+    k1 = out[:, 0]
+    assert torch.allclose(out[:, 1], 0.019 * k1 + 0.805 * k1 * k1, atol=1e-6)
+    assert k1.std() > 0
