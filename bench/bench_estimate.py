@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial.estimate import Estimator, default_model_path  # noqa: E402
+from glradial.estimator import Estimator, default_model_path  # noqa: E402
 
 
 def _median_ms(fn, repeats: int) -> float:

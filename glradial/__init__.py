@@ -28,8 +28,9 @@ _EXPORTS = {
     "crop_batches": "crop_stream",
     "stadium_panorama": "stadium",
     "StadiumRenderer": "stadium",
-    "estimate": "estimate",
-    "Estimator": "estimate",
+    "estimate": "estimator",
+    "Estimator": "estimator",
+    "ModelLoadError": "estimator",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]

@@ -122,7 +122,7 @@ class LensTrack:
 
 def default_estimator(model: str | os.PathLike | None = None) -> EstimatorFn:
     """The bundled CNN (:class:`glradial.Estimator`), as a frame -> lens function."""
-    from .estimate import Estimator
+    from .estimator import Estimator
 
     estimator = Estimator(model) if model is not None else Estimator()
     return lambda frame: estimator.estimate(frame)

@@ -122,10 +122,10 @@ def render_frames(panoramas: list[np.ndarray], n: int, seed: int, frame_size: tu
 
 
 class OnnxPredictor:
-    """Predicts through :class:`glradial.estimate.Estimator` (the shipped path, area resize included)."""
+    """Predicts through :class:`glradial.estimator.Estimator` (the shipped path, area resize included)."""
 
     def __init__(self, path: str, threads: int | None):
-        from glradial.estimate import Estimator
+        from glradial.estimator import Estimator
 
         self.estimator = Estimator(path, threads=threads)
         self.input_size = self.estimator.input_size

@@ -1,4 +1,4 @@
-"""glradial.estimate: the onnxruntime Estimator (errors, preprocessing) and the shipped model's quality."""
+"""glradial.estimator: the onnxruntime Estimator (errors, preprocessing) and the shipped model's quality."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.estimate import Estimator, ModelLoadError, default_model_path
+from glradial.estimator import Estimator, ModelLoadError, default_model_path
 
 SHIPPED = default_model_path()
 needs_shipped = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped model in glradial/models")

@@ -147,7 +147,7 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     (hfov 45° -> 33°, k1 -0.35 -> -0.25 along the manifold) for 24 frames, a cut to another camera
     (k1 -0.05) for 12 frames. Smoothing does not add error, removes most of the frame-to-frame
     wobble, and the frames after the cut follow the second shot."""
-    from glradial.estimate import default_model_path
+    from glradial.estimator import default_model_path
 
     if not default_model_path().is_file():
         pytest.skip("no bundled model (glradial/models/glradial_k1k2.onnx) yet")

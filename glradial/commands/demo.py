@@ -209,7 +209,7 @@ def _find_model(explicit: str | None) -> Path | None:
         if not path.is_file():
             raise FileNotFoundError(f"model file {explicit!r} does not exist")
         return path
-    from ..estimate import default_model_path
+    from ..estimator import default_model_path
 
     path = default_model_path()
     return path if path.is_file() else None
@@ -259,7 +259,7 @@ def run(args: argparse.Namespace) -> int:
               "correcting with the true lens", flush=True)
         used, source = (true_lens.k1, true_lens.k2), "true"
     else:
-        from ..estimate import Estimator
+        from ..estimator import Estimator
 
         estimate = Estimator(model).estimate(frame)
         used = (float(estimate.k1), float(estimate.k2)) if hasattr(estimate, "k1") else tuple(map(float, estimate))

@@ -41,7 +41,7 @@ def _read_rgb(path: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimate import Estimator
+    from ..estimator import Estimator
 
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:

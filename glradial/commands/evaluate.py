@@ -29,7 +29,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimate import default_model_path
+    from ..estimator import default_model_path
 
     try:
         from ..net.evaluate import main

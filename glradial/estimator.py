@@ -19,8 +19,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
-import types
 import threading
 import warnings
 from pathlib import Path
@@ -189,15 +187,3 @@ def default_estimator() -> Estimator:
 def estimate(frame: np.ndarray) -> Lens:
     """Estimate the radial lens of one RGB frame with the bundled model (see the module docstring)."""
     return default_estimator().estimate(frame)
-
-
-class _CallableModule(types.ModuleType):
-    """``glradial.estimate`` names both this module and its :func:`estimate` function: once the
-    module is imported, Python binds the package attribute to the module, which would shadow the
-    lazily exported function. Calling the module therefore calls the function."""
-
-    def __call__(self, frame: np.ndarray) -> Lens:
-        return estimate(frame)
-
-
-sys.modules[__name__].__class__ = _CallableModule
