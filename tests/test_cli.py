@@ -373,3 +373,21 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     np.testing.assert_allclose(back.lens, track.lens, rtol=1e-7)
     np.testing.assert_array_equal(back.shot, track.shot)
     assert json.loads((tmp_path / "t.json").read_text())["shots"] == track.per_shot()
+
+
+def test_estimate_command_on_a_video_prints_shots(tmp_path, field_panorama, capsys):
+    """'glradial estimate VIDEO': one line per detected shot with the model's lens; --json gives one
+    document with per-frame rows when --per-frame is set; images and videos mix in one call."""
+    model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
+    video = tmp_path / "cut.mp4"
+    _pan_video(video, field_panorama, n=20, fps=25, cut=12)
+    image = tmp_path / "frame.png"
+    write_image(image, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (128, 72)))
+    assert main(["estimate", str(video), str(image), "--model", str(model), "--every", "4"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"{video}: shot 0 frames 0-11 k1=-0.210000 k2=0.040000"
+    assert lines[1] == f"{video}: shot 1 frames 12-19 k1=-0.210000 k2=0.040000"
+    assert lines[2].startswith(f"{image}\tk1=-0.210000")
+    assert main(["estimate", str(video), "--model", str(model), "--json", "--per-frame"]) == 0
+    document = json.loads(capsys.readouterr().out)
+    assert len(document["frames"]) == 20 and [s["first_frame"] for s in document["shots"]] == [0, 12]

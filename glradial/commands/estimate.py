@@ -1,4 +1,4 @@
-"""``glradial estimate``: estimate the lens (k1, k2) of images with the bundled CNN."""
+"""``glradial estimate``: estimate the lens (k1, k2) of images and videos with the bundled CNN."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
+from ..video import media_kind
 from . import CliError, positive_int
 
 DESCRIPTION = """\
@@ -14,18 +15,24 @@ is read as RGB, treated as a whole 16:9 broadcast frame and resized with area in
 network input. Prints one line per image: the path, k1 and k2 (width-normalised: image width = 1,
 origin at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel), or with --json
 one JSON object per line {"path", "k1", "k2"}. Images of another aspect ratio are squashed to 16:9
-(a warning says so). Videos: see 'glradial correct --auto'."""
+(a warning says so). Videos (by extension): shot cuts are detected, every --every-th frame of each
+shot is estimated and the estimates are smoothed within the shot as 'glradial correct --auto' does;
+prints one line per shot (first and last frame, median k1, k2), or per frame with --per-frame, or
+one JSON document per video with --json."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
-        "estimate", help="estimate the lens (k1, k2) of images with the bundled CNN", description=DESCRIPTION,
+        "estimate", help="estimate the lens (k1, k2) of images and videos with the bundled CNN", description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("inputs", metavar="INPUT", nargs="+", help="image files (PNG, JPEG, TIFF, ...)")
+    parser.add_argument("inputs", metavar="INPUT", nargs="+", help="image (PNG, JPEG, TIFF) or video files")
     parser.add_argument("--json", action="store_true", help="one JSON object per line instead of text")
     parser.add_argument("--model", metavar="ONNX", help="use this ONNX model instead of the bundled one")
     parser.add_argument("--threads", type=positive_int, help="onnxruntime threads (default: all cores)")
+    parser.add_argument("--every", type=positive_int, default=5, metavar="N",
+                        help="videos: estimate every N-th frame of each shot (frames; default 5)")
+    parser.add_argument("--per-frame", action="store_true", help="videos: one line (or JSON row) per frame")
     return parser
 
 
@@ -45,6 +52,12 @@ def run(args: argparse.Namespace) -> int:
 
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:
+        if media_kind(path) == "video":
+            from ..auto import estimate_video, track_report
+
+            track = estimate_video(path, model=args.model, every=args.every)
+            print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
+            continue
         lens = estimator.estimate(_read_rgb(path))
         if args.json:
             print(json.dumps({"path": path, "k1": lens.k1, "k2": lens.k2}), flush=True)
