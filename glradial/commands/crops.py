@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import parse_size, positive_int, show_progress
+from . import non_negative_int, parse_size, positive_int, show_progress
 
 DESCRIPTION = """\
 Render COUNT distorted perspective crops from equirectangular panoramas (2:1 image files) with the
@@ -29,16 +29,6 @@ def _fractions(text: str) -> tuple[float, float, float]:
     return values  # type: ignore[return-value]
 
 
-def _seed(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}") from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f"expected a non-negative integer seed, got {text!r}")
-    return value
-
-
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "crops", help="write a dataset of distorted crops from equirectangular panoramas",
@@ -47,7 +37,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("panoramas", nargs="+", metavar="PANORAMA", help="equirectangular panorama image files (width = 2 x height)")
     parser.add_argument("--count", type=positive_int, required=True, metavar="N", help="number of crops in total (spread evenly over the panoramas)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created; rerun to resume)")
-    parser.add_argument("--seed", type=_seed, required=True, metavar="S", help="random seed: fixes every crop and the split assignment")
+    parser.add_argument("--seed", type=non_negative_int, required=True, metavar="S", help="random seed: fixes every crop and the split assignment")
     parser.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH",
                         help="frame geometry the lens refers to, in pixels (default: 1280x720)")
     parser.add_argument("--out-size", type=parse_size, default=None, metavar="WxH",

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from . import parse_size, positive_int
+from . import non_negative_int, parse_size, positive_int
 
 DESCRIPTION = """\
 Render the procedural football-stadium panorama of SEED as an equirectangular RGB image
@@ -20,7 +20,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "stadium", help="render a procedural football-stadium panorama (equirectangular)",
         description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--seed", type=int, required=True, help="stadium seed (integer >= 0)")
+    parser.add_argument("--seed", type=non_negative_int, required=True, help="stadium seed (integer >= 0)")
     parser.add_argument("--size", type=parse_size, default=(8192, 4096), metavar="WxH",
                         help="panorama size in pixels (default 8192x4096)")
     parser.add_argument("--supersample", type=positive_int, default=None, metavar="N",
