@@ -242,7 +242,7 @@ def estimate_video(
     of ``glradial correct --auto`` (:func:`track_video`) without the correction. Hook for
     ``glradial estimate VIDEO``."""
     estimate = default_estimator(model)
-    return track_video(path, lambda frame: estimate(_rgb8(frame)), every=every, window_s=window_s, progress=progress)
+    return track_video(path, lambda frame: estimate(rgb8_for_estimator(frame)), every=every, window_s=window_s, progress=progress)
 
 
 def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_json: bool = False) -> str:
@@ -266,7 +266,7 @@ def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_j
     return "\n".join(lines)
 
 
-def _rgb8(frame: np.ndarray) -> np.ndarray:
+def rgb8_for_estimator(frame: np.ndarray) -> np.ndarray:
     """RGB uint8 H×W×3 for the estimator: 16-bit/float scaled, alpha dropped, grey expanded."""
     frame = np.asarray(frame)
     if frame.dtype == np.uint16:

@@ -391,3 +391,18 @@ def test_estimate_command_on_a_video_prints_shots(tmp_path, field_panorama, caps
     assert main(["estimate", str(video), "--model", str(model), "--json", "--per-frame"]) == 0
     document = json.loads(capsys.readouterr().out)
     assert len(document["frames"]) == 20 and [s["first_frame"] for s in document["shots"]] == [0, 12]
+
+
+def test_estimate_command_bad_images_get_one_line(tmp_path, capsys):
+    """Missing and corrupt images (read by glradial.video.read_image) get one named error line."""
+    model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
+    assert main(["estimate", str(tmp_path / "missing.png"), "--model", str(model)]) == 1
+    assert "missing.png" in _error_line(capsys)
+    (tmp_path / "junk.jpg").write_bytes(b"not a jpeg")
+    assert main(["estimate", str(tmp_path / "junk.jpg"), "--model", str(model)]) == 1
+    line = _error_line(capsys)
+    assert "junk.jpg" in line and "corrupt" in line
+    gray16 = tmp_path / "gray16.png"
+    write_image(gray16, np.full((36, 64), 40000, np.uint16))
+    assert main(["estimate", str(gray16), "--model", str(model)]) == 0
+    assert "k1=-0.210000" in capsys.readouterr().out

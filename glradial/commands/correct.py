@@ -97,9 +97,9 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError("--sidecar is for videos")
         image = read_image(args.input, order="rgb")
         if args.auto:
-            from ..auto import default_estimator
+            from ..auto import default_estimator, rgb8_for_estimator
 
-            k1, k2 = _pair(default_estimator(args.model)(_for_estimator(image)))
+            k1, k2 = _pair(default_estimator(args.model)(rgb8_for_estimator(image)))
             print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}")
         else:
             k1, k2 = args.k1 or 0.0, args.k2 or 0.0
@@ -116,13 +116,13 @@ def run(args: argparse.Namespace) -> int:
         correct_video(args.input, args.output, lambda _i: (k1, k2), progress=progress, **options)
         return 0
 
-    from ..auto import default_estimator, track_video
+    from ..auto import default_estimator, rgb8_for_estimator, track_video
     from ..atomic import check_output_folder
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
     estimator = default_estimator(args.model)
-    track = track_video(args.input, lambda frame: estimator(_for_estimator(frame)), every=args.every,
+    track = track_video(args.input, lambda frame: estimator(rgb8_for_estimator(frame)), every=args.every,
                         window_s=args.window, progress=progress)
     correct_video(args.input, args.output, lambda i: tuple(track.lens[min(i, track.n_frames - 1)]),
                   progress=progress, **options)
@@ -145,9 +145,3 @@ def _pair(value: object) -> tuple[float, float]:
     a, b = value  # type: ignore[misc]
     return float(a), float(b)
 
-
-def _for_estimator(frame):
-    """RGB uint8 for the estimator (see :func:`glradial.auto._rgb8`)."""
-    from ..auto import _rgb8
-
-    return _rgb8(frame)

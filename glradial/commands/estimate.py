@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
-from ..video import media_kind
-from . import CliError, positive_int
+from ..video import media_kind, read_image
+from . import positive_int
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT image with the bundled CNN (ONNX, onnxruntime). Each image
@@ -36,18 +35,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def _read_rgb(path: str):
-    import cv2
-
-    if not Path(path).is_file():
-        raise FileNotFoundError(f"input file {path!r} does not exist")
-    image = cv2.imread(path, cv2.IMREAD_COLOR)
-    if image is None:
-        raise CliError(f"cannot read image {path!r} (not an image format OpenCV reads)")
-    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
-
-
 def run(args: argparse.Namespace) -> int:
+    from ..auto import rgb8_for_estimator
     from ..estimator import Estimator
 
     estimator = Estimator(args.model, threads=args.threads)
@@ -58,7 +47,7 @@ def run(args: argparse.Namespace) -> int:
             track = estimate_video(path, model=args.model, every=args.every)
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             continue
-        lens = estimator.estimate(_read_rgb(path))
+        lens = estimator.estimate(rgb8_for_estimator(read_image(path)))
         if args.json:
             print(json.dumps({"path": path, "k1": lens.k1, "k2": lens.k2}), flush=True)
         else:
