@@ -29,6 +29,7 @@ import moderngl
 import numpy as np
 
 from . import lensfuncs
+from .inverse_series import SERIES_DEGREE, fit_inverse_series
 from .lens import Lens, corner_radius, frame_size, real_number
 
 InverseMethod = Literal["exact", "drap"]
@@ -260,6 +261,8 @@ ATLAS_BYTES = 64 * 2**20
 #: blurs even magnified reads (measured: mean error 0.73 vs 0.25 levels against an exact bilinear
 #: ray cast) and is 2-5× slower; supersampling does the anti-aliasing instead.
 ANISOTROPY = 1.0
+#: Floats per crop in the instance buffer: rotation | f, k1, k2 (3 vec4), series coefficients | tile (3 vec4).
+_INSTANCE_FLOATS = 24
 
 
 def _panorama_array(panorama: object) -> np.ndarray:
@@ -321,9 +324,14 @@ class CropRenderer:
     inverse (``newton_steps`` Newton steps from the Drap-Lefevre seed; 3 reach 1e-9 lens units for
     the paper's distribution; the default is common.glsl's ``LENS_NEWTON_STEPS`` = 8, and pixels where
     Newton does not converge count as having no solution) or the paper's four-term ``"drap"`` one.
+    With ``series_inverse`` (default) the exact inverse of each crop's lens is fitted on the CPU as a
+    degree-10 Chebyshev series in ``r_d²`` and used instead of the per-pixel Newton solve wherever it
+    is within 1e-6 lens units of it over the whole frame (:mod:`glradial.inverse_series`; 95 % of the
+    paper's lenses; the others, near fold-over, keep Newton): the same geometry, a faster shader.
 
-    Crops are drawn up to ``tiles_per_pass`` at a time into a vertical atlas (one instanced draw and
-    one readback per pass). Use it on the thread and process that made ``ctx`` (default:
+    Crops are drawn up to ``tiles_per_pass`` at a time into a vertical atlas (one instanced draw per
+    inverse path and one readback per pass). A 3-channel panorama is stored as RGBA (a quarter more
+    texture memory; Mesa llvmpipe samples it faster). Use it on the thread and process that made ``ctx`` (default:
     ``thread_context()``) and :meth:`release` it (or use ``with``). Panoramas wider than
     ``GL_MAX_TEXTURE_SIZE`` are downscaled (area filter) with a ``RuntimeWarning``.
     """
@@ -338,6 +346,7 @@ class CropRenderer:
         supersample: int | tuple[int, int] | None = None,
         anisotropy: float | None = None,
         newton_steps: int = lensfuncs.LENS_NEWTON_STEPS,
+        series_inverse: bool = True,
         ctx: object | None = None,
     ) -> None:
         from .glcontext import max_texture_size, thread_context
@@ -351,6 +360,10 @@ class CropRenderer:
         if isinstance(newton_steps, bool) or not isinstance(newton_steps, (numbers.Integral, np.integer)) or not 1 <= newton_steps <= 16:
             raise ValueError(f"newton_steps must be an integer in 1..16, got {newton_steps!r}")
         self.newton_steps = int(newton_steps)
+        if not isinstance(series_inverse, (bool, np.bool_)):
+            raise TypeError(f"series_inverse must be a bool, got {series_inverse!r}")
+        self.series_inverse = bool(series_inverse) and inverse == "exact"
+        self._corner = corner_radius(self.size)
         if anisotropy is None:
             anisotropy = ANISOTROPY
         self.anisotropy = float(anisotropy)
@@ -388,36 +401,52 @@ class CropRenderer:
 
         ctx = self.ctx
         tex_dtype = _TEXTURE_DTYPES[self.dtype]
-        self._pano = ctx.texture(self.panorama_size, self.channels, array.tobytes(), dtype=tex_dtype, alignment=1)
+        if self.channels == 3:  # stored as RGBA: Mesa llvmpipe samples 4-channel textures ~5 % faster
+            opaque = np.iinfo(self.dtype).max if self.dtype.kind == "u" else 1.0
+            array = np.concatenate([array, np.full((*array.shape[:2], 1), opaque, self.dtype)], axis=2)
+        self._pano = ctx.texture(self.panorama_size, array.shape[2], array.tobytes(), dtype=tex_dtype, alignment=1)
         self._objects.append(self._pano)
         self._pano.build_mipmaps()
         self._pano.repeat_x = True
         self._pano.repeat_y = False
         self._pano.anisotropy = self.anisotropy
-        defines = {
-            "CROP_SUPERSAMPLE_X": self.supersample[0],
-            "CROP_SUPERSAMPLE_Y": self.supersample[1],
-            "CROP_INVERSE_DRAP": self.inverse == "drap",
-            "LENS_NEWTON_STEPS": self.newton_steps,
-        }
-        self._prog = build_program(ctx, "crop.vert", "crop.frag", defines)
-        self._objects.append(self._prog)
         w, h = self.out_size
         limit = min(int(ctx.info["GL_MAX_VIEWPORT_DIMS"][1]), int(ctx.info["GL_MAX_TEXTURE_SIZE"]))
         per_tile = 4 * w * h * np.dtype(self.dtype).itemsize
         self.tiles_per_pass = max(1, min(limit // h, ATLAS_BYTES // per_tile))
-        self._params = np.zeros((self.tiles_per_pass, 3, 4), np.float32)
-        self._instances = ctx.buffer(reserve=self._params.nbytes)
-        self._objects.append(self._instances)
-        self._vao = ctx.vertex_array(self._prog, [(self._instances, "4f 4f 4f/i", "in_r0", "in_r1", "in_r2")])
-        self._objects.append(self._vao)
+        # One program per inverse path; each draws its own crops of a pass (tile index per instance):
+        # "series" for lenses whose inverse series passed its check, "newton"/"drap" for the others.
+        paths = ["drap"] if self.inverse == "drap" else (["series", "newton"] if self.series_inverse else ["newton"])
+        self._draws: dict[str, tuple[object, object, np.ndarray]] = {}
+        for path in paths:
+            defines = {
+                "CROP_SUPERSAMPLE_X": self.supersample[0],
+                "CROP_SUPERSAMPLE_Y": self.supersample[1],
+                "CROP_INVERSE_DRAP": path == "drap",
+                "CROP_INVERSE_SERIES": path == "series",
+                "LENS_NEWTON_STEPS": self.newton_steps,
+            }
+            prog = build_program(ctx, "crop.vert", "crop.frag", defines)
+            self._objects.append(prog)
+            instances = ctx.buffer(reserve=self.tiles_per_pass * _INSTANCE_FLOATS * 4)
+            self._objects.append(instances)
+            # Attributes a program does not read (the series coefficients outside the series
+            # program) are skipped as padding: GL has no location for them.
+            names = [n for n in ("in_r0", "in_r1", "in_r2", "in_s0", "in_s1", "in_s2") if n in prog]
+            layout = " ".join("4f" if n in prog else "16x" for n in ("in_r0", "in_r1", "in_r2", "in_s0", "in_s1", "in_s2"))
+            vao = ctx.vertex_array(prog, [(instances, layout + "/i", *names)])
+            self._objects.append(vao)
+            prog["u_panorama"].value = 0
+            prog["u_tile_size"].value = (w, h)
+            prog["u_aspect_hw"].value = self.size[1] / self.size[0]
+            if path == "series":
+                prog["u_series_scale"].value = 2.0 / (self._corner * self._corner)
+            self._draws[path] = (prog, vao, instances)
+        self._params = np.zeros((self.tiles_per_pass, 6, 4), np.float32)
         self._target = ctx.texture((w, h * self.tiles_per_pass), 4, dtype=tex_dtype)
         self._objects.append(self._target)
         self._fbo = ctx.framebuffer(color_attachments=[self._target])
         self._objects.append(self._fbo)
-        self._prog["u_panorama"].value = 0
-        self._prog["u_tile_size"].value = (w, h)
-        self._prog["u_aspect_hw"].value = self.size[1] / self.size[0]
 
     # -- rendering -------------------------------------------------------------------------------
     def render(self, params: Sequence[CropParams], out: np.ndarray | None = None) -> np.ndarray:
@@ -455,15 +484,24 @@ class CropRenderer:
         for start in range(0, len(params), self.tiles_per_pass):
             batch = params[start : start + self.tiles_per_pass]
             n = len(batch)
+            table = self._params[:n]
             for j, item in enumerate(batch):
-                self._params[j, :, :3] = item.rotation()
-                self._params[j, :, 3] = (item.focal, item.k1, item.k2)
-            self._instances.write(self._params[:n].tobytes())
-            self._prog["u_tiles"].value = n
+                table[j, :3, :3] = item.rotation()
+                table[j, :3, 3] = (item.focal, item.k1, item.k2)
+            table[:, 5, 3] = np.arange(n)  # tile index
+            use_series = np.zeros(n, bool)
+            if self.series_inverse:
+                coefficients, use_series = fit_inverse_series(table[:, 1, 3], table[:, 2, 3], self._corner)
+                table.reshape(n, _INSTANCE_FLOATS)[:, 12 : 13 + SERIES_DEGREE] = coefficients
             self._fbo.use()
             ctx.viewport = (0, 0, w, n * h)
             self._pano.use(0)
-            self._vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=n)
+            for path, (prog, vao, instances) in self._draws.items():
+                chosen = table[use_series] if path == "series" else table[~use_series]
+                if len(chosen):
+                    instances.write(np.ascontiguousarray(chosen).tobytes())
+                    prog["u_tiles"].value = n
+                    vao.render(moderngl.TRIANGLE_STRIP, vertices=4, instances=len(chosen))
             self._fbo.read_into(
                 out[start : start + n], viewport=(0, 0, w, n * h), components=self.channels, alignment=1, dtype=tex_dtype
             )

@@ -107,10 +107,17 @@ def undistort_radius_exact(r_d: np.ndarray, k1: float, k2: float) -> tuple[np.nd
     which the map is increasing), ``LENS_NEWTON_STEPS`` steps. Returns ``(r_u, valid)``; ``valid``
     is False where ``r_d`` lies beyond the largest distorted radius the lens reaches (no undistorted
     point maps there, e.g. outside the image circle of a strong barrel lens).
+
+    ``k1``, ``k2`` may be arrays that broadcast against ``r_d`` (many lenses at once, e.g. ``N × 1``
+    lenses against ``M`` radii -> ``N × M``).
     """
     r_d = np.asarray(r_d, dtype=np.float64)
+    if np.ndim(k1) or np.ndim(k2):
+        k1, k2 = np.broadcast_arrays(np.asarray(k1, np.float64), np.asarray(k2, np.float64))
+        r_fold = np.vectorize(fold_radius, otypes=[np.float64])(k1, k2)
+    else:
+        r_fold = fold_radius(k1, k2)
     b1, b2, b3, b4 = drap_coefficients(k1, k2)
-    r_fold = fold_radius(k1, k2)
     rd2 = r_d * r_d
     r = np.clip(r_d * (1.0 + rd2 * (b1 + rd2 * (b2 + rd2 * (b3 + rd2 * b4)))), 0.0, r_fold)
     for _ in range(LENS_NEWTON_STEPS):

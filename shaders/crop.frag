@@ -7,8 +7,10 @@
 // f = 1 / (2 tan(hfov / 2)) is the focal length in lens units (image width = 1).
 //
 // Geometry of one output pixel (uv in <0;1> over the tile, lens aspect from the frame geometry):
-//   p_d = lens_from_uv(uv, u_aspect_hw); p_u = inverse(p_d) (exact, or Drap-Lefevre when
-//   CROP_INVERSE_DRAP is 1); camera ray (p_u.x, p_u.y, f); world ray w = R * camera ray;
+//   p_d = lens_from_uv(uv, u_aspect_hw); p_u = inverse(p_d): exact (bounded Newton, common.glsl),
+//   the same exact inverse as the lens's Chebyshev series in r_d^2 when CROP_INVERSE_SERIES is 1
+//   (fitted and checked per crop on the CPU: glradial/inverse_series.py), or Drap-Lefevre when
+//   CROP_INVERSE_DRAP is 1; camera ray (p_u.x, p_u.y, f); world ray w = R * camera ray;
 //   longitude = atan(w.x, w.z) (0 = centre column, + right), latitude = atan(-w.y, |w.xz|) (+ up);
 //   panorama texture coordinates u = 0.5 + lon / (2 pi), v = 0.5 - lat / pi (v = 0 is the top row).
 // Where the exact inverse has no solution the sample is 0.
@@ -31,25 +33,52 @@
 #ifndef CROP_INVERSE_DRAP
 #define CROP_INVERSE_DRAP 0
 #endif
+#ifndef CROP_INVERSE_SERIES
+#define CROP_INVERSE_SERIES 0
+#endif
 
 #define CROP_PI 3.14159265358979
 
 uniform sampler2D u_panorama;
 uniform ivec2 u_tile_size;    // (w, h) of one output tile in pixels
 uniform float u_aspect_hw;    // H / W of the frame geometry the lens refers to (9/16 for 1280x720)
+uniform float u_series_scale; // 2 / r_c^2, r_c = corner radius of that frame (lens units)
 
 flat in vec4 v_r0;
 flat in vec4 v_r1;
 flat in vec4 v_r2;
+flat in vec4 v_s0;  // inverse series c0..c3
+flat in vec4 v_s1;  // c4..c7
+flat in vec4 v_s2;  // c8..c10, tile index
 flat in float v_top;
 
 out vec4 frag_color;
+
+// s(x) = sum_i c_i T_i(x) by Clenshaw's recurrence, x = 2 r_d^2 / r_c^2 - 1; r_u = r_d s.
+float inverse_series(float x) {
+    float b1 = 0.0, b2 = 0.0, b0;
+    float x2 = 2.0 * x;
+    b0 = v_s2.z + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s2.y + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s2.x + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s1.w + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s1.z + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s1.y + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s1.x + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s0.w + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s0.z + x2 * b1 - b2; b2 = b1; b1 = b0;
+    b0 = v_s0.y + x2 * b1 - b2; b2 = b1; b1 = b0;
+    return v_s0.x + x * b1 - b2;
+}
 
 // World ray through tile position uv; .w = 1 where the inverse exists, 0 where it does not.
 vec4 world_ray(vec2 uv) {
     vec2 p_d = lens_from_uv(uv, u_aspect_hw);
     vec2 k = vec2(v_r1.w, v_r2.w);
-#if CROP_INVERSE_DRAP
+#if CROP_INVERSE_SERIES
+    vec3 c = vec3(p_d * inverse_series(dot(p_d, p_d) * u_series_scale - 1.0), v_r0.w);
+    float valid = 1.0;
+#elif CROP_INVERSE_DRAP
     vec3 c = vec3(undistort_point_drap(p_d, k), v_r0.w);
     float valid = 1.0;
 #else
