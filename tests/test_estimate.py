@@ -95,3 +95,21 @@ def test_shipped_model_beats_the_mean_baseline_on_held_out_stadiums():
     # (docs/MODEL.md); the bounds leave room for a retrained model while still failing a broken one.
     assert model_dl < 0.5 * baseline_dl, (model_dl, baseline_dl)
     assert np.median(np.abs(pred[:, 0] - labels[:, 0])) < 0.15
+
+
+@needs_shipped
+def test_mirror_average_is_the_mean_of_frame_and_mirror(field_panorama):
+    """The default estimate averages the single-pass outputs of the frame and its left-right mirror,
+    so it is the same for a frame and its mirror image (a radial lens is mirror-symmetric)."""
+    frame = np.ascontiguousarray(field_panorama[200:200 + 360, 300:300 + 640])
+    mirror = np.ascontiguousarray(frame[:, ::-1])
+    single = Estimator(threads=1, mirror_average=False)
+    a, b = single(frame), single(mirror)
+    assert (a.k1, a.k2) != (b.k1, b.k2)  # the network alone is not mirror-invariant
+    averaged = Estimator(threads=1)
+    both = averaged.estimate_batch([frame, mirror])
+    for lens in both:
+        assert lens.k1 == pytest.approx((a.k1 + b.k1) / 2, abs=1e-6)
+        assert lens.k2 == pytest.approx((a.k2 + b.k2) / 2, abs=1e-6)
+    with pytest.raises(TypeError, match="mirror_average"):
+        Estimator(mirror_average="yes")
