@@ -261,8 +261,10 @@ ATLAS_BYTES = 64 * 2**20
 #: blurs even magnified reads (measured: mean error 0.73 vs 0.25 levels against an exact bilinear
 #: ray cast) and is 2-5× slower; supersampling does the anti-aliasing instead.
 ANISOTROPY = 1.0
-#: Floats per crop in the instance buffer: rotation | f, k1, k2 (3 vec4), series coefficients | tile (3 vec4).
-_INSTANCE_FLOATS = 24
+#: Per-crop vertex attributes of crop.vert, in buffer order (vec4 each): rotation rows | f, k1, k2;
+#: inverse series coefficients c0..c10 | tile index.
+_INSTANCE_ATTRIBUTES = ("in_r0", "in_r1", "in_r2", "in_s0", "in_s1", "in_s2")
+_INSTANCE_FLOATS = 4 * len(_INSTANCE_ATTRIBUTES)
 
 
 def _panorama_array(panorama: object) -> np.ndarray:
@@ -417,7 +419,7 @@ class CropRenderer:
         # One program per inverse path; each draws its own crops of a pass (tile index per instance):
         # "series" for lenses whose inverse series passed its check, "newton"/"drap" for the others.
         paths = ["drap"] if self.inverse == "drap" else (["series", "newton"] if self.series_inverse else ["newton"])
-        self._draws: dict[str, tuple[object, object, np.ndarray]] = {}
+        self._draws: dict[str, tuple[object, object, object]] = {}  # path -> program, vao, instance buffer
         for path in paths:
             defines = {
                 "CROP_SUPERSAMPLE_X": self.supersample[0],
@@ -432,8 +434,8 @@ class CropRenderer:
             self._objects.append(instances)
             # Attributes a program does not read (the series coefficients outside the series
             # program) are skipped as padding: GL has no location for them.
-            names = [n for n in ("in_r0", "in_r1", "in_r2", "in_s0", "in_s1", "in_s2") if n in prog]
-            layout = " ".join("4f" if n in prog else "16x" for n in ("in_r0", "in_r1", "in_r2", "in_s0", "in_s1", "in_s2"))
+            names = [n for n in _INSTANCE_ATTRIBUTES if n in prog]
+            layout = " ".join("4f" if n in prog else "16x" for n in _INSTANCE_ATTRIBUTES)
             vao = ctx.vertex_array(prog, [(instances, layout + "/i", *names)])
             self._objects.append(vao)
             prog["u_panorama"].value = 0
@@ -442,7 +444,7 @@ class CropRenderer:
             if path == "series":
                 prog["u_series_scale"].value = 2.0 / (self._corner * self._corner)
             self._draws[path] = (prog, vao, instances)
-        self._params = np.zeros((self.tiles_per_pass, 6, 4), np.float32)
+        self._params = np.zeros((self.tiles_per_pass, len(_INSTANCE_ATTRIBUTES), 4), np.float32)
         self._target = ctx.texture((w, h * self.tiles_per_pass), 4, dtype=tex_dtype)
         self._objects.append(self._target)
         self._fbo = ctx.framebuffer(color_attachments=[self._target])
