@@ -14,8 +14,9 @@ rasteriser. Instead, per lens and on the CPU (float64, all lenses of a batch at 
   or with unreachable corners) keep the per-pixel Newton inverse.
 
 The shader evaluates ``s`` with Clenshaw's recurrence; :func:`series_radius` is its NumPy twin.
-Measured on 2 000 lenses of the paper's distribution at 16:9: median fit error 2e-13 lens units,
-99th percentile 8e-6 (those near fold-over are the ones rejected).
+Measured on 2 000 lenses of the paper's distribution at 16:9 against the Newton inverse on 2 001
+radii: median error 6e-14 lens units; 94.7 % accepted, the largest error among them 9.9e-7; the
+rejected ones are barrels near fold-over (k1 < -0.6).
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ FIT_NODES = 32
 CHECK_POINTS = 129
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=1)
 def _fit_operator() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x of the fit nodes, pseudo-inverse of their Chebyshev-Vandermonde matrix, that matrix of the
     check grid; its column 1 is the check grid's x)."""
