@@ -4,7 +4,7 @@ Convention:
     Input frames: NumPy arrays ``H x W x 3`` RGB (``H x W`` grayscale and ``H x W x 4`` RGBA are
     accepted: gray is repeated, alpha dropped), dtype uint8 (0..255) or float32/float64 in [0, 1].
     Any size: the whole frame is resized with area interpolation (``cv2.INTER_AREA``) to the network
-    input (``Estimator.input_size``, ``(W, H)``, e.g. 192 x 108) and is treated as the 16:9 frame
+    input (``Estimator.input_size``, ``(W, H)``, e.g. 256 x 144) and is treated as the 16:9 frame
     geometry the lens refers to, as in training (crops rendered as 1280 x 720 frames). A frame of
     another aspect ratio is squashed to 16:9 and the result describes that squashed geometry
     (a warning says so). Crop letterboxes before estimating.
@@ -17,7 +17,7 @@ The ONNX graph takes uint8 ``N x H x W x 3`` RGB and does the rest of the prepro
 Mirror averaging (default): a radial lens about the frame centre is unchanged by a left-right
 mirror, so the estimate is the mean of the network's outputs for the frame and for its mirror
 image (one batch of 2N; training saw mirrored crops with the same labels). Measured on the
-held-out test crops: median error -10 %, 90th percentile -9 % (docs/MODEL.md).
+held-out test crops: median error -14 %, 90th percentile -6 % (docs/MODEL.md).
 """
 
 from __future__ import annotations
