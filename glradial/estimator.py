@@ -4,7 +4,7 @@ Convention:
     Input frames: NumPy arrays ``H x W x 3`` RGB (``H x W`` grayscale and ``H x W x 4`` RGBA are
     accepted: gray is repeated, alpha dropped), dtype uint8 (0..255) or float32/float64 in [0, 1].
     Any size: the whole frame is resized with area interpolation (``cv2.INTER_AREA``) to the network
-    input (``Estimator.input_size``, ``(W, H)``, e.g. 256 x 144) and is treated as the 16:9 frame
+    input (``Estimator.input_size``, ``(W, H)``, e.g. 384 x 216) and is treated as the 16:9 frame
     geometry the lens refers to, as in training (crops rendered as 1280 x 720 frames). A frame of
     another aspect ratio is squashed to 16:9 and the result describes that squashed geometry
     (a warning says so). Crop letterboxes before estimating.

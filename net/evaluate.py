@@ -236,7 +236,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--model", required=True, help=".onnx (through glradial.estimate) or .pt checkpoint")
     parser.add_argument("--out", default="docs/eval", help="folder for metrics.json, results.md and plots")
     parser.add_argument("--n", type=int, default=800, help="test crops from held-out stadiums")
-    parser.add_argument("--test-panoramas", type=int, default=8, help="held-out (test split) stadiums")
+    parser.add_argument("--test-panoramas", type=int, default=8, help="held-out stadiums of --split")
+    parser.add_argument("--split", choices=("test", "val"), default="test",
+                        help="stadium split to evaluate on: test (the reported figures) or val (checkpoint selection)")
     parser.add_argument("--panorama-size", type=int, nargs=2, default=(4096, 2048))
     parser.add_argument("--ood-n", type=int, default=200, help="crops of the real panorama (out of domain)")
     parser.add_argument("--seed", type=int, default=2024)
@@ -250,7 +252,7 @@ def main(argv: list[str] | None = None) -> int:
     predictor = (TorchPredictor if args.model.endswith(".pt") else OnnxPredictor)(args.model, args.threads)
     width, height = predictor.input_size
     frame_size = (2 * width, 2 * height)  # rendered at twice the input, area-resized by the predictor
-    seeds = split_seeds("test", args.test_panoramas)
+    seeds = split_seeds(args.split, args.test_panoramas)
     panoramas = [stadium_panorama_cached(s, tuple(args.panorama_size), args.cache_dir) for s in seeds]
     frames, params = render_frames(panoramas, args.n, args.seed, frame_size)
     labels = np.array([(p.k1, p.k2) for p in params])
@@ -260,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
     t_pred = time.monotonic() - t1
     result = {
         "model": str(args.model),
-        "test_set": {"stadium_seeds": seeds, "panorama_size": list(args.panorama_size), "crops": len(labels),
+        "test_set": {"split": args.split, "stadium_seeds": seeds, "panorama_size": list(args.panorama_size), "crops": len(labels),
                      "crop_seed": args.seed, "frame_size_rendered": list(frame_size), "distribution": "paper (crops.PAPER_RANGES)"},
         "overall": metrics(pred, labels),
         "by_k1": breakdown(pred, labels, labels[:, 0], K1_BINS),
@@ -284,9 +286,10 @@ def main(argv: list[str] | None = None) -> int:
     o = result["overall"]
     lines = [
         f"# Evaluation of `{Path(args.model).name}`\n",
-        f"Held-out procedural stadiums (test split seeds {seeds}, {args.panorama_size[0]}×{args.panorama_size[1]}), "
+        f"Held-out procedural stadiums ({args.split} split seeds {seeds}, {args.panorama_size[0]}×{args.panorama_size[1]}), "
         f"{len(labels)} crops from the paper's distribution, rendered at {frame_size[0]}×{frame_size[1]} and area-resized "
-        f"to the {width}×{height} input. Command: `python -m net.evaluate --model {args.model} --out {args.out} --n {args.n}`.\n",
+        f"to the {width}×{height} input. Command: `python -m net.evaluate --model {args.model} --out {args.out} --n {args.n}"
+        f"{'' if args.split == 'test' else ' --split ' + args.split}`.\n",
         "| metric | method A (net k1, k2) | method B (net k1, manifold k2) | mean predictor |",
         "|---|---|---|---|",
         f"| median max displacement (px @1920) | {o['median_max_px']:.2f} | {o['b_median_max_px']:.2f} | {o['baseline_median_max_px']:.2f} |",

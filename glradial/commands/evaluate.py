@@ -24,6 +24,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--out", default="eval", help="output folder (default: ./eval)")
     parser.add_argument("--n", type=positive_int, default=800, help="test crops (default 800)")
     parser.add_argument("--test-panoramas", type=positive_int, default=8, help="held-out stadiums (default 8)")
+    parser.add_argument("--split", choices=("test", "val"), default="test",
+                        help="stadium split: test (reported figures, default) or val (choosing between checkpoints)")
     parser.add_argument("--threads", type=positive_int, help="onnxruntime threads (default: all cores)")
     return parser
 
@@ -36,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
     except ImportError:  # running from a source checkout: net/ is not under glradial/
         from net.evaluate import main  # type: ignore[no-redef]
     argv = ["--model", str(args.model or default_model_path()), "--out", args.out, "--n", str(args.n),
-            "--test-panoramas", str(args.test_panoramas)]
+            "--test-panoramas", str(args.test_panoramas), "--split", args.split]
     if args.threads:
         argv += ["--threads", str(args.threads)]
     return main(argv)
