@@ -84,7 +84,7 @@ class _Config:
     inverse: str
     panoramas_per_batch: int
     cache: int
-    supersample: int | None
+    supersample: int | tuple[int, int] | str
     newton_steps: int = field(init=False)
 
     def __post_init__(self) -> None:
@@ -287,7 +287,7 @@ def crop_batches(
     panoramas_per_batch: int = 4,
     cache: int = 4,
     prefetch: int = 2,
-    supersample: int | None = None,
+    supersample: int | tuple[int, int] | str = 1,
     lp_num_threads: int | None = None,
 ) -> CropStream:
     """Endless seeded stream of :class:`CropBatch` from ``panoramas`` (arrays or image paths).

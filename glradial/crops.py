@@ -281,15 +281,17 @@ def _panorama_array(panorama: object) -> np.ndarray:
     return array
 
 
-def _supersample(value: object, size: tuple[int, int], out: tuple[int, int]) -> tuple[int, int]:
-    """Sub-samples per output pixel along (x, y): ``value`` as int or pair, or the default.
+def supersample_grid(value: object, size: tuple[int, int], out: tuple[int, int]) -> tuple[int, int]:
+    """Sub-samples per output pixel along (x, y): ``value`` as one int (both axes), a pair, or ``"auto"``.
 
-    Default: an output pixel covers ``fx × fy = (W/w) × (H/h)`` frame pixels; with ``m = min(fx, fy)``
+    ``"auto"``: an output pixel covers ``fx × fy = (W/w) × (H/h)`` frame pixels; with ``m = min(fx, fy)``
     it gets ``round(fx / m) × round(fy / m)`` samples when ``m > 1.5`` (each sample's footprint is then
     near-square, which a trilinear read filters well), and ``1 × 1`` otherwise. 1280×720 -> 224×224:
     2 × 1; 1280×720 -> 640×360: 1 × 1 (plain trilinear).
     """
-    if value is None:
+    if isinstance(value, str):
+        if value != "auto":
+            raise ValueError(f"supersample must be an integer, (x, y) integers or 'auto', got {value!r}")
         fx, fy = size[0] / out[0], size[1] / out[1]
         m = min(fx, fy)
         if m <= 1.5:
@@ -299,7 +301,7 @@ def _supersample(value: object, size: tuple[int, int], out: tuple[int, int]) -> 
     try:
         sx, sy = pair  # type: ignore[misc]
     except (TypeError, ValueError):
-        raise TypeError(f"supersample must be an integer or (x, y) integers, got {value!r}") from None
+        raise TypeError(f"supersample must be an integer, (x, y) integers or 'auto', got {value!r}") from None
     for s in (sx, sy):
         if isinstance(s, bool) or not isinstance(s, (numbers.Integral, np.integer)) or not 1 <= s <= 8:
             raise ValueError(f"supersample must be integers in 1..8, got {value!r}")
@@ -314,14 +316,18 @@ class CropRenderer:
     ``(i, j)`` covers the frame rectangle ``[i W/w, (i+1) W/w] × [j H/h, (j+1) H/h]``.
 
     Anti-aliasing: the footprint of each output pixel on the panorama comes from the derivatives of
-    the world ray (no seam at ±180°). ``supersample`` ``(SX, SY)`` (or one int for both) averages
-    ``SX × SY`` sub-pixel samples placed with the local linear map, each a trilinear mipmap read at
-    its sub-pixel footprint: a box filter over the output pixel, i.e. what area-resizing
-    (``cv2.INTER_AREA``) an anti-aliased ``size`` frame gives, without rendering it. The default
-    makes each sample's footprint near-square (see :func:`_supersample`): 1 × 1 when ``out_size`` is
-    ``size``, 2 × 1 for 1280×720 -> 224×224. Measured on that case against the INTER_AREA-resized
-    1280×720 render (60 paper crops of a 4096×2048 panorama), RMS difference in levels of 255:
-    photo 1.66 (1 × 1), 0.63 (2 × 1), 0.52 (2 × 2); binary noise 26.1, 12.5, 8.4.
+    the world ray (no seam at ±180°) and selects the mipmap level. The default (``supersample=1``)
+    is one trilinear read per pixel at that footprint: anti-aliased like any mipmapped GPU texture
+    read, and, when ``out_size`` squashes the frame (1280×720 -> 224×224 is 5.7 × 3.2 frame pixels
+    per output pixel), blurred along the short axis to the long axis's scale. ``supersample``
+    ``(SX, SY)`` (or one int for both) averages ``SX × SY`` sub-pixel samples placed with the local
+    linear map, each a trilinear read at its sub-pixel footprint: a box filter over the output pixel,
+    i.e. what area-resizing (``cv2.INTER_AREA``) an anti-aliased ``size`` frame gives, without
+    rendering it; ``"auto"`` picks the grid that makes each sample's footprint near-square (see
+    :func:`supersample_grid`; 2 × 1 for 1280×720 -> 224×224). Measured on that case against the
+    INTER_AREA-resized 1280×720 render (60 paper crops of a 4096×2048 panorama), RMS difference in
+    levels of 255: photo 1.66 (1 × 1), 0.63 (2 × 1), 0.52 (2 × 2); binary noise 26.1, 12.5, 8.4. On
+    Mesa llvmpipe 2 × 1 costs ~1.3× the time of 1 × 1 (docs/CROPS.md).
     ``anisotropy`` (default 1: trilinear) is passed to the driver. ``inverse`` picks the exact
     inverse (``newton_steps`` Newton steps from the Drap-Lefevre seed; 3 reach 1e-9 lens units for
     the paper's distribution; the default is common.glsl's ``LENS_NEWTON_STEPS`` = 8, and pixels where
@@ -345,7 +351,7 @@ class CropRenderer:
         size: tuple[int, int] = PAPER_SIZE,
         out_size: tuple[int, int] | None = None,
         inverse: InverseMethod = "exact",
-        supersample: int | tuple[int, int] | None = None,
+        supersample: int | tuple[int, int] | Literal["auto"] = 1,
         anisotropy: float | None = None,
         newton_steps: int = lensfuncs.LENS_NEWTON_STEPS,
         series_inverse: bool = True,
@@ -358,7 +364,7 @@ class CropRenderer:
         if inverse not in ("exact", "drap"):
             raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
         self.inverse: InverseMethod = inverse
-        self.supersample = _supersample(supersample, self.size, self.out_size)
+        self.supersample = supersample_grid(supersample, self.size, self.out_size)
         if isinstance(newton_steps, bool) or not isinstance(newton_steps, (numbers.Integral, np.integer)) or not 1 <= newton_steps <= 16:
             raise ValueError(f"newton_steps must be an integer in 1..16, got {newton_steps!r}")
         self.newton_steps = int(newton_steps)
@@ -551,7 +557,8 @@ def render_crops(
     size: tuple[int, int] = PAPER_SIZE,
     out_size: tuple[int, int] | None = None,
     inverse: InverseMethod = "exact",
+    supersample: int | tuple[int, int] | Literal["auto"] = 1,
 ) -> np.ndarray:
     """Render ``params`` from ``panorama`` once -> ``(N, h, w, C)`` of its dtype (see :class:`CropRenderer`)."""
-    with CropRenderer(panorama, size=size, out_size=out_size, inverse=inverse) as renderer:
+    with CropRenderer(panorama, size=size, out_size=out_size, inverse=inverse, supersample=supersample) as renderer:
         return renderer.render(params)

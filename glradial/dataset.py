@@ -2,7 +2,7 @@
 
 Convention (layout of ``DIR``):
 
-* ``DIR/manifest.json``: the settings (seed, count, sizes, inverse, splits, format) and the
+* ``DIR/manifest.json``: the settings (seed, count, sizes, inverse, supersample grid, splits, format) and the
   panoramas (id, path, split). Written first; a resumed run must have the same settings and inputs.
 * ``DIR/<split>/<index:07d>.<ext>``: crop ``index`` (0 .. count-1), uint8 RGB, ``out_size``.
 * ``DIR/labels.csv``: one row per crop: ``index, file, split, panorama_id, panorama, seed, pan,
@@ -32,7 +32,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .atomic import atomic_path, atomic_write_text
-from .crops import PAPER_SIZE, CropParams, CropRenderer, InverseMethod, sample_crop_params
+from .crops import PAPER_SIZE, CropParams, CropRenderer, InverseMethod, sample_crop_params, supersample_grid
 from .lens import frame_size
 
 SPLITS = ("train", "val", "test")
@@ -106,6 +106,7 @@ def write_crops_dataset(
     size: tuple[int, int] = PAPER_SIZE,
     out_size: tuple[int, int] | None = None,
     inverse: InverseMethod = "exact",
+    supersample: int | str = 1,
     splits: Sequence[float] = (0.8, 0.1, 0.1),
     image_format: str = "png",
     progress: Callable[[int], None] | None = None,
@@ -114,7 +115,8 @@ def write_crops_dataset(
 
     Resumes: files already present are complete (atomic writes) and skipped; a ``manifest.json``
     with other settings or inputs is an error (``ValueError``). ``progress(n)`` is called with the
-    number of crops finished (written or skipped) since the last call.
+    number of crops finished (written or skipped) since the last call. ``size``, ``out_size``,
+    ``inverse`` and ``supersample`` are as in :class:`~glradial.crops.CropRenderer`.
     """
     from .crop_stream import load_panorama
 
@@ -128,6 +130,7 @@ def write_crops_dataset(
         raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
     size = frame_size(size)
     out_size = frame_size(out_size) if out_size is not None else size
+    grid = supersample_grid(supersample, size, out_size)  # validated before anything is written
     paths = [Path(p) for p in panoramas]
     if not paths:
         raise ValueError("at least one panorama is needed")
@@ -146,6 +149,7 @@ def write_crops_dataset(
         "size": list(size),
         "out_size": list(out_size),
         "inverse": inverse,
+        "supersample": list(grid),
         "splits": dict(zip(SPLITS, (float(f) for f in splits))),
         "image_format": image_format,
         "panoramas": [
@@ -180,7 +184,7 @@ def write_crops_dataset(
             progress(len(mine) - len(todo))
         if not todo:
             continue
-        with CropRenderer(load_panorama(path), size=size, out_size=out_size, inverse=inverse) as renderer:
+        with CropRenderer(load_panorama(path), size=size, out_size=out_size, inverse=inverse, supersample=supersample) as renderer:
             for start in range(0, len(todo), CHUNK):
                 chunk = todo[start : start + CHUNK]
                 images = renderer.render([params[i] for i in chunk])

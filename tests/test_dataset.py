@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import cv2
@@ -135,3 +136,28 @@ def test_cli_crops(ctx, tmp_path, pano_files, capsys) -> None:
     cv2.imwrite(str(bad), np.zeros((10, 30, 3), np.uint8))
     assert main(["crops", str(bad), "--count", "1", "--out", str(tmp_path / "x"), "--seed", "1", "--size", "64x36"]) == 1
     assert "2:1" in capsys.readouterr().err
+
+
+def test_cli_crops_supersample(ctx, tmp_path, pano_files, capsys) -> None:
+    from glradial.cli import main
+
+    # 128x72 -> 32x32 is 4 x 2.25 frame pixels per output pixel: "auto" takes 2 x 1 samples.
+    out = tmp_path / "aa"
+    argv = ["crops", str(pano_files[0]), "--count", "2", "--out", str(out), "--seed", "3", "--size", "128x72",
+            "--out-size", "32x32", "--supersample", "auto"]
+    assert main(argv) == 0
+    rows, params = read_labels(out / "labels.csv")
+    pano = cv2.cvtColor(cv2.imread(str(pano_files[0])), cv2.COLOR_BGR2RGB)
+    want = render_crops(pano, params, size=(128, 72), out_size=(32, 32), supersample=(2, 1))
+    plain = render_crops(pano, params, size=(128, 72), out_size=(32, 32))
+    got = np.stack([cv2.cvtColor(cv2.imread(str(out / r["file"])), cv2.COLOR_BGR2RGB) for r in rows])
+    assert np.array_equal(got, want) and not np.array_equal(got, plain)
+    assert json.loads((out / "manifest.json").read_text())["supersample"] == [2, 1]
+    # A bad value is refused by name, before anything is written.
+    for bad in ("0", "9", "2x1"):
+        assert main([*argv[:5], str(tmp_path / "never"), *argv[6:-1], bad]) == 2
+        assert "supersample" in capsys.readouterr().err
+    assert not (tmp_path / "never").exists()
+    with pytest.raises(ValueError, match="supersample"):
+        write_crops_dataset(pano_files[:1], tmp_path / "never", count=1, seed=0, supersample="area")
+    assert not (tmp_path / "never").exists()

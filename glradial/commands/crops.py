@@ -19,6 +19,15 @@ are assigned to train/val/test as a whole: no panorama is in two splits. Every f
 atomically; rerunning the same command resumes an interrupted run, skipping finished files."""
 
 
+def _supersample(text: str) -> int | str:
+    if text == "auto":
+        return text
+    value = positive_int(text)
+    if value > 8:
+        raise argparse.ArgumentTypeError(f"expected an integer in 1..8 or auto, got {text!r}")
+    return value
+
+
 def _fractions(text: str) -> tuple[float, float, float]:
     try:
         values = tuple(float(v) for v in text.split(","))
@@ -44,6 +53,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="size of the written images (area-filtered; default: --size)")
     parser.add_argument("--inverse", choices=("exact", "drap"), default="exact",
                         help="lens inverse used to distort: exact (Newton) or the paper's Drap-Lefevre polynomial (default: exact)")
+    parser.add_argument("--supersample", type=_supersample, default=1, metavar="N|auto",
+                        help="anti-aliasing with --out-size: N x N area-averaged samples per pixel, or auto (near-square "
+                             "footprints, 2x1 for 1280x720 -> 224x224); default 1: one trilinear mipmap read")
     parser.add_argument("--splits", type=_fractions, default=(0.8, 0.1, 0.1), metavar="TRAIN,VAL,TEST",
                         help="fractions of the panoramas per split (default: 0.8,0.1,0.1)")
     parser.add_argument("--format", choices=("png", "jpg"), default="png", help="image file format (default: png)")
@@ -58,7 +70,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         summary = write_crops_dataset(
             args.panoramas, args.out, count=args.count, seed=args.seed, size=args.size, out_size=args.out_size,
-            inverse=args.inverse, splits=args.splits, image_format=args.format, progress=bar.update,
+            inverse=args.inverse, supersample=args.supersample, splits=args.splits, image_format=args.format, progress=bar.update,
         )
     finally:
         bar.close()
