@@ -247,3 +247,50 @@ def normalise_batch(images: torch.Tensor, config: ModelConfig) -> torch.Tensor:
     mean = torch.tensor(config.mean, dtype=x.dtype, device=x.device).view(1, -1, 1, 1)
     std = torch.tensor(config.std, dtype=x.dtype, device=x.device).view(1, -1, 1, 1)
     return (x - mean) / std
+
+
+def load_grown(model: DistortionNet, weights: dict[str, torch.Tensor]) -> dict[str, list[str]]:
+    """Load a smaller network's ``weights`` into ``model``, a wider and/or deeper one, so that the
+    grown model computes exactly the same function (Net2Net-style growth, then fine-tune).
+
+    Widths may grow (block expansions, stage channels, ``feature_channels``, ``head_hidden``) and
+    stages may gain blocks after their last one (only where that keeps every later block's index,
+    i.e. in the last stage). Rules, each of which keeps the output unchanged:
+
+    * a tensor of the same shape is copied;
+    * a grown tensor gets the old values in its leading slice; the weights a layer gives to its new
+      *inputs* (dim 1 of a conv or linear weight) are zero, so the new units it receives are ignored;
+      new *outputs* keep their fresh initialisation (they can learn once a consumer's zero weights
+      move); batch-norm entries of new channels keep their defaults;
+    * a new residual block gets a zero scale in its last batch norm, so it starts as the identity.
+
+    Returns the names that were ``copied``, ``grown`` and ``new``. Raises ``ValueError`` for a
+    tensor that shrank or changed rank, and for a new block that has no identity shortcut.
+    """
+    target = model.state_dict()
+    report: dict[str, list[str]] = {"copied": [], "grown": [], "new": []}
+    for name, value in target.items():
+        if name not in weights:
+            report["new"].append(name)
+            continue
+        old = weights[name]
+        if old.shape == value.shape:
+            value.copy_(old)
+            report["copied"].append(name)
+            continue
+        if old.ndim != value.ndim or any(o > n for o, n in zip(old.shape, value.shape)):
+            raise ValueError(f"{name}: cannot grow {tuple(old.shape)} into {tuple(value.shape)}")
+        if value.ndim >= 2:
+            value[:, old.shape[1]:].zero_()
+        value[tuple(slice(0, n) for n in old.shape)] = old
+        report["grown"].append(name)
+    new_names = set(report["new"])
+    for prefix, module in model.named_modules():
+        if isinstance(module, (InvertedResidual, FusedInvertedResidual)):
+            names = [f"{prefix}.{n}" for n, _ in module.named_parameters()]
+            if names and all(n in new_names for n in names):
+                if not module.residual:
+                    raise ValueError(f"{prefix}: a new block must have an identity shortcut (stride 1, same channels)")
+                target[f"{prefix}.block.{len(module.block) - 1}.1.weight"].zero_()
+    model.load_state_dict(target)
+    return report

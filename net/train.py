@@ -41,7 +41,7 @@ import torch.distributed as dist
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, PanoramaSource, render_test_set
 from .loss import training_loss
-from .model import DistortionNet, ModelConfig, count_parameters, normalise_batch
+from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
 
 @dataclass
 class TrainConfig:
@@ -155,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--time-budget-s", type=float, help="override the config's time budget")
     parser.add_argument("--threads", type=int, help="torch threads per process")
     parser.add_argument("--init", help="start from this checkpoint's (EMA) weights; new optimizer and schedule "
-                        "(fine-tuning; keys missing from it keep their initialisation)")
+                        "(fine-tuning). The config's model may be wider or deeper: net.model.load_grown grows "
+                        "the weights so that training starts from the same function")
     parser.add_argument("--zero-k2-head", action="store_true",
                         help="with --init: zero the k2 head's last layer (a k2_residual model then starts on the manifold)")
     args = parser.parse_args(argv)
@@ -203,13 +204,15 @@ def main(argv: list[str] | None = None) -> int:
     if args.init:
         state = torch.load(args.init, map_location=device, weights_only=False)
         weights = state.get("ema", state["model"])
-        missing, unexpected = model.load_state_dict(weights, strict=False)
+        grown = load_grown(model, weights)
+        unexpected = sorted(set(weights) - set(model.state_dict()))
         if args.zero_k2_head:
             with torch.no_grad():
                 model.head_k2.net[-1].weight.zero_()
                 model.head_k2.net[-1].bias.zero_()
         ema.model.load_state_dict(model.state_dict())
-        log(f"initialised from {args.init} (missing {missing}, unexpected {unexpected})")
+        log(f"initialised from {args.init} ({len(grown['copied'])} tensors copied, {len(grown['grown'])} grown, "
+            f"{len(grown['new'])} new, unexpected {unexpected})")
     if args.resume and (out / "last.pt").exists():
         state = torch.load(out / "last.pt", map_location=device, weights_only=False)
         model.load_state_dict(state["model"])

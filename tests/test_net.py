@@ -11,7 +11,7 @@ torch = pytest.importorskip("torch")
 
 from net.augment import AugmentConfig, augment_batch, jpeg_roundtrip, motion_kernel  # noqa: E402
 from net.loss import distortion_loss, loss_radii, max_displacement, training_loss  # noqa: E402
-from net.model import DistortionNet, ModelConfig, count_parameters  # noqa: E402
+from net.model import DistortionNet, ModelConfig, count_parameters, load_grown  # noqa: E402
 
 SHIPPED_CONFIG = "net/configs/shipped.json"
 
@@ -68,6 +68,55 @@ def test_model_shapes_and_parameter_budget():
     assert count_parameters(model) <= 6_600_000
     shipped = ModelConfig.from_dict(json.load(open(SHIPPED_CONFIG))["model"])
     assert count_parameters(DistortionNet(shipped)) <= 6_600_000
+
+
+def _trained_like(model: DistortionNet, seed: int) -> DistortionNet:
+    """Random non-trivial batch-norm statistics and scales, as a trained model has."""
+    gen = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        for m in model.modules():
+            if isinstance(m, (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d)):
+                m.weight.copy_(1 + 0.3 * torch.randn(m.weight.shape, generator=gen))
+                m.bias.copy_(0.2 * torch.randn(m.bias.shape, generator=gen))
+                m.running_mean.copy_(0.2 * torch.randn(m.running_mean.shape, generator=gen))
+                m.running_var.copy_(0.5 + torch.rand(m.running_var.shape, generator=gen))
+        for head in (model.head_k1, model.head_k2):
+            torch.nn.init.normal_(head.net[-1].weight, std=0.5, generator=gen)
+    return model.eval()
+
+
+def test_grown_model_computes_the_same_function():
+    # Wider expansions and channels, a wider feature conv and heads, two new blocks at the end of
+    # the last stage: the grown model's output equals the small one's to float32 rounding.
+    small_cfg = ModelConfig(input_size=(96, 54), stages=[(1, 16, 1, 2), (3, 24, 2, 2), (3, 32, 2, 1)],
+                            feature_channels=64, head_hidden=16)
+    big_cfg = ModelConfig(input_size=(96, 54), stages=[(1, 16, 1, 2), (6, 32, 2, 2), (6, 40, 4, 1)],
+                          feature_channels=96, head_hidden=24)
+    small = _trained_like(DistortionNet(small_cfg), 0)
+    big = DistortionNet(big_cfg).eval()
+    report = load_grown(big, small.state_dict())
+    assert report["grown"] and report["copied"]
+    assert {n.split(".")[1] for n in report["new"]} == {"5", "6"}  # the two appended blocks
+    x = torch.randn(4, 3, 54, 96)
+    with torch.no_grad():
+        expected, got = small(x), big(x)
+    assert float(expected.std()) > 0.05  # the heads' outputs vary, so the comparison means something
+    assert torch.allclose(got, expected, atol=1e-5), float((got - expected).abs().max())
+    # The new units are not dead: one training step moves the zero weights that read them.
+    big.train()
+    loss = training_loss(torch.zeros(4, 2), big(x))
+    loss.backward()
+    assert float(big.blocks[5].block[2][1].weight.grad.abs().sum()) > 0
+
+
+def test_grown_model_rejects_shrinking_and_new_strided_blocks():
+    small = DistortionNet(ModelConfig(input_size=(64, 36), stages=[(3, 24, 2, 2)], feature_channels=64))
+    with pytest.raises(ValueError, match="cannot grow"):
+        load_grown(DistortionNet(ModelConfig(input_size=(64, 36), stages=[(3, 16, 2, 2)], feature_channels=64)),
+                   small.state_dict())
+    with pytest.raises(ValueError, match="identity shortcut"):
+        load_grown(DistortionNet(ModelConfig(input_size=(64, 36), stages=[(3, 24, 2, 2), (3, 32, 1, 2)],
+                                             feature_channels=64)), small.state_dict())
 
 
 def test_grayscale_variant_and_config_roundtrip(tmp_path):
