@@ -265,7 +265,8 @@ def load_grown(model: DistortionNet, weights: dict[str, torch.Tensor]) -> dict[s
     * a new residual block gets a zero scale in its last batch norm, so it starts as the identity.
 
     Returns the names that were ``copied``, ``grown`` and ``new``. Raises ``ValueError`` for a
-    tensor that shrank or changed rank, and for a new block that has no identity shortcut.
+    tensor that shrank or changed rank (also what a block's expansion changing from or to 1 looks
+    like: the layers differ) and for a new block that has no identity shortcut.
     """
     target = model.state_dict()
     report: dict[str, list[str]] = {"copied": [], "grown": [], "new": []}
@@ -279,7 +280,8 @@ def load_grown(model: DistortionNet, weights: dict[str, torch.Tensor]) -> dict[s
             report["copied"].append(name)
             continue
         if old.ndim != value.ndim or any(o > n for o, n in zip(old.shape, value.shape)):
-            raise ValueError(f"{name}: cannot grow {tuple(old.shape)} into {tuple(value.shape)}")
+            raise ValueError(f"{name}: cannot grow {tuple(old.shape)} into {tuple(value.shape)} (a tensor may only "
+                             "widen; an expansion of 1 has no expand conv, so it cannot change)")
         if value.ndim >= 2:
             value[:, old.shape[1]:].zero_()
         value[tuple(slice(0, n) for n in old.shape)] = old

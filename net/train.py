@@ -9,9 +9,11 @@ Data path per rank: a :class:`~.data.CropProducer` process renders crops from th
 panoramas ahead of time with its own EGL context and its own seed (``seed * 1000 + rank``); every
 step takes exactly ``fresh_per_step`` new crops from it into a :class:`~.data.CropPool` and samples
 the batch from the pool, then applies :func:`~.augment.augment_batch` (photometric + flips).
-Loss: :func:`~.loss.training_loss` (the paper's). AdamW, linear warm-up then cosine decay; the
+Loss: :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the joint in-frame
+term). AdamW, linear warm-up then cosine decay; the
 schedule's progress is ``step / steps`` or, with ``time_budget_s``, the training wall time spent
 over the budget (so a run ends on time on a shared machine; then the run is not bit-reproducible).
+``stop_at_s`` ends a run early without changing its schedule.
 An exponential moving average (EMA) of the weights is kept and is what validation, the "best"
 checkpoint and export use.
 
@@ -64,6 +66,8 @@ class TrainConfig:
     producer_chunk: int = 64
     producer_threads: int = 1
     paired: bool = False
+    stop_at_s: float | None = None  # stop after this much step time, leaving the schedule as it is
+    joint_loss_weight: float = 0.0  # > 0 adds the joint in-frame term to the paper's loss (net.loss)
     panoramas: dict = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "train", "n": 16}, "size": [2048, 1024]})
     val_panoramas: dict | None = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "val", "n": 4}, "size": [2048, 1024]})
     val_size: int = 256
@@ -272,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
                 dist.all_reduce(clock, op=dist.ReduceOp.MAX)
                 train_time = float(clock)
             progress = train_time / cfg.time_budget_s if cfg.time_budget_s else step / max(1, cfg.steps)
-            if progress >= 1.0:
+            if progress >= 1.0 or (cfg.stop_at_s is not None and train_time >= cfg.stop_at_s):
                 break
             ts = time.monotonic()
             pool.add(*producer.take(cfg.fresh_per_step))
@@ -285,7 +289,7 @@ def main(argv: list[str] | None = None) -> int:
                 group["lr"] = cfg.lr * factor
             train_model.train()
             pred = train_model(x)
-            loss = training_loss(y, pred)
+            loss = training_loss(y, pred, joint_weight=cfg.joint_loss_weight)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()

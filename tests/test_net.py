@@ -45,6 +45,25 @@ def test_training_loss_judges_each_coefficient_with_the_other_true():
     assert float(training_loss(y, y.clone())) == 0.0
 
 
+def test_joint_term_judges_both_coefficients_inside_the_frame():
+    # joint_weight w adds w * mean DL(y, y_hat) on radii over [0, 0.5737] (the 16:9 corner).
+    y = torch.tensor([[-0.5, 0.2], [0.1, 0.0]], dtype=torch.float64)
+    d = torch.tensor([[0.05, -0.03], [-0.1, 0.07]], dtype=torch.float64)
+    frame = loss_radii(64, 0.5737, dtype=torch.float64)
+    a, c, b = (frame**6).sum(), (frame**8).sum(), (frame**10).sum()
+    joint = (a * d[:, 0] ** 2 + 2 * c * d[:, 0] * d[:, 1] + b * d[:, 1] ** 2).mean()
+    paper = float(training_loss(y, y + d))
+    assert float(training_loss(y, y + d, joint_weight=3.0)) == pytest.approx(paper + 3.0 * float(joint), rel=1e-12)
+    # With k2 exact and a k1 error, the paper's loss leaves k2 alone; the joint term moves k2 to
+    # offset the k1 error (gradient sign equal to the k1 error's: descent goes the other way).
+    y_hat = (y + torch.tensor([[0.05, 0.0], [0.05, 0.0]], dtype=torch.float64)).requires_grad_(True)
+    training_loss(y, y_hat).backward()
+    assert torch.all(y_hat.grad[:, 1] == 0)
+    y_hat.grad = None
+    training_loss(y, y_hat, joint_weight=1.0).backward()
+    assert torch.all(y_hat.grad[:, 1] > 0)
+
+
 def test_max_displacement_single_coefficient():
     # P(r, y) - P(r, y^) = r^3 d1 for d2 = 0: largest at the corner radius.
     y = torch.tensor([[-0.4, 0.1]], dtype=torch.float64)
@@ -114,6 +133,9 @@ def test_grown_model_rejects_shrinking_and_new_strided_blocks():
     with pytest.raises(ValueError, match="cannot grow"):
         load_grown(DistortionNet(ModelConfig(input_size=(64, 36), stages=[(3, 16, 2, 2)], feature_channels=64)),
                    small.state_dict())
+    with pytest.raises(ValueError, match="expansion of 1"):
+        load_grown(DistortionNet(ModelConfig(input_size=(64, 36), stages=[(2, 24, 2, 2)], feature_channels=64)),
+                   DistortionNet(ModelConfig(input_size=(64, 36), stages=[(1, 24, 2, 2)], feature_channels=64)).state_dict())
     with pytest.raises(ValueError, match="identity shortcut"):
         load_grown(DistortionNet(ModelConfig(input_size=(64, 36), stages=[(3, 24, 2, 2), (3, 32, 1, 2)],
                                              feature_channels=64)), small.state_dict())

@@ -47,3 +47,26 @@ def test_ddp_two_processes_train_and_checkpoint(tmp_path):
     init = DistortionNet(ModelConfig.from_dict(config["model"])).state_dict()
     moved = [k for k, v in state["model"].items() if v.dtype.is_floating_point and not torch.equal(v, init[k])]
     assert moved, "training did not change the weights"
+
+
+def test_grown_fine_tune_with_joint_loss_stops_early(tmp_path):
+    # One process: --init from a smaller checkpoint (net.model.load_grown), the joint loss term, and
+    # stop_at_s (a run ended early with its schedule unchanged: here after the first step).
+    from net.model import DistortionNet, ModelConfig
+
+    config = json.loads((ROOT / "net/configs/tiny.json").read_text())
+    small = DistortionNet(ModelConfig.from_dict(config["model"]))
+    torch.save({"model": small.state_dict()}, tmp_path / "small.pt")
+    grown = dict(config["model"], stages=[[e * 2 if e > 1 else e, c, n, s, *rest] for e, c, n, s, *rest in config["model"]["stages"]])
+    config.update(model=grown, steps=1000, time_budget_s=1000.0, stop_at_s=1e-6, joint_loss_weight=5.0,
+                  val_size=16, log_every=1)
+    (tmp_path / "grown.json").write_text(json.dumps(config))
+    out = tmp_path / "run"
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))
+    cmd = [sys.executable, "-m", "net.train", "--config", str(tmp_path / "grown.json"), "--out", str(out),
+           "--init", str(tmp_path / "small.pt")]
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
+    assert " grown, " in proc.stdout and "0 grown" not in proc.stdout
+    state = torch.load(out / "last.pt", map_location="cpu", weights_only=False)
+    assert state["step"] == 1
