@@ -33,6 +33,8 @@ train: $(STAMP)
 	$(PY) -m net.train --config net/configs/finetune_192.json --out runs/ft192 --init runs/shipped/best.pt
 	$(PY) -m net.train --config net/configs/finetune_256.json --out runs/ft256 --init runs/ft192/best.pt
 	$(PY) -m net.train --config net/configs/finetune_384.json --out runs/ft384 --init runs/ft256/best.pt
+	$(PY) -m net.train --config net/configs/grow_384.json --out runs/grow384 --init runs/ft384/best.pt
+	$(PY) -m net.train --config net/configs/joint_384.json --out runs/joint384 --init runs/grow384/last.pt
 
 evaluate: $(STAMP)
 	$(PY) -m net.evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval
