@@ -281,6 +281,10 @@ def _panorama_array(panorama: object) -> np.ndarray:
     return array
 
 
+#: Largest number of sub-samples per axis that ``supersample`` accepts.
+MAX_SUPERSAMPLE = 8
+
+
 def supersample_grid(value: object, size: tuple[int, int], out: tuple[int, int]) -> tuple[int, int]:
     """Sub-samples per output pixel along (x, y): ``value`` as one int (both axes), a pair, or ``"auto"``.
 
@@ -303,8 +307,8 @@ def supersample_grid(value: object, size: tuple[int, int], out: tuple[int, int])
     except (TypeError, ValueError):
         raise TypeError(f"supersample must be an integer, (x, y) integers or 'auto', got {value!r}") from None
     for s in (sx, sy):
-        if isinstance(s, bool) or not isinstance(s, (numbers.Integral, np.integer)) or not 1 <= s <= 8:
-            raise ValueError(f"supersample must be integers in 1..8, got {value!r}")
+        if isinstance(s, bool) or not isinstance(s, (numbers.Integral, np.integer)) or not 1 <= s <= MAX_SUPERSAMPLE:
+            raise ValueError(f"supersample must be integers in 1..{MAX_SUPERSAMPLE}, got {value!r}")
     return int(sx), int(sy)
 
 

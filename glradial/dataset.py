@@ -184,7 +184,7 @@ def write_crops_dataset(
             progress(len(mine) - len(todo))
         if not todo:
             continue
-        with CropRenderer(load_panorama(path), size=size, out_size=out_size, inverse=inverse, supersample=supersample) as renderer:
+        with CropRenderer(load_panorama(path), size=size, out_size=out_size, inverse=inverse, supersample=grid) as renderer:
             for start in range(0, len(todo), CHUNK):
                 chunk = todo[start : start + CHUNK]
                 images = renderer.render([params[i] for i in chunk])

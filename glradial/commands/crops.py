@@ -22,9 +22,11 @@ atomically; rerunning the same command resumes an interrupted run, skipping fini
 def _supersample(text: str) -> int | str:
     if text == "auto":
         return text
+    from ..crops import MAX_SUPERSAMPLE
+
     value = positive_int(text)
-    if value > 8:
-        raise argparse.ArgumentTypeError(f"expected an integer in 1..8 or auto, got {text!r}")
+    if value > MAX_SUPERSAMPLE:
+        raise argparse.ArgumentTypeError(f"expected an integer in 1..{MAX_SUPERSAMPLE} or auto, got {text!r}")
     return value
 
 
