@@ -21,11 +21,13 @@ from __future__ import annotations
 
 import torch
 
+from glradial.lens import corner_radius
+
 #: Default number of radii and largest radius of the loss (lens units).
 LOSS_SAMPLES = 64
 LOSS_R_MAX = 0.7
-#: Corner radius of a 16:9 frame in lens units, ``sqrt(0.5^2 + (0.5 * 9/16)^2)``.
-CORNER_RADIUS = 0.5737
+#: Corner radius of a 16:9 frame in lens units (0.5737).
+CORNER_RADIUS = corner_radius((16, 9))
 
 
 def loss_radii(samples: int = LOSS_SAMPLES, r_max: float = LOSS_R_MAX, *, device=None, dtype=torch.float32) -> torch.Tensor:

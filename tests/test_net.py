@@ -9,6 +9,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
+from glradial.lens import corner_radius  # noqa: E402
 from net.augment import AugmentConfig, augment_batch, jpeg_roundtrip, motion_kernel  # noqa: E402
 from net.loss import distortion_loss, loss_radii, max_displacement, training_loss  # noqa: E402
 from net.model import DistortionNet, ModelConfig, count_parameters, load_grown  # noqa: E402
@@ -46,10 +47,10 @@ def test_training_loss_judges_each_coefficient_with_the_other_true():
 
 
 def test_joint_term_judges_both_coefficients_inside_the_frame():
-    # joint_weight w adds w * mean DL(y, y_hat) on radii over [0, 0.5737] (the 16:9 corner).
+    # joint_weight w adds w * mean DL(y, y_hat) on radii over [0, 0.5737] (the 16:9 corner radius).
     y = torch.tensor([[-0.5, 0.2], [0.1, 0.0]], dtype=torch.float64)
     d = torch.tensor([[0.05, -0.03], [-0.1, 0.07]], dtype=torch.float64)
-    frame = loss_radii(64, 0.5737, dtype=torch.float64)
+    frame = loss_radii(64, corner_radius((16, 9)), dtype=torch.float64)
     a, c, b = (frame**6).sum(), (frame**8).sum(), (frame**10).sum()
     joint = (a * d[:, 0] ** 2 + 2 * c * d[:, 0] * d[:, 1] + b * d[:, 1] ** 2).mean()
     paper = float(training_loss(y, y + d))
