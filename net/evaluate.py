@@ -24,16 +24,17 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from glradial.lens import corner_radius
+
 #: Width (pixels) at which displacement errors are reported, and the 16:9 corner radius.
 REPORT_WIDTH = 1920
-CORNER_RADIUS_16_9 = 0.5 * math.hypot(1.0, 9.0 / 16.0)
+CORNER_RADIUS_16_9 = corner_radius((16, 9))
 LOSS_RADII = np.linspace(0.0, 0.7, 64)
 DISPLACEMENT_RADII = np.linspace(0.0, CORNER_RADIUS_16_9, 256)
 #: Mean (k1, k2) of the paper's training distribution: k1 ~ U[-0.7, 0.3] -> -0.2;
