@@ -15,6 +15,12 @@ Metrics (DESIGN.md), for predictions ``y_hat = (k1_hat, k2_hat)`` against labels
 * ``k1_mae``, ``k2_mae``: mean absolute coefficient errors;
 * ``median_max_px`` / ``p90_max_px``: median / 90th percentile of the maximum displacement error
   ``1920 * max_{r <= 0.5737} |P(r, y) - P(r, y_hat)|`` (pixels of a 1920-wide frame);
+  ``median_max_px_ci95``: the median's 95 % bootstrap interval (percentiles of the median over
+  :data:`BOOTSTRAP_DRAWS` resamples of the images, fixed seed): how far two models' medians on the
+  same set must differ to mean anything;
+* ``k2_deviation_corr``: Pearson correlation between the predicted and the true deviation of k2 from
+  the manifold, ``k2_hat - m(k1_hat)`` against ``k2 - m(k1)``: whether the k2 output carries any
+  information beyond the manifold (``None`` when either deviation is constant);
 * ``a_beats_b``: share of images where method A (both coefficients from the net) has a smaller DL
   than method B (the net's k1 and ``k2 = 0.019 k1 + 0.805 k1^2``); the paper reports 0.612;
 * the same for method B and for the trivial baseline that always predicts the training mean.
@@ -37,6 +43,8 @@ REPORT_WIDTH = 1920
 CORNER_RADIUS_16_9 = corner_radius((16, 9))
 LOSS_RADII = np.linspace(0.0, 0.7, 64)
 DISPLACEMENT_RADII = np.linspace(0.0, CORNER_RADIUS_16_9, 256)
+#: Resamples behind ``median_max_px_ci95``.
+BOOTSTRAP_DRAWS = 1000
 #: Mean (k1, k2) of the paper's training distribution: k1 ~ U[-0.7, 0.3] -> -0.2;
 #: E[k2] = 0.019 E[k1] + 0.805 E[k1^2] = 0.019 (-0.2) + 0.805 (0.04 + 1/12) = 0.0955.
 TRAINING_MEAN = (-0.2, 0.019 * -0.2 + 0.805 * (0.04 + 1.0 / 12.0))
@@ -71,6 +79,23 @@ def method_b(pred: np.ndarray) -> np.ndarray:
     return np.stack([pred[:, 0], manifold_k2(pred[:, 0])], axis=1)
 
 
+def median_interval(values: np.ndarray, draws: int = BOOTSTRAP_DRAWS, seed: int = 0) -> list[float]:
+    """95 % percentile-bootstrap interval ``[lo, hi]`` of the median of ``values``."""
+    values = np.asarray(values, np.float64)
+    resamples = np.random.default_rng(seed).integers(0, len(values), size=(draws, len(values)))
+    lo, hi = np.percentile(np.median(values[resamples], axis=1), [2.5, 97.5])
+    return [float(lo), float(hi)]
+
+
+def deviation_correlation(pred: np.ndarray, labels: np.ndarray) -> float | None:
+    """Correlation of ``k2_hat - m(k1_hat)`` with ``k2 - m(k1)`` (``None`` if either is constant)."""
+    dev_pred = pred[:, 1] - manifold_k2(pred[:, 0])
+    dev_true = labels[:, 1] - manifold_k2(labels[:, 0])
+    if len(pred) < 2 or dev_pred.std() == 0 or dev_true.std() == 0:
+        return None
+    return float(np.corrcoef(dev_pred, dev_true)[0, 1])
+
+
 def metrics(pred: np.ndarray, labels: np.ndarray) -> dict:
     """All metrics of predictions ``N x 2`` against labels ``N x 2`` (see the module docstring)."""
     pred = np.asarray(pred, np.float64)
@@ -88,8 +113,10 @@ def metrics(pred: np.ndarray, labels: np.ndarray) -> dict:
         "k1_mae": float(np.abs(pred[:, 0] - labels[:, 0]).mean()),
         "k2_mae": float(np.abs(pred[:, 1] - labels[:, 1]).mean()),
         "median_max_px": float(np.median(px_a)),
+        "median_max_px_ci95": median_interval(px_a),
         "p90_max_px": float(np.percentile(px_a, 90)),
         "a_beats_b": float((dl_a < dl_b).mean()),
+        "k2_deviation_corr": deviation_correlation(pred, labels),
         "b_mean_dl": float(dl_b.mean()),
         "b_median_max_px": float(np.median(px_b)),
         "b_p90_max_px": float(np.percentile(px_b, 90)),
@@ -172,6 +199,10 @@ def breakdown(pred: np.ndarray, labels: np.ndarray, values: np.ndarray, bins: li
             m = metrics(pred[sel], labels[sel])
             rows.append({"range": f"[{lo:g}, {hi:g}]", **m})
     return rows
+
+
+def _number(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.3f}"
 
 
 def _table(rows: list[dict], first: str) -> str:
@@ -293,11 +324,13 @@ def main(argv: list[str] | None = None) -> int:
         f"{'' if args.split == 'test' else ' --split ' + args.split}`.\n",
         "| metric | method A (net k1, k2) | method B (net k1, manifold k2) | mean predictor |",
         "|---|---|---|---|",
-        f"| median max displacement (px @1920) | {o['median_max_px']:.2f} | {o['b_median_max_px']:.2f} | {o['baseline_median_max_px']:.2f} |",
+        f"| median max displacement (px @1920) | {o['median_max_px']:.2f} (95 % bootstrap interval "
+        f"{o['median_max_px_ci95'][0]:.2f}–{o['median_max_px_ci95'][1]:.2f}) | {o['b_median_max_px']:.2f} | {o['baseline_median_max_px']:.2f} |",
         f"| 90th percentile (px @1920) | {o['p90_max_px']:.2f} | {o['b_p90_max_px']:.2f} | |",
         f"| mean distortion loss | {o['mean_dl']:.3e} | {o['b_mean_dl']:.3e} | {o['baseline_mean_dl']:.3e} |",
         f"| k1 / k2 mean abs error | {o['k1_mae']:.4f} / {o['k2_mae']:.4f} | | |",
-        f"| A beats B (by DL) | {100 * o['a_beats_b']:.1f} % (paper: 61.2 %) | | |\n",
+        f"| A beats B (by DL) | {100 * o['a_beats_b']:.1f} % (paper: 61.2 %) | | |",
+        f"| correlation of predicted and true k2 deviation from the manifold | {_number(o['k2_deviation_corr'])} | | |\n",
         "## By k1 range\n", _table(result["by_k1"], "k1"),
         "## By horizontal field of view (degrees)\n", _table(result["by_hfov"], "hfov"),
     ]
@@ -313,7 +346,7 @@ def main(argv: list[str] | None = None) -> int:
         ]
     lines += [f"![{n}]({n})\n" for n in names]
     (out / "results.md").write_text("\n".join(lines))
-    print("\n".join(lines[:9]))
+    print("\n".join(lines[:10]))
     print(f"wrote {out / 'metrics.json'}, {out / 'results.md'} ({result['seconds']})")
     return 0
 
