@@ -36,6 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
+from glradial.crops import manifold_k2
 from glradial.lens import corner_radius
 
 #: Width (pixels) at which displacement errors are reported, and the 16:9 corner radius.
@@ -48,11 +49,6 @@ BOOTSTRAP_DRAWS = 1000
 #: Mean (k1, k2) of the paper's training distribution: k1 ~ U[-0.7, 0.3] -> -0.2;
 #: E[k2] = 0.019 E[k1] + 0.805 E[k1^2] = 0.019 (-0.2) + 0.805 (0.04 + 1/12) = 0.0955.
 TRAINING_MEAN = (-0.2, 0.019 * -0.2 + 0.805 * (0.04 + 1.0 / 12.0))
-
-
-def manifold_k2(k1: np.ndarray) -> np.ndarray:
-    """Lopez-Antequera manifold ``k2 = 0.019 k1 + 0.805 k1^2``."""
-    return 0.019 * k1 + 0.805 * k1 * k1
 
 
 def radial_map(r: np.ndarray, k: np.ndarray) -> np.ndarray:

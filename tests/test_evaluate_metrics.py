@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from net.evaluate import deviation_correlation, manifold_k2, median_interval, metrics
+from glradial.crops import manifold_k2
+from net.evaluate import deviation_correlation, median_interval, metrics
 
 
 def _lenses(k1: np.ndarray, deviation: np.ndarray) -> np.ndarray:
