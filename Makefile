@@ -36,6 +36,7 @@ train: $(STAMP)
 	$(PY) -m net.train --config net/configs/grow_384.json --out runs/grow384 --init runs/ft384/best.pt
 	$(PY) -m net.train --config net/configs/joint_384.json --out runs/joint384 --init runs/grow384/last.pt
 	$(PY) -m net.train --config net/configs/grow2_384.json --out runs/grow2_384 --init runs/joint384/best.pt
+	$(PY) -m net.train --config net/configs/extend_384.json --out runs/extend384 --init runs/grow2_384/best.pt
 
 evaluate: $(STAMP)
 	$(PY) -m net.evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval

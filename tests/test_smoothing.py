@@ -173,14 +173,20 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     smooth = lens_distance(track.lens, truth) * WIDTH_PX
     # a real estimator's error is part noise, part bias (the same scene, frame after frame), and
     # smoothing removes only the noise: the smoothed error may not be larger than the raw one (0.5 px
-    # slack for the local line's curvature error), and the frame-to-frame wobble inside each shot,
-    # which is what a viewer sees, must drop to at most half
+    # slack for the local line's curvature error), and the frame-to-frame wobble inside each shot
+    # beyond the lens's true motion (the zoom: 0.85 px per frame in the first shot), which is what a
+    # viewer sees as jitter, must drop to at most half. The true motion is subtracted because a
+    # smoother must keep it: without that, a less noisy estimator would fail the bound.
     assert smooth.mean() <= raw.mean() + 0.5, (smooth.mean(), raw.mean())
     same_shot = np.diff(track.shot) == 0
+    wobble_true = lens_distance(truth[1:], truth[:-1])[same_shot].mean()
     wobble_raw = lens_distance(track.raw[1:], track.raw[:-1])[same_shot].mean()
     wobble_smooth = lens_distance(track.lens[1:], track.lens[:-1])[same_shot].mean()
-    print(f"error raw {raw.mean():.2f} px smoothed {smooth.mean():.2f} px; wobble raw {wobble_raw * WIDTH_PX:.2f} px smoothed {wobble_smooth * WIDTH_PX:.2f} px")
-    assert wobble_smooth < 0.5 * wobble_raw, (wobble_smooth * WIDTH_PX, wobble_raw * WIDTH_PX)
+    print(f"error raw {raw.mean():.2f} px smoothed {smooth.mean():.2f} px; wobble raw {wobble_raw * WIDTH_PX:.2f} px "
+          f"smoothed {wobble_smooth * WIDTH_PX:.2f} px true {wobble_true * WIDTH_PX:.2f} px")
+    assert wobble_raw > wobble_true  # the estimates do wobble: the bound below means something
+    jitter_raw, jitter_smooth = wobble_raw - wobble_true, wobble_smooth - wobble_true
+    assert jitter_smooth < 0.5 * jitter_raw, (jitter_smooth * WIDTH_PX, jitter_raw * WIDTH_PX)
     # reset: right after the cut the smoothed lens is the second shot's, not a blend with the first
     second = np.median(track.raw[cut:], axis=0)
     assert np.all(lens_distance(track.lens[cut : cut + 3], second) * WIDTH_PX < 0.5 * lens_distance(truth[0], truth[cut]) * WIDTH_PX)
