@@ -6,13 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
+from glradial.crops import manifold_k2
 from glradial.smoothing import ShotDetector, detect_cuts, lens_distance, shot_ids, smooth_shot, smooth_track
 
 WIDTH_PX = 1920  # errors are reported in pixels of a 1920-wide frame, as in DESIGN.md
-
-
-def manifold(k1):
-    return 0.019 * k1 + 0.805 * k1**2
 
 
 def synthetic_track(seed: int = 0, n: int = 240, cut: int = 140, every: int = 3):
@@ -22,7 +19,7 @@ def synthetic_track(seed: int = 0, n: int = 240, cut: int = 140, every: int = 3)
     rng = np.random.default_rng(seed)
     t = np.arange(n)
     k1 = np.where(t < cut, -0.35 + 0.15 * t / cut, 0.10 - 0.05 * (t - cut) / (n - cut))
-    truth = np.stack([k1, manifold(k1)], 1)
+    truth = np.stack([k1, manifold_k2(k1)], 1)
     times = np.union1d(np.arange(0, n, every), [cut])
     raw = truth[times] + rng.normal(0.0, [0.02, 0.01], (len(times), 2))
     outliers = rng.random(len(times)) < 0.10
@@ -70,7 +67,7 @@ def test_smoothing_follows_a_zoom_without_lag():
     the ends)."""
     n = 100
     k1 = np.linspace(-0.4, -0.1, n)
-    truth = np.stack([k1, manifold(k1)], 1)
+    truth = np.stack([k1, manifold_k2(k1)], 1)
     times = np.arange(0, n, 4)
     smoothed, _ = smooth_shot(times, truth[times], np.arange(n), half_window=15)
     inside = slice(0, times[-1] + 1)
@@ -158,7 +155,7 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
 
     n, cut = 36, 24
     k1 = np.where(np.arange(n) < cut, np.linspace(-0.35, -0.25, n), -0.05)
-    truth = np.stack([k1, manifold(k1)], 1)
+    truth = np.stack([k1, manifold_k2(k1)], 1)
     panorama = glradial.stadium_panorama(19, (2048, 1024))
     params = [CropParams(pan=-15 + 0.3 * i, tilt=-10, roll=0.5, hfov=45 - 0.5 * i, k1=truth[i, 0], k2=truth[i, 1]) for i in range(cut)]
     params += [CropParams(pan=12 + 0.2 * i, tilt=-14, roll=-0.5, hfov=30, k1=truth[i, 0], k2=truth[i, 1]) for i in range(cut, n)]
