@@ -13,6 +13,7 @@ compression at a random quality (``cv2.imencode``), horizontal / vertical flips.
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import cv2
@@ -103,15 +104,39 @@ def augment_batch(images: np.ndarray, rng: np.random.Generator, config: AugmentC
     return out
 
 
-def augment_pairs(images: np.ndarray, rng: np.random.Generator, config: AugmentConfig | None = None) -> np.ndarray:
+def augment_pairs(images: np.ndarray, rng: np.random.Generator, config: AugmentConfig | None = None,
+                  workers: int = 0) -> np.ndarray:
     """Like :func:`augment_batch`, but images ``2i`` and ``2i + 1`` get exactly the same operations
-    (same draws, same noise), so that within a pair only the lens differs."""
+    (same draws, same noise), so that within a pair only the lens differs.
+
+    ``workers`` > 0 augments the pairs on that many threads (OpenCV and numpy release the GIL; a
+    GPU trainer is otherwise bound by this loop). The result does not depend on ``workers``: each
+    pair's seed is drawn from ``rng`` in order before any work starts.
+    """
     images = np.asarray(images)
     if images.ndim != 4 or images.shape[0] % 2:
         raise ValueError(f"pairs need an even N x H x W x 3 batch, got shape {images.shape}")
     out = np.empty_like(images)
-    for i in range(0, images.shape[0], 2):
-        seed = int(rng.integers(2**63))
-        out[i] = augment_batch(images[i : i + 1], np.random.default_rng(seed), config)[0]
-        out[i + 1] = augment_batch(images[i + 1 : i + 2], np.random.default_rng(seed), config)[0]
+    seeds = [int(rng.integers(2**63)) for _ in range(0, images.shape[0], 2)]
+
+    def one_pair(k: int) -> None:
+        i = 2 * k
+        out[i] = augment_batch(images[i : i + 1], np.random.default_rng(seeds[k]), config)[0]
+        out[i + 1] = augment_batch(images[i + 1 : i + 2], np.random.default_rng(seeds[k]), config)[0]
+
+    if workers > 0:
+        list(_thread_pool(workers).map(one_pair, range(len(seeds))))
+    else:
+        for k in range(len(seeds)):
+            one_pair(k)
     return out
+
+
+_pools: dict[int, ThreadPoolExecutor] = {}
+
+
+def _thread_pool(workers: int) -> ThreadPoolExecutor:
+    """One shared pool per thread count (created on first use, lives as long as the process)."""
+    if workers not in _pools:
+        _pools[workers] = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="augment")
+    return _pools[workers]

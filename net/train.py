@@ -65,6 +65,7 @@ class TrainConfig:
     pool_min: int = 1024
     producer_chunk: int = 64
     producer_threads: int = 1
+    augment_workers: int = 0  # threads augmenting a paired batch (0: inline); results do not depend on it
     paired: bool = False
     stop_at_s: float | None = None  # stop after this much step time, leaving the schedule as it is
     joint_loss_weight: float = 0.0  # > 0 adds the joint in-frame term to the paper's loss (net.loss)
@@ -281,7 +282,10 @@ def main(argv: list[str] | None = None) -> int:
             ts = time.monotonic()
             pool.add(*producer.take(cfg.fresh_per_step))
             images, labels = pool.sample(cfg.batch_size, rng, paired=cfg.paired)
-            images = (augment_pairs if cfg.paired else augment_batch)(images, rng, aug_cfg)
+            if cfg.paired:
+                images = augment_pairs(images, rng, aug_cfg, workers=cfg.augment_workers)
+            else:
+                images = augment_batch(images, rng, aug_cfg)
             x = normalise_batch(torch.from_numpy(images).to(device), model_cfg).contiguous(memory_format=torch.channels_last)
             y = torch.from_numpy(labels).to(device)
             factor = lr_factor(progress, step, cfg)

@@ -10,7 +10,7 @@ import pytest
 torch = pytest.importorskip("torch")
 
 from glradial.lens import corner_radius  # noqa: E402
-from net.augment import AugmentConfig, augment_batch, jpeg_roundtrip, motion_kernel  # noqa: E402
+from net.augment import AugmentConfig, augment_batch, augment_pairs, jpeg_roundtrip, motion_kernel  # noqa: E402
 from net.loss import distortion_loss, loss_radii, max_displacement, training_loss  # noqa: E402
 from net.model import DistortionNet, ModelConfig, count_parameters, load_grown  # noqa: E402
 
@@ -167,6 +167,22 @@ def test_augment_keeps_shape_is_seeded_and_flips_only():
     np.testing.assert_array_equal(augment_batch(images, rng, cfg), images[:, ::-1, ::-1])
     with pytest.raises(ValueError, match="uint8"):
         augment_batch(images.astype(np.float32), rng)
+
+
+def test_augment_pairs_applies_one_draw_per_pair_on_any_number_of_threads():
+    rng = np.random.default_rng(1)
+    scene = rng.integers(0, 256, (1, 36, 64, 3), dtype=np.uint8)
+    images = np.repeat(scene, 12, axis=0)  # six pairs, all of the same image
+    cfg = AugmentConfig(p_noise=1.0, p_jpeg=0.5, p_blur=0.5)
+    inline = augment_pairs(images, np.random.default_rng(9), cfg)
+    # the same operations (noise included) on both members: identical inputs stay identical
+    np.testing.assert_array_equal(inline[0::2], inline[1::2])
+    # different pairs get different draws (noise on every image makes equal outputs all but impossible)
+    assert all(not np.array_equal(inline[0], inline[2 * k]) for k in range(1, 6))
+    threaded = augment_pairs(images, np.random.default_rng(9), cfg, workers=3)
+    np.testing.assert_array_equal(threaded, inline)
+    with pytest.raises(ValueError, match="even"):
+        augment_pairs(images[:3], rng)
 
 
 def test_motion_kernel_and_jpeg():
