@@ -28,7 +28,7 @@ bench: $(STAMP)
 	$(PY) bench/bench_estimate.py
 
 train: $(STAMP)
-	$(PY) -m net.data --split train --n 40 --split val --n 4 --split test --n 8 --size 4096 2048
+	$(PY) -m net.data --split train --n 80 --split val --n 4 --split test --n 8 --size 4096 2048
 	$(PY) -m net.train --config net/configs/shipped.json --out runs/shipped
 	$(PY) -m net.train --config net/configs/finetune_192.json --out runs/ft192 --init runs/shipped/best.pt
 	$(PY) -m net.train --config net/configs/finetune_256.json --out runs/ft256 --init runs/ft192/best.pt
@@ -37,6 +37,9 @@ train: $(STAMP)
 	$(PY) -m net.train --config net/configs/joint_384.json --out runs/joint384 --init runs/grow384/last.pt
 	$(PY) -m net.train --config net/configs/grow2_384.json --out runs/grow2_384 --init runs/joint384/best.pt
 	$(PY) -m net.train --config net/configs/extend_384.json --out runs/extend384 --init runs/grow2_384/best.pt
+	# stages 9-10 ran on a GPU under a step-time budget; --steps with no budget gives the same schedule anywhere
+	$(PY) -m net.train --config net/configs/gpu_384.json --out runs/gpu384 --init runs/extend384/best.pt --steps 11809 --time-budget-s 0
+	$(PY) -m net.train --config net/configs/gpu_384_polish.json --out runs/gpu384b --init runs/gpu384/last.pt --steps 3485 --time-budget-s 0
 
 evaluate: $(STAMP)
 	$(PY) -m net.evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval

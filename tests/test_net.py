@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -258,3 +259,16 @@ def test_k2_residual_head_starts_on_the_manifold():
     k1 = out[:, 0]
     assert torch.allclose(out[:, 1], 0.019 * k1 + 0.805 * k1 * k1, atol=1e-6)
     assert k1.std() > 0
+
+
+@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[1] / "net" / "configs").glob("*.json")),
+                         ids=lambda p: p.name)
+def test_every_shipped_training_config_loads_and_fits_the_parameter_budget(path):
+    # make train and the README's recipe run these files: a stale key or a model over the paper's
+    # 6.6 M parameters must fail here, not hours into a run
+    from net.train import TrainConfig
+
+    cfg = TrainConfig.from_json(path)
+    model = DistortionNet(ModelConfig.from_dict(cfg.model))
+    assert 0 < count_parameters(model) <= 6_600_000
+    assert cfg.batch_size > 0 and (cfg.steps > 0 or cfg.time_budget_s)

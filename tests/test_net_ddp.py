@@ -25,12 +25,15 @@ def _free_port() -> int:
 
 def test_ddp_two_processes_train_and_checkpoint(tmp_path):
     config = json.loads((ROOT / "net/configs/tiny.json").read_text())
-    config.update(steps=4, val_size=16, log_every=1)
+    # the config asks for an hour; the command line's --steps 4 --time-budget-s 0 must win (make train
+    # reproduces the GPU stages' schedules that way)
+    config.update(steps=1000, time_budget_s=3600.0, val_size=16, log_every=1, augment_workers=2)
     (tmp_path / "tiny.json").write_text(json.dumps(config))
     out = tmp_path / "run"
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))
     cmd = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2", f"--master_port={_free_port()}",
-           "-m", "net.train", "--config", str(tmp_path / "tiny.json"), "--out", str(out)]
+           "-m", "net.train", "--config", str(tmp_path / "tiny.json"), "--out", str(out), "--steps", "4",
+           "--time-budget-s", "0"]
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     assert "world 2" in proc.stdout
