@@ -208,6 +208,12 @@ class CropProducer:
 
     ``take(n)`` returns exactly the next ``n`` crops of the stream (blocking), whatever the chunking.
     The process makes its own EGL context after it starts (spawn start method).
+
+    If the process dies (an exception, or killed, e.g. by the kernel's out-of-memory killer: it
+    holds every panorama, once as an array and once as a texture), ``take`` raises
+    ``RuntimeError`` naming its exit code. This holds even when it dies halfway through sending a
+    chunk: the trainer keeps no copy of the queue's write end, so a cut-off message ends in
+    end-of-file instead of a read that waits forever.
     """
 
     def __init__(self, source: PanoramaSource, *, seed: int, out_size: tuple[int, int], chunk: int = 64,
@@ -222,6 +228,8 @@ class CropProducer:
                 daemon=True
             )
             self._proc.start()
+            # the child has its own copy of the write end now; without ours, its death closes the pipe
+            self._queue._writer.close()
         finally:
             if env_before is None:
                 os.environ.pop("LP_NUM_THREADS", None)
@@ -238,9 +246,11 @@ class CropProducer:
             try:
                 item = self._queue.get(timeout=1.0)
                 break
+            except (EOFError, OSError):  # the pipe closed, maybe in the middle of a chunk
+                raise self._died() from None
             except queue_mod.Empty:
                 if not self._proc.is_alive():
-                    raise RuntimeError(f"crop producer died (exit code {self._proc.exitcode})") from None
+                    raise self._died() from None
                 if time.monotonic() - t0 > timeout:
                     raise TimeoutError(f"no crops from the producer in {timeout:.0f} s") from None
         self.wait_s += time.monotonic() - t0
@@ -248,6 +258,12 @@ class CropProducer:
             raise RuntimeError(f"crop producer failed: {item[1]}")
         self._images, self._labels = item
         self._pos = 0
+
+    def _died(self) -> RuntimeError:
+        self._proc.join(timeout=10)
+        code = self._proc.exitcode
+        hint = " (killed: look for the out-of-memory killer; every producer holds all panoramas)" if code == -9 else ""
+        return RuntimeError(f"crop producer died (exit code {code}){hint}")
 
     def take(self, n: int, timeout: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
         images, labels = [], []

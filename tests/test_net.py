@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -272,3 +273,38 @@ def test_every_shipped_training_config_loads_and_fits_the_parameter_budget(path)
     model = DistortionNet(ModelConfig.from_dict(cfg.model))
     assert 0 < count_parameters(model) <= 6_600_000
     assert cfg.batch_size > 0 and (cfg.steps > 0 or cfg.time_budget_s)
+
+
+def test_trainer_gets_an_error_not_a_hang_when_its_crop_producer_is_killed_mid_chunk():
+    # A producer killed by the out-of-memory killer while its queue's feeder thread is halfway
+    # through writing a chunk left the trainer blocked forever in the pipe read (seen with 80
+    # panoramas per producer on this 24 GiB machine). A chunk of 8 crops of 128x72 is 221 KB, more
+    # than a pipe holds (64 KB), so once the trainer stops reading the producer is always mid-chunk.
+    import threading
+
+    from net.data import CropProducer, PanoramaSource
+
+    source = PanoramaSource(kind="synthetic", seeds=[1], size=(512, 256))
+    producer = CropProducer(source, seed=3, out_size=(128, 72), chunk=8)
+    try:
+        producer.take(8, timeout=120)  # the producer is up and streaming
+        deadline = time.monotonic() + 60
+        while not producer._queue._reader.poll(0.5) and time.monotonic() < deadline:
+            pass  # wait until the next chunk is (partly) in the pipe
+        producer._proc.kill()
+        outcome: list[BaseException | None] = []
+
+        def drain() -> None:
+            try:
+                while True:
+                    producer.take(8, timeout=60)
+            except BaseException as err:  # noqa: BLE001 - the test inspects it
+                outcome.append(err)
+
+        reader = threading.Thread(target=drain, daemon=True)
+        reader.start()
+        reader.join(timeout=60)
+        assert not reader.is_alive(), "take() hung on a producer that was killed mid-chunk"
+        assert isinstance(outcome[0], RuntimeError) and "exit code -9" in str(outcome[0]), outcome
+    finally:
+        producer.close()
