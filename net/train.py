@@ -157,7 +157,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")
     parser.add_argument("--resume", action="store_true", help="continue from OUT/last.pt if present")
     parser.add_argument("--steps", type=int, help="override the config's step count")
-    parser.add_argument("--time-budget-s", type=float, help="override the config's time budget (0: none; the schedule then follows the step count)")
+    parser.add_argument("--time-budget-s", type=float,
+                        help="override the config's time budget (0: none; the schedule then follows the step count)")
     parser.add_argument("--threads", type=int, help="torch threads per process")
     parser.add_argument("--init", help="start from this checkpoint's (EMA) weights; new optimizer and schedule "
                         "(fine-tuning). The config's model may be wider or deeper: net.model.load_grown grows "
