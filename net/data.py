@@ -14,7 +14,8 @@ Throughput on a CPU-only machine: rendering a crop (llvmpipe) costs about as muc
 step on it, so the trainer keeps a pool of recent crops and, each step, pulls a fixed number of
 fresh crops from a producer process (which renders ahead, in parallel) and samples its batch from
 the pool. The number of fresh crops per step is fixed, so a run is deterministic per seed no matter
-how fast the producer is.
+how fast the producer is. Several producers (:class:`CropProducers`) each render their own shard
+of the panoramas (:func:`shard_source`), so the panorama memory does not grow with their number.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import multiprocessing as mp
 import os
 import queue as queue_mod
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Iterator, Sequence
 
@@ -262,7 +263,7 @@ class CropProducer:
     def _died(self) -> RuntimeError:
         self._proc.join(timeout=10)
         code = self._proc.exitcode
-        hint = " (killed: look for the out-of-memory killer; every producer holds all panoramas)" if code == -9 else ""
+        hint = " (killed: look for the out-of-memory killer; every producer holds its shard of the panoramas)" if code == -9 else ""
         return RuntimeError(f"crop producer died (exit code {code}){hint}")
 
     def take(self, n: int, timeout: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
@@ -284,6 +285,81 @@ class CropProducer:
         self._queue.close()
 
     def __enter__(self) -> "CropProducer":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def shard_source(source: PanoramaSource, index: int, count: int) -> PanoramaSource:
+    """Shard ``index`` of ``count`` of ``source``'s panoramas: every ``count``-th one from ``index``.
+
+    The shards of ``0 .. count - 1`` partition the panoramas; their sizes differ by at most one.
+    ``count`` may not exceed the number of panoramas (a shard would be empty).
+    """
+    items = list(source.files if source.kind == "files" else source.seeds)
+    if not 0 <= index < count:
+        raise ValueError(f"shard index {index} outside 0 .. {count - 1}")
+    if count > len(items):
+        raise ValueError(f"cannot split {len(items)} panoramas into {count} shards (one per crop producer); "
+                         "use fewer producers or ranks, or more panoramas")
+    if source.kind == "files":
+        return replace(source, files=items[index::count])
+    return replace(source, seeds=items[index::count])
+
+
+class CropProducers:
+    """Several :class:`CropProducer` processes behind one ``take``, each rendering its own shard.
+
+    ``producers[i]`` must stream chunks of ``chunk`` crops and hold ``weights[i]`` panoramas. Whole
+    chunks are taken from the producers in smooth weighted round-robin order (each producer in
+    proportion to its weight, interleaved), so every panorama keeps the same share of the crops
+    as with one producer holding them all, and crop pairs (which never straddle a chunk) stay
+    together. ``take(n)`` returns exactly the next ``n`` crops of that interleaved stream.
+    """
+
+    def __init__(self, producers: Sequence[CropProducer], weights: Sequence[int], chunk: int):
+        if len(producers) != len(weights) or not producers or min(weights) <= 0:
+            raise ValueError("one positive weight per producer, at least one producer")
+        self.producers = list(producers)
+        self.weights = [int(w) for w in weights]
+        self._credit = [0] * len(self.weights)
+        self._chunk = chunk
+        self._images: np.ndarray | None = None
+        self._labels: np.ndarray | None = None
+        self._pos = 0
+
+    @property
+    def wait_s(self) -> float:
+        """Seconds spent waiting for crops, over all producers (they are read one at a time)."""
+        return sum(p.wait_s for p in self.producers)
+
+    def _next_producer(self) -> CropProducer:
+        total = sum(self.weights)
+        for i, w in enumerate(self.weights):
+            self._credit[i] += w
+        best = max(range(len(self._credit)), key=self._credit.__getitem__)
+        self._credit[best] -= total
+        return self.producers[best]
+
+    def take(self, n: int, timeout: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
+        images, labels = [], []
+        while n > 0:
+            if self._images is None or self._pos >= len(self._images):
+                self._images, self._labels = self._next_producer().take(self._chunk, timeout=timeout)
+                self._pos = 0
+            k = min(n, len(self._images) - self._pos)
+            images.append(self._images[self._pos : self._pos + k])
+            labels.append(self._labels[self._pos : self._pos + k])
+            self._pos += k
+            n -= k
+        return np.concatenate(images), np.concatenate(labels)
+
+    def close(self) -> None:
+        for p in self.producers:
+            p.close()
+
+    def __enter__(self) -> "CropProducers":
         return self
 
     def __exit__(self, *exc) -> None:

@@ -5,10 +5,13 @@ Usage::
     python -m net.train --config net/configs/shipped.json --out runs/shipped [--resume]
     torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
 
-Data path per rank: a :class:`~.data.CropProducer` process renders crops from the training
-panoramas ahead of time with its own EGL context and its own seed (``seed * 1000 + rank``); every
-step takes exactly ``fresh_per_step`` new crops from it into a :class:`~.data.CropPool` and samples
-the batch from the pool, then applies :func:`~.augment.augment_batch` (photometric + flips).
+Data path per rank: ``producers`` :class:`~.data.CropProducer` processes render crops ahead of
+time, each with its own EGL context, its own seed (``seed * 1000 + shard``) and its own shard of the
+training panoramas (shard ``rank * producers + j`` of ``world * producers``, so memory per process
+falls as processes are added); :class:`~.data.CropProducers` interleaves their chunks in
+proportion to shard size. Every step takes exactly ``fresh_per_step`` new crops into a
+:class:`~.data.CropPool` and samples the batch from the pool, then applies
+:func:`~.augment.augment_batch` (photometric + flips).
 Loss: :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the joint in-frame
 term). AdamW, linear warm-up then cosine decay; the
 schedule's progress is ``step / steps`` or, with ``time_budget_s``, the training wall time spent
@@ -41,7 +44,7 @@ import torch
 import torch.distributed as dist
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
-from .data import CropPool, CropProducer, PanoramaSource, render_test_set
+from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
 from .loss import training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
 
@@ -65,6 +68,7 @@ class TrainConfig:
     pool_min: int = 1024
     producer_chunk: int = 64
     producer_threads: int = 1
+    producers: int = 1  # crop producer processes per rank, each rendering its own shard of the panoramas
     augment_workers: int = 0  # threads augmenting a paired batch (0: inline); results do not depend on it
     paired: bool = False
     stop_at_s: float | None = None  # stop after this much step time, leaving the schedule as it is
@@ -86,6 +90,8 @@ class TrainConfig:
         if unknown:
             raise ValueError(f"unknown keys in {path}: {sorted(unknown)}")
         cfg = cls(**data)
+        if cfg.producers < 1:
+            raise ValueError(f"producers must be at least 1, got {cfg.producers}")
         if cfg.paired and (cfg.batch_size % 2 or cfg.fresh_per_step % 2 or cfg.producer_chunk % 2 or cfg.pool_capacity % 2):
             raise ValueError("paired training needs even batch_size, fresh_per_step, producer_chunk and pool_capacity")
         return cfg
@@ -149,6 +155,29 @@ def save_checkpoint(path: Path, **state) -> None:
     tmp = path.with_suffix(".tmp")
     torch.save(state, tmp)
     os.replace(tmp, path)
+
+
+def start_producers(source: PanoramaSource, cfg: TrainConfig, rank: int, world: int, step: int,
+                    out_size: tuple[int, int]) -> CropProducers:
+    """This rank's crop producers: producer ``j`` renders shard ``rank * producers + j`` of the
+    ``world * producers`` shards of ``source`` with seed ``cfg.seed * 1000 + shard + 7919 * step``
+    (a resumed run never repeats the crops it has seen). With one producer and one rank this is
+    the single full-set producer of the runs made before producers were sharded: same stream."""
+    count = world * cfg.producers
+    producers: list[CropProducer] = []
+    weights: list[int] = []
+    try:
+        for j in range(cfg.producers):
+            shard = rank * cfg.producers + j
+            part = shard_source(source, shard, count)
+            producers.append(CropProducer(part, seed=cfg.seed * 1000 + shard + 7919 * step, out_size=out_size,
+                                          chunk=cfg.producer_chunk, threads=cfg.producer_threads, paired=cfg.paired))
+            weights.append(len(part.files if part.kind == "files" else part.seeds))
+    except BaseException:
+        for started in producers:
+            started.close()
+        raise
+    return CropProducers(producers, weights, cfg.producer_chunk)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -249,9 +278,9 @@ def main(argv: list[str] | None = None) -> int:
         val = render_test_set(vsrc, cfg.val_size, seed=10_000 + cfg.seed, out_size=model_cfg.input_size)
         log(f"validation set: {len(val[0])} crops from {len(vsrc.seeds)} panoramas ({time.monotonic() - t0:.1f} s)")
 
-    # the stream restarts from a seed derived from the step on resume (never repeats the same crops)
-    producer = CropProducer(source, seed=cfg.seed * 1000 + rank + 7919 * step, out_size=model_cfg.input_size,
-                            chunk=cfg.producer_chunk, threads=cfg.producer_threads, paired=cfg.paired)
+    producers = start_producers(source, cfg, rank, world, step, model_cfg.input_size)
+    log(f"{len(producers.producers)} crop producer(s) on this rank, holding "
+        f"{' + '.join(str(w) for w in producers.weights)} panoramas")
     rng = np.random.default_rng([cfg.seed, rank, step])
     aug_cfg = AugmentConfig(**cfg.augment)
     pool = CropPool(cfg.pool_capacity, model_cfg.input_size)
@@ -267,11 +296,11 @@ def main(argv: list[str] | None = None) -> int:
         t_fill = time.monotonic()
         need = max(cfg.pool_min, cfg.batch_size)
         while pool.count < need:
-            pool.add(*producer.take(cfg.producer_chunk))
+            pool.add(*producers.take(cfg.producer_chunk))
         log(f"pool filled with {pool.count} crops ({time.monotonic() - t_fill:.1f} s)")
         last_ckpt = last_val = time.monotonic()
         window_loss, window_k, window_n, window_t = 0.0, np.zeros(2), 0, 0.0
-        wait_before = producer.wait_s
+        wait_before = producers.wait_s
         while True:
             if distributed and cfg.time_budget_s:  # every rank follows the slowest clock: same step count
                 clock = torch.tensor([train_time], dtype=torch.float64)
@@ -281,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
             if progress >= 1.0 or (cfg.stop_at_s is not None and train_time >= cfg.stop_at_s):
                 break
             ts = time.monotonic()
-            pool.add(*producer.take(cfg.fresh_per_step))
+            pool.add(*producers.take(cfg.fresh_per_step))
             images, labels = pool.sample(cfg.batch_size, rng, paired=cfg.paired)
             if cfg.paired:
                 images = augment_pairs(images, rng, aug_cfg, workers=cfg.augment_workers)
@@ -319,8 +348,8 @@ def main(argv: list[str] | None = None) -> int:
                         best = vm["median_max_px"]
                         save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
                                         step=step, train_time=train_time, val=vm)
-                wait = producer.wait_s - wait_before
-                wait_before = producer.wait_s
+                wait = producers.wait_s - wait_before
+                wait_before = producers.wait_s
                 row = [step, round(train_time, 1), f"{cfg.lr * factor:.3g}", f"{window_loss / window_n:.4g}",
                        f"{window_k[0] / window_n:.4f}", f"{window_k[1] / window_n:.4f}",
                        f"{window_n * cfg.batch_size * world / max(window_t, 1e-9):.1f}", f"{wait:.1f}",
@@ -346,7 +375,7 @@ def main(argv: list[str] | None = None) -> int:
                 save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
                                 step=step, train_time=train_time, val=vm)
     finally:
-        producer.close()
+        producers.close()
         if writer is not None:
             csv_file.close()
         if distributed:

@@ -308,3 +308,54 @@ def test_trainer_gets_an_error_not_a_hang_when_its_crop_producer_is_killed_mid_c
         assert isinstance(outcome[0], RuntimeError) and "exit code -9" in str(outcome[0]), outcome
     finally:
         producer.close()
+
+
+def test_shards_partition_the_panoramas():
+    from net.data import PanoramaSource, shard_source
+
+    source = PanoramaSource(kind="stadium", seeds=list(range(10, 17)), size=(512, 256))
+    shards = [shard_source(source, i, 3) for i in range(3)]
+    assert [s.seeds for s in shards] == [[10, 13, 16], [11, 14], [12, 15]]
+    assert all(s.kind == "stadium" and s.size == (512, 256) for s in shards)
+    files = shard_source(PanoramaSource(kind="files", files=["a.png", "b.png"]), 1, 2)
+    assert list(files.files) == ["b.png"]
+    with pytest.raises(ValueError, match="cannot split 7 panoramas into 8 shards"):
+        shard_source(source, 0, 8)
+    with pytest.raises(ValueError, match="shard index 3"):
+        shard_source(source, 3, 3)
+
+
+class _CountingProducer:
+    """Stand-in for a CropProducer: chunk ``c`` of producer ``name`` holds labels ``(name, c)``."""
+
+    def __init__(self, name: int, chunk: int):
+        self.name, self.chunk, self.taken, self.wait_s = name, chunk, 0, 0.5
+
+    def take(self, n: int, timeout: float = 600.0):
+        assert n == self.chunk, "CropProducers must take whole chunks"
+        labels = np.array([(self.name, self.taken)] * n, np.float32)
+        self.taken += 1
+        return np.full((n, 2, 2, 3), self.name, np.uint8), labels
+
+
+def test_several_producers_give_each_panorama_the_same_share_of_crops():
+    # shards of 3, 2 and 2 panoramas: per 7 chunks, 3 from the first and 2 from each other one, so
+    # every panorama gets 1/7 of the crops as it would from one producer holding all seven
+    from net.data import CropProducers
+
+    fakes = [_CountingProducer(i, chunk=4) for i in range(3)]
+    group = CropProducers(fakes, [3, 2, 2], chunk=4)
+    images, labels = group.take(5)
+    rest_images, rest_labels = group.take(4 * 70 - 5)
+    labels = np.concatenate([labels, rest_labels])
+    assert images.shape == (5, 2, 2, 3) and len(labels) == 280
+    chunks = labels[::4]  # (producer, its chunk index) per chunk, in order
+    assert np.all(labels.reshape(70, 4, 2) == chunks[:, None, :]), "a chunk was split or reordered"
+    for cycle in chunks.reshape(10, 7, 2):
+        assert np.bincount(cycle[:, 0].astype(int), minlength=3).tolist() == [3, 2, 2]
+    for i, fake in enumerate(fakes):  # each producer's chunks arrive in its own order
+        assert chunks[chunks[:, 0] == i, 1].tolist() == list(range(fake.taken))
+    assert len(set(map(int, chunks[:7, 0]))) == 3, "producers are interleaved within a cycle"
+    assert group.wait_s == 1.5
+    with pytest.raises(ValueError):
+        CropProducers(fakes, [3, 0, 2], chunk=4)

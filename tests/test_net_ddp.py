@@ -37,6 +37,7 @@ def test_ddp_two_processes_train_and_checkpoint(tmp_path):
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     assert "world 2" in proc.stdout
+    assert "1 crop producer(s) on this rank, holding 1 panoramas" in proc.stdout  # 2 panoramas, 2 ranks
     state = torch.load(out / "last.pt", map_location="cpu", weights_only=False)
     assert state["step"] == 4
     rows = list(csv.DictReader(open(out / "train.csv")))
@@ -53,8 +54,9 @@ def test_ddp_two_processes_train_and_checkpoint(tmp_path):
 
 
 def test_grown_fine_tune_with_joint_loss_stops_early(tmp_path):
-    # One process: --init from a smaller checkpoint (net.model.load_grown), the joint loss term, and
-    # stop_at_s (a run ended early with its schedule unchanged: here after the first step).
+    # One process: --init from a smaller checkpoint (net.model.load_grown), the joint loss term,
+    # stop_at_s (a run ended early with its schedule unchanged: here after the first step) and two
+    # crop producers, one per panorama.
     from net.model import DistortionNet, ModelConfig
 
     config = json.loads((ROOT / "net/configs/tiny.json").read_text())
@@ -62,7 +64,7 @@ def test_grown_fine_tune_with_joint_loss_stops_early(tmp_path):
     torch.save({"model": small.state_dict()}, tmp_path / "small.pt")
     grown = dict(config["model"], stages=[[e * 2 if e > 1 else e, c, n, s, *rest] for e, c, n, s, *rest in config["model"]["stages"]])
     config.update(model=grown, steps=1000, time_budget_s=1000.0, stop_at_s=1e-6, joint_loss_weight=5.0,
-                  val_size=16, log_every=1)
+                  val_size=16, log_every=1, producers=2)
     (tmp_path / "grown.json").write_text(json.dumps(config))
     out = tmp_path / "run"
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))
@@ -71,5 +73,6 @@ def test_grown_fine_tune_with_joint_loss_stops_early(tmp_path):
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-3000:]
     assert " grown, " in proc.stdout and "0 grown" not in proc.stdout
+    assert "2 crop producer(s) on this rank, holding 1 + 1 panoramas" in proc.stdout
     state = torch.load(out / "last.pt", map_location="cpu", weights_only=False)
     assert state["step"] == 1
