@@ -204,7 +204,32 @@ def _producer_main(out_queue, source: PanoramaSource, chunk: int, seed: int, out
         raise
 
 
-class CropProducer:
+class _ChunkReader:
+    """``take(n)``: exactly the next ``n`` crops of a stream that arrives in chunks from ``_fetch``."""
+
+    _images: np.ndarray | None = None
+    _labels: np.ndarray | None = None
+    _pos = 0
+
+    def _fetch(self, timeout: float) -> tuple[np.ndarray, np.ndarray]:
+        """The next chunk ``(images, labels)``, waiting at most ``timeout`` seconds."""
+        raise NotImplementedError
+
+    def take(self, n: int, timeout: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
+        images, labels = [], []
+        while n > 0:
+            if self._images is None or self._pos >= len(self._images):
+                self._images, self._labels = self._fetch(timeout)
+                self._pos = 0
+            k = min(n, len(self._images) - self._pos)
+            images.append(self._images[self._pos : self._pos + k])
+            labels.append(self._labels[self._pos : self._pos + k])
+            self._pos += k
+            n -= k
+        return np.concatenate(images), np.concatenate(labels)
+
+
+class CropProducer(_ChunkReader):
     """A background process running :func:`crop_stream` into a bounded queue.
 
     ``take(n)`` returns exactly the next ``n`` crops of the stream (blocking), whatever the chunking.
@@ -236,12 +261,9 @@ class CropProducer:
                 os.environ.pop("LP_NUM_THREADS", None)
             else:
                 os.environ["LP_NUM_THREADS"] = env_before
-        self._images: np.ndarray | None = None
-        self._labels: np.ndarray | None = None
-        self._pos = 0
         self.wait_s = 0.0
 
-    def _next_chunk(self, timeout: float) -> None:
+    def _fetch(self, timeout: float) -> tuple[np.ndarray, np.ndarray]:
         t0 = time.monotonic()
         while True:
             try:
@@ -257,26 +279,13 @@ class CropProducer:
         self.wait_s += time.monotonic() - t0
         if isinstance(item[0], str):
             raise RuntimeError(f"crop producer failed: {item[1]}")
-        self._images, self._labels = item
-        self._pos = 0
+        return item
 
     def _died(self) -> RuntimeError:
         self._proc.join(timeout=10)
         code = self._proc.exitcode
         hint = " (killed: look for the out-of-memory killer; every producer holds its shard of the panoramas)" if code == -9 else ""
         return RuntimeError(f"crop producer died (exit code {code}){hint}")
-
-    def take(self, n: int, timeout: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
-        images, labels = [], []
-        while n > 0:
-            if self._images is None or self._pos >= len(self._images):
-                self._next_chunk(timeout)
-            k = min(n, len(self._images) - self._pos)
-            images.append(self._images[self._pos : self._pos + k])
-            labels.append(self._labels[self._pos : self._pos + k])
-            self._pos += k
-            n -= k
-        return np.concatenate(images), np.concatenate(labels)
 
     def close(self) -> None:
         if self._proc.is_alive():
@@ -308,7 +317,7 @@ def shard_source(source: PanoramaSource, index: int, count: int) -> PanoramaSour
     return replace(source, seeds=items[index::count])
 
 
-class CropProducers:
+class CropProducers(_ChunkReader):
     """Several :class:`CropProducer` processes behind one ``take``, each rendering its own shard.
 
     ``producers[i]`` must stream chunks of ``chunk`` crops and hold ``weights[i]`` panoramas. Whole
@@ -325,9 +334,6 @@ class CropProducers:
         self.weights = [int(w) for w in weights]
         self._credit = [0] * len(self.weights)
         self._chunk = chunk
-        self._images: np.ndarray | None = None
-        self._labels: np.ndarray | None = None
-        self._pos = 0
 
     @property
     def wait_s(self) -> float:
@@ -342,18 +348,8 @@ class CropProducers:
         self._credit[best] -= total
         return self.producers[best]
 
-    def take(self, n: int, timeout: float = 600.0) -> tuple[np.ndarray, np.ndarray]:
-        images, labels = [], []
-        while n > 0:
-            if self._images is None or self._pos >= len(self._images):
-                self._images, self._labels = self._next_producer().take(self._chunk, timeout=timeout)
-                self._pos = 0
-            k = min(n, len(self._images) - self._pos)
-            images.append(self._images[self._pos : self._pos + k])
-            labels.append(self._labels[self._pos : self._pos + k])
-            self._pos += k
-            n -= k
-        return np.concatenate(images), np.concatenate(labels)
+    def _fetch(self, timeout: float) -> tuple[np.ndarray, np.ndarray]:
+        return self._next_producer().take(self._chunk, timeout=timeout)
 
     def close(self) -> None:
         for p in self.producers:
