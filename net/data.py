@@ -94,6 +94,13 @@ class PanoramaSource:
     cache_dir: str | None = "data_cache"
     files: Sequence[str] = ()
 
+    def _items(self) -> list:
+        """The seeds, or the files for ``kind`` "files": one per panorama."""
+        return list(self.files if self.kind == "files" else self.seeds)
+
+    def __len__(self) -> int:
+        return len(self._items())
+
     def load(self) -> list[np.ndarray]:
         if self.kind == "stadium":
             return [stadium_panorama_cached(int(s), tuple(self.size), self.cache_dir) for s in self.seeds]
@@ -306,7 +313,7 @@ def shard_source(source: PanoramaSource, index: int, count: int) -> PanoramaSour
     The shards of ``0 .. count - 1`` partition the panoramas; their sizes differ by at most one.
     ``count`` may not exceed the number of panoramas (a shard would be empty).
     """
-    items = list(source.files if source.kind == "files" else source.seeds)
+    items = source._items()
     if not 0 <= index < count:
         raise ValueError(f"shard index {index} outside 0 .. {count - 1}")
     if count > len(items):

@@ -172,7 +172,7 @@ def start_producers(source: PanoramaSource, cfg: TrainConfig, rank: int, world: 
             part = shard_source(source, shard, count)
             producers.append(CropProducer(part, seed=cfg.seed * 1000 + shard + 7919 * step, out_size=out_size,
                                           chunk=cfg.producer_chunk, threads=cfg.producer_threads, paired=cfg.paired))
-            weights.append(len(part.files if part.kind == "files" else part.seeds))
+            weights.append(len(part))
     except BaseException:
         for started in producers:
             started.close()
@@ -270,13 +270,13 @@ def main(argv: list[str] | None = None) -> int:
         source.load()  # render + cache once before the producers start (they then read the cache)
     if distributed:
         dist.barrier()
-    log(f"{len(source.seeds)} training panoramas ready ({time.monotonic() - t0:.1f} s)")
+    log(f"{len(source)} training panoramas ready ({time.monotonic() - t0:.1f} s)")
     val = None
     if is_main and cfg.val_panoramas and cfg.val_size > 0:
         vsrc = panorama_source(cfg.val_panoramas, cfg.cache_dir)
         t0 = time.monotonic()
         val = render_test_set(vsrc, cfg.val_size, seed=10_000 + cfg.seed, out_size=model_cfg.input_size)
-        log(f"validation set: {len(val[0])} crops from {len(vsrc.seeds)} panoramas ({time.monotonic() - t0:.1f} s)")
+        log(f"validation set: {len(val[0])} crops from {len(vsrc)} panoramas ({time.monotonic() - t0:.1f} s)")
 
     producers = start_producers(source, cfg, rank, world, step, model_cfg.input_size)
     log(f"{len(producers.producers)} crop producer(s) on this rank, holding "

@@ -317,6 +317,7 @@ def test_shards_partition_the_panoramas():
     shards = [shard_source(source, i, 3) for i in range(3)]
     assert [s.seeds for s in shards] == [[10, 13, 16], [11, 14], [12, 15]]
     assert all(s.kind == "stadium" and s.size == (512, 256) for s in shards)
+    assert [len(s) for s in shards] == [3, 2, 2]
     files = shard_source(PanoramaSource(kind="files", files=["a.png", "b.png"]), 1, 2)
     assert list(files.files) == ["b.png"]
     with pytest.raises(ValueError, match="cannot split 7 panoramas into 8 shards"):
