@@ -291,7 +291,9 @@ class CropProducer(_ChunkReader):
     def _died(self) -> RuntimeError:
         self._proc.join(timeout=10)
         code = self._proc.exitcode
-        hint = " (killed: look for the out-of-memory killer; every producer holds its shard of the panoramas)" if code == -9 else ""
+        hint = ""
+        if code == -9:
+            hint = " (killed: look for the out-of-memory killer; every producer holds its shard of the panoramas)"
         return RuntimeError(f"crop producer died (exit code {code}){hint}")
 
     def close(self) -> None:

@@ -157,27 +157,31 @@ def save_checkpoint(path: Path, **state) -> None:
     os.replace(tmp, path)
 
 
-def start_producers(source: PanoramaSource, cfg: TrainConfig, rank: int, world: int, step: int,
-                    out_size: tuple[int, int]) -> CropProducers:
-    """This rank's crop producers: producer ``j`` renders shard ``rank * producers + j`` of the
-    ``world * producers`` shards of ``source`` with seed ``cfg.seed * 1000 + shard + 7919 * step``
-    (a resumed run never repeats the crops it has seen). With one producer and one rank this is
-    the single full-set producer of the runs made before producers were sharded: same stream."""
+def rank_shards(source: PanoramaSource, cfg: TrainConfig, rank: int, world: int) -> list[tuple[int, PanoramaSource]]:
+    """This rank's ``(shard index, panoramas)``: producer ``j`` gets shard ``rank * producers + j`` of
+    the ``world * producers`` shards of ``source`` (``ValueError`` when there are more shards than
+    panoramas)."""
     count = world * cfg.producers
+    first = rank * cfg.producers
+    return [(shard, shard_source(source, shard, count)) for shard in range(first, first + cfg.producers)]
+
+
+def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, step: int,
+                    out_size: tuple[int, int]) -> CropProducers:
+    """One crop producer per shard of :func:`rank_shards`, with seed ``cfg.seed * 1000 + shard +
+    7919 * step`` (a resumed run never repeats the crops it has seen). With one producer and one
+    rank this is the single full-set producer of the runs made before producers were sharded:
+    same stream."""
     producers: list[CropProducer] = []
-    weights: list[int] = []
     try:
-        for j in range(cfg.producers):
-            shard = rank * cfg.producers + j
-            part = shard_source(source, shard, count)
+        for shard, part in shards:
             producers.append(CropProducer(part, seed=cfg.seed * 1000 + shard + 7919 * step, out_size=out_size,
                                           chunk=cfg.producer_chunk, threads=cfg.producer_threads, paired=cfg.paired))
-            weights.append(len(part))
     except BaseException:
         for started in producers:
             started.close()
         raise
-    return CropProducers(producers, weights, cfg.producer_chunk)
+    return CropProducers(producers, [len(part) for _, part in shards], cfg.producer_chunk)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -211,6 +215,8 @@ def main(argv: list[str] | None = None) -> int:
         rank, world = dist.get_rank(), dist.get_world_size()
     else:
         rank, world = 0, 1
+    source = panorama_source(cfg.panoramas, cfg.cache_dir)
+    shards = rank_shards(source, cfg, rank, world)  # too many producers: an error before anything is written
     if cuda:
         local = int(os.environ.get("LOCAL_RANK", 0))
         torch.cuda.set_device(local)
@@ -264,7 +270,6 @@ def main(argv: list[str] | None = None) -> int:
     train_model = torch.nn.parallel.DistributedDataParallel(model) if distributed else model
     log(f"model {count_parameters(model)} parameters, input {model_cfg.input_size}, device {device}, world {world}")
 
-    source = panorama_source(cfg.panoramas, cfg.cache_dir)
     t0 = time.monotonic()
     if is_main:
         source.load()  # render + cache once before the producers start (they then read the cache)
@@ -278,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
         val = render_test_set(vsrc, cfg.val_size, seed=10_000 + cfg.seed, out_size=model_cfg.input_size)
         log(f"validation set: {len(val[0])} crops from {len(vsrc)} panoramas ({time.monotonic() - t0:.1f} s)")
 
-    producers = start_producers(source, cfg, rank, world, step, model_cfg.input_size)
+    producers = start_producers(shards, cfg, step, model_cfg.input_size)
     log(f"{len(producers.producers)} crop producer(s) on this rank, holding "
         f"{' + '.join(str(w) for w in producers.weights)} panoramas")
     rng = np.random.default_rng([cfg.seed, rank, step])

@@ -76,3 +76,14 @@ def test_grown_fine_tune_with_joint_loss_stops_early(tmp_path):
     assert "2 crop producer(s) on this rank, holding 1 + 1 panoramas" in proc.stdout
     state = torch.load(out / "last.pt", map_location="cpu", weights_only=False)
     assert state["step"] == 1
+
+
+def test_more_producers_than_panoramas_is_an_error_before_the_run_folder_exists(tmp_path):
+    from net.train import main
+
+    config = json.loads((ROOT / "net/configs/tiny.json").read_text())
+    config.update(producers=3)  # 2 panoramas
+    (tmp_path / "tiny.json").write_text(json.dumps(config))
+    with pytest.raises(ValueError, match="cannot split 2 panoramas into 3 shards"):
+        main(["--config", str(tmp_path / "tiny.json"), "--out", str(tmp_path / "run")])
+    assert not (tmp_path / "run").exists()
