@@ -1,33 +1,47 @@
-# glradial: two commands do all set-up on a fresh machine: `make demo` and `make test`.
-PY ?= python3
-STAMP := .setup.stamp
+# glradial: two commands do all set-up on a fresh Debian/Ubuntu machine: `make demo` and `make test`.
+# Everything goes into the project's own virtual environment (.venv), so a system Python that is
+# externally managed (PEP 668) is never touched. `make demo` installs the runtime dependencies only;
+# `make test` adds the test tools and torch (CPU build, for the training tests).
+SYSPY ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+RUNTIME_STAMP := $(VENV)/.runtime.stamp
+DEV_STAMP := $(VENV)/.dev.stamp
 
 .PHONY: setup system-deps demo test bench train evaluate clean
 
 system-deps:
 	@bash scripts/install_system_deps.sh
 
-$(STAMP): pyproject.toml scripts/install_system_deps.sh
+$(PY): scripts/install_system_deps.sh
 	@bash scripts/install_system_deps.sh
+	$(SYSPY) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+
+$(RUNTIME_STAMP): pyproject.toml $(PY)
+	$(PY) -m pip install --quiet -e .
+	@touch $@
+
+$(DEV_STAMP): pyproject.toml $(PY)
 	$(PY) -m pip install --quiet torch==2.13.0
 	$(PY) -m pip install --quiet -e ".[train,test,bench]"
-	@touch $(STAMP)
+	@touch $@ $(RUNTIME_STAMP)
 
-setup: $(STAMP)
+setup: $(DEV_STAMP)
 
-demo: $(STAMP)
+demo: $(RUNTIME_STAMP)
 	$(PY) -m glradial demo --out out/demo
 
-test: $(STAMP)
+test: $(DEV_STAMP)
 	$(PY) -m pytest -q tests
 
-bench: $(STAMP)
+bench: $(DEV_STAMP)
 	$(PY) bench/bench_correct.py
 	$(PY) bench/bench_crops.py
 	$(PY) bench/bench_stadium.py
 	$(PY) bench/bench_estimate.py
 
-train: $(STAMP)
+train: $(DEV_STAMP)
 	$(PY) -m net.data --split train --n 80 --split val --n 4 --split test --n 8 --size 4096 2048
 	$(PY) -m net.train --config net/configs/shipped.json --out runs/shipped
 	$(PY) -m net.train --config net/configs/finetune_192.json --out runs/ft192 --init runs/shipped/best.pt
@@ -41,8 +55,8 @@ train: $(STAMP)
 	$(PY) -m net.train --config net/configs/gpu_384.json --out runs/gpu384 --init runs/extend384/best.pt --steps 11809 --time-budget-s 0
 	$(PY) -m net.train --config net/configs/gpu_384_polish.json --out runs/gpu384b --init runs/gpu384/last.pt --steps 3485 --time-budget-s 0
 
-evaluate: $(STAMP)
+evaluate: $(DEV_STAMP)
 	$(PY) -m net.evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval
 
 clean:
-	rm -rf $(STAMP) out build dist *.egg-info .pytest_cache
+	rm -rf $(VENV) out build dist *.egg-info .pytest_cache

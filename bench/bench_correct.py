@@ -22,7 +22,7 @@ import time
 import cv2
 import numpy as np
 
-from glradial import correct, glcontext, remap
+from glradial import correct, egl, remap
 from glradial.lens import Lens
 
 K1, K2 = -0.3, 0.06
@@ -77,8 +77,8 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads is not None:
         cv2.setNumThreads(args.threads)
-    ctx = glcontext.thread_context()
-    print(f"GL renderer: {glcontext.renderer_name(ctx)}; auto backend -> {remap.auto_backend()}; "
+    ctx = egl.thread_context()
+    print(f"GL renderer: {egl.renderer_name(ctx)}; auto backend -> {remap.auto_backend()}; "
           f"OpenCV {cv2.__version__} with {cv2.getNumThreads()} threads; lens k1={K1}, k2={K2}")
     sizes = [(1280, 720), (1920, 1080)] + ([(3840, 2160)] if args.uhd else [])
     rng = np.random.default_rng(0)

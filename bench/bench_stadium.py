@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from glradial.glcontext import renderer_name, thread_context
+from glradial.egl import renderer_name, thread_context
 from glradial.stadium import StadiumRenderer
 from glradial.stadium_style import sample_style
 

@@ -15,7 +15,7 @@ __version__ = "0.1.0"
 #: public name -> module (relative to the package) that defines it
 _EXPORTS = {
     "Lens": "lens",
-    "GLUnavailableError": "glcontext",
+    "GLUnavailableError": "egl",
     "ShaderCompileError": "shaderlib",
     "correct": "remap",
     "distort": "remap",

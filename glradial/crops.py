@@ -31,6 +31,7 @@ import numpy as np
 from . import lensfuncs
 from .inverse_series import SERIES_DEGREE, fit_inverse_series
 from .lens import Lens, corner_radius, frame_size, real_number
+from .metrics import PAPER_SIZE, manifold_k2
 
 InverseMethod = Literal["exact", "drap"]
 
@@ -44,13 +45,6 @@ PAPER_RANGES: Mapping[str, tuple[float, float]] = {
 }
 #: Standard deviation of k2 around the Lopez-Antequera manifold (the paper's).
 K2_NOISE = 0.02
-#: Frame geometry of the paper's crops (W, H).
-PAPER_SIZE = (1280, 720)
-
-
-def manifold_k2(k1: float | np.ndarray) -> float | np.ndarray:
-    """Lopez-Antequera manifold of real lenses: ``k2 = 0.019 k1 + 0.805 k1²``."""
-    return 0.019 * k1 + 0.805 * k1 * k1
 
 
 @dataclass(frozen=True)
@@ -361,7 +355,7 @@ class CropRenderer:
         series_inverse: bool = True,
         ctx: object | None = None,
     ) -> None:
-        from .glcontext import max_texture_size, thread_context
+        from .egl import max_texture_size, thread_context
 
         self.size = frame_size(size)
         self.out_size = frame_size(out_size) if out_size is not None else self.size
@@ -539,7 +533,7 @@ class CropRenderer:
 
     def release(self) -> None:
         """Free the GL objects (idempotent)."""
-        from .glcontext import release_objects
+        from .egl import release_objects
 
         objects, self._objects = getattr(self, "_objects", []), []
         if objects:

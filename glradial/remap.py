@@ -44,7 +44,7 @@ import cv2
 import moderngl
 import numpy as np
 
-from . import glcontext
+from . import egl
 from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
 from .shaderlib import build_program
 
@@ -147,8 +147,8 @@ class Remapper:
 
     def __init__(self, ctx: moderngl.Context | None = None) -> None:
         self._owns_context = ctx is None
-        self.ctx: moderngl.Context = glcontext.create_context() if ctx is None else ctx
-        self.max_texture_size = glcontext.max_texture_size(self.ctx)
+        self.ctx: moderngl.Context = egl.create_context() if ctx is None else ctx
+        self.max_texture_size = egl.max_texture_size(self.ctx)
         self._programs: dict[tuple[str, str, str], tuple[moderngl.Program, moderngl.VertexArray]] = {}
         self._frame_key: tuple[int, int, int, np.dtype] | None = None
         self._source: moderngl.Texture | None = None
@@ -235,7 +235,7 @@ class Remapper:
             return
         self._release_frame_objects()
         for program, vao in self._programs.values():
-            glcontext.release_objects(self.ctx, vao, program)
+            egl.release_objects(self.ctx, vao, program)
         self._programs.clear()
         if self._owns_context:
             self.ctx.release()
@@ -273,7 +273,7 @@ class Remapper:
         return entry
 
     def _release_frame_objects(self) -> None:
-        glcontext.release_objects(self.ctx, self._fbo, self._target, self._source)
+        egl.release_objects(self.ctx, self._fbo, self._target, self._source)
         self._fbo = self._target = self._source = None
         self._frame_key = None
 
@@ -292,7 +292,7 @@ class Remapper:
             # read back 3 components (glReadPixels converts).
             if channels != 3:
                 raise
-            glcontext.release_objects(self.ctx, self._target)
+            egl.release_objects(self.ctx, self._target)
             self._target = self.ctx.texture((width, height), 4, dtype=texture_dtype, alignment=1)
             self._fbo = self.ctx.framebuffer(color_attachments=[self._target])
         self._frame_key = key
@@ -417,11 +417,11 @@ _auto_choice: dict[int, str] = {}
 
 
 def _thread_remapper() -> Remapper:
-    """The calling thread's Remapper on :func:`glcontext.thread_context` (one per thread and process)."""
+    """The calling thread's Remapper on :func:`egl.thread_context` (one per thread and process)."""
     pid = os.getpid()
     remapper = getattr(_local, "remapper", None)
     if remapper is None or getattr(_local, "pid", None) != pid:
-        _local.remapper = Remapper(glcontext.thread_context())
+        _local.remapper = Remapper(egl.thread_context())
         _local.pid = pid
     return _local.remapper
 
@@ -434,11 +434,11 @@ def auto_backend() -> str:
         choice = _auto_choice.get(pid)
     if choice is None:
         try:
-            ctx = glcontext.thread_context()
-        except glcontext.GLUnavailableError:
+            ctx = egl.thread_context()
+        except egl.GLUnavailableError:
             choice = "cpu"
         else:
-            choice = "cpu" if glcontext.is_software_renderer(ctx) else "gl"
+            choice = "cpu" if egl.is_software_renderer(ctx) else "gl"
         with _auto_lock:
             _auto_choice[pid] = choice
     return choice

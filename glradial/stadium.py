@@ -22,7 +22,7 @@ from typing import Any
 import moderngl
 import numpy as np
 
-from .glcontext import check_gl_error, max_texture_size, release_objects, thread_context
+from .egl import check_gl_error, max_texture_size, release_objects, thread_context
 from .shaderlib import build_program
 from .stadium_style import (
     HALF_LENGTH,

@@ -36,51 +36,26 @@ from pathlib import Path
 
 import numpy as np
 
-from glradial.crops import manifold_k2
-from glradial.lens import corner_radius
+from glradial.metrics import (
+    BOOTSTRAP_DRAWS,
+    CORNER_RADIUS_16_9,
+    REPORT_WIDTH,
+    distortion_loss,
+    manifold_k2,
+    max_displacement_px,
+    median_interval,
+    radial_map,
+)
 
-#: Width (pixels) at which displacement errors are reported, and the 16:9 corner radius.
-REPORT_WIDTH = 1920
-CORNER_RADIUS_16_9 = corner_radius((16, 9))
-LOSS_RADII = np.linspace(0.0, 0.7, 64)
-DISPLACEMENT_RADII = np.linspace(0.0, CORNER_RADIUS_16_9, 256)
-#: Resamples behind ``median_max_px_ci95``.
-BOOTSTRAP_DRAWS = 1000
 #: Mean (k1, k2) of the paper's training distribution: k1 ~ U[-0.7, 0.3] -> -0.2;
 #: E[k2] = 0.019 E[k1] + 0.805 E[k1^2] = 0.019 (-0.2) + 0.805 (0.04 + 1/12) = 0.0955.
 TRAINING_MEAN = (-0.2, 0.019 * -0.2 + 0.805 * (0.04 + 1.0 / 12.0))
-
-
-def radial_map(r: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """``P(r, k) = r (1 + k1 r^2 + k2 r^4)`` for ``k`` N x 2 -> N x len(r) (float64)."""
-    k = np.asarray(k, np.float64)
-    r2 = r * r
-    return r * (1.0 + k[:, :1] * r2 + k[:, 1:2] * r2 * r2)
-
-
-def distortion_loss(y: np.ndarray, y_hat: np.ndarray) -> np.ndarray:
-    """Per-sample DL (sum over :data:`LOSS_RADII`), the NumPy twin of :func:`net.loss.distortion_loss`."""
-    d = radial_map(LOSS_RADII, y) - radial_map(LOSS_RADII, y_hat)
-    return (d * d).sum(axis=1)
-
-
-def max_displacement_px(y: np.ndarray, y_hat: np.ndarray, width: int = REPORT_WIDTH) -> np.ndarray:
-    """``width * max_{r <= 0.5737} |P(r, y) - P(r, y_hat)|`` per sample (pixels)."""
-    return width * np.abs(radial_map(DISPLACEMENT_RADII, y) - radial_map(DISPLACEMENT_RADII, y_hat)).max(axis=1)
 
 
 def method_b(pred: np.ndarray) -> np.ndarray:
     """The net's k1 with ``k2`` from the manifold."""
     pred = np.asarray(pred, np.float64)
     return np.stack([pred[:, 0], manifold_k2(pred[:, 0])], axis=1)
-
-
-def median_interval(values: np.ndarray, draws: int = BOOTSTRAP_DRAWS, seed: int = 0) -> list[float]:
-    """95 % percentile-bootstrap interval ``[lo, hi]`` of the median of ``values``."""
-    values = np.asarray(values, np.float64)
-    resamples = np.random.default_rng(seed).integers(0, len(values), size=(draws, len(values)))
-    lo, hi = np.percentile(np.median(values[resamples], axis=1), [2.5, 97.5])
-    return [float(lo), float(hi)]
 
 
 def deviation_correlation(pred: np.ndarray, labels: np.ndarray) -> float | None:

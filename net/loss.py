@@ -21,13 +21,12 @@ from __future__ import annotations
 
 import torch
 
-from glradial.lens import corner_radius
+from glradial.metrics import CORNER_RADIUS_16_9, LOSS_R_MAX
 
 #: Default number of radii and largest radius of the loss (lens units).
 LOSS_SAMPLES = 64
-LOSS_R_MAX = 0.7
-#: Corner radius of a 16:9 frame in lens units (0.5737).
-CORNER_RADIUS = corner_radius((16, 9))
+#: Corner radius of a 16:9 frame in lens units.
+CORNER_RADIUS = CORNER_RADIUS_16_9
 
 
 def loss_radii(samples: int = LOSS_SAMPLES, r_max: float = LOSS_R_MAX, *, device=None, dtype=torch.float32) -> torch.Tensor:
@@ -70,7 +69,7 @@ def training_loss(
     return loss
 
 
-def max_displacement(y: torch.Tensor, y_hat: torch.Tensor, r_max: float = 0.5737, samples: int = 256) -> torch.Tensor:
+def max_displacement(y: torch.Tensor, y_hat: torch.Tensor, r_max: float = CORNER_RADIUS_16_9, samples: int = 256) -> torch.Tensor:
     """``max_{r <= r_max} |P(r, y) - P(r, y_hat)|`` in lens units (image widths) -> shape ``N``."""
     radii = torch.linspace(0.0, r_max, samples, device=y.device, dtype=y.dtype)
     return (radial_map(radii, y) - radial_map(radii, y_hat)).abs().amax(dim=1)

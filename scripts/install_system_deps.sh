@@ -1,15 +1,28 @@
 #!/usr/bin/env bash
-# Installs the system libraries glradial needs for headless OpenGL (EGL + Mesa llvmpipe) where they
-# are missing. Debian/Ubuntu only; elsewhere it says what to install and carries on.
+# Installs what glradial needs from the system where it is missing (Debian/Ubuntu): the headless
+# OpenGL libraries (EGL + Mesa llvmpipe), Python's venv module (Debian ships it separately), and the
+# ffmpeg command the video tests compare against. Elsewhere it says what to install and carries on.
 set -eu
-if ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' && ldconfig -p 2>/dev/null | grep -q 'libEGL_mesa.so.0' \
-   && ldconfig -p 2>/dev/null | grep -q 'libGL.so.1'; then
-  exit 0
+PYTHON="${SYSPY:-python3}"
+need=()
+ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' || need+=(libegl1)
+ldconfig -p 2>/dev/null | grep -q 'libEGL_mesa.so.0' || need+=(libegl-mesa0 libgl1-mesa-dri)
+ldconfig -p 2>/dev/null | grep -q 'libGL.so.1' || need+=(libgl1)
+command -v ffmpeg >/dev/null 2>&1 || need+=(ffmpeg)
+if ! "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1; then
+  ver=$("$PYTHON" -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')
+  need+=(python3-venv "python${ver}-venv")
 fi
+[ ${#need[@]} -eq 0 ] && exit 0
 if command -v apt-get >/dev/null 2>&1; then
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
   $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 >/dev/null
+  # pythonX.Y-venv may not exist as a separate package on every release: install what exists.
+  avail=()
+  for p in "${need[@]}"; do
+    if apt-cache show "$p" >/dev/null 2>&1; then avail+=("$p"); fi
+  done
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${avail[@]}" >/dev/null
 else
-  echo "glradial: install EGL and Mesa (libEGL.so.1, libEGL_mesa.so.0, libGL.so.1) with your package manager" >&2
+  echo "glradial: please install ${need[*]} (EGL, Mesa, ffmpeg, Python venv) with your package manager" >&2
 fi

@@ -17,7 +17,7 @@ import pytest
 import glradial
 from glradial import Lens
 from glradial.cli import build_parser, main
-from glradial.video import VideoReader, VideoWriter, probe_video, read_image, write_image
+from glradial.media_io import VideoReader, VideoWriter, probe_video, read_image, write_image
 
 from conftest import DATA
 
@@ -130,7 +130,7 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
 
         return estimate
 
-    monkeypatch.setattr("glradial.auto.default_estimator", fake_estimator)
+    monkeypatch.setattr("glradial.video_pipeline.default_estimator", fake_estimator)
     source, out = tmp_path / "in.mkv", tmp_path / "out.mkv"
     _pan_video(source, field_panorama, n=n, fps=25, cut=cut, marker=True, lenses=truth)
     assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--window", "0.5", "--backend", "cpu"]) == 0
@@ -159,7 +159,7 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr("glradial.auto.default_estimator", lambda model=None: (lambda frame: Lens(-0.2, 0.03)))
+    monkeypatch.setattr("glradial.video_pipeline.default_estimator", lambda model=None: (lambda frame: Lens(-0.2, 0.03)))
     source, out = tmp_path / "in.png", tmp_path / "out.png"
     write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
     assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0
@@ -350,9 +350,9 @@ def test_correct_auto_with_an_onnx_model(tmp_path, capsys):
 
 
 def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
-    """The video hook of 'glradial estimate' (glradial.auto.estimate_video): shots found, every
+    """The video hook of 'glradial estimate' (glradial.video_pipeline.estimate_video): shots found, every
     frame gets the model's lens, JSON and CSV sidecars agree."""
-    from glradial.auto import LensTrack, estimate_video, track_report
+    from glradial.video_pipeline import LensTrack, estimate_video, track_report
 
     model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
     source = tmp_path / "cut.mp4"
@@ -394,7 +394,7 @@ def test_estimate_command_on_a_video_prints_shots(tmp_path, field_panorama, caps
 
 
 def test_estimate_command_bad_images_get_one_line(tmp_path, capsys):
-    """Missing and corrupt images (read by glradial.video.read_image) get one named error line."""
+    """Missing and corrupt images (read by glradial.media_io.read_image) get one named error line."""
     model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
     assert main(["estimate", str(tmp_path / "missing.png"), "--model", str(model)]) == 1
     assert "missing.png" in _error_line(capsys)

@@ -221,9 +221,9 @@ def test_identity_lens_is_exact(ctx):
 
 
 def test_auto_backend_decision(ctx):
-    from glradial import glcontext, remap
+    from glradial import egl, remap
 
-    expected = "cpu" if glcontext.is_software_renderer(ctx) else "gl"
+    expected = "cpu" if egl.is_software_renderer(ctx) else "gl"
     assert remap.auto_backend() == expected
     image = np.zeros((20, 30, 3), np.uint8)
     assert correct(image, -0.1, 0.0).shape == image.shape
@@ -233,7 +233,7 @@ def test_render_texture_embeds_in_a_callers_pipeline(ctx, photos):
     """A caller's texture drawn into a caller's framebuffer (no CPU round trip) gives what
     correct() returns; a viewport draws into part of a larger framebuffer."""
     from glradial import Remapper
-    from glradial.glcontext import release_objects
+    from glradial.egl import release_objects
 
     image = photos["road"]
     h, w = image.shape[:2]

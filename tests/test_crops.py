@@ -324,7 +324,7 @@ def test_out_size_is_area_filtered_frame(ctx, supersample) -> None:
 
 
 def test_oversized_panorama_is_downscaled_with_warning(ctx, monkeypatch) -> None:
-    import glradial.glcontext as glc
+    import glradial.egl as glc
 
     monkeypatch.setattr(glc, "max_texture_size", lambda c: 256)
     pano = np.zeros((256, 512, 3), np.uint8)

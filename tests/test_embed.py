@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.glcontext import release_objects
+from glradial.egl import release_objects
 from glradial.shaderlib import shader_path
 
 ROOT = Path(__file__).resolve().parent.parent

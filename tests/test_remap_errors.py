@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial import Lens, Remapper, correct, distort, glcontext, remap
+from glradial import Lens, Remapper, correct, distort, egl, remap
 
 FRAME = np.zeros((18, 32, 3), np.uint8)
 
@@ -96,7 +96,7 @@ def test_unknown_backend():
 def test_frame_over_the_texture_limit(ctx):
     """A frame wider than GL_MAX_TEXTURE_SIZE: backend='gl' refuses naming the limit, without
     allocating the frame's texture; 'cpu' and 'auto' still work (a 1-row strip keeps it small)."""
-    limit = glcontext.max_texture_size(ctx)
+    limit = egl.max_texture_size(ctx)
     wide = np.zeros((1, limit + 1), np.uint8)
     with pytest.raises(ValueError, match=f"exceeds this GL driver's texture limit of {limit}"):
         correct(wide, -0.01, 0.0, backend="gl")
@@ -155,24 +155,24 @@ def test_released_remapper_refuses(ctx):
 
 
 def test_egl_unavailable_names_library_and_cpu_still_works(ctx, monkeypatch):
-    with pytest.raises(glcontext.GLUnavailableError) as info:
-        glcontext.create_context(libegl="libnonexistent.so")
+    with pytest.raises(egl.GLUnavailableError) as info:
+        egl.create_context(libegl="libnonexistent.so")
     message = str(info.value)
     assert isinstance(info.value, ValueError), "bad environment must reach callers that catch ValueError"
-    assert "libnonexistent.so" in message and glcontext.EGL_PACKAGES in message and "backend='cpu'" in message
+    assert "libnonexistent.so" in message and egl.EGL_PACKAGES in message and "backend='cpu'" in message
 
     def no_egl():
-        raise glcontext.GLUnavailableError("cannot create a headless OpenGL context through EGL (libEGL.so.1)")
+        raise egl.GLUnavailableError("cannot create a headless OpenGL context through EGL (libEGL.so.1)")
 
     # a fresh process state: no cached auto decision, no per-thread Remapper, EGL missing
-    monkeypatch.setattr(glcontext, "thread_context", no_egl)
+    monkeypatch.setattr(egl, "thread_context", no_egl)
     monkeypatch.setattr(remap, "_auto_choice", {})
     monkeypatch.setattr(remap, "_local", threading.local())
     image = np.random.default_rng(0).integers(0, 256, (18, 32, 3), dtype=np.uint8)
     expected = correct(image, -0.2, 0.0, backend="cpu")
     assert np.array_equal(correct(image, -0.2, 0.0), expected)  # auto falls back to the CPU
     assert remap.auto_backend() == "cpu"
-    with pytest.raises(glcontext.GLUnavailableError, match="libEGL.so.1"):
+    with pytest.raises(egl.GLUnavailableError, match="libEGL.so.1"):
         correct(image, -0.2, 0.0, backend="gl")
 
 

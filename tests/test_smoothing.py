@@ -96,7 +96,7 @@ def _pan_frames(panorama: np.ndarray, x0: int, y0: int, n: int, step: int, windo
 def test_cut_detected_in_a_synthetic_video(field_panorama, tmp_path):
     """A slow pan over the real field panorama (4 px of panorama per frame), then a cut to another
     part of it, written to and read back from an .mp4: exactly one cut, at the right frame."""
-    from glradial.video import VideoReader, VideoWriter
+    from glradial.media_io import VideoReader, VideoWriter
 
     pano = field_panorama
     shot_a = _pan_frames(pano, 200, 420, 18, 4)
@@ -149,9 +149,9 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     if not default_model_path().is_file():
         pytest.skip("no bundled model (glradial/models/glradial_k1k2.onnx) yet")
     import glradial
-    from glradial.auto import default_estimator, track_video
+    from glradial.video_pipeline import default_estimator, track_video
     from glradial.crops import CropParams, render_crops
-    from glradial.video import VideoWriter
+    from glradial.media_io import VideoWriter
 
     n, cut = 36, 24
     k1 = np.where(np.arange(n) < cut, np.linspace(-0.35, -0.25, n), -0.05)

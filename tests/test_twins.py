@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from glradial import lensfuncs
-from glradial.glcontext import release_objects
+from glradial.egl import release_objects
 from glradial.shaderlib import preprocess
 
 PROBE_MAIN = """

@@ -59,7 +59,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def _check_paths(args: argparse.Namespace) -> tuple[str, str]:
-    from ..video import media_kind
+    from ..media_io import media_kind
 
     source, target = Path(args.input), Path(args.output)
     if not source.exists():
@@ -91,13 +91,13 @@ def run(args: argparse.Namespace) -> int:
 
     if kind == "image":
         from ..remap import correct
-        from ..video import read_image, write_image
+        from ..media_io import read_image, write_image
 
         if args.sidecar is not None:
             raise UsageError("--sidecar is for videos")
         image = read_image(args.input, order="rgb")
         if args.auto:
-            from ..auto import default_estimator, rgb8_for_estimator
+            from ..video_pipeline import default_estimator, rgb8_for_estimator
 
             k1, k2 = _pair(default_estimator(args.model)(rgb8_for_estimator(image)))
             print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}")
@@ -106,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
         write_image(args.output, correct(image, k1, k2, **options), order="rgb")
         return 0
 
-    from ..auto import correct_video
+    from ..video_pipeline import correct_video
 
     if not args.auto:
         k1, k2 = args.k1 or 0.0, args.k2 or 0.0
@@ -116,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
         correct_video(args.input, args.output, lambda _i: (k1, k2), progress=progress, **options)
         return 0
 
-    from ..auto import default_estimator, rgb8_for_estimator, track_video
+    from ..video_pipeline import default_estimator, rgb8_for_estimator, track_video
     from ..atomic import check_output_folder
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")

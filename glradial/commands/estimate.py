@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..video import media_kind, read_image
+from ..media_io import media_kind, read_image
 from . import positive_int
 
 DESCRIPTION = """\
@@ -36,13 +36,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..auto import rgb8_for_estimator
+    from ..video_pipeline import rgb8_for_estimator
     from ..estimator import Estimator
 
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:
         if media_kind(path) == "video":
-            from ..auto import estimate_video, track_report
+            from ..video_pipeline import estimate_video, track_report
 
             track = estimate_video(path, model=args.model, every=args.every)
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)

@@ -36,7 +36,7 @@ from .atomic import atomic_write_text
 from .lens import Lens, corner_radius
 from .progress import Progress
 from .smoothing import ShotDetector, lens_distance, smooth_track
-from .video import VideoReader, VideoWriter
+from .media_io import VideoReader, VideoWriter
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator"]
 

@@ -1,4 +1,4 @@
-"""glradial.video and glradial.atomic: bit depth, channel order, fps/size/frame count, atomic writes,
+"""glradial.media_io and glradial.atomic: bit depth, channel order, fps/size/frame count, atomic writes,
 clear errors on bad files."""
 
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from glradial.atomic import atomic_path, atomic_write_text
-from glradial.video import (
+from glradial.media_io import (
     VideoReader,
     VideoWriter,
     media_kind,
