@@ -18,8 +18,10 @@ outside colour there).
 (the same as :func:`glradial.correct`). ``direction="distort"``: applying it to an undistorted
 render (CG, graphics) yields the distorted frame (the same as :func:`glradial.distort`).
 
-Files: ``.tif``/``.tiff`` = 32-bit float RGB TIFF (OpenCV's writer; EXR is not available without
-extra libraries), ``.npy`` = the same ``H x W x 3`` float32 array (R, G, B order).
+Files: ``.exr`` = OpenEXR with 32-bit float R, G, B channels, ZIP-compressed (lossless; what Nuke,
+Natron and Gyroflow load; written with the OpenEXR project's own Python bindings),
+``.tif``/``.tiff`` = uncompressed 32-bit float RGB TIFF (OpenCV's writer), ``.npy`` = the same
+``H x W x 3`` float32 array (R, G, B order).
 """
 
 from __future__ import annotations
@@ -32,12 +34,13 @@ import numpy as np
 from .atomic import atomic_path, check_output_folder
 from .lens import NO_SOURCE, Lens
 
-__all__ = ["STMAP_NO_SOURCE", "stmap_from_maps", "maps_from_stmap", "lens_stmap", "write_stmap", "read_stmap"]
+__all__ = ["STMAP_EXTENSIONS", "STMAP_NO_SOURCE", "check_stmap_path", "stmap_from_maps", "maps_from_stmap", "lens_stmap", "write_stmap", "read_stmap"]
 
 #: S and T of output pixels without a source
 STMAP_NO_SOURCE = -1.0
 
-STMAP_EXTENSIONS = (".tif", ".tiff", ".npy")
+#: file extensions :func:`write_stmap` and :func:`read_stmap` handle
+STMAP_EXTENSIONS = (".exr", ".tif", ".tiff", ".npy")
 
 
 def stmap_from_maps(map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
@@ -86,14 +89,19 @@ def lens_stmap(
     return stmap_from_maps(map_x, map_y)
 
 
-def write_stmap(path: str | os.PathLike, stmap: np.ndarray) -> Path:
-    """Write an STMap atomically as a float32 RGB TIFF (``.tif``/``.tiff``) or ``.npy``."""
-    import cv2
+def check_stmap_path(path: str | os.PathLike) -> Path:
+    """``path`` as a :class:`Path` if its extension is one of :data:`STMAP_EXTENSIONS`, else ``ValueError``."""
+    target = Path(path)
+    if target.suffix.lower() not in STMAP_EXTENSIONS:
+        known = ", ".join(STMAP_EXTENSIONS)
+        raise ValueError(f"unknown STMap extension {target.suffix or '(none)'!r} of {str(target)!r}; use {known}")
+    return target
 
-    target = check_output_folder(path)
+
+def write_stmap(path: str | os.PathLike, stmap: np.ndarray) -> Path:
+    """Write an STMap atomically: ``.exr`` (float32 R, G, B, ZIP), float32 RGB TIFF or ``.npy``."""
+    target = check_output_folder(check_stmap_path(path))
     ext = target.suffix.lower()
-    if ext not in STMAP_EXTENSIONS:
-        raise ValueError(f"unknown STMap extension {ext or '(none)'!r} of {str(target)!r}; use .tif, .tiff or .npy")
     stmap = np.asarray(stmap, dtype=np.float32)
     if stmap.ndim != 3 or stmap.shape[2] != 3:
         raise ValueError(f"an STMap must be H×W×3, got shape {stmap.shape}")
@@ -101,7 +109,11 @@ def write_stmap(path: str | os.PathLike, stmap: np.ndarray) -> Path:
         if ext == ".npy":
             with open(tmp, "wb") as handle:
                 np.save(handle, stmap)
+        elif ext == ".exr":
+            _write_exr(tmp, stmap)
         else:
+            import cv2
+
             ok, encoded = cv2.imencode(".tiff", np.ascontiguousarray(stmap[..., ::-1]))  # OpenCV writes BGR
             if not ok:
                 raise OSError(f"OpenCV could not encode a float TIFF for {str(target)!r}")
@@ -109,15 +121,45 @@ def write_stmap(path: str | os.PathLike, stmap: np.ndarray) -> Path:
     return target
 
 
+def _write_exr(path: Path, stmap: np.ndarray) -> None:
+    """Scanline OpenEXR, one float32 channel each for R, G, B, ZIP compression (16-line blocks)."""
+    import OpenEXR
+
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    channels = {name: np.ascontiguousarray(stmap[..., i]) for i, name in enumerate("RGB")}
+    with OpenEXR.File(header, channels) as exr:
+        exr.write(str(path))
+
+
+def _read_exr(source: Path) -> np.ndarray:
+    import OpenEXR
+
+    try:
+        with OpenEXR.File(str(source), separate_channels=True) as exr:
+            channels = exr.channels()
+            missing = [name for name in "RGB" if name not in channels]
+            if missing:
+                raise ValueError(f"EXR STMap {str(source)!r} lacks channel(s) {', '.join(missing)} (has {', '.join(sorted(channels))})")
+            planes = [np.asarray(channels[name].pixels, dtype=np.float32) for name in "RGB"]
+    except ValueError:
+        raise
+    except Exception as err:  # the bindings raise RuntimeError/OSError for unreadable files
+        raise ValueError(f"cannot read {str(source)!r} as an EXR STMap: {err}") from None
+    return np.stack(planes, axis=-1)
+
+
 def read_stmap(path: str | os.PathLike) -> np.ndarray:
     """Read an STMap written by :func:`write_stmap` (``H x W x 3`` float32, R, G, B order)."""
-    import cv2
-
-    source = Path(path)
+    source = check_stmap_path(path)
     if not source.is_file():
         raise FileNotFoundError(f"STMap file {str(source)!r} does not exist")
-    if source.suffix.lower() == ".npy":
+    ext = source.suffix.lower()
+    if ext == ".npy":
         return np.load(source).astype(np.float32)
+    if ext == ".exr":
+        return _read_exr(source)
+    import cv2
+
     image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
     if image is None or image.ndim != 3:
         raise ValueError(f"cannot read {str(source)!r} as a 3-channel float STMap")

@@ -3,13 +3,16 @@ cv2.undistort as an independent oracle."""
 
 from __future__ import annotations
 
+import shutil
+import subprocess
+
 import cv2
 import numpy as np
 import pytest
 
 from glradial import Lens
 from glradial.cli import main
-from glradial.stmap import STMAP_NO_SOURCE, lens_stmap, maps_from_stmap, read_stmap
+from glradial.stmap import STMAP_NO_SOURCE, lens_stmap, maps_from_stmap, read_stmap, write_stmap
 
 SIZE = (96, 54)
 
@@ -38,7 +41,7 @@ def test_identity_stmap_is_the_nuke_identity(tmp_path):
 
 @pytest.mark.parametrize("direction", ["undistort", "distort"])
 @pytest.mark.parametrize("fit", ["same", "crop"])
-@pytest.mark.parametrize("ext", [".tif", ".npy"])
+@pytest.mark.parametrize("ext", [".exr", ".tif", ".npy"])
 def test_stmap_file_matches_lens_maps(tmp_path, direction, fit, ext):
     k1, k2 = -0.3, 0.07
     out = tmp_path / f"m{ext}"
@@ -90,11 +93,44 @@ def test_pixels_without_source_are_marked():
 
 
 def test_stmap_bad_input(tmp_path, capsys):
-    assert main(["stmap", "--k1", "0.1", "--size", "96x54", "--out", str(tmp_path / "m.exr")]) == 1
-    assert "unknown STMap extension '.exr'" in capsys.readouterr().err
+    assert main(["stmap", "--k1", "0.1", "--size", "96x54", "--out", str(tmp_path / "m.png")]) == 1
+    assert "unknown STMap extension '.png'" in capsys.readouterr().err
     assert main(["stmap", "--k1", "0.1", "--size", "96by54", "--out", str(tmp_path / "m.tif")]) == 2
     assert "WIDTHxHEIGHT" in capsys.readouterr().err
     assert main(["stmap", "--k1", "-2", "--k2", "0", "--size", "96x54", "--out", str(tmp_path / "m.tif")]) == 1
     assert "folds over" in capsys.readouterr().err
     assert main(["stmap", "--k1", "nan", "--size", "96x54", "--out", str(tmp_path / "m.tif")]) == 2
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg command (installed by make's set-up)")
+def test_exr_stmap_decodes_in_ffmpeg_as_written(tmp_path):
+    """An independent EXR decoder (FFmpeg's) reads the same float32 S, T, B planes: proof that the
+    file is a standard float EXR, not just something our own reader round-trips."""
+    stmap = lens_stmap(Lens(-0.3, 0.07), (96, 54))
+    out = tmp_path / "m.exr"
+    write_stmap(out, stmap)
+    raw = subprocess.run(
+        ["ffmpeg", "-v", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "gbrpf32le", "-"],
+        check=True, capture_output=True,
+    ).stdout
+    planes = np.frombuffer(raw, dtype="<f4").reshape(3, 54, 96)  # planar G, B, R
+    decoded = np.stack([planes[2], planes[0], planes[1]], axis=-1)
+    np.testing.assert_array_equal(decoded, stmap)  # float32 in, float32 out: lossless, bit-exact
+
+
+def test_exr_stmap_is_compressed(tmp_path):
+    """ZIP compression: the smooth S, T ramps of a 1080p map take far less than the 24.9 MB of raw
+    float32 RGB (the TIFF writer stores them uncompressed)."""
+    stmap = lens_stmap(Lens(-0.25, 0.05), (1920, 1080))
+    exr = write_stmap(tmp_path / "m.exr", stmap)
+    tif = write_stmap(tmp_path / "m.tif", stmap)
+    assert exr.stat().st_size < 0.6 * tif.stat().st_size
+    np.testing.assert_array_equal(read_stmap(exr), stmap)
+
+
+def test_read_stmap_rejects_a_broken_exr(tmp_path):
+    bad = tmp_path / "bad.exr"
+    bad.write_bytes(b"not an exr file at all")
+    with pytest.raises(ValueError, match="bad.exr"):
+        read_stmap(bad)

@@ -12,8 +12,9 @@ green (T) channels give, for each output pixel, the source position to sample, w
 convention: S = (x + 0.5) / W, T = 1 - (y + 0.5) / H (origin at the bottom-left corner of the
 source, x right, y down in pixels, row 0 at the top), blue = 0. Pixels with no source hold
 S = T = -1. --direction undistort: apply the map to the distorted footage to correct it (as
-'glradial correct'); distort: apply it to an undistorted render to add the lens. Formats: .tif or
-.tiff (float32 RGB TIFF), .npy (H x W x 3 float32 array)."""
+'glradial correct'); distort: apply it to an undistorted render to add the lens. Formats: .exr
+(float32 R, G, B, ZIP-compressed: what Nuke and Gyroflow load), .tif or .tiff (uncompressed float32
+RGB TIFF), .npy (H x W x 3 float32 array)."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -30,17 +31,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="output scale, as in 'glradial correct' (default: same)")
     parser.add_argument("--inverse", choices=("exact", "drap"), default="exact",
                         help="with --direction distort: exact inverse (Newton) or the paper's Drap-Lefevre polynomial (default: exact)")
-    parser.add_argument("--out", required=True, metavar="FILE", help="output .tif/.tiff/.npy")
+    parser.add_argument("--out", required=True, metavar="FILE", help="output .exr (recommended), .tif/.tiff or .npy")
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
     from ..lens import Lens
-    from ..stmap import STMAP_EXTENSIONS, lens_stmap, write_stmap
-    from pathlib import Path
+    from ..stmap import check_stmap_path, lens_stmap, write_stmap
 
-    if Path(args.out).suffix.lower() not in STMAP_EXTENSIONS:
-        raise ValueError(f"unknown STMap extension {Path(args.out).suffix or '(none)'!r} of {args.out!r}; use .tif, .tiff or .npy")
+    check_stmap_path(args.out)
     lens = Lens(args.k1, args.k2)
     stmap = lens_stmap(lens, args.size, direction=args.direction, fit=args.fit, inverse=args.inverse)
     write_stmap(args.out, stmap)
