@@ -1,5 +1,6 @@
-"""glradial demo: runs end to end on a small stadium, and its reference lines really are the pitch
-lines of the rendered frame (projection conventions agree with crops.py and stadium.py)."""
+"""glradial demo: runs end to end on the bundled real frame and on a small stadium, and its reference
+lines really are painted lines of the frame (projection conventions agree with crops.py, stadium.py
+and distort)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,7 @@ def test_demo_small_end_to_end(tmp_path, capsys):
 
     out = tmp_path / "demo"
     model = constant_model(tmp_path / "const.onnx", -0.30, 0.07)
-    assert main(["demo", "--out", str(out), "--size", "320x180", "--panorama-width", "1024", "--model", str(model)]) == 0
+    assert main(["demo", "--source", "stadium", "--out", str(out), "--size", "320x180", "--panorama-width", "1024", "--model", str(model)]) == 0
     printed = capsys.readouterr().out
     figure = read_image(out / "demo.png")
     distorted = read_image(out / "distorted.png")
@@ -33,7 +34,7 @@ def test_demo_small_end_to_end(tmp_path, capsys):
 
 def test_demo_without_model_says_so(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(demo, "_find_model", lambda explicit: None)
-    assert main(["demo", "--out", str(tmp_path), "--size", "320x180", "--panorama-width", "1024"]) == 0
+    assert main(["demo", "--source", "stadium", "--out", str(tmp_path), "--size", "320x180", "--panorama-width", "1024"]) == 0
     printed = capsys.readouterr().out
     assert "no model shipped" in printed
     assert (tmp_path / "demo.png").is_file()
@@ -82,3 +83,64 @@ def test_displacement_error_known_answer():
     # a k1 error of 0.01 alone: 1920 · 0.01 · r_corner³ at r_corner = 0.5737 (16:9)
     expected = 1920 * 0.01 * 0.5 ** 3 * (1 + (9 / 16) ** 2) ** 1.5
     assert demo.displacement_error_px((-0.3, 0.05), (-0.29, 0.05), (1280, 720)) == pytest.approx(expected, rel=1e-6)
+
+
+# -- the real frame (default source) ----------------------------------------------------------------
+
+def test_bundled_reference_lines_lie_on_painted_lines():
+    """The shipped end points trace painted lines of the shipped frame: along each line the frame is
+    brighter than 5 px to both sides nearly everywhere (players crossing it are the exceptions),
+    and 12 px beside it almost nowhere: an independent check of the measured end points."""
+    from glradial.commands.demo_real import bundled_frame
+
+    frame, lines = bundled_frame()
+    for name, ends in lines.items():
+        t = np.linspace(0.0, 1.0, 300)[:, None]
+        points = ends[0] + t * (ends[1] - ends[0])
+        assert demo.painted_fraction(frame, points) > 0.8, name
+        normal = np.array([-(ends[1] - ends[0])[1], (ends[1] - ends[0])[0]]) / np.hypot(*(ends[1] - ends[0]))
+        assert demo.painted_fraction(frame, points + 12 * normal) < 0.2, name
+
+
+def test_distorted_reference_lines_follow_the_distorted_paint():
+    """The positions the demo predicts for the lines in the distorted frame (Lens.distort_points of
+    the scaled original) lie on the paint that glradial.distort moved there: the image path (the
+    GLSL/CPU remap) and the point path (lensfuncs) agree; the chord between the ends does not."""
+    from glradial import Lens, distort
+    from glradial.commands.demo_real import bundled_frame, line_positions
+
+    frame, lines = bundled_frame()
+    size = (frame.shape[1], frame.shape[0])
+    lens = Lens(-0.45, 0.019 * -0.45 + 0.805 * 0.45**2)
+    scale = lens.fit_scale(size, "crop", "distort")
+    distorted = distort(frame, lens.k1, lens.k2, fit=scale)
+    for name, ends in lines.items():
+        curved, _ = line_positions(ends, lens, scale, size)
+        assert demo.painted_fraction(distorted, curved) > 0.8, name
+
+
+def test_real_demo_without_model_straightens_exactly(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(demo, "_find_model", lambda explicit: None)
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "no model shipped" in printed and "real broadcast frame" in printed
+    bow = float(printed.split("reference lines: up to ")[1].split(" px")[0])
+    assert bow > 3.0  # the default lens visibly bends the lines
+    assert "px from straight in the distorted frame, 0.0 px after correction" in printed, printed
+    for name in ("demo.png", "distorted.png", "corrected.png"):
+        assert (tmp_path / name).is_file()
+    assert read_image(tmp_path / "corrected.png").shape == (720, 1280, 3)
+
+
+def test_real_demo_reports_the_estimate_error(tmp_path, capsys):
+    """A stand-in model answering (-0.30, 0.07): the printed error is the metric of the difference."""
+    from test_cli import constant_model
+
+    from glradial.metrics import max_displacement_px
+
+    model = constant_model(tmp_path / "const.onnx", -0.30, 0.07)
+    assert main(["demo", "--out", str(tmp_path / "d"), "--model", str(model)]) == 0
+    printed = capsys.readouterr().out
+    assert "estimated k1=-0.3000 k2=+0.0700" in printed
+    error = float(max_displacement_px((demo.DEFAULT_K1, demo.DEFAULT_K2), (-0.30, 0.07)))
+    assert f"max displacement error: {error:.1f} px" in printed

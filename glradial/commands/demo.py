@@ -1,7 +1,9 @@
-"""``glradial demo``: the whole pipeline on a procedural stadium, with a figure like the paper's.
+"""``glradial demo``: the whole pipeline on a real broadcast frame or a procedural stadium.
 
-Renders a stadium panorama, a broadcast-like 16:9 frame from it with a known lens, estimates the
-lens with the bundled CNN, corrects the frame, and writes DIR/demo.png: the distorted frame with
+By default (--source real) a real broadcast frame shipped with glradial gets a known lens, the
+lens is estimated from the distorted frame, and the frame is corrected with the estimate
+(glradial/commands/demo_real.py). With --source stadium it renders a stadium panorama and a
+broadcast-like 16:9 frame from it with a known lens instead. Both write DIR/demo.png: the distorted frame with
 the straight chords between the ends of each visible pitch line (the painted lines bow away from
 them), the corrected frame with the pitch lines' true straight positions (the painted lines lie on
 them when the estimate is right), and close-ups of the four corners of both. Prints the true and
@@ -30,9 +32,12 @@ DEFAULT_SEED = 89
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
-        "demo", help="render a stadium frame with a known lens, estimate it, correct it, draw a figure",
+        "demo", help="apply a known lens to a real frame (or a stadium render), estimate it, correct it, draw a figure",
         description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+    parser.add_argument("--source", choices=("real", "stadium"), default="real",
+                        help="real: the bundled real broadcast frame (default); stadium: a procedural stadium frame "
+                             "(--seed, --size, --panorama-width, --hfov and --target apply to it)")
     parser.add_argument("--out", default="out/demo", metavar="DIR", help="output folder, created if missing (default: out/demo)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"stadium seed (default {DEFAULT_SEED}, a test-split stadium)")
     parser.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH", help="frame size in pixels (default 1280x720)")
@@ -232,6 +237,10 @@ def run(args: argparse.Namespace) -> int:
     from ..stadium_style import sample_style
     from ..media_io import write_image
 
+    if args.source == "real":
+        from .demo_real import run_real
+
+        return run_real(args)
     start = time.monotonic()
     size = args.size
     true_lens = Lens(args.k1, args.k2)

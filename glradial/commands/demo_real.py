@@ -1,0 +1,119 @@
+"""The real-frame half of ``glradial demo`` (``--source real``, the default).
+
+A real 1280 x 720 broadcast frame shipped with glradial (``glradial/data/``, BSD-2-Clause, see the
+README there) is taken as the undistorted picture. A known lens is applied to it with
+:func:`glradial.distort` at ``fit="crop"`` (every pixel of the distorted frame has a source, so it
+looks like a real camera's frame), the lens is estimated from the distorted frame alone, and the
+frame is corrected with the estimate (``fit="same"``).
+
+Geometry of the reference lines (lens coordinates, DESIGN.md): a point ``p`` of the original frame
+appears in the distorted frame at ``P(s p)`` (``s`` the distortion's crop scale) and, after a
+correction with the true lens, at ``s p`` in the corrected frame: a straight line of the original
+stays straight there. So the figure draws, on the distorted frame, the chord between the ends of
+each reference line (the painted line bows away from it) and, on the corrected frame, the line's
+true straight position (the painted line lies on it when the estimate is right).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+#: the bundled real frame and its reference lines (package ``glradial.data``)
+FRAME_NAME = "usl_broadcast_0195.jpg"
+LINES_NAME = "usl_broadcast_0195.json"
+
+
+def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """The shipped real frame (H x W x 3 uint8 RGB) and its reference lines ``{name: 2 x 2 end
+    points in pixels of that frame}``."""
+    from ..media_io import read_image
+
+    data = resources.files("glradial.data")
+    frame = read_image(Path(str(data.joinpath(FRAME_NAME))))
+    spec = json.loads(data.joinpath(LINES_NAME).read_text(encoding="utf-8"))
+    if tuple(spec["size"]) != (frame.shape[1], frame.shape[0]):
+        raise ValueError(f"{LINES_NAME} describes a {spec['size']} frame, {FRAME_NAME} is {frame.shape[1]}x{frame.shape[0]}")
+    return frame, {name: np.asarray(ends, dtype=np.float64) for name, ends in spec["lines"].items()}
+
+
+def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, int], samples: int = 400):
+    """Pixel positions of the points of one reference line (``ends`` 2 x 2, original pixels):
+    ``(distorted, corrected)``, each ``samples x 2``: where the distorted frame shows them
+    (``P(s p)``) and where a correction with the true lens shows them (``s p``)."""
+    from ..lens import lens_to_pixels, pixels_to_lens
+
+    t = np.linspace(0.0, 1.0, samples)[:, None]
+    p = pixels_to_lens(ends[0] + t * (ends[1] - ends[0]), size) * scale
+    return true_lens.distort_points(lens_to_pixels(p, size), size), lens_to_pixels(p, size)
+
+
+def run_real(args: argparse.Namespace) -> int:
+    """``glradial demo --source real``: see the module docstring."""
+    from ..lens import Lens, corner_radius
+    from ..media_io import write_image
+    from ..metrics import max_displacement_px
+    from ..remap import correct, distort
+    from .demo import _distance_to_chord, _find_model, compose_figure
+
+    start = time.monotonic()
+
+    def log(text: str) -> None:
+        print(f"[{time.monotonic() - start:5.1f}s] {text}", flush=True)
+
+    original, lines = bundled_frame()
+    size = (original.shape[1], original.shape[0])
+    true_lens = Lens(args.k1, args.k2)
+    true_lens.check_frame(size)
+    scale = true_lens.fit_scale(size, "crop", "distort")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    frame = distort(original, true_lens.k1, true_lens.k2, fit=scale)
+    log(f"real broadcast frame {FRAME_NAME} ({size[0]}x{size[1]}) with the known lens k1={true_lens.k1:.4f} "
+        f"k2={true_lens.k2:.4f} applied (fit=crop, scale {scale:.4f})")
+
+    model = _find_model(args.model)
+    if model is None:
+        print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
+              "correcting with the true lens", flush=True)
+        used, source = true_lens, "true"
+    else:
+        from ..estimator import Estimator
+
+        used, source = Estimator(model).estimate(frame), "estimated"
+        error = float(max_displacement_px((true_lens.k1, true_lens.k2), (used.k1, used.k2), radius=corner_radius(size)))
+        log(f"estimated with {model.name}: k1={used.k1:.4f} k2={used.k2:.4f}")
+        print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
+        print(f"estimated k1={used.k1:+.4f} k2={used.k2:+.4f}")
+        print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
+    used = Lens(float(used.k1), float(used.k2))
+    corrected = correct(frame, used.k1, used.k2, fit="same")
+
+    chords, straight = [], []
+    bow, residual = 0.0, 0.0
+    for ends in lines.values():
+        distorted_px, true_px = line_positions(ends, true_lens, scale, size)
+        chords.append(distorted_px)
+        straight.append(true_px)
+        bow = max(bow, _distance_to_chord(distorted_px))
+        shown = used.undistort_points(distorted_px, size)  # where the corrected frame shows each point
+        residual = max(residual, float(np.nanmax(np.hypot(*(shown - true_px).T))))
+    print(f"reference lines: up to {bow:.1f} px from straight in the distorted frame, "
+          f"{residual:.1f} px after correction ({size[0]}x{size[1]} pixels)")
+    labels = (
+        f"real frame, known lens k1={true_lens.k1:.3f} k2={true_lens.k2:.3f} applied; red: chords between line ends",
+        f"corrected ({source} k1={used.k1:.3f} k2={used.k2:.3f}); red: the lines' true straight positions",
+        "distorted: enlarged close-ups where the reference lines run",
+        "corrected: the same close-ups",
+    )
+    figure = compose_figure(frame, corrected, chords, straight, labels)
+    write_image(out / "distorted.png", frame)
+    write_image(out / "corrected.png", corrected)
+    write_image(out / "demo.png", figure)
+    log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
+    return 0
