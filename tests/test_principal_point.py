@@ -103,20 +103,22 @@ def interior(camera, size, margin=2.0):
 
 
 @pytest.mark.parametrize("backend", ["gl", "cpu"])
-def test_correct_matches_cv2_undistort_off_centre(ctx, road, lens, backend):
-    """The issue's target on the full 1280×720 photo: mean |diff| <= 0.3 levels against
+@pytest.mark.parametrize("name", ["road", "chessboard"])
+def test_correct_matches_cv2_undistort_off_centre(ctx, request, name, lens, backend):
+    """The issue's target on the full 1280×720 photos: mean |diff| <= 0.3 levels against
     cv2.undistort(frame, K, dist, newCameraMatrix=K) inside the interior mask. The bounds are the
     centred case's (test_correct.py: OpenCV quantises positions to 1/32 px, the shader does not;
     the CPU path uses OpenCV's quantisation, so it must be near identical)."""
+    photo = request.getfixturevalue(name)
     mask = interior(K_OFF, SIZE)
     assert mask.mean() > 0.7
-    result = correct(road, lens, backend=backend)
-    reference = cv2.undistort(road, K_OFF, DIST, newCameraMatrix=K_OFF)
+    result = correct(photo, lens, backend=backend)
+    reference = cv2.undistort(photo, K_OFF, DIST, newCameraMatrix=K_OFF)
     diff = np.abs(result.astype(np.float64) - reference).max(axis=2)[mask]
     assert diff.mean() <= (0.3 if backend == "gl" else 0.01), diff.mean()
     assert diff.max() <= 5.0, diff.max()
     # the principal point matters: the centred lens with the same (k1, k2) is far off
-    centred = correct(road, lens.k1, lens.k2, backend=backend)
+    centred = correct(photo, lens.k1, lens.k2, backend=backend)
     assert np.abs(centred.astype(np.float64) - reference).max(axis=2)[mask].mean() > 10 * max(diff.mean(), 0.1)
 
 
