@@ -239,6 +239,7 @@ class Remapper:
         are texelFetch).
         """
         self._check_alive()
+        self._make_current()
         lens = _lens(lens, k2)
         direction = _choice("direction", direction, DIRECTIONS)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
@@ -281,6 +282,12 @@ class Remapper:
     def _check_alive(self) -> None:
         if self._released:
             raise RuntimeError("this Remapper has been released")
+
+    def _make_current(self) -> None:
+        """Make this Remapper's context the thread's current one before drawing: creating another
+        context on the thread (e.g. a second ``Remapper()``) switches EGL's current context, and
+        drawing with a non-current context reads back garbage with GL_INVALID_OPERATION."""
+        self.ctx.__enter__()
 
     def _program(self, direction: str, interpolation: str, inverse: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
         key = (direction, interpolation, inverse)
@@ -361,6 +368,7 @@ class Remapper:
         out: np.ndarray | None,
     ) -> np.ndarray:
         self._check_alive()
+        self._make_current()
         height, width, channels = _check_frame(frame)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
         inverse = _choice("inverse", inverse, INVERSES)
@@ -506,6 +514,8 @@ def _run(frame, lens_or_k1, k2, direction, fit, interpolation, fill, inverse, ba
             f"frame must be H×W, H×W×C or a batch N×H×W×C with C in (1, 3, 4), got a {frame.ndim}-D array "
             f"of shape {frame.shape}"
         )
+    if frame.dtype not in _TEXTURE_DTYPES and frame.dtype != np.float64:
+        raise TypeError(f"frame dtype must be uint8, uint16, float32 or float64, got {frame.dtype}")
     if frame.ndim == 4:
         if frame.shape[0] == 0:
             raise ValueError(f"frame batch is empty: shape {frame.shape}")

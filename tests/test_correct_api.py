@@ -86,3 +86,14 @@ def test_batch_equals_frame_by_frame(ctx, photo, layout, backend):
         assert np.array_equal(out[index], correct(frame, OFF, fit="crop", backend=backend)), index
     distorted = distort(frames, LENS, backend=backend)
     assert np.array_equal(distorted[1], distort(frames[1], LENS, backend=backend))
+
+
+def test_module_functions_survive_a_second_context_on_the_thread(ctx, photo):
+    """README's sequence: glradial.correct (the thread's context), then a Remapper() with its own
+    context, released; the thread's context must be current again for the next call (it used to
+    read back garbage with GL_INVALID_OPERATION: mean 111 levels off)."""
+    before = correct(photo, LENS, backend="gl")
+    with Remapper() as own:
+        assert np.array_equal(own.correct(photo, LENS), before)
+    assert np.array_equal(correct(photo, LENS, backend="gl"), before)
+    assert ctx.error == "GL_NO_ERROR"

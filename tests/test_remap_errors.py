@@ -60,7 +60,7 @@ def test_fold_over_names_the_radius(ctx, fn, backend):
         (np.zeros((0, 18, 32, 3), np.uint8), ValueError, "frame batch is empty"),
         (np.zeros((2, 18, 32, 2), np.uint8), ValueError, r"batch must be N×H×W×C with C in \(1, 3, 4\)"),
         (np.zeros(32, np.uint8), ValueError, "1-D array"),
-        (np.zeros((18, 32, 3), np.complex64), TypeError, "dtype must be uint8, uint16 or float32, got complex64"),
+        (np.zeros((18, 32, 3), np.complex64), TypeError, "dtype must be uint8, uint16, float32 or float64, got complex64"),
         (np.zeros((18, 32, 3), object), TypeError, "got object"),
         (np.full((18, 32), "a"), TypeError, "got <U1"),
         (np.zeros((18, 32, 3), np.float16), TypeError, "got float16"),
