@@ -97,3 +97,21 @@ def test_module_functions_survive_a_second_context_on_the_thread(ctx, photo):
         assert np.array_equal(own.correct(photo, LENS), before)
     assert np.array_equal(correct(photo, LENS, backend="gl"), before)
     assert ctx.error == "GL_NO_ERROR"
+
+
+def test_render_texture_takes_a_lens(ctx, photo):
+    from glradial.egl import release_objects
+
+    h, w = photo.shape[:2]
+    source = ctx.texture((w, h), 3, np.ascontiguousarray(photo).tobytes())
+    target = ctx.texture((w, h), 4)
+    fbo = ctx.framebuffer([target])
+    try:
+        with Remapper(ctx) as remapper:
+            remapper.render_texture(source, fbo, OFF, fit="crop")
+            drawn = np.frombuffer(fbo.read(components=4), np.uint8).reshape(h, w, 4)
+            assert np.array_equal(drawn[..., :3], correct(photo, OFF, fit="crop", backend="gl"))
+            with pytest.raises(TypeError, match="not both"):
+                remapper.render_texture(source, fbo, OFF, 0.1)
+    finally:
+        release_objects(ctx, fbo, target, source)
