@@ -53,15 +53,16 @@ class CropParams:
 
     Convention: ``pan`` (+ right), ``tilt`` (+ up, within [-90, 90]), ``roll`` (+ clockwise seen
     from behind, the right side dips), ``hfov`` (horizontal field of view of the undistorted frame,
-    in (0, 180)) in degrees; ``k1``, ``k2`` in width-normalised lens units of the 16:9 frame.
+    in (0, 180)) in degrees; ``k1``, ``k2`` in width-normalised lens units of the 16:9 frame
+    (default 0: an undistorted perspective view of the panorama).
     """
 
     pan: float
     tilt: float
     roll: float
     hfov: float
-    k1: float
-    k2: float
+    k1: float = 0.0
+    k2: float = 0.0
 
     def __post_init__(self) -> None:
         for item in fields(self):

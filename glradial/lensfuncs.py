@@ -7,6 +7,10 @@ Convention (DESIGN.md, written once here and in the GLSL header):
 
 * Lens coordinates ``p = (u - 0.5, (v - 0.5) * H / W)``: image width = 1, origin at the image centre
   (the principal point), x right, y down.  ``aspect_hw = H / W``.
+* A lens may carry a principal point ``centre = (cx, cy)`` (its offset from the image centre in width
+  units, x right, y down) and a pixel aspect ``pixel_aspect = fy / fx``; then
+  ``p = (u - 0.5 - cx, ((v - 0.5) * H / W - cy) / pixel_aspect)`` (radii still normalised by the image
+  width along x). ``centre = (0, 0)``, ``pixel_aspect = 1`` is the centred model above.
 * Texture coordinates ``u = (x + 0.5) / W``, ``v = (y + 0.5) / H`` with pixel centres at integer
   ``(x, y)`` and ``v = 0`` the first row in memory (the top of the image).
 * A lens is ``(k1, k2)`` in those units. Forward (undistorted -> distorted):
@@ -31,16 +35,24 @@ LENS_INVERSE_TOLERANCE = 1.0e-4
 LENS_RADIUS_UNBOUNDED = 1.0e6
 
 
-def lens_from_uv(uv: np.ndarray, aspect_hw: float) -> np.ndarray:
-    """Texture coordinates (..., 2) in <0;1> -> lens coordinates (..., 2), width-normalised."""
+def lens_from_uv(
+    uv: np.ndarray, aspect_hw: float, centre: tuple[float, float] = (0.0, 0.0), pixel_aspect: float = 1.0
+) -> np.ndarray:
+    """Texture coordinates (..., 2) in <0;1> -> lens coordinates (..., 2), width-normalised, about
+    the principal point ``centre`` (offset from the image centre, width units) with pixel aspect
+    ``pixel_aspect = fy / fx``; the defaults are the centred model."""
     uv = np.asarray(uv, dtype=np.float64)
-    return np.stack([uv[..., 0] - 0.5, (uv[..., 1] - 0.5) * aspect_hw], axis=-1)
+    return np.stack(
+        [uv[..., 0] - 0.5 - centre[0], ((uv[..., 1] - 0.5) * aspect_hw - centre[1]) / pixel_aspect], axis=-1
+    )
 
 
-def uv_from_lens(p: np.ndarray, aspect_hw: float) -> np.ndarray:
+def uv_from_lens(
+    p: np.ndarray, aspect_hw: float, centre: tuple[float, float] = (0.0, 0.0), pixel_aspect: float = 1.0
+) -> np.ndarray:
     """Lens coordinates (..., 2) -> texture coordinates (..., 2); inverse of :func:`lens_from_uv`."""
     p = np.asarray(p, dtype=np.float64)
-    return np.stack([p[..., 0] + 0.5, p[..., 1] / aspect_hw + 0.5], axis=-1)
+    return np.stack([p[..., 0] + centre[0] + 0.5, (p[..., 1] * pixel_aspect + centre[1]) / aspect_hw + 0.5], axis=-1)
 
 
 def radial_factor(r2: np.ndarray, k1: float, k2: float) -> np.ndarray:

@@ -2,7 +2,13 @@
 ``distort.frag``) or the same maps through ``cv2.remap``.
 
 Convention (DESIGN.md): a lens is ``(k1, k2)`` in width-normalised lens units, principal point at the
-frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k2 r_u⁴)``.
+frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k2 r_u⁴)``; a
+:class:`glradial.Lens` may move the principal point and set a pixel aspect (``cx``, ``cy``,
+``pixel_aspect``; lens points and the fit scale are then taken about the principal point).
+
+* The lens: a :class:`glradial.Lens` (or any subclass, e.g. an estimate) as ``correct(frame, lens)``,
+  or the coefficients as ``correct(frame, k1, k2)`` (``k2`` defaults to 0 then). A Lens together with
+  ``k2`` is a ``TypeError``.
 
 * :func:`correct` (undistortion): output pixel ``q`` shows the undistorted point ``p_u = s q`` and
   samples the input at ``p_d = P(p_u)``; no inverse is needed. With ``fit="same"`` it equals
@@ -14,8 +20,13 @@ frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k
   every output pixel has a source, ``"full"`` -> the whole input stays visible, or a positive number
   taken as ``s``. A distortion's "crop" is a correction's "full": ``correct(distort(x, fit="crop"),
   fit="full") ≈ x``.
-* Frames: NumPy ``H×W`` or ``H×W×C`` with ``C`` in (1, 3, 4); dtype uint8, uint16 or float32; the
-  result has the same shape and dtype, channels in the same order (nothing is swapped).
+* Frames: NumPy ``H×W`` or ``H×W×C`` with ``C`` in (1, 3, 4); dtype uint8, uint16, float32 or
+  float64; the result has the same shape and dtype, channels in the same order (nothing is swapped).
+  float64 frames are computed in float32 on both backends (GL textures are float32; the CPU path
+  does the same so both agree) and returned as float64: values keep float32's ~7 significant
+  digits, and values beyond float32's range are a ``ValueError``. A batch ``N×H×W×C`` (4-D) is
+  corrected frame by frame with the same lens in one call (the result has the batch's shape);
+  a batch of single-channel frames is ``N×H×W×1`` (a 3-D array is always one ``H×W×C`` frame).
 * ``fill``: the value of output pixels with no source, a scalar or one value per channel, in the
   frame's units. No source: the source position lies outside the input's area (pixel coordinates
   outside ``[-0.5, W-0.5] × [-0.5, H-0.5]``) or, for distortion, no undistorted point maps there.
@@ -110,8 +121,18 @@ def _check_fill(fill: object, channels: int, dtype: np.dtype) -> tuple[float, ..
     return tuple(out)
 
 
-def _lens(k1: object, k2: object) -> Lens:
-    return Lens(k1, k2)  # type: ignore[arg-type]
+def _lens(lens: object, k2: object = None) -> Lens:
+    """The lens of ``correct(frame, lens)`` or ``correct(frame, k1, k2)`` (``k2`` None -> 0)."""
+    if isinstance(lens, Lens):
+        if k2 is not None:
+            raise TypeError(
+                f"give a Lens or the coefficients k1, k2, not both: got {type(lens).__name__} "
+                f"{lens!r} and k2={k2!r}"
+            )
+        return lens
+    if not isinstance(lens, (numbers.Real, np.floating, np.integer)) or isinstance(lens, (bool, np.bool_)):
+        raise TypeError(f"k1 must be a real number (or lens a glradial.Lens), got {type(lens).__name__} {lens!r}")
+    return Lens(lens, 0.0 if k2 is None else k2)  # type: ignore[arg-type]
 
 
 def fit_scale(
@@ -160,23 +181,24 @@ class Remapper:
     def correct(
         self,
         frame: np.ndarray,
-        k1: float,
-        k2: float,
+        lens: Lens | float,
+        k2: float | None = None,
         *,
         fit: Fit = "same",
         interpolation: Interpolation = "linear",
         fill: float | Sequence[float] = 0,
         out: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Undistort ``frame`` on the GPU; see the module docstring. ``out``: an array of the
-        frame's shape and dtype to read the result into (returned)."""
-        return self._remap(frame, _lens(k1, k2), "undistort", fit, interpolation, fill, "exact", out)
+        """Undistort one ``frame`` (uint8, uint16 or float32) on the GPU with a :class:`Lens` or
+        ``k1, k2``; see the module docstring. ``out``: an array of the frame's shape and dtype to read
+        the result into (returned). Batches and float64: :func:`correct`."""
+        return self._remap(frame, _lens(lens, k2), "undistort", fit, interpolation, fill, "exact", out)
 
     def distort(
         self,
         frame: np.ndarray,
-        k1: float,
-        k2: float,
+        lens: Lens | float,
+        k2: float | None = None,
         *,
         fit: Fit = "same",
         interpolation: Interpolation = "linear",
@@ -184,15 +206,16 @@ class Remapper:
         inverse: InverseMethod = "exact",
         out: np.ndarray | None = None,
     ) -> np.ndarray:
-        """Apply the lens to an undistorted ``frame`` on the GPU; see the module docstring."""
-        return self._remap(frame, _lens(k1, k2), "distort", fit, interpolation, fill, inverse, out)
+        """Apply the lens (a :class:`Lens` or ``k1, k2``) to one undistorted ``frame`` on the GPU;
+        see the module docstring."""
+        return self._remap(frame, _lens(lens, k2), "distort", fit, interpolation, fill, inverse, out)
 
     def render_texture(
         self,
         source: moderngl.Texture,
         target: moderngl.Framebuffer,
-        k1: float,
-        k2: float,
+        lens: Lens | float,
+        k2: float | None = None,
         *,
         direction: Direction = "undistort",
         fit: Fit = "same",
@@ -216,7 +239,8 @@ class Remapper:
         are texelFetch).
         """
         self._check_alive()
-        lens = _lens(k1, k2)
+        self._make_current()
+        lens = _lens(lens, k2)
         direction = _choice("direction", direction, DIRECTIONS)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
         inverse = _choice("inverse", inverse, INVERSES)
@@ -258,6 +282,12 @@ class Remapper:
     def _check_alive(self) -> None:
         if self._released:
             raise RuntimeError("this Remapper has been released")
+
+    def _make_current(self) -> None:
+        """Make this Remapper's context the thread's current one before drawing: creating another
+        context on the thread (e.g. a second ``Remapper()``) switches EGL's current context, and
+        drawing with a non-current context reads back garbage with GL_INVALID_OPERATION."""
+        self.ctx.__enter__()
 
     def _program(self, direction: str, interpolation: str, inverse: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
         key = (direction, interpolation, inverse)
@@ -315,6 +345,8 @@ class Remapper:
         source.use(location=texture_unit)
         program["u_source"] = texture_unit
         program["u_k"] = (lens.k1, lens.k2)
+        program["u_centre"] = (lens.cx, lens.cy)
+        program["u_pixel_aspect"] = lens.pixel_aspect
         program["u_scale"] = scale
         program["u_out_rect"] = (float(x0), float(y0), float(width), float(height))
         program["u_aspect_out"] = height / width
@@ -336,6 +368,7 @@ class Remapper:
         out: np.ndarray | None,
     ) -> np.ndarray:
         self._check_alive()
+        self._make_current()
         height, width, channels = _check_frame(frame)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
         inverse = _choice("inverse", inverse, INVERSES)
@@ -372,7 +405,8 @@ def cpu_maps(
     """OpenCV fixed-point maps (``CV_16SC2`` + ``CV_16UC1``) of :meth:`Lens.maps` and the flat
     indices of the output pixels with no source (outside the input's area, or no inverse), cached
     (LRU of :data:`CPU_MAP_CACHE_SIZE`) by lens, size, direction, scale, inverse and nearest."""
-    key = (lens.k1, lens.k2, size, direction, scale, inverse if direction == "distort" else "", nearest)
+    key = (lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, size, direction, scale,
+           inverse if direction == "distort" else "", nearest)
     with _map_lock:
         maps = _map_cache.get(key)
         if maps is not None:
@@ -444,9 +478,7 @@ def auto_backend() -> str:
     return choice
 
 
-def _run(frame, k1, k2, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
-    lens = _lens(k1, k2)
-    backend = _choice("backend", backend, BACKENDS)
+def _run_one(frame, lens, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
     if backend == "auto":
         backend = auto_backend()
         if backend == "gl":
@@ -458,31 +490,74 @@ def _run(frame, k1, k2, direction, fit, interpolation, fill, inverse, backend) -
     return _thread_remapper()._remap(frame, lens, direction, fit, interpolation, fill, inverse, None)
 
 
+def _as_float32(frame: np.ndarray) -> np.ndarray:
+    """A float64 frame as float32 (the precision both backends compute in); ``ValueError`` for
+    values beyond float32's range rather than silent infinities."""
+    try:
+        with np.errstate(over="raise"):
+            return frame.astype(np.float32)
+    except FloatingPointError:
+        limit = float(np.finfo(np.float32).max)
+        raise ValueError(
+            f"float64 frame holds values beyond float32's range (±{limit:.4g}), the precision glradial "
+            f"computes in: largest magnitude {float(np.nanmax(np.abs(frame))):.4g}"
+        ) from None
+
+
+def _run(frame, lens_or_k1, k2, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
+    lens = _lens(lens_or_k1, k2)
+    backend = _choice("backend", backend, BACKENDS)
+    if not isinstance(frame, np.ndarray):
+        return _run_one(frame, lens, direction, fit, interpolation, fill, inverse, backend)  # its TypeError
+    if frame.ndim > 4:
+        raise ValueError(
+            f"frame must be H×W, H×W×C or a batch N×H×W×C with C in (1, 3, 4), got a {frame.ndim}-D array "
+            f"of shape {frame.shape}"
+        )
+    if frame.dtype not in _TEXTURE_DTYPES and frame.dtype != np.float64:
+        raise TypeError(f"frame dtype must be uint8, uint16, float32 or float64, got {frame.dtype}")
+    if frame.ndim == 4:
+        if frame.shape[0] == 0:
+            raise ValueError(f"frame batch is empty: shape {frame.shape}")
+        if frame.shape[3] not in (1, 3, 4):
+            raise ValueError(f"a batch must be N×H×W×C with C in (1, 3, 4), got shape {frame.shape}")
+    source = _as_float32(frame) if frame.dtype == np.float64 else frame
+    if frame.ndim < 4:
+        result = _run_one(source, lens, direction, fit, interpolation, fill, inverse, backend)
+        return result.astype(np.float64) if frame.dtype == np.float64 else result
+    result = np.empty(frame.shape, frame.dtype)
+    for index in range(frame.shape[0]):
+        result[index] = _run_one(source[index], lens, direction, fit, interpolation, fill, inverse, backend)
+    return result
+
+
 def correct(
     frame: np.ndarray,
-    k1: float,
-    k2: float,
+    lens: Lens | float,
+    k2: float | None = None,
     *,
     fit: Fit = "same",
     interpolation: Interpolation = "linear",
     fill: float | Sequence[float] = 0,
     backend: Backend = "auto",
 ) -> np.ndarray:
-    """Remove the lens ``(k1, k2)`` from ``frame``; a new array of the same shape and dtype.
+    """Remove a lens from ``frame`` (or a batch of frames); a new array of the same shape and dtype.
 
-    Convention: see the module docstring (lens units, fit scale, frames, fill, interpolation,
-    backends). ``fit="same"`` equals ``cv2.undistort(frame, K, (k1, k2, 0, 0))`` with
-    ``K = [[W, 0, (W-1)/2], [0, W, (H-1)/2], [0, 0, 1]]``. Raises ``ValueError`` when the lens
-    folds over inside the (fitted) frame, for bad shapes and unknown option values, ``TypeError``
-    for non-array frames, unsupported dtypes and non-real coefficients.
+    ``lens``: a :class:`glradial.Lens` (any subclass, e.g. what :func:`glradial.estimate` returns),
+    or the coefficient ``k1`` followed by ``k2`` (default 0). Convention: see the module docstring
+    (lens units, principal point, fit scale, frames, batches, float64, fill, interpolation,
+    backends). ``fit="same"`` equals ``cv2.undistort(frame, K, dist, newCameraMatrix=K)`` with
+    ``K, dist = lens.to_opencv((W, H))``. Raises ``ValueError`` when the lens folds over inside the
+    (fitted) frame, for bad shapes and unknown option values, ``TypeError`` for non-array frames,
+    unsupported dtypes, non-real coefficients and a Lens given together with ``k2``.
     """
-    return _run(frame, k1, k2, "undistort", fit, interpolation, fill, "exact", backend)
+    return _run(frame, lens, k2, "undistort", fit, interpolation, fill, "exact", backend)
 
 
 def distort(
     frame: np.ndarray,
-    k1: float,
-    k2: float,
+    lens: Lens | float,
+    k2: float | None = None,
     *,
     fit: Fit = "same",
     interpolation: Interpolation = "linear",
@@ -490,12 +565,13 @@ def distort(
     inverse: InverseMethod = "exact",
     backend: Backend = "auto",
 ) -> np.ndarray:
-    """Apply the lens ``(k1, k2)`` to an undistorted ``frame``; a new array, same shape and dtype.
+    """Apply a lens (a :class:`glradial.Lens`, or ``k1, k2``) to an undistorted ``frame`` (or a
+    batch); a new array, same shape and dtype.
 
     Each output pixel samples the input at the inverse of the lens (``inverse="exact"``: bounded
     Newton, pixels the lens never reaches get ``fill``; ``"drap"``: the paper's four-term
     polynomial, up to ~0.002 lens units off at the extremes of its k1 range). Same conventions and
-    errors as :func:`correct`; ``correct(distort(x, k1, k2), k1, k2) ≈ x`` for the same scale
+    errors as :func:`correct`; ``correct(distort(x, lens), lens) ≈ x`` for the same scale
     (``fit="same"``, the same number, or "crop" here with "full" there).
     """
-    return _run(frame, k1, k2, "distort", fit, interpolation, fill, inverse, backend)
+    return _run(frame, lens, k2, "distort", fit, interpolation, fill, inverse, backend)

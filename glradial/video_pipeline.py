@@ -193,7 +193,7 @@ def track_video(
 def correct_video(
     source: str | os.PathLike,
     target: str | os.PathLike,
-    lenses: Callable[[int], tuple[float, float]],
+    lenses: Callable[[int], Lens | tuple[float, float]],
     *,
     fit: str = "same",
     interpolation: str = "linear",
@@ -201,8 +201,8 @@ def correct_video(
     progress: bool | None = None,
     label: str = "correct",
 ) -> int:
-    """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` into ``target``
-    (atomic; fps and size kept). Returns the number of frames written."""
+    """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` (a :class:`Lens` or
+    ``(k1, k2)``) into ``target`` (atomic; fps and size kept). Returns the number of frames written."""
     from .remap import correct
 
     with VideoReader(source, order="bgr") as reader:
@@ -210,8 +210,9 @@ def correct_video(
         with VideoWriter(target, info.size, info.fps, order="bgr") as writer:
             with Progress(info.frame_count, label, enabled=progress) as bar:
                 for index, frame in enumerate(reader):
-                    k1, k2 = lenses(index)
-                    writer.write(correct(frame, k1, k2, fit=fit, interpolation=interpolation, backend=backend))
+                    lens = lenses(index)
+                    lens = lens if isinstance(lens, Lens) else Lens(*lens)
+                    writer.write(correct(frame, lens, fit=fit, interpolation=interpolation, backend=backend))
                     bar.update()
             if 0 < info.frame_count != writer.frames_written:
                 sys.stderr.write(

@@ -11,6 +11,12 @@
 //     readback's first row is y = 0, so no flip happens anywhere.
 //   Lens coordinates ("apparent distortion at scale", image width = 1):
 //     p = (u - 0.5, (v - 0.5) * H / W); principal point at the image centre; aspect_hw = H / W.
+//   A lens may also carry a principal point and a pixel aspect (glradial.Lens's cx, cy,
+//   pixel_aspect): centre = (cx, cy) is the principal point's offset from the image centre in
+//   width units (x right, y down), pixel_aspect = fy / fx (OpenCV's focal lengths); then
+//     p = (u - 0.5 - cx, ((v - 0.5) * H / W - cy) / pixel_aspect),
+//   so radii stay normalised by the image width along x. centre = (0, 0), pixel_aspect = 1 is the
+//   centred model above (the two-argument lens_from_uv / uv_from_lens).
 //   A lens is vec2 k = (k1, k2) in lens units.
 //   Forward model (undistorted -> distorted): p_d = p_u * (1 + k1 r_u^2 + k2 r_u^4).
 //   Correction (undistortion) samples the input at p_d for each output p_u: no inverse needed.
@@ -27,12 +33,23 @@
 // A radius far beyond any a frame uses: "the lens never folds over".
 #define LENS_RADIUS_UNBOUNDED 1.0e6
 
+// Lens point of a texture coordinate for a lens with principal point `centre` (offset from the
+// image centre, width units) and pixel aspect fy / fx.
+vec2 lens_from_uv(vec2 uv, float aspect_hw, vec2 centre, float pixel_aspect) {
+    return vec2(uv.x - 0.5 - centre.x, ((uv.y - 0.5) * aspect_hw - centre.y) / pixel_aspect);
+}
+
+vec2 uv_from_lens(vec2 p, float aspect_hw, vec2 centre, float pixel_aspect) {
+    return vec2(p.x + centre.x + 0.5, (p.y * pixel_aspect + centre.y) / aspect_hw + 0.5);
+}
+
+// The centred model: principal point at the image centre, square pixels.
 vec2 lens_from_uv(vec2 uv, float aspect_hw) {
-    return vec2(uv.x - 0.5, (uv.y - 0.5) * aspect_hw);
+    return lens_from_uv(uv, aspect_hw, vec2(0.0), 1.0);
 }
 
 vec2 uv_from_lens(vec2 p, float aspect_hw) {
-    return vec2(p.x + 0.5, p.y / aspect_hw + 0.5);
+    return uv_from_lens(p, aspect_hw, vec2(0.0), 1.0);
 }
 
 // D = 1 + k1 r^2 + k2 r^4 from the squared undistorted radius.

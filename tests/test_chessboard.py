@@ -3,15 +3,17 @@ board's corner rows and columns.
 
 Photo and calibration: tests/data/README.md (1280×720; fx = 1156.4996, fy = 1151.3055,
 cx = 671.3496, cy = 389.1760, k = (-0.2475567, -0.0195370), p = (-0.0006705, 0.0001363)). The
-principal point is ~31 px right of and ~30 px below the centre and fx != fy, so the lens is converted
-with ``Lens.from_opencv(..., approximate=True)`` (f = sqrt(fx fy), centred, p1/p2 dropped).
+principal point is ~31 px right of and ~30 px below the centre and fx != fy, both exact in
+``Lens.from_opencv``; ``approximate=True`` drops only p1/p2.
 
 Measure: the 9×6 inner corners (cv2.findChessboardCorners + cornerSubPix) form 6 rows and 9
 columns; for each, a total-least-squares line fit; the RMS perpendicular residual over all 15 lines,
 in input-frame pixels (residuals of the fit='full' output are multiplied by its scale s).
-Measured (python3 -m pytest tests/test_chessboard.py): before 1.91 px; after 0.75 px with both
-backends; OpenCV's own full model (off-centre, tangential) on the points: 0.80 px; the opposite
-lens (sign flipped): 3.27 px. The ~0.75 px floor is detection noise and the calibration's fit.
+Measured (python3 -m pytest tests/test_chessboard.py): before 1.91 px; after 0.81 px with both
+backends (0.75 px with the centred approximation f = sqrt(fx fy) used before the principal point
+was modelled); OpenCV's own full model (off-centre, tangential) on the points: 0.80 px; the
+opposite lens (sign flipped): 3.27 px. The ~0.75-0.8 px floor is detection noise and the
+calibration's fit.
 """
 
 from __future__ import annotations
@@ -62,7 +64,7 @@ def test_correction_straightens_the_chessboard(ctx, gray, lens, backend):
     assert 1.5 < before < 2.5  # the photo is visibly distorted
     # fit='full' keeps the whole board in view (at fit='same' its corners leave the frame)
     s = fit_scale(lens, SIZE, "full")
-    corrected = correct(gray, lens.k1, lens.k2, fit="full", fill=255, backend=backend)
+    corrected = correct(gray, lens, fit="full", fill=255, backend=backend)
     after = line_residual(corners(corrected)) * s
     assert after < 0.5 * before, (before, after)
     assert after < 1.0
@@ -77,5 +79,5 @@ def test_point_correction_agrees_with_image_correction(gray, lens):
     after_points = line_residual(lens.undistort_points(corners(gray), SIZE))
     assert after_points < 1.0
     # the wrong direction makes them worse: the check can fail
-    flipped = Lens(-lens.k1, -lens.k2)
+    flipped = Lens(-lens.k1, -lens.k2, lens.cx, lens.cy, lens.pixel_aspect)
     assert line_residual(flipped.undistort_points(corners(gray), SIZE)) > line_residual(corners(gray))

@@ -13,6 +13,7 @@ import cv2
 import numpy as np
 import pytest
 
+from glradial import Lens
 from glradial.crops import (
     CropParams,
     CropRenderer,
@@ -84,6 +85,9 @@ def test_crop_params_validation() -> None:
         CropParams(0, 0, 0, 40, "0.1", 0)
     with pytest.raises(ValueError, match="pan"):
         CropParams(float("nan"), 0, 0, 40, 0, 0)
+    # the lens defaults to a pinhole: an undistorted view needs no k1=0, k2=0 spelled out
+    assert CropParams(20, -8, 1.5, 30) == CropParams(20, -8, 1.5, 30, 0.0, 0.0)
+    assert CropParams(20, -8, 1.5, 30).lens == Lens(0.0, 0.0)
 
 
 def test_sampling_distribution_and_determinism() -> None:
@@ -126,7 +130,7 @@ def test_rejected_lenses_fold_or_leave_empty_corners() -> None:
 @pytest.mark.parametrize(
     "params",
     [
-        CropParams(20.0, -8.0, 1.5, 30.0, 0.0, 0.0),
+        CropParams(20.0, -8.0, 1.5, 30.0),  # the default lens: a pinhole
         CropParams(-150.0, 12.0, -3.0, 40.0, 0.0, 0.0),
         CropParams(180.0, -5.0, 0.0, 35.0, 0.0, 0.0),  # straddles the +-180 seam
     ],

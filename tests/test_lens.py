@@ -147,16 +147,19 @@ def test_rescale_is_a_centred_crop():
 
 
 def test_from_opencv_approximate():
-    """Off-centre principal point, fx != fy and p1/p2 are refused by default; approximate=True
-    uses f = sqrt(fx fy) and drops them (the chessboard camera of tests/data/README.md)."""
+    """p1/p2 are refused by default, naming them; approximate=True drops them and keeps the
+    principal point and fx != fy, which are exact (the chessboard camera of tests/data/README.md)."""
     K = np.array([[1156.4996, 0, 671.3496], [0, 1151.3055, 389.1760], [0, 0, 1]])
     dist = np.array([-0.2475567, -0.0195370, -0.0006705, 0.0001363, 0])
-    with pytest.raises(ValueError, match="principal point .* is not the frame centre"):
+    with pytest.raises(ValueError, match="p1=-0.0006705, p2=0.0001363"):
         Lens.from_opencv(K, dist, SIZE)
     lens = Lens.from_opencv(K, dist, SIZE, approximate=True)
-    f = math.sqrt(1156.4996 * 1151.3055)
-    assert lens.k1 == pytest.approx(-0.2475567 * (1280 / f) ** 2, rel=1e-12)
-    assert lens.k2 == pytest.approx(-0.0195370 * (1280 / f) ** 4, rel=1e-12)
+    assert lens.k1 == pytest.approx(-0.2475567 * (1280 / 1156.4996) ** 2, rel=1e-12)
+    assert lens.k2 == pytest.approx(-0.0195370 * (1280 / 1156.4996) ** 4, rel=1e-12)
+    assert lens.principal_point(SIZE) == pytest.approx((671.3496, 389.1760), abs=1e-9)
+    assert lens.pixel_aspect == pytest.approx(1151.3055 / 1156.4996, rel=1e-12)
+    # the p1, p2-free calibration is exact without approximate=True
+    assert Lens.from_opencv(K, dist[:2].tolist() + [0, 0], SIZE) == lens
 
 
 @pytest.mark.parametrize("k", LENSES)

@@ -69,6 +69,19 @@ def test_undistort_stmap_applied_like_nuke_equals_cv2_undistort(road):
     assert difference.max() <= 3 and difference.mean() < 0.3, (difference.max(), difference.mean())
 
 
+def test_off_centre_stmap_applied_like_nuke_equals_cv2_undistort(road):
+    """The same oracle with a principal point 20 px right of and 6 px above the centre and
+    fx != fy: cv2.undistort(image, K, dist, newCameraMatrix=K); bounds as above."""
+    width, height = SIZE
+    camera = np.array([[80.0, 0, (width - 1) / 2 + 20], [0, 78.5, (height - 1) / 2 - 6], [0, 0, 1]])
+    dist = np.array([-0.25, 0.05, 0, 0])
+    image = cv2.resize(road, SIZE, interpolation=cv2.INTER_AREA)
+    stmap = lens_stmap(Lens.from_opencv(camera, dist, SIZE), SIZE)
+    expected = cv2.undistort(image, camera, dist, newCameraMatrix=camera)
+    difference = np.abs(apply_stmap(image, stmap).astype(int) - expected.astype(int))
+    assert difference.max() <= 3 and difference.mean() < 0.3, (difference.max(), difference.mean())
+
+
 def test_distort_then_undistort_stmaps_round_trip():
     lens = Lens(-0.3, 0.07)
     distort_map = lens_stmap(lens, SIZE, direction="distort")

@@ -18,6 +18,8 @@ PROBE_MAIN = """
 uniform sampler2D u_input;
 uniform vec2 u_k;
 uniform float u_aspect_hw;
+uniform vec2 u_centre;
+uniform float u_pixel_aspect;
 out vec4 result;
 void main() {
     vec4 x = texelFetch(u_input, ivec2(gl_FragCoord.xy), 0);
@@ -30,6 +32,9 @@ void main() {
     result = vec4(undistort_point_exact(p, u_k), 0.0);
 #elif PROBE == 3
     result = vec4(lens_from_uv(p, u_aspect_hw), uv_from_lens(p, u_aspect_hw));
+#elif PROBE == 5
+    result = vec4(lens_from_uv(p, u_aspect_hw, u_centre, u_pixel_aspect),
+                  uv_from_lens(p, u_aspect_hw, u_centre, u_pixel_aspect));
 #else
     result = drap_coefficients(u_k);
 #endif
@@ -39,7 +44,15 @@ void main() {
 LENSES = [(-0.7, 0.805 * 0.49 - 0.7 * 0.019), (-0.3, 0.06), (0.0, 0.0), (0.3, 0.08), (-0.2, -0.05)]
 
 
-def run_probe(ctx, probe: int, points: np.ndarray, k: tuple[float, float], aspect_hw: float = 9 / 16):
+def run_probe(
+    ctx,
+    probe: int,
+    points: np.ndarray,
+    k: tuple[float, float],
+    aspect_hw: float = 9 / 16,
+    centre: tuple[float, float] = (0.0, 0.0),
+    pixel_aspect: float = 1.0,
+):
     source = preprocess("common.glsl", {"PROBE": probe}).text + PROBE_MAIN
     vertex = preprocess("fullscreen.vert").text
     program = ctx.program(vertex_shader=vertex, fragment_shader=source)
@@ -59,6 +72,9 @@ def run_probe(ctx, probe: int, points: np.ndarray, k: tuple[float, float], aspec
             program["u_k"] = k
         if "u_aspect_hw" in program:
             program["u_aspect_hw"] = aspect_hw
+        if "u_centre" in program:
+            program["u_centre"] = centre
+            program["u_pixel_aspect"] = pixel_aspect
         fbo.use()
         fbo.viewport = (0, 0, n, 1)
         vao.render(vertices=3)
@@ -102,6 +118,23 @@ def test_coordinate_and_coefficient_twins(ctx, points):
     for k in LENSES:
         coeffs = run_probe(ctx, 4, points[:1], k)[0]
         np.testing.assert_allclose(coeffs, lensfuncs.drap_coefficients(*k), rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.parametrize("centre, pixel_aspect", [((0.0, 0.0), 1.0), ((0.104, -0.0625), 1.0), ((-0.03, 0.02), 0.9955)])
+def test_principal_point_and_pixel_aspect_twins(ctx, points, centre, pixel_aspect):
+    """The four-argument lens_from_uv / uv_from_lens (principal point, pixel aspect) in both twins;
+    the centred defaults give the two-argument functions, and the pair are inverses."""
+    uv = points + 0.5
+    out = run_probe(ctx, 5, uv, (0.0, 0.0), aspect_hw=9 / 16, centre=centre, pixel_aspect=pixel_aspect)
+    lens_points = lensfuncs.lens_from_uv(uv, 9 / 16, centre, pixel_aspect)
+    np.testing.assert_allclose(out[:, :2], lens_points, atol=1e-6)
+    np.testing.assert_allclose(out[:, 2:], lensfuncs.uv_from_lens(uv, 9 / 16, centre, pixel_aspect), atol=1e-6)
+    np.testing.assert_allclose(lensfuncs.uv_from_lens(lens_points, 9 / 16, centre, pixel_aspect), uv, atol=1e-15)
+    # known answer: the principal point (pixel offset centre * W from the image centre) is lens (0, 0)
+    pp_uv = np.array([0.5 + centre[0], 0.5 + centre[1] * 16 / 9])
+    np.testing.assert_allclose(lensfuncs.lens_from_uv(pp_uv, 9 / 16, centre, pixel_aspect), [0.0, 0.0], atol=1e-15)
+    if centre == (0.0, 0.0) and pixel_aspect == 1.0:
+        np.testing.assert_array_equal(lens_points, lensfuncs.lens_from_uv(uv, 9 / 16))
 
 
 def test_exact_inverse_reports_unreachable_radii(ctx):

@@ -13,15 +13,21 @@ so that ``glradial --help`` stays fast. ``run`` reports bad input by raising :cl
 atomically (:mod:`glradial.atomic`, :mod:`glradial.media_io`).
 
 Shared helpers for command modules live here: :func:`parse_size`, :func:`positive_int`,
-:func:`show_progress`.
+:func:`show_progress`, :func:`add_lens_options` / :func:`lens_from_args` (the lens given on the
+command line) and :func:`read_lens_file`.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import re
+from pathlib import Path
 
-__all__ = ["CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress"]
+__all__ = [
+    "CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress",
+    "add_lens_options", "lens_from_args", "read_lens_file",
+]
 
 _SIZE = re.compile(r"^\s*(\d+)\s*[xX×,]\s*(\d+)\s*$")
 
@@ -91,3 +97,79 @@ def finite_float(text: str) -> float:
 def show_progress(args: argparse.Namespace) -> bool | None:
     """Whether to draw progress bars: ``None`` (auto: when stderr is a terminal) unless ``--quiet``."""
     return False if getattr(args, "quiet", False) else None
+
+
+LENS_FILE_HELP = (
+    "JSON file with the lens: {\"k1\": .., \"k2\": .., \"cx\": .., \"cy\": .., \"pixel_aspect\": ..} "
+    "(glradial units; what 'glradial estimate --json' prints, cx, cy, pixel_aspect optional; or the output of "
+    "'glradial convert --json'), or an OpenCV "
+    "calibration {\"camera_matrix\": 3x3, \"dist_coeffs\": [k1, k2, 0, 0(, 0)], \"size\": [W, H]} "
+    "(size: the calibration's frame size in pixels; default the frame's own)"
+)
+
+
+def add_lens_options(group: argparse._ArgumentGroup, *, k1_required: bool = False) -> None:
+    """Add ``--k1 --k2 --cx --cy --pixel-aspect --lens`` to ``group`` (read by :func:`lens_from_args`)."""
+    group.add_argument("--k1", type=finite_float, help="radial coefficient k1 (width-normalised, unitless)")
+    group.add_argument("--k2", type=finite_float, help="radial coefficient k2 (width-normalised, unitless; default 0)")
+    group.add_argument("--cx", type=finite_float, help="principal point's offset right of the image centre, in image "
+                       "widths (default 0; OpenCV: (cx_px - (W-1)/2) / W)")
+    group.add_argument("--cy", type=finite_float, help="principal point's offset below the image centre, in image "
+                       "widths (default 0; OpenCV: (cy_px - (H-1)/2) / W)")
+    group.add_argument("--pixel-aspect", type=positive_float, metavar="FY/FX",
+                       help="pixel aspect fy / fx of an OpenCV calibration (default 1: square pixels)")
+    group.add_argument("--lens", metavar="JSON", help=LENS_FILE_HELP)
+
+
+def lens_given(args: argparse.Namespace) -> bool:
+    """Whether any of :func:`add_lens_options`'s options was given."""
+    return any(getattr(args, name) is not None for name in ("k1", "k2", "cx", "cy", "pixel_aspect", "lens"))
+
+
+def lens_from_args(args: argparse.Namespace, size: tuple[int, int] | None = None):
+    """The :class:`glradial.Lens` of ``--lens FILE`` or ``--k1 --k2 --cx --cy --pixel-aspect``
+    (``size``: the frame's, for an OpenCV calibration file without its own size)."""
+    from ..lens import Lens
+
+    numbers = {"k1": args.k1, "k2": args.k2, "cx": args.cx, "cy": args.cy, "pixel_aspect": args.pixel_aspect}
+    if args.lens is not None:
+        given = [f"--{name.replace('_', '-')}" for name, value in numbers.items() if value is not None]
+        if given:
+            raise UsageError(f"--lens cannot be combined with {', '.join(given)}")
+        return read_lens_file(args.lens, size)
+    if args.k1 is None and args.k2 is None:
+        raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect) or --lens FILE")
+    return Lens(**{name: value for name, value in numbers.items() if value is not None})
+
+
+def read_lens_file(path: str, size: tuple[int, int] | None = None):
+    """A :class:`glradial.Lens` from a JSON file (formats: :data:`LENS_FILE_HELP`)."""
+    from ..lens import Lens
+
+    source = Path(path)
+    if not source.is_file():
+        raise FileNotFoundError(f"lens file {str(source)!r} does not exist")
+    try:
+        document = json.loads(source.read_text())
+    except (UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise ValueError(f"lens file {str(source)!r} is not JSON: {err}") from None
+    if not isinstance(document, dict):
+        raise ValueError(f"lens file {str(source)!r} must hold a JSON object, got {type(document).__name__}")
+    if "camera_matrix" in document or "dist_coeffs" in document:
+        if "camera_matrix" not in document or "dist_coeffs" not in document:
+            raise ValueError(f"lens file {str(source)!r}: an OpenCV calibration needs both camera_matrix and dist_coeffs")
+        calibrated = document.get("size", size)
+        if calibrated is None:
+            raise ValueError(f"lens file {str(source)!r}: an OpenCV calibration needs \"size\": [W, H] (pixels)")
+        return Lens.from_opencv(document["camera_matrix"], document["dist_coeffs"], tuple(calibrated))
+    if "glradial" in document:  # 'glradial convert --json': its k1, k2 are in the --to convention
+        pair = document["glradial"]
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise ValueError(f"lens file {str(source)!r}: \"glradial\" must be [k1, k2], got {pair!r}")
+        return Lens(*pair)
+    if "k1" not in document:
+        raise ValueError(
+            f"lens file {str(source)!r} has neither \"k1\" nor an OpenCV \"camera_matrix\": keys {sorted(document)}"
+        )
+    fields = ("k1", "k2", "cx", "cy", "pixel_aspect")
+    return Lens(**{name: document[name] for name in fields if name in document})

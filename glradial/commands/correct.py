@@ -6,14 +6,16 @@ import argparse
 import os
 from pathlib import Path
 
-from . import UsageError, finite_float, positive_float, positive_int, show_progress
+from . import UsageError, add_lens_options, lens_from_args, lens_given, positive_float, positive_int, show_progress
 
 DESCRIPTION = """\
 Undistort INPUT into OUTPUT. Images: PNG, JPEG, TIFF (8- and 16-bit and float32 TIFF kept, alpha
 kept). Videos: .mp4/.m4v/.mov (MPEG-4), .avi (Motion JPEG), .mkv (lossless FFV1): the container and
 codec follow OUTPUT's extension, frame rate, frame size and frame count are kept, audio is dropped.
 The lens is given (--k1/--k2, width-normalised: image width = 1, origin at the image centre,
-p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel) or estimated by the bundled CNN (--auto).
+p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel; --cx/--cy/--pixel-aspect for an off-centre
+principal point and non-square pixels; or --lens FILE, e.g. an OpenCV calibration) or estimated by
+the bundled CNN (--auto, centred model).
 For a video, --auto estimates every Nth frame, detects shot cuts, smooths the lens within each
 shot and writes the per-frame lens to a sidecar (OUTPUT.lens.csv by default). Outputs appear only
 when complete."""
@@ -28,9 +30,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("input", metavar="INPUT", help="image or video to correct")
     parser.add_argument("output", metavar="OUTPUT", help="corrected file; its extension picks the format")
-    lens = parser.add_argument_group("lens (give --k1 [--k2] or --auto)")
-    lens.add_argument("--k1", type=finite_float, help="radial coefficient k1 (width-normalised, unitless)")
-    lens.add_argument("--k2", type=finite_float, help="radial coefficient k2 (width-normalised, unitless; default 0)")
+    lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --auto)")
+    add_lens_options(lens)
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled CNN")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
     render = parser.add_argument_group("rendering")
@@ -76,11 +77,11 @@ def _check_paths(args: argparse.Namespace) -> tuple[str, str]:
 
 
 def run(args: argparse.Namespace) -> int:
-    given = args.k1 is not None or args.k2 is not None
+    given = lens_given(args)
     if args.auto and given:
-        raise UsageError("--auto cannot be combined with --k1/--k2")
+        raise UsageError("--auto cannot be combined with --k1/--k2/--cx/--cy/--pixel-aspect/--lens")
     if not args.auto and not given:
-        raise UsageError("give the lens with --k1 (and --k2), or --auto to estimate it")
+        raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect) or --lens FILE, or --auto to estimate it")
     if args.model is not None and not args.auto:
         raise UsageError("--model needs --auto")
     if args.sidecar is not None and not args.auto:
@@ -95,25 +96,29 @@ def run(args: argparse.Namespace) -> int:
 
         if args.sidecar is not None:
             raise UsageError("--sidecar is for videos")
+        from ..lens import Lens
+
         image = read_image(args.input, order="rgb")
         if args.auto:
             from ..video_pipeline import default_estimator, rgb8_for_estimator
 
             k1, k2 = _pair(default_estimator(args.model)(rgb8_for_estimator(image)))
             print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}")
+            lens = Lens(k1, k2)
         else:
-            k1, k2 = args.k1 or 0.0, args.k2 or 0.0
-        write_image(args.output, correct(image, k1, k2, **options), order="rgb")
+            lens = lens_from_args(args, (image.shape[1], image.shape[0]))
+        write_image(args.output, correct(image, lens, **options), order="rgb")
         return 0
 
     from ..video_pipeline import correct_video
 
     if not args.auto:
-        k1, k2 = args.k1 or 0.0, args.k2 or 0.0
-        from ..lens import Lens
+        from ..media_io import VideoReader
 
-        Lens(k1, k2)  # validates before any frame is decoded
-        correct_video(args.input, args.output, lambda _i: (k1, k2), progress=progress, **options)
+        with VideoReader(args.input) as reader:
+            size = reader.info.size
+        lens = lens_from_args(args, size)  # validated before any frame is decoded
+        correct_video(args.input, args.output, lambda _i: lens, progress=progress, **options)
         return 0
 
     from ..video_pipeline import default_estimator, rgb8_for_estimator, track_video

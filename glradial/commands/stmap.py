@@ -4,17 +4,17 @@ from __future__ import annotations
 
 import argparse
 
-from . import finite_float, parse_size
+from . import add_lens_options, lens_from_args, parse_size
 
 DESCRIPTION = """\
-Write the STMap of the lens (k1, k2) on a WxH frame: a 32-bit float RGB image whose red (S) and
-green (T) channels give, for each output pixel, the source position to sample, with Nuke's
-convention: S = (x + 0.5) / W, T = 1 - (y + 0.5) / H (origin at the bottom-left corner of the
-source, x right, y down in pixels, row 0 at the top), blue = 0. Pixels with no source hold
-S = T = -1. --direction undistort: apply the map to the distorted footage to correct it (as
-'glradial correct'); distort: apply it to an undistorted render to add the lens. Formats: .exr
-(float32 R, G, B, ZIP-compressed: what Nuke and Gyroflow load), .tif or .tiff (uncompressed float32
-RGB TIFF), .npy (H x W x 3 float32 array)."""
+Write the STMap of the lens (--k1 --k2 [--cx --cy --pixel-aspect], or --lens FILE) on a WxH frame: a
+32-bit float RGB image whose red (S) and green (T) channels give, for each output pixel, the source
+position to sample, with Nuke's convention: S = (x + 0.5) / W, T = 1 - (y + 0.5) / H (origin at the
+bottom-left corner of the source, x right, y down in pixels, row 0 at the top), blue = 0. Pixels
+with no source hold S = T = -1. --direction undistort: apply the map to the distorted footage to
+correct it (as 'glradial correct'); distort: apply it to an undistorted render to add the lens.
+Formats: .exr (float32 R, G, B, ZIP-compressed: what Nuke and Gyroflow load), .tif or .tiff
+(uncompressed float32 RGB TIFF), .npy (H x W x 3 float32 array)."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -22,8 +22,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "stmap", help="export a lens as a 32-bit float STMap (Nuke convention)",
         description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--k1", type=finite_float, required=True, help="radial coefficient k1 (width-normalised, unitless)")
-    parser.add_argument("--k2", type=finite_float, default=0.0, help="radial coefficient k2 (width-normalised, unitless; default 0)")
+    add_lens_options(parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect] or --lens FILE)"))
     parser.add_argument("--size", type=parse_size, required=True, metavar="WxH", help="frame size in pixels, e.g. 1920x1080")
     parser.add_argument("--direction", choices=("undistort", "distort"), default="undistort",
                         help="undistort = map that corrects distorted footage, distort = map that adds the lens (default: undistort)")
@@ -36,13 +35,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..lens import Lens
     from ..stmap import check_stmap_path, lens_stmap, write_stmap
 
     check_stmap_path(args.out)
-    lens = Lens(args.k1, args.k2)
+    lens = lens_from_args(args, args.size)
     stmap = lens_stmap(lens, args.size, direction=args.direction, fit=args.fit, inverse=args.inverse)
     write_stmap(args.out, stmap)
     width, height = args.size
-    print(f"wrote {args.out}: {width}x{height} float32 STMap ({args.direction}, fit={args.fit}, k1={lens.k1:g}, k2={lens.k2:g})")
+    extra = "" if lens.is_centred else f", cx={lens.cx:g}, cy={lens.cy:g}, pixel_aspect={lens.pixel_aspect:g}"
+    print(f"wrote {args.out}: {width}x{height} float32 STMap ({args.direction}, fit={args.fit}, "
+          f"k1={lens.k1:g}, k2={lens.k2:g}{extra})")
     return 0
