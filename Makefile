@@ -56,7 +56,7 @@ train: $(DEV_STAMP)
 	$(PY) -m net.train --config net/configs/gpu_384_polish.json --out runs/gpu384b --init runs/gpu384/last.pt --steps 3485 --time-budget-s 0
 
 evaluate: $(DEV_STAMP)
-	$(PY) -m net.evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval
+	$(PY) -m glradial evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval --field-panorama tests/data/panorama_field_2048x1024.jpg
 
 clean:
 	rm -rf $(VENV) out build dist *.egg-info .pytest_cache

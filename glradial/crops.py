@@ -30,10 +30,9 @@ import numpy as np
 
 from . import lensfuncs
 from .inverse_series import SERIES_DEGREE, fit_inverse_series
-from .lens import Lens, corner_radius, frame_size, real_number
+from .lens import InverseMethod, Lens, corner_radius, frame_size, real_number
 from .metrics import PAPER_SIZE, manifold_k2
-
-InverseMethod = Literal["exact", "drap"]
+from .shaderlib import TEXTURE_FORMATS
 
 #: The paper's sampling distribution (degrees; k1 in lens units). k2 = manifold(k1) + N(0, K2_NOISE).
 PAPER_RANGES: Mapping[str, tuple[float, float]] = {
@@ -248,7 +247,6 @@ def lonlat_to_panorama_pixels(lon: np.ndarray, lat: np.ndarray, pano_size: tuple
 
 # --- GPU renderer ---------------------------------------------------------------------------------
 
-_TEXTURE_DTYPES = {np.dtype(np.uint8): "f1", np.dtype(np.uint16): "nu2", np.dtype(np.float32): "f4"}
 #: Cap on the bytes of one atlas framebuffer (4 channels); a batch larger than that is drawn in passes.
 ATLAS_BYTES = 64 * 2**20
 #: Default anisotropy of panorama reads: 1 (plain trilinear). Mesa llvmpipe's anisotropic path
@@ -267,7 +265,7 @@ def _panorama_array(panorama: object) -> np.ndarray:
         array = array[:, :, None]
     if array.ndim != 3 or array.shape[2] not in (1, 2, 3, 4):
         raise ValueError(f"panorama must be H×W or H×W×C with C in 1..4, got shape {array.shape}")
-    if array.dtype not in _TEXTURE_DTYPES:
+    if array.dtype not in TEXTURE_FORMATS:
         raise TypeError(f"panorama dtype must be uint8, uint16 or float32, got {array.dtype}")
     height, width = array.shape[:2]
     if width != 2 * height:
@@ -406,7 +404,7 @@ class CropRenderer:
         from .shaderlib import build_program
 
         ctx = self.ctx
-        tex_dtype = _TEXTURE_DTYPES[self.dtype]
+        tex_dtype = TEXTURE_FORMATS[self.dtype][0]
         if self.channels == 3:  # stored as RGBA: Mesa llvmpipe samples 4-channel textures ~5 % faster
             opaque = np.iinfo(self.dtype).max if self.dtype.kind == "u" else 1.0
             array = np.concatenate([array, np.full((*array.shape[:2], 1), opaque, self.dtype)], axis=2)
@@ -518,7 +516,7 @@ class CropRenderer:
         import cv2
 
         w, h = self.out_size
-        tex_dtype = _TEXTURE_DTYPES[self.dtype]
+        tex_dtype = TEXTURE_FORMATS[self.dtype][0]
         if self.channels != 3:
             self._fbo.read_into(dest, viewport=(0, 0, w, n * h), components=self.channels, alignment=1, dtype=tex_dtype)
             return
@@ -560,3 +558,37 @@ def render_crops(
     """Render ``params`` from ``panorama`` once -> ``(N, h, w, C)`` of its dtype (see :class:`CropRenderer`)."""
     with CropRenderer(panorama, size=size, out_size=out_size, inverse=inverse, supersample=supersample) as renderer:
         return renderer.render(params)
+
+
+def render_crop_set(
+    panoramas: Sequence[np.ndarray],
+    n: int,
+    seed: int,
+    *,
+    size: tuple[int, int] = PAPER_SIZE,
+    out_size: tuple[int, int] | None = None,
+    ranges: Mapping[str, object] | None = None,
+) -> tuple[np.ndarray, list[CropParams]]:
+    """``n`` crops spread evenly over ``panoramas`` (the first ``n % P`` get one more), for test and
+    validation sets: panorama ``j`` draws its crops with ``sample_crop_params(count, seed * 1000 + j,
+    size=size, **ranges)`` and renders them at ``out_size`` (no augmentation). Returns contiguous
+    uint8 RGB ``(n, h, w, 3)`` images and the :class:`CropParams` of each crop, in order."""
+    if not panoramas:
+        raise ValueError("panoramas must not be empty")
+    if isinstance(n, bool) or not isinstance(n, (numbers.Integral, np.integer)) or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n!r}")
+    counts = [n // len(panoramas) + (1 if i < n % len(panoramas) else 0) for i in range(len(panoramas))]
+    images, params_all = [], []
+    for j, (panorama, count) in enumerate(zip(panoramas, counts)):
+        if count == 0:
+            continue
+        params = sample_crop_params(count, seed * 1000 + j, size=size, **dict(ranges or {}))
+        with CropRenderer(panorama, size=size, out_size=out_size) as renderer:
+            images.append(np.ascontiguousarray(renderer.render(params)[..., :3]))
+        params_all += params
+    return np.concatenate(images), params_all
+
+
+def crop_labels(params: Sequence[CropParams], dtype: type = np.float64) -> np.ndarray:
+    """``(k1, k2)`` of each crop as an ``N x 2`` array (lens units of the crops' frame geometry)."""
+    return np.array([(p.k1, p.k2) for p in params], dtype).reshape(-1, 2)

@@ -32,8 +32,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .atomic import atomic_path, atomic_write_text
-from .crops import PAPER_SIZE, CropParams, CropRenderer, InverseMethod, sample_crop_params, supersample_grid
-from .lens import frame_size
+from .crops import CropParams, CropRenderer, sample_crop_params, supersample_grid
+from .lens import InverseMethod, frame_size
+from .metrics import PAPER_SIZE
 
 SPLITS = ("train", "val", "test")
 FORMATS = ("png", "jpg")

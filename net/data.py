@@ -30,9 +30,8 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-#: Frame geometry the labels refer to (the paper's 1280 x 720 crops).
-FRAME_SIZE = (1280, 720)
-
+from glradial.metrics import PAPER_SIZE
+from glradial.stadium import stadium_panorama_cached
 
 # --- panoramas ------------------------------------------------------------------------------------
 
@@ -61,26 +60,6 @@ def synthetic_panorama(seed: int, size: tuple[int, int] = (512, 256)) -> np.ndar
             cv2.line(pano, (x0, y0), (x1, y1), (255, 255, 255), max(1, width // 512))
         else:
             cv2.rectangle(pano, (x0, y0), (x0 + width // 40, y0 + height // 40), colour, -1)
-    return pano
-
-
-def stadium_panorama_cached(seed: int, size: tuple[int, int], cache_dir: str | Path | None) -> np.ndarray:
-    """The stadium panorama of ``seed`` at ``size = (W, H)``, rendered once and cached as ``.npy``."""
-    if cache_dir is not None:
-        path = Path(cache_dir) / f"stadium_{seed}_{size[0]}x{size[1]}.npy"
-        if path.exists():
-            return np.load(path)
-    from glradial.stadium import stadium_panorama
-
-    pano = np.ascontiguousarray(stadium_panorama(seed, size=tuple(size)))
-    if pano.ndim != 3 or pano.shape[:2] != (size[1], size[0]) or pano.dtype != np.uint8:
-        raise RuntimeError(f"stadium_panorama({seed}) returned {pano.dtype} {pano.shape}, expected {size[1]}x{size[0]}x3 uint8")
-    pano = pano[:, :, :3]
-    if cache_dir is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}.npy")
-        np.save(tmp, pano)
-        os.replace(tmp, path)
     return pano
 
 
@@ -128,7 +107,7 @@ def crop_stream(
     seed: int,
     *,
     out_size: tuple[int, int],
-    size: tuple[int, int] = FRAME_SIZE,
+    size: tuple[int, int] = PAPER_SIZE,
     ranges: dict | None = None,
     panoramas_per_batch: int = 4,
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
@@ -151,7 +130,7 @@ def paired_crop_stream(
     seed: int,
     *,
     out_size: tuple[int, int],
-    size: tuple[int, int] = FRAME_SIZE,
+    size: tuple[int, int] = PAPER_SIZE,
     ranges: dict | None = None,
 ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
     """Like :func:`crop_stream`, but crops come in pairs ``(2i, 2i + 1)`` that share panorama, pan,
@@ -406,27 +385,14 @@ class CropPool:
 
 def render_test_set(
     source: PanoramaSource, n: int, seed: int, out_size: tuple[int, int], *, ranges: dict | None = None,
-    per_panorama: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list]:
-    """Render ``n`` crops (no augmentation) spread evenly over ``source``'s panoramas, in this process.
+    """``n`` crops (no augmentation) spread evenly over ``source``'s panoramas, rendered in this
+    process by :func:`glradial.crops.render_crop_set`. Returns ``(images, labels float32, params)``;
+    deterministic per ``seed``."""
+    from glradial.crops import crop_labels, render_crop_set
 
-    Returns ``(images, labels, params)``; ``params`` are the :class:`CropParams` (for error by field
-    of view). Deterministic per ``seed``.
-    """
-    from glradial.crops import CropRenderer, sample_crop_params
-
-    panoramas = source.load()
-    counts = [n // len(panoramas) + (1 if i < n % len(panoramas) else 0) for i in range(len(panoramas))]
-    images, params_all = [], []
-    for j, (pano, count) in enumerate(zip(panoramas, counts)):
-        if count == 0:
-            continue
-        params = sample_crop_params(count, seed * 1000 + j, size=FRAME_SIZE, **(ranges or {}))
-        with CropRenderer(pano, size=FRAME_SIZE, out_size=out_size) as renderer:
-            images.append(np.ascontiguousarray(renderer.render(params)[..., :3]))
-        params_all += params
-    labels = np.array([(p.k1, p.k2) for p in params_all], np.float32)
-    return np.concatenate(images), labels, params_all
+    images, params = render_crop_set(source.load(), n, seed, size=PAPER_SIZE, out_size=out_size, ranges=ranges)
+    return images, crop_labels(params, np.float32), params
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -43,6 +43,8 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
+from glradial.evaluation import metrics
+
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
 from .loss import training_loss
@@ -113,13 +115,6 @@ def lr_factor(progress: float, step: int, cfg: TrainConfig) -> float:
     progress = min(max(progress, 0.0), 1.0)
     cosine = cfg.min_lr_ratio + (1 - cfg.min_lr_ratio) * 0.5 * (1 + math.cos(math.pi * progress))
     return warm * cosine
-
-
-def evaluate_arrays(pred: np.ndarray, labels: np.ndarray) -> dict:
-    """Metrics of predictions ``N x 2`` against labels ``N x 2`` (see net.evaluate for the definitions)."""
-    from .evaluate import metrics
-
-    return metrics(pred, labels)
 
 
 def predict(model: torch.nn.Module, images: np.ndarray, config: ModelConfig, device, batch: int = 128) -> np.ndarray:
@@ -347,7 +342,7 @@ def main(argv: list[str] | None = None) -> int:
             if is_main and (step % cfg.log_every == 0 or do_val or done):
                 vm = {}
                 if do_val or (done and val is not None):
-                    vm = evaluate_arrays(predict(ema.model, val[0], model_cfg, device), val[1])
+                    vm = metrics(predict(ema.model, val[0], model_cfg, device), val[1])
                     last_val = time.monotonic()
                     if vm["median_max_px"] < best:
                         best = vm["median_max_px"]
@@ -376,7 +371,7 @@ def main(argv: list[str] | None = None) -> int:
                             optimizer=optimizer.state_dict(), step=step, train_time=train_time, best=best,
                             model_config=model_cfg.to_dict())
             if val is not None and not (out / "best.pt").exists():
-                vm = evaluate_arrays(predict(ema.model, val[0], model_cfg, device), val[1])
+                vm = metrics(predict(ema.model, val[0], model_cfg, device), val[1])
                 save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
                                 step=step, train_time=train_time, val=vm)
     finally:

@@ -17,13 +17,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..metrics import manifold_k2, max_displacement_px
 from . import finite_float, parse_size, positive_float, positive_int
 
 DESCRIPTION = __doc__.split("\n\n", 1)[1]
 
 #: the demo's default camera (degrees) and lens; k2 near the Lopez-Antequera manifold of k1
 DEFAULT_K1 = -0.32
-DEFAULT_K2 = 0.019 * DEFAULT_K1 + 0.805 * DEFAULT_K1**2
+DEFAULT_K2 = float(manifold_k2(DEFAULT_K1))
 #: a stadium of the held-out test split (seed % 10 == 9) seen from its main broadcast camera
 DEFAULT_SEED = 89
 
@@ -215,18 +216,9 @@ def _find_model(explicit: str | None) -> Path | None:
     return path if path.is_file() else None
 
 
-def displacement_error_px(true: tuple[float, float], estimate: tuple[float, float], size: tuple[int, int]) -> float:
-    """``1920 · max_r |P(r, true) − P(r, estimate)|`` for r up to the frame's corner radius."""
-    from ..lens import corner_radius
-
-    r = np.linspace(0.0, corner_radius(size), 512)
-    d = (true[0] - estimate[0]) * r**3 + (true[1] - estimate[1]) * r**5
-    return float(1920.0 * np.max(np.abs(d)))
-
-
 def run(args: argparse.Namespace) -> int:
     from ..crops import CropParams, render_crops
-    from ..lens import Lens
+    from ..lens import Lens, corner_radius
     from ..remap import correct
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style
@@ -264,7 +256,7 @@ def run(args: argparse.Namespace) -> int:
         estimate = Estimator(model).estimate(frame)
         used = (float(estimate.k1), float(estimate.k2)) if hasattr(estimate, "k1") else tuple(map(float, estimate))
         source = "estimated"
-        error = displacement_error_px((true_lens.k1, true_lens.k2), used, size)
+        error = float(max_displacement_px((true_lens.k1, true_lens.k2), used, radius=corner_radius(size)))
         log(f"estimated with {model.name}: k1={used[0]:.4f} k2={used[1]:.4f}")
         print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
         print(f"estimated k1={used[0]:+.4f} k2={used[1]:+.4f}")
