@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 import warnings
 from dataclasses import dataclass, fields
 from typing import Literal, Mapping, Sequence
@@ -560,8 +561,95 @@ def render_crops(
         return renderer.render(params)
 
 
+def load_panorama(item: object) -> np.ndarray:
+    """A panorama as H×W×3 uint8 RGB: uint8 arrays converted (grey repeated, alpha dropped); paths read
+    (image files through OpenCV, ``.npy`` arrays such as the stadium cache through NumPy)."""
+    if isinstance(item, (str, os.PathLike)):
+        if str(item).endswith(".npy"):
+            item = np.load(item)
+        else:
+            import cv2
+
+            image = cv2.imread(str(item), cv2.IMREAD_COLOR)
+            if image is None:
+                raise ValueError(f"cannot read panorama {str(item)!r}")
+            return np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
+    array = np.asarray(item)
+    if array.dtype != np.uint8:
+        raise TypeError(f"panorama arrays must be uint8, got {array.dtype}")
+    if array.ndim == 2:
+        array = array[:, :, None]
+    if array.ndim != 3 or array.shape[2] not in (1, 3, 4):
+        raise ValueError(f"panorama must be H×W, H×W×1, H×W×3 or H×W×4, got shape {array.shape}")
+    if array.shape[2] == 1:
+        array = np.repeat(array, 3, axis=2)
+    return np.ascontiguousarray(array[:, :, :3])
+
+
+class PanoramaRenderers:
+    """:class:`CropRenderer` s for a list of panoramas, and the one loop that renders crops of several.
+
+    ``panoramas``: arrays or paths (:func:`load_panorama`: loaded, as RGB uint8, when first used).
+    A panorama's renderer is made on first use with ``renderer_options`` (keywords of
+    :class:`CropRenderer`); the ``cache`` most recently used stay uploaded, older ones are released.
+    :meth:`render` draws crop ``i`` of ``params`` from panorama ``which[i]``. Same thread and process
+    rules as :class:`CropRenderer`; :meth:`close` (or ``with``) releases them all.
+    """
+
+    def __init__(self, panoramas: Sequence[object], *, cache: int = 1, **renderer_options: object) -> None:
+        if isinstance(cache, bool) or not isinstance(cache, (numbers.Integral, np.integer)) or cache < 1:
+            raise ValueError(f"cache must be an integer >= 1, got {cache!r}")
+        self.panoramas = list(panoramas)
+        self.cache = int(cache)
+        self.options = renderer_options
+        self._renderers: dict[int, CropRenderer] = {}  # least recently used first
+
+    def renderer(self, index: int) -> CropRenderer:
+        """The renderer of panorama ``index`` (made, and the least recently used one released, if needed)."""
+        found = self._renderers.pop(index, None)
+        if found is None:
+            while len(self._renderers) >= self.cache:
+                self._renderers.pop(next(iter(self._renderers))).release()
+            found = CropRenderer(load_panorama(self.panoramas[index]), **self.options)  # type: ignore[arg-type]
+        self._renderers[index] = found
+        return found
+
+    def render(self, params: Sequence[CropParams], which: Sequence[int] | np.ndarray) -> np.ndarray:
+        """Crop ``i`` of ``params`` from panorama ``which[i]`` -> uint8 RGB ``(N, h, w, 3)``, in order
+        (one :meth:`CropRenderer.render` call per panorama, panoramas in index order)."""
+        params = list(params)
+        which = np.asarray(which, np.int64).reshape(-1)
+        if len(which) != len(params):
+            raise ValueError(f"which must give one panorama per crop: {len(which)} for {len(params)} crops")
+        if len(which) and (which.min() < 0 or which.max() >= len(self.panoramas)):
+            raise ValueError(f"which must index the {len(self.panoramas)} panoramas, got {which.min()}..{which.max()}")
+        images: np.ndarray | None = None
+        for pano in np.unique(which):
+            rows = np.flatnonzero(which == pano)
+            part = self.renderer(int(pano)).render([params[r] for r in rows])
+            if images is None:
+                images = np.empty((len(params), *part.shape[1:]), part.dtype)
+            images[rows] = part
+        if images is None:
+            w, h = frame_size(self.options.get("out_size") or self.options.get("size", PAPER_SIZE))
+            images = np.empty((0, h, w, 3), np.uint8)
+        return images
+
+    def close(self) -> None:
+        """Release every renderer (idempotent)."""
+        for renderer in self._renderers.values():
+            renderer.release()
+        self._renderers.clear()
+
+    def __enter__(self) -> "PanoramaRenderers":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def render_crop_set(
-    panoramas: Sequence[np.ndarray],
+    panoramas: Sequence[object],
     n: int,
     seed: int,
     *,
@@ -571,22 +659,22 @@ def render_crop_set(
 ) -> tuple[np.ndarray, list[CropParams]]:
     """``n`` crops spread evenly over ``panoramas`` (the first ``n % P`` get one more), for test and
     validation sets: panorama ``j`` draws its crops with ``sample_crop_params(count, seed * 1000 + j,
-    size=size, **ranges)`` and renders them at ``out_size`` (no augmentation). Returns contiguous
-    uint8 RGB ``(n, h, w, 3)`` images and the :class:`CropParams` of each crop, in order."""
+    size=size, **ranges)``, rendered at ``out_size`` (no augmentation; panoramas as in
+    :func:`load_panorama`). Returns uint8 RGB ``(n, h, w, 3)`` images and the :class:`CropParams`
+    of each crop, in order."""
     if not panoramas:
         raise ValueError("panoramas must not be empty")
     if isinstance(n, bool) or not isinstance(n, (numbers.Integral, np.integer)) or n < 1:
         raise ValueError(f"n must be a positive integer, got {n!r}")
     counts = [n // len(panoramas) + (1 if i < n % len(panoramas) else 0) for i in range(len(panoramas))]
-    images, params_all = [], []
-    for j, (panorama, count) in enumerate(zip(panoramas, counts)):
-        if count == 0:
-            continue
-        params = sample_crop_params(count, seed * 1000 + j, size=size, **dict(ranges or {}))
-        with CropRenderer(panorama, size=size, out_size=out_size) as renderer:
-            images.append(np.ascontiguousarray(renderer.render(params)[..., :3]))
-        params_all += params
-    return np.concatenate(images), params_all
+    params: list[CropParams] = []
+    which: list[int] = []
+    for j, count in enumerate(counts):
+        if count:
+            params += sample_crop_params(count, seed * 1000 + j, size=size, **dict(ranges or {}))
+            which += [j] * count
+    with PanoramaRenderers(panoramas, size=size, out_size=out_size) as renderers:
+        return renderers.render(params, which), params
 
 
 def crop_labels(params: Sequence[CropParams], dtype: type = np.float64) -> np.ndarray:

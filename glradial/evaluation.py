@@ -184,7 +184,7 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
     (all atomically); returns the metrics dict. ``input_size`` (W, H) is the network input:
     crops are rendered at twice it. Progress goes to stderr."""
     from .crops import crop_labels, render_crop_set
-    from .crop_stream import load_panorama
+    from .crops import load_panorama
     from .stadium import stadium_panorama_cached
     from .stadium_style import split_seeds
 

@@ -42,6 +42,7 @@ __all__ = [
     "StadiumRenderer",
     "stadium_panorama",
     "stadium_panorama_cached",
+    "stadium_cache_path",
     "sample_style",
     "stadium_split",
     "split_seeds",
@@ -336,13 +337,19 @@ def stadium_panorama(seed: int, size: tuple[int, int] = (8192, 4096), **style: A
     return renderer.render(st, size)
 
 
+def stadium_cache_path(seed: int, size: tuple[int, int], cache_dir: str | os.PathLike) -> Path:
+    """Where :func:`stadium_panorama_cached` keeps the panorama of ``seed`` at ``size = (W, H)``."""
+    width, height = _parse_size(size)
+    return Path(cache_dir) / f"stadium_{seed}_{width}x{height}.npy"
+
+
 def stadium_panorama_cached(seed: int, size: tuple[int, int], cache_dir: str | os.PathLike | None) -> np.ndarray:
     """:func:`stadium_panorama` of ``seed`` at ``size = (W, H)`` (default style), rendered once and
     kept as ``<cache_dir>/stadium_<seed>_<W>x<H>.npy`` (written atomically); ``cache_dir=None``
     renders without caching. The cache is keyed by seed and size only: clear it when the stadium
     shader changes."""
     width, height = _parse_size(size)
-    path = Path(cache_dir) / f"stadium_{seed}_{width}x{height}.npy" if cache_dir is not None else None
+    path = stadium_cache_path(seed, size, cache_dir) if cache_dir is not None else None
     if path is not None and path.exists():
         return np.load(path)
     pano = np.ascontiguousarray(stadium_panorama(seed, size=(width, height)))
