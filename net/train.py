@@ -20,7 +20,8 @@ over the budget (so a run ends on time on a shared machine; then the run is not 
 An exponential moving average (EMA) of the weights is kept and is what validation, the "best"
 checkpoint and export use.
 
-Outputs in ``--out``: ``train.csv`` (one row per log interval), ``last.pt`` (every
+Outputs in ``--out`` (written through :mod:`glradial.atomic`, except the log ``train.csv``, one
+row per log interval appended and flushed as it comes), ``last.pt`` (every
 ``checkpoint_s`` seconds and at the end; ``--resume`` continues from it), ``best.pt`` (best
 validation median max-displacement), ``config.json`` (the full run config, model config included).
 Uses CUDA when ``torch.cuda.is_available()`` (NCCL for DDP) and the CPU otherwise (gloo).
@@ -43,6 +44,7 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
+from glradial.atomic import atomic_path, atomic_write_text
 from glradial.evaluation import metrics
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
@@ -147,9 +149,9 @@ class EMA:
 
 
 def save_checkpoint(path: Path, **state) -> None:
-    tmp = path.with_suffix(".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    """``torch.save`` of ``state`` to ``path``, atomically (a killed run leaves the previous file)."""
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
 
 
 def rank_shards(source: PanoramaSource, cfg: TrainConfig, rank: int, world: int) -> list[tuple[int, PanoramaSource]]:
@@ -260,7 +262,7 @@ def main(argv: list[str] | None = None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         full = asdict(cfg)
         full["model"] = model_cfg.to_dict()
-        (out / "config.json").write_text(json.dumps(full, indent=2) + "\n")
+        atomic_write_text(out / "config.json", json.dumps(full, indent=2) + "\n")
         model_cfg.save(out / "model_config.json")
     train_model = torch.nn.parallel.DistributedDataParallel(model) if distributed else model
     log(f"model {count_parameters(model)} parameters, input {model_cfg.input_size}, device {device}, world {world}")
