@@ -2,8 +2,8 @@
 
 Usage::
 
-    python -m net.export --checkpoint runs/shipped/best.pt --out glradial/models/glradial_k1k2.onnx \
-        [--metrics runs/shipped/eval.json] [--run-config runs/shipped/config.json]
+    python -m net.export --checkpoint runs/gpu384b/best.pt --out glradial/models/glradial_k1k2.onnx \
+        [--metrics runs/gpu384b/eval.json] [--run-config runs/gpu384b/config.json]
 
 Graph (opset 17). Input ``image``: uint8 ``N x H x W x 3`` RGB (NHWC), the 16:9 frame already
 resized (area interpolation) to the network input ``input_size = (W, H)``. The graph does the rest

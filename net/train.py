@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m net.train --config net/configs/shipped.json --out runs/shipped [--resume]
+    python -m net.train --config net/configs/stage01_128.json --out runs/stage01 [--resume]
     torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
 
 Data path per rank: ``producers`` :class:`~.data.CropProducer` processes render crops ahead of
@@ -88,7 +88,9 @@ class TrainConfig:
 
     @classmethod
     def from_json(cls, path: str | Path) -> "TrainConfig":
-        data = json.loads(Path(path).read_text())
+        """Load a run config; ``"base"`` names a config (relative to this file's folder) that it
+        extends (:func:`load_config_dict`)."""
+        data = load_config_dict(path)
         names = set(cls.__dataclass_fields__)
         unknown = set(data) - names
         if unknown:
@@ -99,6 +101,36 @@ class TrainConfig:
         if cfg.paired and (cfg.batch_size % 2 or cfg.fresh_per_step % 2 or cfg.producer_chunk % 2 or cfg.pool_capacity % 2):
             raise ValueError("paired training needs even batch_size, fresh_per_step, producer_chunk and pool_capacity")
         return cfg
+
+
+def merge_config(base: dict, changes: dict) -> dict:
+    """``base`` updated by ``changes``: nested dicts merge key by key, anything else (lists, numbers,
+    ``null``) replaces the base's value."""
+    out = dict(base)
+    for key, value in changes.items():
+        out[key] = merge_config(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
+
+
+def load_config_dict(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict:
+    """A config file as a dict, its ``"base"`` chain resolved: the file holds only its differences
+    from the config it names (a path relative to the file's folder), merged by :func:`merge_config`.
+    A missing base or a cycle is a ``ValueError`` naming the files."""
+    path = Path(path).resolve()
+    if path in _seen:
+        raise ValueError(f"config base cycle: {' -> '.join(str(p.name) for p in (*_seen, path))}")
+    data = json.loads(path.read_text())
+    if not isinstance(data, dict):
+        raise ValueError(f"{path} must hold a JSON object, got {type(data).__name__}")
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ValueError(f"'base' in {path} must be a file name, got {base!r}")
+    base_path = path.parent / base
+    if not base_path.is_file():
+        raise ValueError(f"{path}: its base {str(base_path)!r} does not exist")
+    return merge_config(load_config_dict(base_path, (*_seen, path)), data)
 
 
 def panorama_source(spec: dict, cache_dir: str) -> PanoramaSource:
@@ -183,7 +215,7 @@ def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
-    parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig)")
+    parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig; \"base\" names the config it extends)")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")
     parser.add_argument("--resume", action="store_true", help="continue from OUT/last.pt if present")
     parser.add_argument("--steps", type=int, help="override the config's step count")

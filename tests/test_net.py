@@ -16,7 +16,7 @@ from net.augment import AugmentConfig, augment_batch, augment_pairs, jpeg_roundt
 from net.loss import distortion_loss, loss_radii, max_displacement, training_loss  # noqa: E402
 from net.model import DistortionNet, ModelConfig, count_parameters, load_grown  # noqa: E402
 
-SHIPPED_CONFIG = "net/configs/shipped.json"
+SHIPPED_CONFIG = "net/configs/stage01_128.json"
 
 
 def _integral(d1: float, d2: float, r: float) -> float:
@@ -328,3 +328,34 @@ def test_training_producer_streams_the_glradial_crop_producer():
     want_labels = np.concatenate([b.labels for b in batches])[:10]
     assert np.array_equal(labels, want_labels)
     assert np.abs(images.astype(int) - want_images).max() <= 1
+
+
+def test_configs_name_a_base_and_hold_their_differences(tmp_path):
+    from net.train import TrainConfig, load_config_dict, merge_config
+
+    # nested objects merge key by key; lists and null replace
+    assert merge_config({"a": {"x": 1, "y": [1, 2]}, "b": 2}, {"a": {"y": [3]}, "b": None}) == {"a": {"x": 1, "y": [3]}, "b": None}
+    (tmp_path / "one.json").write_text(json.dumps({"seed": 1, "lr": 0.5, "model": {"input_size": [64, 36], "head_hidden": 8}}))
+    (tmp_path / "two.json").write_text(json.dumps({"base": "one.json", "lr": 0.25, "model": {"head_hidden": 16}}))
+    cfg = TrainConfig.from_json(tmp_path / "two.json")
+    assert (cfg.seed, cfg.lr, cfg.model) == (1, 0.25, {"input_size": [64, 36], "head_hidden": 16})
+    (tmp_path / "loop.json").write_text(json.dumps({"base": "loop2.json"}))
+    (tmp_path / "loop2.json").write_text(json.dumps({"base": "loop.json"}))
+    with pytest.raises(ValueError, match="cycle"):
+        load_config_dict(tmp_path / "loop.json")
+    (tmp_path / "orphan.json").write_text(json.dumps({"base": "nope.json"}))
+    with pytest.raises(ValueError, match="nope.json"):
+        load_config_dict(tmp_path / "orphan.json")
+
+
+def test_the_shipped_stage_config_describes_the_shipped_model():
+    # stage10_shipped.json is the run that produced glradial/models/glradial_k1k2.onnx: the same
+    # network as the model's embedded config
+    import onnx
+
+    from net.train import TrainConfig
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = TrainConfig.from_json(root / "net" / "configs" / "stage10_shipped.json")
+    props = {p.key: p.value for p in onnx.load(str(root / "glradial" / "models" / "glradial_k1k2.onnx")).metadata_props}
+    assert ModelConfig.from_dict(cfg.model) == ModelConfig.from_dict(json.loads(props["model_config"]))
