@@ -238,14 +238,6 @@ def ray_to_lonlat(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.arctan2(x, z), np.arctan2(-y, np.hypot(x, z))
 
 
-def lonlat_to_panorama_pixels(lon: np.ndarray, lat: np.ndarray, pano_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """(lon, lat) radians -> panorama pixel coordinates (x, y), centres at integers, ``size = (W, H)``."""
-    width, height = pano_size
-    x = (0.5 + np.asarray(lon) / (2.0 * math.pi)) * width - 0.5
-    y = (0.5 - np.asarray(lat) / math.pi) * height - 0.5
-    return x, y
-
-
 # --- GPU renderer ---------------------------------------------------------------------------------
 
 #: Cap on the bytes of one atlas framebuffer (4 channels); a batch larger than that is drawn in passes.

@@ -31,15 +31,9 @@ from glradial.crop_producer import crop_batches
 from glradial.crops import load_panorama
 from glradial.metrics import PAPER_SIZE
 from glradial.stadium import stadium_cache_path, stadium_panorama_cached
+from glradial.stadium_style import split_seeds
 
 # --- panoramas ------------------------------------------------------------------------------------
-
-
-def split_seeds(split: str, n: int, start: int = 0) -> list[int]:
-    """The first ``n`` stadium seeds of ``split`` ("train", "val", "test")."""
-    from glradial.stadium_style import split_seeds as _split_seeds
-
-    return _split_seeds(split, n, start)
 
 
 def synthetic_panorama(seed: int, size: tuple[int, int] = (512, 256)) -> np.ndarray:
@@ -261,9 +255,6 @@ class CropPool:
         else:
             idx = rng.integers(0, self.count, n)
         return self.images[idx], self.labels[idx]
-
-    def state(self) -> dict:
-        return {"count": self.count, "next": self._next}
 
 
 def render_test_set(

@@ -137,7 +137,7 @@ def panorama_source(spec: dict, cache_dir: str) -> PanoramaSource:
     """Build a :class:`PanoramaSource` from a config entry (``seeds`` a list or ``{split, n, start}``)."""
     seeds = spec.get("seeds", [])
     if isinstance(seeds, dict):
-        from .data import split_seeds
+        from glradial.stadium_style import split_seeds
 
         seeds = split_seeds(seeds["split"], int(seeds["n"]), int(seeds.get("start", 0)))
     return PanoramaSource(kind=spec["kind"], seeds=list(seeds), size=tuple(spec.get("size", (2048, 1024))),
