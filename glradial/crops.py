@@ -243,8 +243,8 @@ def ray_to_lonlat(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 #: Cap on the bytes of one atlas framebuffer (4 channels); a batch larger than that is drawn in passes.
 ATLAS_BYTES = 64 * 2**20
 #: Default anisotropy of panorama reads: 1 (plain trilinear). Mesa llvmpipe's anisotropic path
-#: blurs even magnified reads (measured: mean error 0.73 vs 0.25 levels against an exact bilinear
-#: ray cast) and is 2-5× slower; supersampling does the anti-aliasing instead.
+#: blurs even magnified reads and is slower (figures in docs/CROPS.md); supersampling does the
+#: anti-aliasing instead.
 ANISOTROPY = 1.0
 #: Per-crop vertex attributes of crop.vert, in buffer order (vec4 each): rotation rows | f, k1, k2;
 #: inverse series coefficients c0..c10 | tile index.
@@ -313,18 +313,16 @@ class CropRenderer:
     linear map, each a trilinear read at its sub-pixel footprint: a box filter over the output pixel,
     i.e. what area-resizing (``cv2.INTER_AREA``) an anti-aliased ``size`` frame gives, without
     rendering it; ``"auto"`` picks the grid that makes each sample's footprint near-square (see
-    :func:`supersample_grid`; 2 × 1 for 1280×720 -> 224×224). Measured on that case against the
-    INTER_AREA-resized 1280×720 render (60 paper crops of a 4096×2048 panorama), RMS difference in
-    levels of 255: photo 1.66 (1 × 1), 0.63 (2 × 1), 0.52 (2 × 2); binary noise 26.1, 12.5, 8.4. On
-    Mesa llvmpipe 2 × 1 costs ~1.3× the time of 1 × 1 (docs/CROPS.md).
+    :func:`supersample_grid`; 2 × 1 for 1280×720 -> 224×224). How close each grid comes to that, and what it costs:
+    docs/CROPS.md.
     ``anisotropy`` (default 1: trilinear) is passed to the driver. ``inverse`` picks the exact
     inverse (``newton_steps`` Newton steps from the Drap-Lefevre seed; 3 reach 1e-9 lens units for
     the paper's distribution; the default is common.glsl's ``LENS_NEWTON_STEPS`` = 8, and pixels where
     Newton does not converge count as having no solution) or the paper's four-term ``"drap"`` one.
     With ``series_inverse`` (default) the exact inverse of each crop's lens is fitted on the CPU as a
     degree-10 Chebyshev series in ``r_d²`` and used instead of the per-pixel Newton solve wherever it
-    is within 1e-6 lens units of it over the whole frame (:mod:`glradial.inverse_series`; 95 % of the
-    paper's lenses; the others, near fold-over, keep Newton): the same geometry, a faster shader.
+    is within 1e-6 lens units of it over the whole frame (:mod:`glradial.inverse_series`; most of the
+    paper's lenses, docs/CROPS.md; the others, near fold-over, keep Newton): the same geometry, a faster shader.
 
     Crops are drawn up to ``tiles_per_pass`` at a time into a vertical atlas (one instanced draw per
     inverse path and one readback per pass). A 3-channel panorama is stored as RGBA (a quarter more
@@ -398,7 +396,7 @@ class CropRenderer:
 
         ctx = self.ctx
         tex_dtype = TEXTURE_FORMATS[self.dtype][0]
-        if self.channels == 3:  # stored as RGBA: Mesa llvmpipe samples 4-channel textures ~5 % faster
+        if self.channels == 3:  # stored as RGBA: Mesa llvmpipe samples 4-channel textures faster (docs/CROPS.md)
             opaque = np.iinfo(self.dtype).max if self.dtype.kind == "u" else 1.0
             array = np.concatenate([array, np.full((*array.shape[:2], 1), opaque, self.dtype)], axis=2)
         self._pano = ctx.texture(self.panorama_size, array.shape[2], array.tobytes(), dtype=tex_dtype, alignment=1)
@@ -444,8 +442,8 @@ class CropRenderer:
         self._objects.append(self._target)
         self._fbo = ctx.framebuffer(color_attachments=[self._target])
         self._objects.append(self._fbo)
-        # RGB output: the atlas is read as RGBA (a plain copy) and OpenCV drops alpha; measured 3.3 ms
-        # per 73-tile pass of 224×224 against 7.1 ms for the driver's own RGBA -> RGB readback.
+        # RGB output: the atlas is read as RGBA (a plain copy) and OpenCV drops alpha, faster than the
+        # driver's own RGBA -> RGB readback (docs/CROPS.md).
         self._rgba_scratch: np.ndarray | None = None  # allocated on the first RGB readback
 
     # -- rendering -------------------------------------------------------------------------------
