@@ -308,6 +308,13 @@ def plots(out: Path, pred: np.ndarray, labels: np.ndarray, ood: tuple[np.ndarray
         return []
     from .atomic import atomic_path
 
+    def save(name: str) -> str:
+        fig.tight_layout()
+        with atomic_path(out / name) as tmp:
+            fig.savefig(tmp)
+        plt.close(fig)
+        return name
+
     names = []
     px_a = max_displacement_px(labels, pred)
     px_b = max_displacement_px(labels, method_b(pred))
@@ -325,11 +332,7 @@ def plots(out: Path, pred: np.ndarray, labels: np.ndarray, ood: tuple[np.ndarray
     ax.set_ylabel("test crops")
     ax.set_title(f"Error distribution, held-out stadiums (n = {len(labels)}; mean predictor median {np.median(px_0):.1f} px)", fontsize=8)
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    with atomic_path(out / "error_distribution.png") as tmp:
-        fig.savefig(tmp)
-    plt.close(fig)
-    names.append("error_distribution.png")
+    names.append(save("error_distribution.png"))
     fig, axes = plt.subplots(1, 2, figsize=(8.0, 4.0), dpi=110)
     for i, (ax, name) in enumerate(zip(axes, ("k1", "k2"))):
         ax.scatter(labels[:, i], pred[:, i], s=4, alpha=0.5, label="held-out stadiums")
@@ -340,9 +343,5 @@ def plots(out: Path, pred: np.ndarray, labels: np.ndarray, ood: tuple[np.ndarray
         ax.set_xlabel(f"true {name}")
         ax.set_ylabel(f"predicted {name}")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    with atomic_path(out / "predicted_vs_true.png") as tmp:
-        fig.savefig(tmp)
-    plt.close(fig)
-    names.append("predicted_vs_true.png")
+    names.append(save("predicted_vs_true.png"))
     return names

@@ -109,3 +109,15 @@ def test_training_mean_is_the_mean_of_the_paper_distribution():
 
     k = np.array([(p.k1, p.k2) for p in sample_crop_params(20000, 7)])
     assert k.mean(axis=0) == pytest.approx(TRAINING_MEAN, abs=2e-3)
+
+
+def test_plots_without_matplotlib_say_so(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from glradial.evaluation import plots
+
+    labels = np.array([[-0.2, 0.03], [0.1, 0.01]])
+    monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib now raises ImportError
+    assert plots(tmp_path, labels, labels, None) == []
+    assert "matplotlib is not installed" in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []
