@@ -29,7 +29,7 @@ import torch
 from torch import nn
 
 from glradial.atomic import atomic_write_text
-from glradial.metrics import manifold_k2
+from glradial.metrics import PAPER_SIZE, manifold_k2
 
 #: ITU-R BT.601 luma weights (R, G, B) used by the grayscale variant.
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)
@@ -169,7 +169,7 @@ class RegressionHead(nn.Module):
 
 def coordinate_grid(width: int, height: int) -> torch.Tensor:
     """``1 x 3 x H x W`` channels (x, y, r) in lens units of the 16:9 frame (x in [-0.5, 0.5])."""
-    aspect = 9.0 / 16.0
+    aspect = PAPER_SIZE[1] / PAPER_SIZE[0]
     xs = (torch.arange(width, dtype=torch.float32) + 0.5) / width - 0.5
     ys = ((torch.arange(height, dtype=torch.float32) + 0.5) / height - 0.5) * aspect
     gy, gx = torch.meshgrid(ys, xs, indexing="ij")

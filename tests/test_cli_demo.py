@@ -8,7 +8,7 @@ import pytest
 
 from glradial.cli import main
 from glradial.commands import demo
-from glradial.lens import corner_radius
+from glradial.lens import corner_radius, lens_to_pixels
 from glradial.media_io import read_image
 from glradial.metrics import max_displacement_px
 
@@ -62,7 +62,7 @@ def test_reference_lines_lie_on_the_rendered_pitch_lines():
     assert np.abs(centre).max() < 1e-9
     x = -(52.5 - 16.5)
     points = np.stack([np.full(60, x), np.linspace(-15, 15, 60), np.zeros(60)], 1)
-    px = demo._lens_to_px(demo.project_undistorted(params, style, points, size), size)
+    px = lens_to_pixels(demo.project_undistorted(params, style, points, size), size)
     inside = (px[:, 0] > 30) & (px[:, 0] < size[0] - 31) & (px[:, 1] > 8) & (px[:, 1] < size[1] - 9)
     assert inside.sum() > 20
 

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..metrics import manifold_k2, max_displacement_px
+from ..metrics import PAPER_SIZE, manifold_k2, max_displacement_px
 from . import finite_float, parse_size, positive_float, positive_int
 
 DESCRIPTION = __doc__.split("\n\n", 1)[1]
@@ -36,7 +36,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("--out", default="out/demo", metavar="DIR", help="output folder, created if missing (default: out/demo)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"stadium seed (default {DEFAULT_SEED}, a test-split stadium)")
-    parser.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH", help="frame size in pixels (default 1280x720)")
+    parser.add_argument("--size", type=parse_size, default=PAPER_SIZE, metavar="WxH", help="frame size in pixels (default 1280x720)")
     parser.add_argument("--panorama-width", type=positive_int, default=4096, metavar="PX",
                         help="width of the rendered panorama in pixels, height = width / 2 (default 4096)")
     parser.add_argument("--k1", type=finite_float, default=DEFAULT_K1, help=f"true k1 of the frame (width-normalised; default {DEFAULT_K1})")
@@ -93,11 +93,6 @@ def project_undistorted(params, style, points: np.ndarray, size: tuple[int, int]
         p = params.focal * rays[:, :2] / rays[:, 2:3]
     p[rays[:, 2] <= 1e-6] = np.nan
     return p
-
-
-def _lens_to_px(p: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    width, height = size
-    return np.stack([p[:, 0] * width + width / 2 - 0.5, p[:, 1] * width + height / 2 - 0.5], axis=-1)
 
 
 def _visible_run(px: np.ndarray, size: tuple[int, int], margin: float = 2.0) -> np.ndarray | None:
@@ -218,7 +213,7 @@ def _find_model(explicit: str | None) -> Path | None:
 
 def run(args: argparse.Namespace) -> int:
     from ..crops import CropParams, render_crops
-    from ..lens import Lens, corner_radius
+    from ..lens import Lens, corner_radius, lens_to_pixels
     from ..remap import correct
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style
@@ -271,14 +266,14 @@ def run(args: argparse.Namespace) -> int:
         p_u = project_undistorted(params, style, points, size)
         finite = np.all(np.isfinite(p_u), axis=1)
         p_d = np.full_like(p_u, np.nan)
-        p_d[finite] = true_lens.distort_points(_lens_to_px(p_u[finite], size), size)
+        p_d[finite] = true_lens.distort_points(lens_to_pixels(p_u[finite], size), size)
         run_d = _visible_run(p_d, size)
         if run_d is None or painted_fraction(frame, run_d) < 0.5:
             continue  # out of the frame, too short, or hidden (behind a stand): no reference line
         chords.append(run_d)
         # corrected frame (fit "same"): the ideal picture shows the line at p_u; keep the part whose
         # source lies inside the distorted frame
-        px_u = _lens_to_px(p_u, size)
+        px_u = lens_to_pixels(p_u, size)
         px_u[~np.all(np.isfinite(p_d), axis=1) | ~_inside(p_d, size)] = np.nan
         run_u = _visible_run(px_u, size)
         if run_u is not None:
