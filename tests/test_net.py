@@ -13,7 +13,7 @@ torch = pytest.importorskip("torch")
 
 from glradial.lens import corner_radius  # noqa: E402
 from net.augment import AugmentConfig, augment_batch, augment_pairs, jpeg_roundtrip, motion_kernel  # noqa: E402
-from net.loss import distortion_loss, loss_radii, max_displacement, training_loss  # noqa: E402
+from net.loss import distortion_loss, loss_radii, training_loss  # noqa: E402
 from net.model import DistortionNet, ModelConfig, count_parameters, load_grown  # noqa: E402
 
 SHIPPED_CONFIG = "net/configs/stage01_128.json"
@@ -65,13 +65,6 @@ def test_joint_term_judges_both_coefficients_inside_the_frame():
     y_hat.grad = None
     training_loss(y, y_hat, joint_weight=1.0).backward()
     assert torch.all(y_hat.grad[:, 1] > 0)
-
-
-def test_max_displacement_single_coefficient():
-    # P(r, y) - P(r, y^) = r^3 d1 for d2 = 0: largest at the corner radius.
-    y = torch.tensor([[-0.4, 0.1]], dtype=torch.float64)
-    got = float(max_displacement(y, y + torch.tensor([[0.01, 0.0]], dtype=torch.float64), r_max=0.5737)[0])
-    assert got == pytest.approx(0.01 * 0.5737**3, rel=1e-9)
 
 
 def test_loss_rejects_bad_shapes():
@@ -359,3 +352,13 @@ def test_the_shipped_stage_config_describes_the_shipped_model():
     cfg = TrainConfig.from_json(root / "net" / "configs" / "stage10_shipped.json")
     props = {p.key: p.value for p in onnx.load(str(root / "glradial" / "models" / "glradial_k1k2.onnx")).metadata_props}
     assert ModelConfig.from_dict(cfg.model) == ModelConfig.from_dict(json.loads(props["model_config"]))
+
+
+def test_torch_distortion_loss_is_the_twin_of_glradial_metrics():
+    # training's loss (torch) and the evaluation's (NumPy) compare the same radii: same numbers
+    from glradial.metrics import distortion_loss as numpy_loss
+
+    rng = np.random.default_rng(5)
+    y, y_hat = rng.normal(0.0, 0.3, (16, 2)), rng.normal(0.0, 0.3, (16, 2))
+    got = distortion_loss(torch.from_numpy(y), torch.from_numpy(y_hat)).numpy()
+    assert np.allclose(got, numpy_loss(y, y_hat), rtol=1e-12, atol=0)
