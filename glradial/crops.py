@@ -552,28 +552,21 @@ def render_crops(
 
 
 def load_panorama(item: object) -> np.ndarray:
-    """A panorama as H×W×3 uint8 RGB: uint8 arrays converted (grey repeated, alpha dropped); paths read
-    (image files through OpenCV, ``.npy`` arrays such as the stadium cache through NumPy)."""
+    """A panorama as H×W×3 uint8 RGB: arrays through :func:`glradial.frames.to_rgb8` (grey repeated,
+    alpha dropped, 16-bit and float scaled); paths read (image files through OpenCV, ``.npy``
+    arrays such as the stadium cache through NumPy)."""
+    from .frames import to_rgb8
+
     if isinstance(item, (str, os.PathLike)):
-        if str(item).endswith(".npy"):
-            item = np.load(item)
-        else:
+        if not str(item).endswith(".npy"):
             import cv2
 
             image = cv2.imread(str(item), cv2.IMREAD_COLOR)
             if image is None:
                 raise ValueError(f"cannot read panorama {str(item)!r}")
             return np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
-    array = np.asarray(item)
-    if array.dtype != np.uint8:
-        raise TypeError(f"panorama arrays must be uint8, got {array.dtype}")
-    if array.ndim == 2:
-        array = array[:, :, None]
-    if array.ndim != 3 or array.shape[2] not in (1, 3, 4):
-        raise ValueError(f"panorama must be H×W, H×W×1, H×W×3 or H×W×4, got shape {array.shape}")
-    if array.shape[2] == 1:
-        array = np.repeat(array, 3, axis=2)
-    return np.ascontiguousarray(array[:, :, :3])
+        item = np.load(item)
+    return to_rgb8(np.asarray(item), "panorama")
 
 
 class PanoramaRenderers:

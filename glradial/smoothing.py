@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
+from .frames import to_rgb8
 from .metrics import CORNER_RADIUS_16_9, max_displacement
 
 __all__ = ["ShotDetector", "detect_cuts", "smooth_shot", "smooth_track", "shot_ids"]
@@ -59,15 +60,7 @@ class ShotDetector:
     scores: list[float] = field(default_factory=list, repr=False)
 
     def _features(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        frame = np.asarray(frame)
-        if frame.ndim == 2:
-            frame = np.repeat(frame[:, :, None], 3, axis=2)
-        if frame.ndim != 3 or frame.shape[2] < 3:
-            raise ValueError(f"frames must be H×W×3, got shape {frame.shape}")
-        frame = frame[:, :, :3]
-        if frame.dtype != np.uint8:
-            scale = 255.0 / (65535.0 if frame.dtype == np.uint16 else 1.0)
-            frame = np.clip(frame.astype(np.float32) * scale, 0, 255).astype(np.uint8)
+        frame = to_rgb8(np.asarray(frame))
         small = cv2.resize(frame, (64, 36), interpolation=cv2.INTER_AREA)
         hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
         hist = cv2.calcHist([hsv], [0, 1, 2], None, [16, 4, 4], [0, 180, 0, 256, 0, 256])
