@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.crops import manifold_k2
+from glradial.metrics import manifold_k2
 from glradial.metrics import max_displacement
 from glradial.smoothing import ShotDetector, detect_cuts, shot_ids, smooth_shot, smooth_track
 
