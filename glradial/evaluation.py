@@ -128,12 +128,13 @@ def breakdown(pred: np.ndarray, labels: np.ndarray, values: np.ndarray, bins: li
 
 
 class OnnxPredictor:
-    """Predicts through :class:`glradial.estimator.Estimator` (the shipped path, area resize included)."""
+    """Predicts through :class:`glradial.estimator.Estimator` (the shipped path, area resize and
+    mirror averaging included; ``mirror_average=False`` runs the network once per crop)."""
 
-    def __init__(self, path: str | os.PathLike, threads: int | None = None):
+    def __init__(self, path: str | os.PathLike, threads: int | None = None, mirror_average: bool = True):
         from .estimator import Estimator
 
-        self.estimator = Estimator(path, threads=threads)
+        self.estimator = Estimator(path, threads=threads, mirror_average=mirror_average)
         self.input_size = self.estimator.input_size
 
     def __call__(self, frames: np.ndarray) -> np.ndarray:

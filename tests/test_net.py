@@ -362,3 +362,30 @@ def test_torch_distortion_loss_is_the_twin_of_glradial_metrics():
     y, y_hat = rng.normal(0.0, 0.3, (16, 2)), rng.normal(0.0, 0.3, (16, 2))
     got = distortion_loss(torch.from_numpy(y), torch.from_numpy(y_hat)).numpy()
     assert np.allclose(got, numpy_loss(y, y_hat), rtol=1e-12, atol=0)
+
+
+def test_net_evaluate_takes_a_checkpoint_and_matches_its_onnx_export(tmp_path):
+    # python -m net.evaluate is glradial evaluate plus .pt checkpoints: a checkpoint and its ONNX
+    # export, both run without mirror averaging, give the same figures on the same crops (float32
+    # kernels of two libraries: 1e-4 lens units is 0.19 px at 1920 wide)
+    from glradial.evaluation import EvaluationSettings, OnnxPredictor, evaluate
+    from net.evaluate import TorchPredictor, main
+    from net.export import export_onnx
+
+    torch.manual_seed(0)
+    cfg = ModelConfig(input_size=(64, 36), stem_channels=8, stages=[(1, 8, 1, 2), (2, 12, 1, 2)], feature_channels=16)
+    model = DistortionNet(cfg).eval()
+    checkpoint = tmp_path / "m.pt"
+    torch.save({"model": model.state_dict(), "model_config": cfg.to_dict()}, checkpoint)
+    common = ["--n", "6", "--test-panoramas", "1", "--panorama-size", "256x128", "--cache-dir", str(tmp_path / "cache")]
+    assert main(["--model", str(checkpoint), "--out", str(tmp_path / "pt"), *common]) == 0
+    from_pt = json.loads((tmp_path / "pt" / "metrics.json").read_text())
+    assert from_pt["overall"]["n"] == 6 and "python -m net.evaluate" in (tmp_path / "pt" / "results.md").read_text()
+    onnx_path = export_onnx(model, tmp_path / "m.onnx")
+    predictor = OnnxPredictor(onnx_path, threads=1, mirror_average=False)
+    settings = EvaluationSettings(n=6, panoramas=1, panorama_size=(256, 128), cache_dir=str(tmp_path / "cache"))
+    from_onnx = evaluate(predictor, predictor.input_size, tmp_path / "onnx", settings, str(onnx_path))
+    torch_pred = TorchPredictor(str(checkpoint), threads=1)
+    assert torch_pred.input_size == predictor.input_size
+    for key in ("k1_mae", "k2_mae"):
+        assert from_pt["overall"][key] == pytest.approx(from_onnx["overall"][key], abs=1e-4)
