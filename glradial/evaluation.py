@@ -189,6 +189,12 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
     from .stadium import stadium_panorama_cached
     from .stadium_style import split_seeds
 
+    field = None
+    if settings.field_panorama is not None and settings.ood_n > 0:  # checked before the long work
+        field = load_panorama(settings.field_panorama)
+        if field.shape[1] != 2 * field.shape[0]:
+            raise ValueError(f"field panorama {settings.field_panorama!r} must be equirectangular 2:1, "
+                             f"got {field.shape[1]}×{field.shape[0]}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     width, height = input_size
@@ -217,11 +223,10 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
         "by_hfov": breakdown(pred, labels, np.array([p.hfov for p in params]), HFOV_BINS),
     }
     ood = None
-    if settings.field_panorama is None or settings.ood_n == 0:
+    if field is None:
         _say("no out-of-domain figure: " + ("no field panorama given (--field-panorama)"
                                             if settings.field_panorama is None else "--ood-n is 0"))
     else:
-        field = load_panorama(settings.field_panorama)
         _say(f"out of domain: {settings.ood_n} crops of {settings.field_panorama}")
         ood_frames, ood_params = render_crop_set([field], settings.ood_n, settings.seed + 1, size=PAPER_SIZE,
                                                  out_size=frame_size)

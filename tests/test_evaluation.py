@@ -99,6 +99,12 @@ def test_evaluate_out_of_domain_panorama_is_an_argument(tmp_path, capsys):
     assert main(base + ["--out", str(tmp_path / "none"), "--field-panorama", str(missing)]) == 1
     assert str(missing) in capsys.readouterr().err
     assert not (tmp_path / "none").exists()
+    square = tmp_path / "square.png"
+    import cv2
+
+    cv2.imwrite(str(square), np.zeros((64, 64, 3), np.uint8))
+    assert main(base + ["--out", str(tmp_path / "none"), "--field-panorama", str(square)]) == 1
+    assert "2:1" in capsys.readouterr().err and not (tmp_path / "none").exists()
 
 
 def test_training_mean_is_the_mean_of_the_paper_distribution():
