@@ -43,20 +43,20 @@ bench: $(DEV_STAMP)
 
 train: $(DEV_STAMP)
 	$(PY) -m net.data --split train --n 80 --split val --n 4 --split test --n 8 --size 4096 2048
-	$(PY) -m net.train --config net/configs/shipped.json --out runs/shipped
-	$(PY) -m net.train --config net/configs/finetune_192.json --out runs/ft192 --init runs/shipped/best.pt
-	$(PY) -m net.train --config net/configs/finetune_256.json --out runs/ft256 --init runs/ft192/best.pt
-	$(PY) -m net.train --config net/configs/finetune_384.json --out runs/ft384 --init runs/ft256/best.pt
-	$(PY) -m net.train --config net/configs/grow_384.json --out runs/grow384 --init runs/ft384/best.pt
-	$(PY) -m net.train --config net/configs/joint_384.json --out runs/joint384 --init runs/grow384/last.pt
-	$(PY) -m net.train --config net/configs/grow2_384.json --out runs/grow2_384 --init runs/joint384/best.pt
-	$(PY) -m net.train --config net/configs/extend_384.json --out runs/extend384 --init runs/grow2_384/best.pt
+	$(PY) -m net.train --config net/configs/stage01_128.json --out runs/stage01
+	$(PY) -m net.train --config net/configs/stage02_192.json --out runs/ft192 --init runs/stage01/best.pt
+	$(PY) -m net.train --config net/configs/stage03_256.json --out runs/ft256 --init runs/ft192/best.pt
+	$(PY) -m net.train --config net/configs/stage04_384.json --out runs/ft384 --init runs/ft256/best.pt
+	$(PY) -m net.train --config net/configs/stage05_grow_384.json --out runs/grow384 --init runs/ft384/best.pt
+	$(PY) -m net.train --config net/configs/stage06_joint_384.json --out runs/joint384 --init runs/grow384/last.pt
+	$(PY) -m net.train --config net/configs/stage07_grow2_384.json --out runs/grow2_384 --init runs/joint384/best.pt
+	$(PY) -m net.train --config net/configs/stage08_extend_384.json --out runs/extend384 --init runs/grow2_384/best.pt
 	# stages 9-10 ran on a GPU under a step-time budget; --steps with no budget gives the same schedule anywhere
-	$(PY) -m net.train --config net/configs/gpu_384.json --out runs/gpu384 --init runs/extend384/best.pt --steps 11809 --time-budget-s 0
-	$(PY) -m net.train --config net/configs/gpu_384_polish.json --out runs/gpu384b --init runs/gpu384/last.pt --steps 3485 --time-budget-s 0
+	$(PY) -m net.train --config net/configs/stage09_gpu_384.json --out runs/gpu384 --init runs/extend384/best.pt --steps 11809 --time-budget-s 0
+	$(PY) -m net.train --config net/configs/stage10_shipped.json --out runs/gpu384b --init runs/gpu384/last.pt --steps 3485 --time-budget-s 0
 
 evaluate: $(DEV_STAMP)
-	$(PY) -m net.evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval
+	$(PY) -m glradial evaluate --model glradial/models/glradial_k1k2.onnx --out docs/eval --field-panorama tests/data/panorama_field_2048x1024.jpg
 
 clean:
 	rm -rf $(VENV) out build dist *.egg-info .pytest_cache

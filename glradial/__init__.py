@@ -25,7 +25,7 @@ _EXPORTS = {
     "sample_crop_params": "crops",
     "render_crops": "crops",
     "CropRenderer": "crops",
-    "crop_batches": "crop_stream",
+    "crop_batches": "crop_producer",
     "stadium_panorama": "stadium",
     "StadiumRenderer": "stadium",
     "estimate": "estimator",

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import numbers
+import os
 import warnings
 from dataclasses import dataclass, fields
 from typing import Literal, Mapping, Sequence
@@ -30,10 +31,9 @@ import numpy as np
 
 from . import lensfuncs
 from .inverse_series import SERIES_DEGREE, fit_inverse_series
-from .lens import Lens, corner_radius, frame_size, real_number
+from .lens import InverseMethod, Lens, corner_radius, frame_size, real_number
 from .metrics import PAPER_SIZE, manifold_k2
-
-InverseMethod = Literal["exact", "drap"]
+from .shaderlib import TEXTURE_FORMATS
 
 #: The paper's sampling distribution (degrees; k1 in lens units). k2 = manifold(k1) + N(0, K2_NOISE).
 PAPER_RANGES: Mapping[str, tuple[float, float]] = {
@@ -239,22 +239,13 @@ def ray_to_lonlat(world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.arctan2(x, z), np.arctan2(-y, np.hypot(x, z))
 
 
-def lonlat_to_panorama_pixels(lon: np.ndarray, lat: np.ndarray, pano_size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """(lon, lat) radians -> panorama pixel coordinates (x, y), centres at integers, ``size = (W, H)``."""
-    width, height = pano_size
-    x = (0.5 + np.asarray(lon) / (2.0 * math.pi)) * width - 0.5
-    y = (0.5 - np.asarray(lat) / math.pi) * height - 0.5
-    return x, y
-
-
 # --- GPU renderer ---------------------------------------------------------------------------------
 
-_TEXTURE_DTYPES = {np.dtype(np.uint8): "f1", np.dtype(np.uint16): "nu2", np.dtype(np.float32): "f4"}
 #: Cap on the bytes of one atlas framebuffer (4 channels); a batch larger than that is drawn in passes.
 ATLAS_BYTES = 64 * 2**20
 #: Default anisotropy of panorama reads: 1 (plain trilinear). Mesa llvmpipe's anisotropic path
-#: blurs even magnified reads (measured: mean error 0.73 vs 0.25 levels against an exact bilinear
-#: ray cast) and is 2-5× slower; supersampling does the anti-aliasing instead.
+#: blurs even magnified reads and is slower (figures in docs/CROPS.md); supersampling does the
+#: anti-aliasing instead.
 ANISOTROPY = 1.0
 #: Per-crop vertex attributes of crop.vert, in buffer order (vec4 each): rotation rows | f, k1, k2;
 #: inverse series coefficients c0..c10 | tile index.
@@ -268,7 +259,7 @@ def _panorama_array(panorama: object) -> np.ndarray:
         array = array[:, :, None]
     if array.ndim != 3 or array.shape[2] not in (1, 2, 3, 4):
         raise ValueError(f"panorama must be H×W or H×W×C with C in 1..4, got shape {array.shape}")
-    if array.dtype not in _TEXTURE_DTYPES:
+    if array.dtype not in TEXTURE_FORMATS:
         raise TypeError(f"panorama dtype must be uint8, uint16 or float32, got {array.dtype}")
     height, width = array.shape[:2]
     if width != 2 * height:
@@ -323,18 +314,16 @@ class CropRenderer:
     linear map, each a trilinear read at its sub-pixel footprint: a box filter over the output pixel,
     i.e. what area-resizing (``cv2.INTER_AREA``) an anti-aliased ``size`` frame gives, without
     rendering it; ``"auto"`` picks the grid that makes each sample's footprint near-square (see
-    :func:`supersample_grid`; 2 × 1 for 1280×720 -> 224×224). Measured on that case against the
-    INTER_AREA-resized 1280×720 render (60 paper crops of a 4096×2048 panorama), RMS difference in
-    levels of 255: photo 1.66 (1 × 1), 0.63 (2 × 1), 0.52 (2 × 2); binary noise 26.1, 12.5, 8.4. On
-    Mesa llvmpipe 2 × 1 costs ~1.3× the time of 1 × 1 (docs/CROPS.md).
+    :func:`supersample_grid`; 2 × 1 for 1280×720 -> 224×224). How close each grid comes to that, and what it costs:
+    docs/CROPS.md.
     ``anisotropy`` (default 1: trilinear) is passed to the driver. ``inverse`` picks the exact
     inverse (``newton_steps`` Newton steps from the Drap-Lefevre seed; 3 reach 1e-9 lens units for
     the paper's distribution; the default is common.glsl's ``LENS_NEWTON_STEPS`` = 8, and pixels where
     Newton does not converge count as having no solution) or the paper's four-term ``"drap"`` one.
     With ``series_inverse`` (default) the exact inverse of each crop's lens is fitted on the CPU as a
     degree-10 Chebyshev series in ``r_d²`` and used instead of the per-pixel Newton solve wherever it
-    is within 1e-6 lens units of it over the whole frame (:mod:`glradial.inverse_series`; 95 % of the
-    paper's lenses; the others, near fold-over, keep Newton): the same geometry, a faster shader.
+    is within 1e-6 lens units of it over the whole frame (:mod:`glradial.inverse_series`; most of the
+    paper's lenses, docs/CROPS.md; the others, near fold-over, keep Newton): the same geometry, a faster shader.
 
     Crops are drawn up to ``tiles_per_pass`` at a time into a vertical atlas (one instanced draw per
     inverse path and one readback per pass). A 3-channel panorama is stored as RGBA (a quarter more
@@ -407,8 +396,8 @@ class CropRenderer:
         from .shaderlib import build_program
 
         ctx = self.ctx
-        tex_dtype = _TEXTURE_DTYPES[self.dtype]
-        if self.channels == 3:  # stored as RGBA: Mesa llvmpipe samples 4-channel textures ~5 % faster
+        tex_dtype = TEXTURE_FORMATS[self.dtype][0]
+        if self.channels == 3:  # stored as RGBA: Mesa llvmpipe samples 4-channel textures faster (docs/CROPS.md)
             opaque = np.iinfo(self.dtype).max if self.dtype.kind == "u" else 1.0
             array = np.concatenate([array, np.full((*array.shape[:2], 1), opaque, self.dtype)], axis=2)
         self._pano = ctx.texture(self.panorama_size, array.shape[2], array.tobytes(), dtype=tex_dtype, alignment=1)
@@ -454,8 +443,8 @@ class CropRenderer:
         self._objects.append(self._target)
         self._fbo = ctx.framebuffer(color_attachments=[self._target])
         self._objects.append(self._fbo)
-        # RGB output: the atlas is read as RGBA (a plain copy) and OpenCV drops alpha; measured 3.3 ms
-        # per 73-tile pass of 224×224 against 7.1 ms for the driver's own RGBA -> RGB readback.
+        # RGB output: the atlas is read as RGBA (a plain copy) and OpenCV drops alpha, faster than the
+        # driver's own RGBA -> RGB readback (docs/CROPS.md).
         self._rgba_scratch: np.ndarray | None = None  # allocated on the first RGB readback
 
     # -- rendering -------------------------------------------------------------------------------
@@ -519,7 +508,7 @@ class CropRenderer:
         import cv2
 
         w, h = self.out_size
-        tex_dtype = _TEXTURE_DTYPES[self.dtype]
+        tex_dtype = TEXTURE_FORMATS[self.dtype][0]
         if self.channels != 3:
             self._fbo.read_into(dest, viewport=(0, 0, w, n * h), components=self.channels, alignment=1, dtype=tex_dtype)
             return
@@ -561,3 +550,117 @@ def render_crops(
     """Render ``params`` from ``panorama`` once -> ``(N, h, w, C)`` of its dtype (see :class:`CropRenderer`)."""
     with CropRenderer(panorama, size=size, out_size=out_size, inverse=inverse, supersample=supersample) as renderer:
         return renderer.render(params)
+
+
+def load_panorama(item: object) -> np.ndarray:
+    """A panorama as H×W×3 uint8 RGB: arrays through :func:`glradial.frames.to_rgb8` (grey repeated,
+    alpha dropped, 16-bit and float scaled); paths read (image files through OpenCV, ``.npy``
+    arrays such as the stadium cache through NumPy)."""
+    from .frames import to_rgb8
+
+    if isinstance(item, (str, os.PathLike)):
+        if not str(item).endswith(".npy"):
+            import cv2
+
+            image = cv2.imread(str(item), cv2.IMREAD_COLOR)
+            if image is None:
+                raise ValueError(f"cannot read panorama {str(item)!r}")
+            return np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
+        item = np.load(item)
+    return to_rgb8(np.asarray(item), "panorama")
+
+
+class PanoramaRenderers:
+    """:class:`CropRenderer` s for a list of panoramas, and the one loop that renders crops of several.
+
+    ``panoramas``: arrays or paths (:func:`load_panorama`: loaded, as RGB uint8, when first used).
+    A panorama's renderer is made on first use with ``renderer_options`` (keywords of
+    :class:`CropRenderer`); the ``cache`` most recently used stay uploaded, older ones are released.
+    :meth:`render` draws crop ``i`` of ``params`` from panorama ``which[i]``. Same thread and process
+    rules as :class:`CropRenderer`; :meth:`close` (or ``with``) releases them all.
+    """
+
+    def __init__(self, panoramas: Sequence[object], *, cache: int = 1, **renderer_options: object) -> None:
+        if isinstance(cache, bool) or not isinstance(cache, (numbers.Integral, np.integer)) or cache < 1:
+            raise ValueError(f"cache must be an integer >= 1, got {cache!r}")
+        self.panoramas = list(panoramas)
+        self.cache = int(cache)
+        self.options = renderer_options
+        self._renderers: dict[int, CropRenderer] = {}  # least recently used first
+
+    def renderer(self, index: int) -> CropRenderer:
+        """The renderer of panorama ``index`` (made, and the least recently used one released, if needed)."""
+        found = self._renderers.pop(index, None)
+        if found is None:
+            while len(self._renderers) >= self.cache:
+                self._renderers.pop(next(iter(self._renderers))).release()
+            found = CropRenderer(load_panorama(self.panoramas[index]), **self.options)  # type: ignore[arg-type]
+        self._renderers[index] = found
+        return found
+
+    def render(self, params: Sequence[CropParams], which: Sequence[int] | np.ndarray) -> np.ndarray:
+        """Crop ``i`` of ``params`` from panorama ``which[i]`` -> uint8 RGB ``(N, h, w, 3)``, in order
+        (one :meth:`CropRenderer.render` call per panorama, panoramas in index order)."""
+        params = list(params)
+        which = np.asarray(which, np.int64).reshape(-1)
+        if len(which) != len(params):
+            raise ValueError(f"which must give one panorama per crop: {len(which)} for {len(params)} crops")
+        if len(which) and (which.min() < 0 or which.max() >= len(self.panoramas)):
+            raise ValueError(f"which must index the {len(self.panoramas)} panoramas, got {which.min()}..{which.max()}")
+        images: np.ndarray | None = None
+        for pano in np.unique(which):
+            rows = np.flatnonzero(which == pano)
+            part = self.renderer(int(pano)).render([params[r] for r in rows])
+            if images is None:
+                images = np.empty((len(params), *part.shape[1:]), part.dtype)
+            images[rows] = part
+        if images is None:
+            w, h = frame_size(self.options.get("out_size") or self.options.get("size", PAPER_SIZE))
+            images = np.empty((0, h, w, 3), np.uint8)
+        return images
+
+    def close(self) -> None:
+        """Release every renderer (idempotent)."""
+        for renderer in self._renderers.values():
+            renderer.release()
+        self._renderers.clear()
+
+    def __enter__(self) -> "PanoramaRenderers":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def render_crop_set(
+    panoramas: Sequence[object],
+    n: int,
+    seed: int,
+    *,
+    size: tuple[int, int] = PAPER_SIZE,
+    out_size: tuple[int, int] | None = None,
+    ranges: Mapping[str, object] | None = None,
+) -> tuple[np.ndarray, list[CropParams]]:
+    """``n`` crops spread evenly over ``panoramas`` (the first ``n % P`` get one more), for test and
+    validation sets: panorama ``j`` draws its crops with ``sample_crop_params(count, seed * 1000 + j,
+    size=size, **ranges)``, rendered at ``out_size`` (no augmentation; panoramas as in
+    :func:`load_panorama`). Returns uint8 RGB ``(n, h, w, 3)`` images and the :class:`CropParams`
+    of each crop, in order."""
+    if not panoramas:
+        raise ValueError("panoramas must not be empty")
+    if isinstance(n, bool) or not isinstance(n, (numbers.Integral, np.integer)) or n < 1:
+        raise ValueError(f"n must be a positive integer, got {n!r}")
+    counts = [n // len(panoramas) + (1 if i < n % len(panoramas) else 0) for i in range(len(panoramas))]
+    params: list[CropParams] = []
+    which: list[int] = []
+    for j, count in enumerate(counts):
+        if count:
+            params += sample_crop_params(count, seed * 1000 + j, size=size, **dict(ranges or {}))
+            which += [j] * count
+    with PanoramaRenderers(panoramas, size=size, out_size=out_size) as renderers:
+        return renderers.render(params, which), params
+
+
+def crop_labels(params: Sequence[CropParams], dtype: type = np.float64) -> np.ndarray:
+    """``(k1, k2)`` of each crop as an ``N x 2`` array (lens units of the crops' frame geometry)."""
+    return np.array([(p.k1, p.k2) for p in params], dtype).reshape(-1, 2)

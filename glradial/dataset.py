@@ -32,8 +32,9 @@ from typing import Callable, Sequence
 import numpy as np
 
 from .atomic import atomic_path, atomic_write_text
-from .crops import PAPER_SIZE, CropParams, CropRenderer, InverseMethod, sample_crop_params, supersample_grid
-from .lens import frame_size
+from .crops import CropParams, PanoramaRenderers, sample_crop_params, supersample_grid
+from .lens import InverseMethod, frame_size
+from .metrics import PAPER_SIZE
 
 SPLITS = ("train", "val", "test")
 FORMATS = ("png", "jpg")
@@ -118,8 +119,6 @@ def write_crops_dataset(
     number of crops finished (written or skipped) since the last call. ``size``, ``out_size``,
     ``inverse`` and ``supersample`` are as in :class:`~glradial.crops.CropRenderer`.
     """
-    from .crop_stream import load_panorama
-
     if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
         raise ValueError(f"count must be a positive integer, got {count!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -176,18 +175,16 @@ def write_crops_dataset(
             stale.unlink()
 
     written = skipped = 0
-    for p_index, path in enumerate(paths):
-        mine = range(p_index, count, len(paths))
-        todo = [i for i in mine if not (out / files[i]).is_file()]
-        skipped += len(mine) - len(todo)
-        if progress is not None and len(mine) > len(todo):
-            progress(len(mine) - len(todo))
-        if not todo:
-            continue
-        with CropRenderer(load_panorama(path), size=size, out_size=out_size, inverse=inverse, supersample=grid) as renderer:
+    with PanoramaRenderers(paths, size=size, out_size=out_size, inverse=inverse, supersample=grid) as renderers:
+        for p_index in range(len(paths)):
+            mine = range(p_index, count, len(paths))
+            todo = [i for i in mine if not (out / files[i]).is_file()]
+            skipped += len(mine) - len(todo)
+            if progress is not None and len(mine) > len(todo):
+                progress(len(mine) - len(todo))
             for start in range(0, len(todo), CHUNK):
                 chunk = todo[start : start + CHUNK]
-                images = renderer.render([params[i] for i in chunk])
+                images = renderers.render([params[i] for i in chunk], [p_index] * len(chunk))
                 for i, image in zip(chunk, images):
                     _write_image(out / files[i], image)
                     written += 1

@@ -16,8 +16,8 @@ The ONNX graph takes uint8 ``N x H x W x 3`` RGB and does the rest of the prepro
 
 Mirror averaging (default): a radial lens about the frame centre is unchanged by a left-right
 mirror, so the estimate is the mean of the network's outputs for the frame and for its mirror
-image (one batch of 2N; training saw mirrored crops with the same labels). Measured on the
-held-out test crops: median error -13 %, 90th percentile -12 % (docs/MODEL.md).
+image (one batch of 2N; training saw mirrored crops with the same labels). What it gains on the
+held-out test crops is measured in docs/MODEL.md.
 """
 
 from __future__ import annotations

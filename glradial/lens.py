@@ -178,10 +178,6 @@ class Lens:
         radius = lensfuncs.fold_radius(self.k1, self.k2)
         return math.inf if radius >= lensfuncs.LENS_RADIUS_UNBOUNDED else radius
 
-    def max_valid_radius(self) -> float:
-        """Largest undistorted radius (lens units) on which the lens is one-to-one."""
-        return self.fold_radius()
-
     def check_radius(self, radius: float, what: str = "the frame") -> None:
         """Raise ``ValueError`` if the lens folds over at an undistorted radius <= ``radius``."""
         fold = self.fold_radius()

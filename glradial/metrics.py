@@ -25,6 +25,7 @@ __all__ = [
     "REPORT_WIDTH",
     "CORNER_RADIUS_16_9",
     "LOSS_R_MAX",
+    "LOSS_SAMPLES",
     "LOSS_RADII",
     "BOOTSTRAP_DRAWS",
     "manifold_k2",
@@ -43,8 +44,10 @@ REPORT_WIDTH = 1920
 CORNER_RADIUS_16_9 = 0.5 * math.hypot(1.0, 9.0 / 16.0)
 #: Outer radius (lens units) of the distortion loss's samples: beyond the 16:9 corner, as in the paper.
 LOSS_R_MAX = 0.7
+#: Number of radii at which the distortion loss compares radial maps.
+LOSS_SAMPLES = 64
 #: Radii (lens units) at which the distortion loss compares radial maps (both ends included).
-LOSS_RADII = np.linspace(0.0, LOSS_R_MAX, 64)
+LOSS_RADII = np.linspace(0.0, LOSS_R_MAX, LOSS_SAMPLES)
 #: Resamples behind :func:`median_interval`.
 BOOTSTRAP_DRAWS = 1000
 #: Samples of the radius in :func:`max_displacement` (the difference is a smooth odd quintic).

@@ -8,11 +8,9 @@ from __future__ import annotations
 
 import sys
 import time
-from typing import IO, Iterable, Iterator, TypeVar
+from typing import IO
 
-T = TypeVar("T")
-
-__all__ = ["Progress", "progress"]
+__all__ = ["Progress"]
 
 
 class Progress:
@@ -77,11 +75,3 @@ class Progress:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def progress(items: Iterable[T], total: int | None, label: str, **kwargs: object) -> Iterator[T]:
-    """Yield ``items`` while drawing a :class:`Progress` bar."""
-    with Progress(total, label, **kwargs) as bar:  # type: ignore[arg-type]
-        for item in items:
-            yield item
-            bar.update()

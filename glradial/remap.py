@@ -57,7 +57,7 @@ import numpy as np
 
 from . import egl
 from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
-from .shaderlib import build_program
+from .shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES, build_program
 
 Interpolation = Literal["nearest", "linear", "cubic"]
 Backend = Literal["auto", "gl", "cpu"]
@@ -65,12 +65,6 @@ INTERPOLATIONS = ("nearest", "linear", "cubic")
 BACKENDS = ("auto", "gl", "cpu")
 INVERSES = ("exact", "drap")
 
-#: frame dtype -> (moderngl texture dtype, largest value: the texture's 1.0)
-_TEXTURE_DTYPES = {
-    np.dtype(np.uint8): ("f1", 255.0),
-    np.dtype(np.uint16): ("nu2", 65535.0),
-    np.dtype(np.float32): ("f4", 1.0),
-}
 _CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
 _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}
 #: cv2.remap writes at most SHRT_MAX - 1 pixels per side.

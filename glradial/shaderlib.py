@@ -1,4 +1,5 @@
-"""Loads GLSL files from ``shaders/``: resolves ``#include``, injects ``#define``s, keeps ``#line``.
+"""Loads GLSL files from ``shaders/``: resolves ``#include``, injects ``#define``s, keeps ``#line``;
+the texture formats of the image dtypes the programs read and write (:data:`TEXTURE_FORMATS`).
 
 Shaders are files, shipped as package data (``glradial/shaders`` in a wheel, ``shaders/`` at the top
 of a source checkout). A program is built from a vertex and a fragment file; every file gets a
@@ -14,8 +15,16 @@ from pathlib import Path
 from typing import Mapping
 
 import moderngl
+import numpy as np
 
 GLSL_VERSION = "330 core"
+#: NumPy dtype of an image -> (moderngl texture dtype, the sample value a shader reads as 1.0), for
+#: the textures the programs sample and the framebuffers they write (uint8/uint16 normalised).
+TEXTURE_FORMATS = {
+    np.dtype(np.uint8): ("f1", 255.0),
+    np.dtype(np.uint16): ("nu2", 65535.0),
+    np.dtype(np.float32): ("f4", 1.0),
+}
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _ERROR_LOCATION = re.compile(r"\b(\d+):(\d+)(\(\d+\))?")
 

@@ -13,9 +13,9 @@ then wrong. Two pieces:
   local line follows a zoom; samples whose lens is far from the local fit get weight 0.
 
 Convention: times are frame indices (integers, 0 = first frame); coefficients are width-normalised
-``(k1, k2)`` (DESIGN.md). The distance between two lenses is the maximum radial displacement
-``max_r |P(r, a) - P(r, b)|`` in lens units (image widths) over ``r`` in ``[0, radius]``, with
-``P(r, k) = r (1 + k1 r^2 + k2 r^4)``; multiply by the frame width for pixels.
+``(k1, k2)`` (DESIGN.md). The distance between two lenses is
+:func:`glradial.metrics.max_displacement`, the maximum radial displacement ``max_r |P(r, a) -
+P(r, b)|`` in lens units (image widths) over ``r`` in ``[0, radius]``.
 """
 
 from __future__ import annotations
@@ -26,22 +26,10 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-__all__ = ["ShotDetector", "detect_cuts", "lens_distance", "smooth_shot", "smooth_track", "shot_ids"]
+from .frames import to_rgb8
+from .metrics import CORNER_RADIUS_16_9, max_displacement
 
-#: corner radius of a 16:9 frame in lens units, the default extent of :func:`lens_distance`
-RADIUS_16_9 = 0.5 * float(np.hypot(1.0, 9.0 / 16.0))
-
-
-def lens_distance(a: np.ndarray, b: np.ndarray, radius: float = RADIUS_16_9, samples: int = 64) -> np.ndarray:
-    """Maximum radial displacement between lenses ``a`` and ``b`` (arrays ``(..., 2)`` of k1, k2)
-    over ``r`` in ``[0, radius]``, in lens units (image widths)."""
-    a = np.asarray(a, dtype=np.float64)
-    b = np.asarray(b, dtype=np.float64)
-    r = np.linspace(0.0, radius, samples)
-    d = a - b
-    displacement = d[..., 0:1] * r**3 + d[..., 1:2] * r**5
-    return np.max(np.abs(displacement), axis=-1)
-
+__all__ = ["ShotDetector", "detect_cuts", "smooth_shot", "smooth_track", "shot_ids"]
 
 # -- shot cuts --------------------------------------------------------------------------------
 @dataclass
@@ -72,15 +60,7 @@ class ShotDetector:
     scores: list[float] = field(default_factory=list, repr=False)
 
     def _features(self, frame: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        frame = np.asarray(frame)
-        if frame.ndim == 2:
-            frame = np.repeat(frame[:, :, None], 3, axis=2)
-        if frame.ndim != 3 or frame.shape[2] < 3:
-            raise ValueError(f"frames must be H×W×3, got shape {frame.shape}")
-        frame = frame[:, :, :3]
-        if frame.dtype != np.uint8:
-            scale = 255.0 / (65535.0 if frame.dtype == np.uint16 else 1.0)
-            frame = np.clip(frame.astype(np.float32) * scale, 0, 255).astype(np.uint8)
+        frame = to_rgb8(np.asarray(frame))
         small = cv2.resize(frame, (64, 36), interpolation=cv2.INTER_AREA)
         hsv = cv2.cvtColor(small, cv2.COLOR_BGR2HSV)
         hist = cv2.calcHist([hsv], [0, 1, 2], None, [16, 4, 4], [0, 180, 0, 256, 0, 256])
@@ -143,14 +123,14 @@ def smooth_shot(
     half_window: float,
     iterations: int = 3,
     min_scale: float = 5e-4,
-    radius: float = RADIUS_16_9,
+    radius: float = CORNER_RADIUS_16_9,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Robust local-linear fit of the samples ``lenses`` (N x 2) at ``times`` (N), evaluated at
     ``query`` (M). Returns ``(smoothed (M x 2), weights (N,))``; weight 0 marks a rejected sample.
 
     Each query point fits ``k(t) = a + b (t - q)`` with weights ``tricube((t - q) / h) * w_i``, where
     ``h`` is ``half_window`` frames (widened so that at least 3 samples count) and ``w_i`` are bisquare
-    robustness weights from the samples' residual distance (:func:`lens_distance`) over
+    robustness weights from the samples' residual distance (:func:`glradial.metrics.max_displacement`) over
     ``6 * max(MAD, min_scale)`` (``min_scale`` in lens units: residuals below ~ it are never
     rejected). Queries outside the sampled span take the fit at the nearest sampled time (no
     extrapolation).
@@ -191,7 +171,7 @@ def smooth_shot(
         return out
 
     for _ in range(iterations):
-        residual = lens_distance(lenses, fit(times), radius)
+        residual = max_displacement(lenses, fit(times), radius)
         mad = float(np.median(residual))
         u = residual / (6.0 * max(mad, min_scale))
         robust = np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0)
@@ -207,7 +187,7 @@ def smooth_track(
     half_window: float = 25.0,
     iterations: int = 3,
     min_scale: float = 5e-4,
-    radius: float = RADIUS_16_9,
+    radius: float = CORNER_RADIUS_16_9,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Smooth per-frame estimates shot by shot and return a lens for every frame.
 

@@ -17,6 +17,8 @@ train / val / test is ``seed % 10`` (0-7 / 8 / 9), see :func:`stadium_split` and
 from __future__ import annotations
 
 import math
+import os
+from pathlib import Path
 from typing import Any
 
 import moderngl
@@ -39,6 +41,8 @@ from .stadium_style import (
 __all__ = [
     "StadiumRenderer",
     "stadium_panorama",
+    "stadium_panorama_cached",
+    "stadium_cache_path",
     "sample_style",
     "stadium_split",
     "split_seeds",
@@ -331,3 +335,31 @@ def stadium_panorama(seed: int, size: tuple[int, int] = (8192, 4096), **style: A
     if renderer is None or renderer.program is None:
         renderer = _renderers[key] = StadiumRenderer(ctx)
     return renderer.render(st, size)
+
+
+def stadium_cache_path(seed: int, size: tuple[int, int], cache_dir: str | os.PathLike) -> Path:
+    """Where :func:`stadium_panorama_cached` keeps the panorama of ``seed`` at ``size = (W, H)``."""
+    width, height = _parse_size(size)
+    return Path(cache_dir) / f"stadium_{seed}_{width}x{height}.npy"
+
+
+def stadium_panorama_cached(seed: int, size: tuple[int, int], cache_dir: str | os.PathLike | None) -> np.ndarray:
+    """:func:`stadium_panorama` of ``seed`` at ``size = (W, H)`` (default style), rendered once and
+    kept as ``<cache_dir>/stadium_<seed>_<W>x<H>.npy`` (written atomically); ``cache_dir=None``
+    renders without caching. The cache is keyed by seed and size only: clear it when the stadium
+    shader changes."""
+    width, height = _parse_size(size)
+    path = stadium_cache_path(seed, size, cache_dir) if cache_dir is not None else None
+    if path is not None and path.exists():
+        return np.load(path)
+    pano = np.ascontiguousarray(stadium_panorama(seed, size=(width, height)))
+    if pano.ndim != 3 or pano.shape[:2] != (height, width) or pano.dtype != np.uint8:
+        raise RuntimeError(f"stadium_panorama({seed}) returned {pano.dtype} {pano.shape}, expected {height}x{width}x3 uint8")
+    pano = np.ascontiguousarray(pano[:, :, :3])
+    if path is not None:
+        from .atomic import atomic_path
+
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            np.save(tmp, pano)
+    return pano

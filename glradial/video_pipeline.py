@@ -35,7 +35,7 @@ import numpy as np
 from .atomic import atomic_write_text
 from .lens import Lens, corner_radius
 from .progress import Progress
-from .smoothing import ShotDetector, lens_distance, smooth_track
+from .smoothing import ShotDetector, smooth_track
 from .media_io import VideoReader, VideoWriter
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator"]
@@ -220,15 +220,6 @@ def correct_video(
                     f"{writer.frames_written} could be decoded and were written\n"
                 )
             return writer.frames_written
-
-
-def track_error(track: LensTrack, truth: np.ndarray) -> tuple[float, float]:
-    """Mean displacement error (lens units) of the raw estimates and of the smoothed lenses on the
-    estimated frames against per-frame ``truth`` (n x 2)."""
-    estimated = ~np.isnan(track.raw[:, 0])
-    raw = lens_distance(track.raw[estimated], truth[estimated])
-    smooth = lens_distance(track.lens[estimated], truth[estimated])
-    return float(raw.mean()), float(smooth.mean())
 
 
 def estimate_video(

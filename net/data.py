@@ -5,14 +5,15 @@ rendered by :class:`glradial.crops.CropRenderer` with the frame geometry ``size`
 that the labels refer to; labels are float32 ``N x 2`` = ``(k1, k2)`` in width-normalised lens
 units, drawn from the paper's distribution (:func:`glradial.crops.sample_crop_params`).
 
-Panoramas: procedural stadiums (:func:`glradial.stadium.stadium_panorama`) rendered once per seed
-and size and cached as ``.npy`` under a cache folder (``data_cache/`` by default, git-ignored);
+Panoramas: procedural stadiums rendered once per seed and size and cached as ``.npy`` under a cache
+folder (:func:`glradial.stadium.stadium_panorama_cached`; ``data_cache/`` by default, git-ignored);
 train / val / test seeds follow :func:`glradial.stadium_style.split_seeds`. ``synthetic_panorama``
 is a fast stand-in (random lines and blobs) for tests.
 
 Throughput on a CPU-only machine: rendering a crop (llvmpipe) costs about as much as a training
 step on it, so the trainer keeps a pool of recent crops and, each step, pulls a fixed number of
-fresh crops from a producer process (which renders ahead, in parallel) and samples its batch from
+fresh crops from a producer process (glradial's crop producer, :mod:`glradial.crop_producer`,
+which renders ahead, in parallel) and samples its batch from
 the pool. The number of fresh crops per step is fixed, so a run is deterministic per seed no matter
 how fast the producer is. Several producers (:class:`CropProducers`) each render their own shard
 of the panoramas (:func:`shard_source`), so the panorama memory does not grow with their number.
@@ -20,28 +21,19 @@ of the panoramas (:func:`shard_source`), so the panorama memory does not grow wi
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import os
-import queue as queue_mod
 import time
 from dataclasses import dataclass, replace
-from pathlib import Path
-from typing import Iterator, Sequence
+from typing import Sequence
 
 import numpy as np
 
-#: Frame geometry the labels refer to (the paper's 1280 x 720 crops).
-FRAME_SIZE = (1280, 720)
-
+from glradial.crop_producer import crop_batches
+from glradial.crops import load_panorama
+from glradial.metrics import PAPER_SIZE
+from glradial.stadium import stadium_cache_path, stadium_panorama_cached
+from glradial.stadium_style import split_seeds
 
 # --- panoramas ------------------------------------------------------------------------------------
-
-
-def split_seeds(split: str, n: int, start: int = 0) -> list[int]:
-    """The first ``n`` stadium seeds of ``split`` ("train", "val", "test")."""
-    from glradial.stadium_style import split_seeds as _split_seeds
-
-    return _split_seeds(split, n, start)
 
 
 def synthetic_panorama(seed: int, size: tuple[int, int] = (512, 256)) -> np.ndarray:
@@ -64,26 +56,6 @@ def synthetic_panorama(seed: int, size: tuple[int, int] = (512, 256)) -> np.ndar
     return pano
 
 
-def stadium_panorama_cached(seed: int, size: tuple[int, int], cache_dir: str | Path | None) -> np.ndarray:
-    """The stadium panorama of ``seed`` at ``size = (W, H)``, rendered once and cached as ``.npy``."""
-    if cache_dir is not None:
-        path = Path(cache_dir) / f"stadium_{seed}_{size[0]}x{size[1]}.npy"
-        if path.exists():
-            return np.load(path)
-    from glradial.stadium import stadium_panorama
-
-    pano = np.ascontiguousarray(stadium_panorama(seed, size=tuple(size)))
-    if pano.ndim != 3 or pano.shape[:2] != (size[1], size[0]) or pano.dtype != np.uint8:
-        raise RuntimeError(f"stadium_panorama({seed}) returned {pano.dtype} {pano.shape}, expected {size[1]}x{size[0]}x3 uint8")
-    pano = pano[:, :, :3]
-    if cache_dir is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".tmp{os.getpid()}.npy")
-        np.save(tmp, pano)
-        os.replace(tmp, path)
-    return pano
-
-
 @dataclass
 class PanoramaSource:
     """Where a producer gets panoramas: ``kind`` "stadium" (seeds) or "synthetic" (seeds) or "files"."""
@@ -102,113 +74,33 @@ class PanoramaSource:
         return len(self._items())
 
     def load(self) -> list[np.ndarray]:
+        """The panoramas as uint8 RGB arrays (stadiums rendered into the cache when missing)."""
         if self.kind == "stadium":
             return [stadium_panorama_cached(int(s), tuple(self.size), self.cache_dir) for s in self.seeds]
         if self.kind == "synthetic":
             return [synthetic_panorama(int(s), tuple(self.size)) for s in self.seeds]
         if self.kind == "files":
-            import cv2
-
-            out = []
-            for f in self.files:
-                img = cv2.imread(str(f), cv2.IMREAD_COLOR)
-                if img is None:
-                    raise FileNotFoundError(f"cannot read panorama {f}")
-                out.append(np.ascontiguousarray(img[:, :, ::-1]))
-            return out
+            return [load_panorama(str(f)) for f in self.files]
         raise ValueError(f"panorama source kind must be 'stadium', 'synthetic' or 'files', got {self.kind!r}")
 
-
-# --- crop stream ----------------------------------------------------------------------------------
-
-
-def crop_stream(
-    panoramas: Sequence[np.ndarray],
-    chunk: int,
-    seed: int,
-    *,
-    out_size: tuple[int, int],
-    size: tuple[int, int] = FRAME_SIZE,
-    ranges: dict | None = None,
-    panoramas_per_batch: int = 4,
-) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Endless deterministic stream of ``(images, labels)`` chunks of ``chunk`` crops, rendered in
-    the calling process by :func:`glradial.crop_stream.crop_batches` (every panorama stays uploaded)."""
-    from glradial.crop_stream import crop_batches
-
-    stream = crop_batches(panoramas, chunk, seed=seed, size=size, out_size=out_size, workers=0, ranges=ranges,
-                          panoramas_per_batch=panoramas_per_batch, cache=max(1, len(panoramas)))
-    try:
-        for batch in stream:
-            yield np.ascontiguousarray(batch.images), np.ascontiguousarray(batch.labels, dtype=np.float32)
-    finally:
-        stream.close()
+    def inputs(self) -> list:
+        """What a crop producer reads (:func:`glradial.crop_producer.crop_batches`), loaded in its
+        worker process: paths of the cached stadiums (rendered here first when missing) or of the
+        files; arrays for synthetic panoramas and uncached stadiums."""
+        if self.kind == "stadium" and self.cache_dir is not None:
+            paths = []
+            for seed in self.seeds:
+                path = stadium_cache_path(int(seed), tuple(self.size), self.cache_dir)
+                if not path.exists():
+                    stadium_panorama_cached(int(seed), tuple(self.size), self.cache_dir)
+                paths.append(str(path))
+            return paths
+        if self.kind == "files":
+            return [str(f) for f in self.files]
+        return self.load()
 
 
-def paired_crop_stream(
-    panoramas: Sequence[np.ndarray],
-    chunk: int,
-    seed: int,
-    *,
-    out_size: tuple[int, int],
-    size: tuple[int, int] = FRAME_SIZE,
-    ranges: dict | None = None,
-) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """Like :func:`crop_stream`, but crops come in pairs ``(2i, 2i + 1)`` that share panorama, pan,
-    tilt, roll and field of view and differ only in the lens (two independent draws of the paper's
-    ``(k1, k2)``): within a pair, only the lens explains the difference between the images, which
-    makes the lens signal stand out from the scene early in training. ``chunk`` must be even.
-    """
-    from glradial.crops import CropParams, CropRenderer, sample_crop_params
-
-    if chunk % 2:
-        raise ValueError(f"chunk must be even for pairs, got {chunk}")
-    renderers: dict[int, CropRenderer] = {}
-    try:
-        index = 0
-        while True:
-            rng = np.random.default_rng([seed, index, 0xA1])
-            j = int(rng.integers(len(panoramas)))
-            if j not in renderers:
-                renderers[j] = CropRenderer(panoramas[j], size=size, out_size=out_size)
-            half = chunk // 2
-            first = sample_crop_params(half, int(rng.integers(2**62)), size=size, **(ranges or {}))
-            lenses = sample_crop_params(half, int(rng.integers(2**62)), size=size, **(ranges or {}))
-            params = []
-            for a, b in zip(first, lenses):
-                params += [a, CropParams(a.pan, a.tilt, a.roll, a.hfov, b.k1, b.k2)]
-            images = renderers[j].render(params)[..., :3]
-            labels = np.array([(p.k1, p.k2) for p in params], np.float32)
-            yield np.ascontiguousarray(images), labels
-            index += 1
-    finally:
-        for r in renderers.values():
-            r.release()
-
-
-def _producer_main(out_queue, source: PanoramaSource, chunk: int, seed: int, out_size, ranges, threads: int,
-                   paired: bool = False) -> None:
-    os.environ.setdefault("LP_NUM_THREADS", str(threads))
-    try:
-        panoramas = source.load()
-        parent = os.getppid()
-        out_queue.cancel_join_thread()  # exit without flushing to a trainer that is gone
-        stream = paired_crop_stream if paired else crop_stream
-        for images, labels in stream(panoramas, chunk, seed, out_size=out_size, ranges=ranges):
-            while True:  # stop when the trainer is gone (its queue would stay full forever)
-                try:
-                    out_queue.put((images, labels), timeout=2.0)
-                    break
-                except queue_mod.Full:
-                    if os.getppid() != parent:
-                        return
-            if os.getppid() != parent:
-                return
-    except KeyboardInterrupt:
-        pass
-    except BaseException as err:  # report to the trainer instead of dying silently
-        out_queue.put(("error", repr(err)))
-        raise
+# --- crop producers -------------------------------------------------------------------------------
 
 
 class _ChunkReader:
@@ -237,70 +129,34 @@ class _ChunkReader:
 
 
 class CropProducer(_ChunkReader):
-    """A background process running :func:`crop_stream` into a bounded queue.
+    """One background process rendering ``source``'s panoramas in chunks of ``chunk`` crops: the
+    glradial crop producer (:func:`glradial.crop_producer.crop_batches`, one worker, every panorama
+    kept uploaded, ``threads`` llvmpipe threads, up to ``prefetch`` chunks ahead; ``paired``: lens
+    pairs).
 
     ``take(n)`` returns exactly the next ``n`` crops of the stream (blocking), whatever the chunking.
-    The process makes its own EGL context after it starts (spawn start method).
-
     If the process dies (an exception, or killed, e.g. by the kernel's out-of-memory killer: it
-    holds every panorama, once as an array and once as a texture), ``take`` raises
-    ``RuntimeError`` naming its exit code. This holds even when it dies halfway through sending a
-    chunk: the trainer keeps no copy of the queue's write end, so a cut-off message ends in
-    end-of-file instead of a read that waits forever.
+    holds every panorama of its shard, once as an array and once as a texture), ``take`` raises
+    ``RuntimeError`` naming its exit code, even when it dies halfway through sending a chunk.
     """
 
     def __init__(self, source: PanoramaSource, *, seed: int, out_size: tuple[int, int], chunk: int = 64,
                  ranges: dict | None = None, threads: int = 1, prefetch: int = 8, paired: bool = False):
-        ctx = mp.get_context("spawn")
-        self._queue = ctx.Queue(maxsize=prefetch)
-        env_before = os.environ.get("LP_NUM_THREADS")
-        os.environ["LP_NUM_THREADS"] = str(threads)
-        try:
-            self._proc = ctx.Process(
-                target=_producer_main, args=(self._queue, source, chunk, seed, tuple(out_size), ranges, threads, paired),
-                daemon=True
-            )
-            self._proc.start()
-            # the child has its own copy of the write end now; without ours, its death closes the pipe
-            self._queue._writer.close()
-        finally:
-            if env_before is None:
-                os.environ.pop("LP_NUM_THREADS", None)
-            else:
-                os.environ["LP_NUM_THREADS"] = env_before
-        self.wait_s = 0.0
+        self.stream = crop_batches(source.inputs(), chunk, seed=seed, size=PAPER_SIZE, out_size=tuple(out_size),
+                                   workers=1, ranges=ranges, cache=max(1, len(source)), prefetch=prefetch,
+                                   lp_num_threads=threads, paired=paired)
+
+    @property
+    def wait_s(self) -> float:
+        """Seconds spent waiting for crops."""
+        return self.stream.wait_s
 
     def _fetch(self, timeout: float) -> tuple[np.ndarray, np.ndarray]:
-        t0 = time.monotonic()
-        while True:
-            try:
-                item = self._queue.get(timeout=1.0)
-                break
-            except (EOFError, OSError):  # the pipe closed, maybe in the middle of a chunk
-                raise self._died() from None
-            except queue_mod.Empty:
-                if not self._proc.is_alive():
-                    raise self._died() from None
-                if time.monotonic() - t0 > timeout:
-                    raise TimeoutError(f"no crops from the producer in {timeout:.0f} s") from None
-        self.wait_s += time.monotonic() - t0
-        if isinstance(item[0], str):
-            raise RuntimeError(f"crop producer failed: {item[1]}")
-        return item
-
-    def _died(self) -> RuntimeError:
-        self._proc.join(timeout=10)
-        code = self._proc.exitcode
-        hint = ""
-        if code == -9:
-            hint = " (killed: look for the out-of-memory killer; every producer holds its shard of the panoramas)"
-        return RuntimeError(f"crop producer died (exit code {code}){hint}")
+        batch = self.stream.get(timeout)
+        return batch.images, batch.labels
 
     def close(self) -> None:
-        if self._proc.is_alive():
-            self._proc.terminate()
-        self._proc.join(timeout=10)
-        self._queue.close()
+        self.stream.close()
 
     def __enter__(self) -> "CropProducer":
         return self
@@ -400,33 +256,17 @@ class CropPool:
             idx = rng.integers(0, self.count, n)
         return self.images[idx], self.labels[idx]
 
-    def state(self) -> dict:
-        return {"count": self.count, "next": self._next}
-
 
 def render_test_set(
     source: PanoramaSource, n: int, seed: int, out_size: tuple[int, int], *, ranges: dict | None = None,
-    per_panorama: int | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list]:
-    """Render ``n`` crops (no augmentation) spread evenly over ``source``'s panoramas, in this process.
+    """``n`` crops (no augmentation) spread evenly over ``source``'s panoramas, rendered in this
+    process by :func:`glradial.crops.render_crop_set`. Returns ``(images, labels float32, params)``;
+    deterministic per ``seed``."""
+    from glradial.crops import crop_labels, render_crop_set
 
-    Returns ``(images, labels, params)``; ``params`` are the :class:`CropParams` (for error by field
-    of view). Deterministic per ``seed``.
-    """
-    from glradial.crops import CropRenderer, sample_crop_params
-
-    panoramas = source.load()
-    counts = [n // len(panoramas) + (1 if i < n % len(panoramas) else 0) for i in range(len(panoramas))]
-    images, params_all = [], []
-    for j, (pano, count) in enumerate(zip(panoramas, counts)):
-        if count == 0:
-            continue
-        params = sample_crop_params(count, seed * 1000 + j, size=FRAME_SIZE, **(ranges or {}))
-        with CropRenderer(pano, size=FRAME_SIZE, out_size=out_size) as renderer:
-            images.append(np.ascontiguousarray(renderer.render(params)[..., :3]))
-        params_all += params
-    labels = np.array([(p.k1, p.k2) for p in params_all], np.float32)
-    return np.concatenate(images), labels, params_all
+    images, params = render_crop_set(source.load(), n, seed, size=PAPER_SIZE, out_size=out_size, ranges=ranges)
+    return images, crop_labels(params, np.float32), params
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -442,7 +282,7 @@ def main(argv: list[str] | None = None) -> int:
     for split, n in zip(args.split, args.n):
         for seed in split_seeds(split, n):
             t0 = time.monotonic()
-            existed = (Path(args.cache_dir) / f"stadium_{seed}_{args.size[0]}x{args.size[1]}.npy").exists()
+            existed = stadium_cache_path(seed, tuple(args.size), args.cache_dir).exists()
             stadium_panorama_cached(seed, tuple(args.size), args.cache_dir)
             if not existed:
                 print(f"{split} seed {seed}: {time.monotonic() - t0:.1f} s", flush=True)

@@ -2,8 +2,8 @@
 
 Usage::
 
-    python -m net.export --checkpoint runs/shipped/best.pt --out glradial/models/glradial_k1k2.onnx \
-        [--metrics runs/shipped/eval.json] [--run-config runs/shipped/config.json]
+    python -m net.export --checkpoint runs/gpu384b/best.pt --out glradial/models/glradial_k1k2.onnx \
+        [--metrics runs/gpu384b/eval.json] [--run-config runs/gpu384b/config.json]
 
 Graph (opset 17). Input ``image``: uint8 ``N x H x W x 3`` RGB (NHWC), the 16:9 frame already
 resized (area interpolation) to the network input ``input_size = (W, H)``. The graph does the rest
@@ -34,7 +34,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from .model import LUMA_WEIGHTS, DistortionNet, ModelConfig
+from glradial.atomic import atomic_path
+
+from .model import DistortionNet, ModelConfig, normalise_batch
 
 #: Largest |torch - onnxruntime| (lens units) accepted by :func:`check_agreement`.
 ATOL = 1e-4
@@ -49,22 +51,14 @@ OUTPUT = "k: float32 N x 2 = (k1, k2), width-normalised lens units (image width 
 
 
 class ExportWrapper(nn.Module):
-    """uint8 NHWC RGB -> normalised NCHW -> (k1, k2); the graph that ships."""
+    """uint8 NHWC RGB -> :func:`~.model.normalise_batch` -> the model -> (k1, k2); the graph that ships."""
 
     def __init__(self, model: DistortionNet):
         super().__init__()
         self.model = model
-        cfg = model.config
-        self.register_buffer("mean", torch.tensor(cfg.mean, dtype=torch.float32).view(1, -1, 1, 1))
-        self.register_buffer("scale", 1.0 / torch.tensor(cfg.std, dtype=torch.float32).view(1, -1, 1, 1))
-        self.register_buffer("luma", torch.tensor(LUMA_WEIGHTS, dtype=torch.float32).view(1, 3, 1, 1))
-        self.grey = cfg.channels == 1
 
     def forward(self, image: torch.Tensor) -> torch.Tensor:
-        x = image.permute(0, 3, 1, 2).to(torch.float32) * (1.0 / 255.0)
-        if self.grey:
-            x = (x * self.luma).sum(dim=1, keepdim=True)
-        return self.model((x - self.mean) * self.scale)
+        return self.model(normalise_batch(image, self.model.config))
 
 
 def load_checkpoint(path: str | Path, which: str = "auto") -> DistortionNet:
@@ -81,26 +75,35 @@ def load_checkpoint(path: str | Path, which: str = "auto") -> DistortionNet:
 
 
 def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = None) -> Path:
-    """Write ``model`` (eval mode) as ONNX with the preprocessing graph and metadata; returns the path."""
-    import onnx
-
+    """Write ``model`` (eval mode) as ONNX with the preprocessing graph and metadata (atomically);
+    returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     model = model.eval()
     wrapper = ExportWrapper(model).eval()
     width, height = model.config.input_size
     dummy = torch.zeros(1, height, width, 3, dtype=torch.uint8)
-    tmp = path.with_suffix(".tmp.onnx")
-    with warnings.catch_warnings():  # the TorchScript exporter is deprecated; onnxscript (dynamo) is not a dependency
-        warnings.simplefilter("ignore", DeprecationWarning)
-        torch.onnx.export(
-            wrapper, (dummy,), str(tmp), dynamo=False, input_names=["image"], output_names=["k"],
-            dynamic_axes={"image": {0: "N"}, "k": {0: "N"}}, opset_version=OPSET, do_constant_folding=True,
-        )
-    proto = onnx.load(str(tmp))
+    with atomic_path(path) as tmp:
+        with warnings.catch_warnings():  # the TorchScript exporter is deprecated; onnxscript (dynamo) is not a dependency
+            warnings.simplefilter("ignore", DeprecationWarning)
+            warnings.simplefilter("ignore", torch.jit.TracerWarning)  # the preprocessing constants
+            torch.onnx.export(
+                wrapper, (dummy,), str(tmp), dynamo=False, input_names=["image"], output_names=["k"],
+                dynamic_axes={"image": {0: "N"}, "k": {0: "N"}}, opset_version=OPSET, do_constant_folding=True,
+            )
+        _add_metadata(tmp, model.config, metadata)
+    return path
+
+
+def _add_metadata(path: Path, config: ModelConfig, metadata: dict | None) -> None:
+    """Write the metadata properties into the ONNX file at ``path`` (in place) and check the model."""
+    import onnx
+
+    proto = onnx.load(str(path))
+    width, height = config.input_size
     props = {
         "glradial_format": "1",
-        "model_config": json.dumps(model.config.to_dict()),
+        "model_config": json.dumps(config.to_dict()),
         "input_size": f"{width},{height}",
         "input_layout": "NHWC uint8 RGB",
         "preprocessing": PREPROCESSING,
@@ -120,9 +123,7 @@ def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = 
         entry.key, entry.value = key, value
     proto.doc_string = "glradial radial distortion estimator: " + OUTPUT
     onnx.checker.check_model(proto)
-    onnx.save(proto, str(tmp))
-    tmp.replace(path)
-    return path
+    onnx.save(proto, str(path))
 
 
 def check_agreement(model: DistortionNet, onnx_path: str | Path, n: int = 8, seed: int = 0) -> float:
@@ -171,7 +172,8 @@ def main(argv: list[str] | None = None) -> int:
     proto = onnx.load(str(path))
     entry = proto.metadata_props.add()
     entry.key, entry.value = "onnx_check", json.dumps({"max_abs_diff_vs_torch": err, "atol": ATOL})
-    onnx.save(proto, str(path))
+    with atomic_path(path) as tmp:
+        onnx.save(proto, str(tmp))
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB); torch vs onnxruntime max |diff| {err:.2e} (atol {ATOL})")
     return 0
 

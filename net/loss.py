@@ -12,7 +12,7 @@ the paper.
 
 Training loss ``L = DL(y, (k1_hat, k2)) + DL(y, (k1, k2_hat))``: each coefficient judged with the
 other one true. Optionally (``joint_weight`` w > 0, not the paper's) ``+ w DL_c(y, y_hat)``, both
-coefficients judged together on radii up to the 16:9 corner radius (``CORNER_RADIUS``): the
+coefficients judged together on radii up to the 16:9 corner radius (:data:`glradial.metrics.CORNER_RADIUS_16_9`): the
 quantity behind the evaluation's maximum displacement error, which rewards a k2 that offsets the
 network's own k1 error inside the frame.
 """
@@ -21,12 +21,7 @@ from __future__ import annotations
 
 import torch
 
-from glradial.metrics import CORNER_RADIUS_16_9, LOSS_R_MAX
-
-#: Default number of radii and largest radius of the loss (lens units).
-LOSS_SAMPLES = 64
-#: Corner radius of a 16:9 frame in lens units.
-CORNER_RADIUS = CORNER_RADIUS_16_9
+from glradial.metrics import CORNER_RADIUS_16_9, LOSS_R_MAX, LOSS_SAMPLES
 
 
 def loss_radii(samples: int = LOSS_SAMPLES, r_max: float = LOSS_R_MAX, *, device=None, dtype=torch.float32) -> torch.Tensor:
@@ -58,18 +53,12 @@ def training_loss(
     y: torch.Tensor, y_hat: torch.Tensor, radii: torch.Tensor | None = None, joint_weight: float = 0.0
 ) -> torch.Tensor:
     """Batch mean of ``DL(y, (k1_hat, k2)) + DL(y, (k1, k2_hat))`` (scalar), plus ``joint_weight``
-    times the batch mean of ``DL(y, y_hat)`` on ``LOSS_SAMPLES`` radii over ``[0, CORNER_RADIUS]``
+    times the batch mean of ``DL(y, y_hat)`` on ``LOSS_SAMPLES`` radii over ``[0, CORNER_RADIUS_16_9]``
     when ``joint_weight > 0`` (see the module docstring)."""
     k1_only = torch.stack([y_hat[:, 0], y[:, 1]], dim=1)
     k2_only = torch.stack([y[:, 0], y_hat[:, 1]], dim=1)
     loss = (distortion_loss(y, k1_only, radii) + distortion_loss(y, k2_only, radii)).mean()
     if joint_weight > 0:
-        frame_radii = loss_radii(LOSS_SAMPLES, CORNER_RADIUS, device=y.device, dtype=y.dtype)
+        frame_radii = loss_radii(LOSS_SAMPLES, CORNER_RADIUS_16_9, device=y.device, dtype=y.dtype)
         loss = loss + joint_weight * distortion_loss(y, y_hat, frame_radii).mean()
     return loss
-
-
-def max_displacement(y: torch.Tensor, y_hat: torch.Tensor, r_max: float = CORNER_RADIUS_16_9, samples: int = 256) -> torch.Tensor:
-    """``max_{r <= r_max} |P(r, y) - P(r, y_hat)|`` in lens units (image widths) -> shape ``N``."""
-    radii = torch.linspace(0.0, r_max, samples, device=y.device, dtype=y.dtype)
-    return (radial_map(radii, y) - radial_map(radii, y_hat)).abs().amax(dim=1)

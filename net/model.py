@@ -28,8 +28,9 @@ from typing import Any
 import torch
 from torch import nn
 
-#: Lopez-Antequera manifold of real lenses, ``k2 = MANIFOLD[0] k1 + MANIFOLD[1] k1^2``.
-MANIFOLD = (0.019, 0.805)
+from glradial.atomic import atomic_write_text
+from glradial.metrics import PAPER_SIZE, manifold_k2
+
 #: ITU-R BT.601 luma weights (R, G, B) used by the grayscale variant.
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)
 
@@ -101,7 +102,7 @@ class ModelConfig:
         return cls(**{k: v for k, v in data.items() if k in names})
 
     def save(self, path: str | Path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        atomic_write_text(path, json.dumps(self.to_dict(), indent=2) + "\n")
 
     @classmethod
     def load(cls, path: str | Path) -> "ModelConfig":
@@ -168,7 +169,7 @@ class RegressionHead(nn.Module):
 
 def coordinate_grid(width: int, height: int) -> torch.Tensor:
     """``1 x 3 x H x W`` channels (x, y, r) in lens units of the 16:9 frame (x in [-0.5, 0.5])."""
-    aspect = 9.0 / 16.0
+    aspect = PAPER_SIZE[1] / PAPER_SIZE[0]
     xs = (torch.arange(width, dtype=torch.float32) + 0.5) / width - 0.5
     ys = ((torch.arange(height, dtype=torch.float32) + 0.5) / height - 0.5) * aspect
     gy, gx = torch.meshgrid(ys, xs, indexing="ij")
@@ -227,7 +228,7 @@ class DistortionNet(nn.Module):
         k2 = self.head_k2(features)
         if self.config.k2_residual:
             prior = k1.detach()
-            k2 = k2 + MANIFOLD[0] * prior + MANIFOLD[1] * prior * prior
+            k2 = k2 + manifold_k2(prior)
         return torch.cat([k1, k2], dim=1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -239,7 +240,10 @@ def count_parameters(model: nn.Module) -> int:
 
 
 def normalise_batch(images: torch.Tensor, config: ModelConfig) -> torch.Tensor:
-    """uint8 ``N x H x W x 3`` RGB (already at ``input_size``) -> normalised float ``N x C x H x W``."""
+    """uint8 ``N x H x W x 3`` RGB (already at ``input_size``) -> normalised float ``N x C x H x W``.
+
+    The one definition of the preprocessing: training feeds the network through it and the exported
+    ONNX graph contains it (:class:`net.export.ExportWrapper`)."""
     x = images.permute(0, 3, 1, 2).float().div_(255.0)
     if config.channels == 1:
         w = torch.tensor(LUMA_WEIGHTS, dtype=x.dtype, device=x.device).view(1, 3, 1, 1)

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m net.train --config net/configs/shipped.json --out runs/shipped [--resume]
+    python -m net.train --config net/configs/stage01_128.json --out runs/stage01 [--resume]
     torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
 
 Data path per rank: ``producers`` :class:`~.data.CropProducer` processes render crops ahead of
@@ -20,7 +20,8 @@ over the budget (so a run ends on time on a shared machine; then the run is not 
 An exponential moving average (EMA) of the weights is kept and is what validation, the "best"
 checkpoint and export use.
 
-Outputs in ``--out``: ``train.csv`` (one row per log interval), ``last.pt`` (every
+Outputs in ``--out`` (written through :mod:`glradial.atomic`, except the log ``train.csv``, one
+row per log interval appended and flushed as it comes), ``last.pt`` (every
 ``checkpoint_s`` seconds and at the end; ``--resume`` continues from it), ``best.pt`` (best
 validation median max-displacement), ``config.json`` (the full run config, model config included).
 Uses CUDA when ``torch.cuda.is_available()`` (NCCL for DDP) and the CPU otherwise (gloo).
@@ -42,6 +43,9 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.distributed as dist
+
+from glradial.atomic import atomic_path, atomic_write_text
+from glradial.evaluation import metrics
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
@@ -84,7 +88,9 @@ class TrainConfig:
 
     @classmethod
     def from_json(cls, path: str | Path) -> "TrainConfig":
-        data = json.loads(Path(path).read_text())
+        """Load a run config; ``"base"`` names a config (relative to this file's folder) that it
+        extends (:func:`load_config_dict`)."""
+        data = load_config_dict(path)
         names = set(cls.__dataclass_fields__)
         unknown = set(data) - names
         if unknown:
@@ -97,11 +103,41 @@ class TrainConfig:
         return cfg
 
 
+def merge_config(base: dict, changes: dict) -> dict:
+    """``base`` updated by ``changes``: nested dicts merge key by key, anything else (lists, numbers,
+    ``null``) replaces the base's value."""
+    out = dict(base)
+    for key, value in changes.items():
+        out[key] = merge_config(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
+
+
+def load_config_dict(path: str | Path, _seen: tuple[Path, ...] = ()) -> dict:
+    """A config file as a dict, its ``"base"`` chain resolved: the file holds only its differences
+    from the config it names (a path relative to the file's folder), merged by :func:`merge_config`.
+    A missing base or a cycle is a ``ValueError`` naming the files."""
+    path = Path(path).resolve()
+    if path in _seen:
+        raise ValueError(f"config base cycle: {' -> '.join(str(p.name) for p in (*_seen, path))}")
+    data = json.loads(path.read_text())
+    if not isinstance(data, dict):
+        raise ValueError(f"{path} must hold a JSON object, got {type(data).__name__}")
+    base = data.pop("base", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ValueError(f"'base' in {path} must be a file name, got {base!r}")
+    base_path = path.parent / base
+    if not base_path.is_file():
+        raise ValueError(f"{path}: its base {str(base_path)!r} does not exist")
+    return merge_config(load_config_dict(base_path, (*_seen, path)), data)
+
+
 def panorama_source(spec: dict, cache_dir: str) -> PanoramaSource:
     """Build a :class:`PanoramaSource` from a config entry (``seeds`` a list or ``{split, n, start}``)."""
     seeds = spec.get("seeds", [])
     if isinstance(seeds, dict):
-        from .data import split_seeds
+        from glradial.stadium_style import split_seeds
 
         seeds = split_seeds(seeds["split"], int(seeds["n"]), int(seeds.get("start", 0)))
     return PanoramaSource(kind=spec["kind"], seeds=list(seeds), size=tuple(spec.get("size", (2048, 1024))),
@@ -113,13 +149,6 @@ def lr_factor(progress: float, step: int, cfg: TrainConfig) -> float:
     progress = min(max(progress, 0.0), 1.0)
     cosine = cfg.min_lr_ratio + (1 - cfg.min_lr_ratio) * 0.5 * (1 + math.cos(math.pi * progress))
     return warm * cosine
-
-
-def evaluate_arrays(pred: np.ndarray, labels: np.ndarray) -> dict:
-    """Metrics of predictions ``N x 2`` against labels ``N x 2`` (see net.evaluate for the definitions)."""
-    from .evaluate import metrics
-
-    return metrics(pred, labels)
 
 
 def predict(model: torch.nn.Module, images: np.ndarray, config: ModelConfig, device, batch: int = 128) -> np.ndarray:
@@ -152,9 +181,9 @@ class EMA:
 
 
 def save_checkpoint(path: Path, **state) -> None:
-    tmp = path.with_suffix(".tmp")
-    torch.save(state, tmp)
-    os.replace(tmp, path)
+    """``torch.save`` of ``state`` to ``path``, atomically (a killed run leaves the previous file)."""
+    with atomic_path(path) as tmp:
+        torch.save(state, tmp)
 
 
 def rank_shards(source: PanoramaSource, cfg: TrainConfig, rank: int, world: int) -> list[tuple[int, PanoramaSource]]:
@@ -186,7 +215,7 @@ def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
-    parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig)")
+    parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig; \"base\" names the config it extends)")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")
     parser.add_argument("--resume", action="store_true", help="continue from OUT/last.pt if present")
     parser.add_argument("--steps", type=int, help="override the config's step count")
@@ -265,7 +294,7 @@ def main(argv: list[str] | None = None) -> int:
         out.mkdir(parents=True, exist_ok=True)
         full = asdict(cfg)
         full["model"] = model_cfg.to_dict()
-        (out / "config.json").write_text(json.dumps(full, indent=2) + "\n")
+        atomic_write_text(out / "config.json", json.dumps(full, indent=2) + "\n")
         model_cfg.save(out / "model_config.json")
     train_model = torch.nn.parallel.DistributedDataParallel(model) if distributed else model
     log(f"model {count_parameters(model)} parameters, input {model_cfg.input_size}, device {device}, world {world}")
@@ -347,7 +376,7 @@ def main(argv: list[str] | None = None) -> int:
             if is_main and (step % cfg.log_every == 0 or do_val or done):
                 vm = {}
                 if do_val or (done and val is not None):
-                    vm = evaluate_arrays(predict(ema.model, val[0], model_cfg, device), val[1])
+                    vm = metrics(predict(ema.model, val[0], model_cfg, device), val[1])
                     last_val = time.monotonic()
                     if vm["median_max_px"] < best:
                         best = vm["median_max_px"]
@@ -376,7 +405,7 @@ def main(argv: list[str] | None = None) -> int:
                             optimizer=optimizer.state_dict(), step=step, train_time=train_time, best=best,
                             model_config=model_cfg.to_dict())
             if val is not None and not (out / "best.pt").exists():
-                vm = evaluate_arrays(predict(ema.model, val[0], model_cfg, device), val[1])
+                vm = metrics(predict(ema.model, val[0], model_cfg, device), val[1])
                 save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
                                 step=step, train_time=train_time, val=vm)
     finally:

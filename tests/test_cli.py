@@ -140,16 +140,16 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
     rows = np.genfromtxt(sidecar, delimiter=",", names=True)
     assert len(rows) == n
     assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)
-    from glradial.smoothing import lens_distance
+    from glradial.metrics import max_displacement
 
     est = ~np.isnan(rows["k1_raw"])
     smooth = np.stack([rows["k1"], rows["k2"]], 1)
     raw = np.stack([rows["k1_raw"], rows["k2_raw"]], 1)
-    raw_error = lens_distance(raw[est], truth[est]).mean()
-    smooth_error = lens_distance(smooth[est], truth[est]).mean()
+    raw_error = max_displacement(raw[est], truth[est]).mean()
+    smooth_error = max_displacement(smooth[est], truth[est]).mean()
     assert smooth_error < 0.5 * raw_error, (smooth_error, raw_error)
     # the cut resets: frames right after it follow shot 1's lens, not a blend with shot 0's
-    assert lens_distance(smooth[cut : cut + 3], truth[cut : cut + 3]).max() * 1920 < 15
+    assert max_displacement(smooth[cut : cut + 3], truth[cut : cut + 3]).max() * 1920 < 15
     with VideoReader(source) as a, VideoReader(out) as b:
         pairs = list(zip(a, b))
     assert len(pairs) == n

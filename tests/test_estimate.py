@@ -115,22 +115,3 @@ def test_mirror_average_is_the_mean_of_frame_and_mirror(field_panorama):
         assert lens.k2 == pytest.approx((a.k2 + b.k2) / 2, abs=1e-6)
     with pytest.raises(TypeError, match="mirror_average"):
         Estimator(mirror_average="yes")
-
-
-def test_evaluate_on_the_validation_split_uses_only_val_stadiums(tmp_path):
-    """``net.evaluate --split val`` (checkpoint selection) renders the val stadiums, never test ones."""
-    import json
-
-    from net.data import split_seeds
-    from net.evaluate import main
-
-    out = tmp_path / "eval"
-    argv = ["--model", str(default_model_path()), "--out", str(out), "--n", "6", "--test-panoramas", "2",
-            "--panorama-size", "512", "256", "--ood-n", "0", "--cache-dir", str(tmp_path / "cache"), "--threads", "1"]
-    assert main(argv + ["--split", "val"]) == 0
-    result = json.loads((out / "metrics.json").read_text())
-    assert result["test_set"]["split"] == "val"
-    assert result["test_set"]["stadium_seeds"] == split_seeds("val", 2)
-    assert not set(split_seeds("val", 2)) & (set(split_seeds("test", 8)) | set(split_seeds("train", 40)))
-    assert result["overall"]["n"] == 6 and np.isfinite(result["overall"]["median_max_px"])
-    assert "--split val" in (out / "results.md").read_text()

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from glradial import lensfuncs
-from glradial.crops import CropParams, CropRenderer, manifold_k2, sample_crop_params
+from glradial.crops import CropParams, CropRenderer, sample_crop_params
+from glradial.metrics import manifold_k2
 from glradial.inverse_series import SERIES_TOLERANCE, fit_inverse_series, series_radius
 from glradial.lens import corner_radius
 

@@ -13,10 +13,10 @@ torch = pytest.importorskip("torch")
 
 from glradial.lens import corner_radius  # noqa: E402
 from net.augment import AugmentConfig, augment_batch, augment_pairs, jpeg_roundtrip, motion_kernel  # noqa: E402
-from net.loss import distortion_loss, loss_radii, max_displacement, training_loss  # noqa: E402
+from net.loss import distortion_loss, loss_radii, training_loss  # noqa: E402
 from net.model import DistortionNet, ModelConfig, count_parameters, load_grown  # noqa: E402
 
-SHIPPED_CONFIG = "net/configs/shipped.json"
+SHIPPED_CONFIG = "net/configs/stage01_128.json"
 
 
 def _integral(d1: float, d2: float, r: float) -> float:
@@ -65,13 +65,6 @@ def test_joint_term_judges_both_coefficients_inside_the_frame():
     y_hat.grad = None
     training_loss(y, y_hat, joint_weight=1.0).backward()
     assert torch.all(y_hat.grad[:, 1] > 0)
-
-
-def test_max_displacement_single_coefficient():
-    # P(r, y) - P(r, y^) = r^3 d1 for d2 = 0: largest at the corner radius.
-    y = torch.tensor([[-0.4, 0.1]], dtype=torch.float64)
-    got = float(max_displacement(y, y + torch.tensor([[0.01, 0.0]], dtype=torch.float64), r_max=0.5737)[0])
-    assert got == pytest.approx(0.01 * 0.5737**3, rel=1e-9)
 
 
 def test_loss_rejects_bad_shapes():
@@ -232,21 +225,6 @@ def test_pool_keeps_pairs_adjacent():
     assert np.all(first % 2 == 0) and np.all(labels[1::2, 0] == first + 1)
 
 
-def test_paired_crops_share_the_view_and_differ_in_the_lens(ctx):
-    # Radial distortion fixes the frame centre (p_d = p_u at r = 0 with unit slope), so the two crops
-    # of a pair (same pose and field of view, different lens) agree there and differ towards the corners.
-    from net.data import paired_crop_stream, synthetic_panorama
-
-    pano = synthetic_panorama(3, (1024, 512))
-    images, labels = next(paired_crop_stream([pano], 4, seed=1, out_size=(160, 90)))
-    assert images.shape == (4, 90, 160, 3) and labels.shape == (4, 2)
-    for a, b in ((0, 1), (2, 3)):
-        assert not np.allclose(labels[a], labels[b])
-        centre = np.abs(images[a, 40:50, 75:85].astype(int) - images[b, 40:50, 75:85].astype(int)).mean()
-        corner = np.abs(images[a, :15, :25].astype(int) - images[b, :15, :25].astype(int)).mean()
-        assert centre < 3.0 and (corner > centre or corner == 0.0), (centre, corner)
-
-
 def test_k2_residual_head_starts_on_the_manifold():
     # With k2_residual the k2 head adds to 0.019 k1 + 0.805 k1^2 of the predicted k1; a zeroed head
     # therefore reproduces the paper's method B exactly.
@@ -273,41 +251,6 @@ def test_every_shipped_training_config_loads_and_fits_the_parameter_budget(path)
     model = DistortionNet(ModelConfig.from_dict(cfg.model))
     assert 0 < count_parameters(model) <= 6_600_000
     assert cfg.batch_size > 0 and (cfg.steps > 0 or cfg.time_budget_s)
-
-
-def test_trainer_gets_an_error_not_a_hang_when_its_crop_producer_is_killed_mid_chunk():
-    # A producer killed by the out-of-memory killer while its queue's feeder thread is halfway
-    # through writing a chunk left the trainer blocked forever in the pipe read (seen with 80
-    # panoramas per producer on this 24 GiB machine). A chunk of 8 crops of 128x72 is 221 KB, more
-    # than a pipe holds (64 KB), so once the trainer stops reading the producer is always mid-chunk.
-    import threading
-
-    from net.data import CropProducer, PanoramaSource
-
-    source = PanoramaSource(kind="synthetic", seeds=[1], size=(512, 256))
-    producer = CropProducer(source, seed=3, out_size=(128, 72), chunk=8)
-    try:
-        producer.take(8, timeout=120)  # the producer is up and streaming
-        deadline = time.monotonic() + 60
-        while not producer._queue._reader.poll(0.5) and time.monotonic() < deadline:
-            pass  # wait until the next chunk is (partly) in the pipe
-        producer._proc.kill()
-        outcome: list[BaseException | None] = []
-
-        def drain() -> None:
-            try:
-                while True:
-                    producer.take(8, timeout=60)
-            except BaseException as err:  # noqa: BLE001 - the test inspects it
-                outcome.append(err)
-
-        reader = threading.Thread(target=drain, daemon=True)
-        reader.start()
-        reader.join(timeout=60)
-        assert not reader.is_alive(), "take() hung on a producer that was killed mid-chunk"
-        assert isinstance(outcome[0], RuntimeError) and "exit code -9" in str(outcome[0]), outcome
-    finally:
-        producer.close()
 
 
 def test_shards_partition_the_panoramas():
@@ -360,3 +303,89 @@ def test_several_producers_give_each_panorama_the_same_share_of_crops():
     assert group.wait_s == 1.5
     with pytest.raises(ValueError):
         CropProducers(fakes, [3, 0, 2], chunk=4)
+
+
+def test_training_producer_streams_the_glradial_crop_producer():
+    # The trainer's producer is glradial's crop producer in one worker process over the source's
+    # panoramas: its crops equal the in-process stream of the same seed (<= 1 level: llvmpipe's
+    # thread count may differ between the processes)
+    from glradial.crop_producer import crop_batches
+    from net.data import CropProducer, PanoramaSource
+
+    source = PanoramaSource(kind="synthetic", seeds=[1, 2], size=(512, 256))
+    with CropProducer(source, seed=4, out_size=(48, 27), chunk=6) as producer:
+        images, labels = producer.take(10)
+    with crop_batches(source.load(), 6, seed=4, out_size=(48, 27), cache=2) as stream:
+        batches = [next(stream) for _ in range(2)]
+    want_images = np.concatenate([b.images for b in batches])[:10]
+    want_labels = np.concatenate([b.labels for b in batches])[:10]
+    assert np.array_equal(labels, want_labels)
+    assert np.abs(images.astype(int) - want_images).max() <= 1
+
+
+def test_configs_name_a_base_and_hold_their_differences(tmp_path):
+    from net.train import TrainConfig, load_config_dict, merge_config
+
+    # nested objects merge key by key; lists and null replace
+    assert merge_config({"a": {"x": 1, "y": [1, 2]}, "b": 2}, {"a": {"y": [3]}, "b": None}) == {"a": {"x": 1, "y": [3]}, "b": None}
+    (tmp_path / "one.json").write_text(json.dumps({"seed": 1, "lr": 0.5, "model": {"input_size": [64, 36], "head_hidden": 8}}))
+    (tmp_path / "two.json").write_text(json.dumps({"base": "one.json", "lr": 0.25, "model": {"head_hidden": 16}}))
+    cfg = TrainConfig.from_json(tmp_path / "two.json")
+    assert (cfg.seed, cfg.lr, cfg.model) == (1, 0.25, {"input_size": [64, 36], "head_hidden": 16})
+    (tmp_path / "loop.json").write_text(json.dumps({"base": "loop2.json"}))
+    (tmp_path / "loop2.json").write_text(json.dumps({"base": "loop.json"}))
+    with pytest.raises(ValueError, match="cycle"):
+        load_config_dict(tmp_path / "loop.json")
+    (tmp_path / "orphan.json").write_text(json.dumps({"base": "nope.json"}))
+    with pytest.raises(ValueError, match="nope.json"):
+        load_config_dict(tmp_path / "orphan.json")
+
+
+def test_the_shipped_stage_config_describes_the_shipped_model():
+    # stage10_shipped.json is the run that produced glradial/models/glradial_k1k2.onnx: the same
+    # network as the model's embedded config
+    import onnx
+
+    from net.train import TrainConfig
+
+    root = Path(__file__).resolve().parents[1]
+    cfg = TrainConfig.from_json(root / "net" / "configs" / "stage10_shipped.json")
+    props = {p.key: p.value for p in onnx.load(str(root / "glradial" / "models" / "glradial_k1k2.onnx")).metadata_props}
+    assert ModelConfig.from_dict(cfg.model) == ModelConfig.from_dict(json.loads(props["model_config"]))
+
+
+def test_torch_distortion_loss_is_the_twin_of_glradial_metrics():
+    # training's loss (torch) and the evaluation's (NumPy) compare the same radii: same numbers
+    from glradial.metrics import distortion_loss as numpy_loss
+
+    rng = np.random.default_rng(5)
+    y, y_hat = rng.normal(0.0, 0.3, (16, 2)), rng.normal(0.0, 0.3, (16, 2))
+    got = distortion_loss(torch.from_numpy(y), torch.from_numpy(y_hat)).numpy()
+    assert np.allclose(got, numpy_loss(y, y_hat), rtol=1e-12, atol=0)
+
+
+def test_net_evaluate_takes_a_checkpoint_and_matches_its_onnx_export(tmp_path):
+    # python -m net.evaluate is glradial evaluate plus .pt checkpoints: a checkpoint and its ONNX
+    # export, both run without mirror averaging, give the same figures on the same crops (float32
+    # kernels of two libraries: 1e-4 lens units is 0.19 px at 1920 wide)
+    from glradial.evaluation import EvaluationSettings, OnnxPredictor, evaluate
+    from net.evaluate import TorchPredictor, main
+    from net.export import export_onnx
+
+    torch.manual_seed(0)
+    cfg = ModelConfig(input_size=(64, 36), stem_channels=8, stages=[(1, 8, 1, 2), (2, 12, 1, 2)], feature_channels=16)
+    model = DistortionNet(cfg).eval()
+    checkpoint = tmp_path / "m.pt"
+    torch.save({"model": model.state_dict(), "model_config": cfg.to_dict()}, checkpoint)
+    common = ["--n", "6", "--test-panoramas", "1", "--panorama-size", "256x128", "--cache-dir", str(tmp_path / "cache")]
+    assert main(["--model", str(checkpoint), "--out", str(tmp_path / "pt"), *common]) == 0
+    from_pt = json.loads((tmp_path / "pt" / "metrics.json").read_text())
+    assert from_pt["overall"]["n"] == 6 and "python -m net.evaluate" in (tmp_path / "pt" / "results.md").read_text()
+    onnx_path = export_onnx(model, tmp_path / "m.onnx")
+    predictor = OnnxPredictor(onnx_path, threads=1, mirror_average=False)
+    settings = EvaluationSettings(n=6, panoramas=1, panorama_size=(256, 128), cache_dir=str(tmp_path / "cache"))
+    from_onnx = evaluate(predictor, predictor.input_size, tmp_path / "onnx", settings, str(onnx_path))
+    torch_pred = TorchPredictor(str(checkpoint), threads=1)
+    assert torch_pred.input_size == predictor.input_size
+    for key in ("k1_mae", "k2_mae"):
+        assert from_pt["overall"][key] == pytest.approx(from_onnx["overall"][key], abs=1e-4)

@@ -6,8 +6,9 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.crops import manifold_k2
-from glradial.smoothing import ShotDetector, detect_cuts, lens_distance, shot_ids, smooth_shot, smooth_track
+from glradial.metrics import manifold_k2
+from glradial.metrics import max_displacement
+from glradial.smoothing import ShotDetector, detect_cuts, shot_ids, smooth_shot, smooth_track
 
 WIDTH_PX = 1920  # errors are reported in pixels of a 1920-wide frame, as in DESIGN.md
 
@@ -31,15 +32,15 @@ def synthetic_track(seed: int = 0, n: int = 240, cut: int = 140, every: int = 3)
 def test_smoothing_beats_raw_and_rejects_outliers(seed):
     truth, times, raw, outliers, shots, _ = synthetic_track(seed)
     smoothed, weights = smooth_track(times, raw, shots, half_window=20)
-    raw_error = lens_distance(raw, truth[times]) * WIDTH_PX
-    smooth_error = lens_distance(smoothed[times], truth[times]) * WIDTH_PX
+    raw_error = max_displacement(raw, truth[times]) * WIDTH_PX
+    smooth_error = max_displacement(smoothed[times], truth[times]) * WIDTH_PX
     # the noise alone is ~2-4 px (sigma 0.02 on k1 at r = 0.57: 0.02 * 0.19 * 1920 ~ 7 px);
     # averaging ~13 samples per window must at least halve the median error, and the mean
     # (dominated by outliers in the raw data) must drop by more than 3x
     assert np.median(smooth_error) < 0.5 * np.median(raw_error)
     assert smooth_error.mean() < raw_error.mean() / 3
     # every frame (not only the estimated ones) is close to the truth
-    all_error = lens_distance(smoothed, truth) * WIDTH_PX
+    all_error = max_displacement(smoothed, truth) * WIDTH_PX
     assert np.percentile(all_error, 95) < 6.0, np.percentile(all_error, 95)
     # gross outliers (> 40 px away, 10x the noise) get weight 0 (bisquare cut at 6 MAD ~ 20-25 px)
     gross = outliers & (raw_error > 40)
@@ -50,16 +51,16 @@ def test_smoothing_beats_raw_and_rejects_outliers(seed):
 def test_cut_resets_the_smoother():
     truth, times, raw, _, shots, cut = synthetic_track(seed=3)
     smoothed, _ = smooth_track(times, raw, shots, half_window=20)
-    jump = lens_distance(truth[cut - 1], truth[cut]) * WIDTH_PX
+    jump = max_displacement(truth[cut - 1], truth[cut]) * WIDTH_PX
     assert jump > 100  # the two shots' lenses differ by > 100 px of displacement
     # frames on both sides of the cut follow their own shot: a smoother across the cut would mix
     # the two lenses and be off by a good fraction of the 100+ px jump
     near = np.arange(cut - 3, cut + 3)
-    error = lens_distance(smoothed[near], truth[near]) * WIDTH_PX
+    error = max_displacement(smoothed[near], truth[near]) * WIDTH_PX
     assert error.max() < 12.0, error
     # the same data smoothed as one shot (no reset) is visibly wrong near the cut: the check above can fail
     one_shot, _ = smooth_track(times, raw, np.zeros_like(shots), half_window=20)
-    assert (lens_distance(one_shot[near], truth[near]) * WIDTH_PX).max() > 30.0
+    assert (max_displacement(one_shot[near], truth[near]) * WIDTH_PX).max() > 30.0
 
 
 def test_smoothing_follows_a_zoom_without_lag():
@@ -72,7 +73,7 @@ def test_smoothing_follows_a_zoom_without_lag():
     smoothed, _ = smooth_shot(times, truth[times], np.arange(n), half_window=15)
     inside = slice(0, times[-1] + 1)
     # k2 is quadratic in k1, so a line through it is off by its curvature over the window only
-    assert (lens_distance(smoothed[inside], truth[inside]) * WIDTH_PX).max() < 0.5
+    assert (max_displacement(smoothed[inside], truth[inside]) * WIDTH_PX).max() < 0.5
 
 
 def test_smoothing_input_errors():
@@ -166,8 +167,8 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
             writer.write(frame)
     track = track_video(path, default_estimator(), every=1, window_s=0.6)
     assert list(np.flatnonzero(np.diff(track.shot))) == [cut - 1]
-    raw = lens_distance(track.raw, truth) * WIDTH_PX
-    smooth = lens_distance(track.lens, truth) * WIDTH_PX
+    raw = max_displacement(track.raw, truth) * WIDTH_PX
+    smooth = max_displacement(track.lens, truth) * WIDTH_PX
     # a real estimator's error is part noise, part bias (the same scene, frame after frame), and
     # smoothing removes only the noise: the smoothed error may not be larger than the raw one (0.5 px
     # slack for the local line's curvature error), and the frame-to-frame wobble inside each shot
@@ -176,9 +177,9 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     # smoother must keep it: without that, a less noisy estimator would fail the bound.
     assert smooth.mean() <= raw.mean() + 0.5, (smooth.mean(), raw.mean())
     same_shot = np.diff(track.shot) == 0
-    wobble_true = lens_distance(truth[1:], truth[:-1])[same_shot].mean()
-    wobble_raw = lens_distance(track.raw[1:], track.raw[:-1])[same_shot].mean()
-    wobble_smooth = lens_distance(track.lens[1:], track.lens[:-1])[same_shot].mean()
+    wobble_true = max_displacement(truth[1:], truth[:-1])[same_shot].mean()
+    wobble_raw = max_displacement(track.raw[1:], track.raw[:-1])[same_shot].mean()
+    wobble_smooth = max_displacement(track.lens[1:], track.lens[:-1])[same_shot].mean()
     print(f"error raw {raw.mean():.2f} px smoothed {smooth.mean():.2f} px; wobble raw {wobble_raw * WIDTH_PX:.2f} px "
           f"smoothed {wobble_smooth * WIDTH_PX:.2f} px true {wobble_true * WIDTH_PX:.2f} px")
     assert wobble_raw > wobble_true  # the estimates do wobble: the bound below means something
@@ -186,4 +187,4 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     assert jitter_smooth < 0.5 * jitter_raw, (jitter_smooth * WIDTH_PX, jitter_raw * WIDTH_PX)
     # reset: right after the cut the smoothed lens is the second shot's, not a blend with the first
     second = np.median(track.raw[cut:], axis=0)
-    assert np.all(lens_distance(track.lens[cut : cut + 3], second) * WIDTH_PX < 0.5 * lens_distance(truth[0], truth[cut]) * WIDTH_PX)
+    assert np.all(max_displacement(track.lens[cut : cut + 3], second) * WIDTH_PX < 0.5 * max_displacement(truth[0], truth[cut]) * WIDTH_PX)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..metrics import PAPER_SIZE
 from . import non_negative_int, parse_size, positive_int, show_progress
 
 DESCRIPTION = """\
@@ -49,7 +50,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--count", type=positive_int, required=True, metavar="N", help="number of crops in total (spread evenly over the panoramas)")
     parser.add_argument("--out", required=True, metavar="DIR", help="output folder (created; rerun to resume)")
     parser.add_argument("--seed", type=non_negative_int, required=True, metavar="S", help="random seed: fixes every crop and the split assignment")
-    parser.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH",
+    parser.add_argument("--size", type=parse_size, default=PAPER_SIZE, metavar="WxH",
                         help="frame geometry the lens refers to, in pixels (default: 1280x720)")
     parser.add_argument("--out-size", type=parse_size, default=None, metavar="WxH",
                         help="size of the written images (area-filtered; default: --size)")

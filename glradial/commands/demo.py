@@ -19,13 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..metrics import PAPER_SIZE, manifold_k2, max_displacement_px
 from . import finite_float, parse_size, positive_float, positive_int
 
 DESCRIPTION = __doc__.split("\n\n", 1)[1]
 
 #: the demo's default camera (degrees) and lens; k2 near the Lopez-Antequera manifold of k1
 DEFAULT_K1 = -0.32
-DEFAULT_K2 = 0.019 * DEFAULT_K1 + 0.805 * DEFAULT_K1**2
+DEFAULT_K2 = float(manifold_k2(DEFAULT_K1))
 #: a stadium of the held-out test split (seed % 10 == 9) seen from its main broadcast camera
 DEFAULT_SEED = 89
 
@@ -40,7 +41,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                              "(--seed, --size, --panorama-width, --hfov and --target apply to it)")
     parser.add_argument("--out", default="out/demo", metavar="DIR", help="output folder, created if missing (default: out/demo)")
     parser.add_argument("--seed", type=int, default=DEFAULT_SEED, help=f"stadium seed (default {DEFAULT_SEED}, a test-split stadium)")
-    parser.add_argument("--size", type=parse_size, default=(1280, 720), metavar="WxH", help="frame size in pixels (default 1280x720)")
+    parser.add_argument("--size", type=parse_size, default=PAPER_SIZE, metavar="WxH", help="frame size in pixels (default 1280x720)")
     parser.add_argument("--panorama-width", type=positive_int, default=4096, metavar="PX",
                         help="width of the rendered panorama in pixels, height = width / 2 (default 4096)")
     parser.add_argument("--k1", type=finite_float, default=DEFAULT_K1, help=f"true k1 of the frame (width-normalised; default {DEFAULT_K1})")
@@ -97,11 +98,6 @@ def project_undistorted(params, style, points: np.ndarray, size: tuple[int, int]
         p = params.focal * rays[:, :2] / rays[:, 2:3]
     p[rays[:, 2] <= 1e-6] = np.nan
     return p
-
-
-def _lens_to_px(p: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    width, height = size
-    return np.stack([p[:, 0] * width + width / 2 - 0.5, p[:, 1] * width + height / 2 - 0.5], axis=-1)
 
 
 def _visible_run(px: np.ndarray, size: tuple[int, int], margin: float = 2.0) -> np.ndarray | None:
@@ -220,18 +216,9 @@ def _find_model(explicit: str | None) -> Path | None:
     return path if path.is_file() else None
 
 
-def displacement_error_px(true: tuple[float, float], estimate: tuple[float, float], size: tuple[int, int]) -> float:
-    """``1920 · max_r |P(r, true) − P(r, estimate)|`` for r up to the frame's corner radius."""
-    from ..lens import corner_radius
-
-    r = np.linspace(0.0, corner_radius(size), 512)
-    d = (true[0] - estimate[0]) * r**3 + (true[1] - estimate[1]) * r**5
-    return float(1920.0 * np.max(np.abs(d)))
-
-
 def run(args: argparse.Namespace) -> int:
     from ..crops import CropParams, render_crops
-    from ..lens import Lens
+    from ..lens import Lens, corner_radius, lens_to_pixels
     from ..remap import correct
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style
@@ -273,7 +260,7 @@ def run(args: argparse.Namespace) -> int:
         estimate = Estimator(model).estimate(frame)
         used = (float(estimate.k1), float(estimate.k2)) if hasattr(estimate, "k1") else tuple(map(float, estimate))
         source = "estimated"
-        error = displacement_error_px((true_lens.k1, true_lens.k2), used, size)
+        error = float(max_displacement_px((true_lens.k1, true_lens.k2), used, radius=corner_radius(size)))
         log(f"estimated with {model.name}: k1={used[0]:.4f} k2={used[1]:.4f}")
         print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
         print(f"estimated k1={used[0]:+.4f} k2={used[1]:+.4f}")
@@ -288,14 +275,14 @@ def run(args: argparse.Namespace) -> int:
         p_u = project_undistorted(params, style, points, size)
         finite = np.all(np.isfinite(p_u), axis=1)
         p_d = np.full_like(p_u, np.nan)
-        p_d[finite] = true_lens.distort_points(_lens_to_px(p_u[finite], size), size)
+        p_d[finite] = true_lens.distort_points(lens_to_pixels(p_u[finite], size), size)
         run_d = _visible_run(p_d, size)
         if run_d is None or painted_fraction(frame, run_d) < 0.5:
             continue  # out of the frame, too short, or hidden (behind a stand): no reference line
         chords.append(run_d)
         # corrected frame (fit "same"): the ideal picture shows the line at p_u; keep the part whose
         # source lies inside the distorted frame
-        px_u = _lens_to_px(p_u, size)
+        px_u = lens_to_pixels(p_u, size)
         px_u[~np.all(np.isfinite(p_d), axis=1) | ~_inside(p_d, size)] = np.nan
         run_u = _visible_run(px_u, size)
         if run_u is not None:

@@ -1,4 +1,4 @@
-"""The training stream: determinism per seed, worker processes, labels, shutdown."""
+"""glradial.crop_producer, the training stream: determinism per seed, worker processes, labels, pairs, shutdown."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from glradial import lensfuncs
-from glradial.crop_stream import PAPER_NEWTON_STEPS, crop_batches, plan_batch
+from glradial.crop_producer import PAPER_NEWTON_STEPS, crop_batches, plan_batch
 from glradial.crops import CropRenderer, render_crops, sample_crop_params
 
 PANO = str(Path(__file__).parent / "data" / "panorama_field_2048x1024.jpg")
@@ -104,3 +104,65 @@ def test_newton_steps_render_the_same(ctx, field_panorama) -> None:
         field_panorama, size=(96, 54), ctx=ctx
     ) as b:
         assert np.abs(a.render(params).astype(int) - b.render(params)).max() <= 1
+
+
+def _synthetic_panorama(seed: int) -> np.ndarray:
+    """A 1024x512 stand-in: random grey blocks on a two-tone background (enough texture for corners)."""
+    rng = np.random.default_rng(seed)
+    pano = np.zeros((512, 1024, 3), np.uint8)
+    pano[:256], pano[256:] = (90, 120, 160), (40, 130, 40)
+    for _ in range(400):
+        x, y = int(rng.integers(0, 1000)), int(rng.integers(0, 500))
+        pano[y : y + 12, x : x + 24] = rng.integers(0, 256, 3)
+    return pano
+
+
+def test_paired_crops_share_the_view_and_differ_in_the_lens() -> None:
+    # Radial distortion fixes the frame centre (p_d = p_u at r = 0 with unit slope), so the two crops
+    # of a pair (same pose and field of view, different lens) agree there and differ towards the corners.
+    with crop_batches([_synthetic_panorama(3)], 4, seed=1, out_size=(160, 90), paired=True) as stream:
+        batch = next(stream)
+    images, labels = batch.images, batch.labels
+    assert images.shape == (4, 90, 160, 3) and labels.shape == (4, 2)
+    for a, b in ((0, 1), (2, 3)):
+        pa, pb = batch.params[a], batch.params[b]
+        assert (pa.pan, pa.tilt, pa.roll, pa.hfov) == (pb.pan, pb.tilt, pb.roll, pb.hfov)
+        assert not np.allclose(labels[a], labels[b])
+        centre = np.abs(images[a, 40:50, 75:85].astype(int) - images[b, 40:50, 75:85].astype(int)).mean()
+        corner = np.abs(images[a, :15, :25].astype(int) - images[b, :15, :25].astype(int)).mean()
+        assert centre < 3.0 and (corner > centre or corner == 0.0), (centre, corner)
+    with pytest.raises(ValueError, match="even"):
+        crop_batches([PANO], 3, seed=0, paired=True)
+
+
+def test_reader_gets_an_error_not_a_hang_when_a_worker_is_killed_mid_batch() -> None:
+    # A worker killed by the out-of-memory killer while its queue's feeder thread is halfway
+    # through writing a batch left the trainer blocked forever in the pipe read (seen with 80
+    # panoramas per producer on a 24 GiB machine). A batch of 8 crops of 128x72 is 221 KB, more
+    # than a pipe holds (64 KB), so once the reader stops reading the worker is always mid-batch.
+    import threading
+    import time
+
+    stream = crop_batches([_synthetic_panorama(1)[::2, ::2].copy()], 8, seed=3, out_size=(128, 72), workers=1)
+    try:
+        stream.get(timeout=120)  # the worker is up and streaming
+        deadline = time.monotonic() + 60
+        while not stream._queues[0]._reader.poll(0.5) and time.monotonic() < deadline:
+            pass  # wait until the next batch is (partly) in the pipe
+        stream._procs[0].kill()
+        outcome: list[BaseException | None] = []
+
+        def drain() -> None:
+            try:
+                while True:
+                    stream.get(timeout=60)
+            except BaseException as err:  # noqa: BLE001 - the test inspects it
+                outcome.append(err)
+
+        reader = threading.Thread(target=drain, daemon=True)
+        reader.start()
+        reader.join(timeout=60)
+        assert not reader.is_alive(), "get() hung on a worker that was killed mid-batch"
+        assert isinstance(outcome[0], RuntimeError) and "exit code -9" in str(outcome[0]), outcome
+    finally:
+        stream.close()
