@@ -277,8 +277,10 @@ class Lens:
         """
         s = _positive("s", s)
         s2 = s * s
+        if (s2 == 0.0 and self.k1) or (s2 * s2 == 0.0 and self.k2):
+            raise ValueError(f"s={s:g} rescales lens k1={self.k1:g}, k2={self.k2:g} beyond the float range")
         k1, k2 = (self.k1 / s2 if self.k1 else 0.0), (self.k2 / s2 / s2 if self.k2 else 0.0)
-        if not (math.isfinite(k1) and math.isfinite(k2)) or (s2 == 0.0 and (self.k1 or self.k2)):
+        if not (math.isfinite(k1) and math.isfinite(k2)):
             raise ValueError(f"s={s:g} rescales lens k1={self.k1:g}, k2={self.k2:g} beyond the float range")
         return Lens(k1, k2)
 

@@ -61,9 +61,12 @@ def check_checksum(path: Path) -> bool:
     if not recorded.is_file():
         return False
     try:
-        expected = recorded.read_text().split()[0].lower()
-    except (OSError, IndexError, UnicodeDecodeError) as err:
-        raise ModelLoadError(f"cannot read the checksum file {recorded}: {err}") from None
+        fields = recorded.read_text().split()
+    except (OSError, UnicodeDecodeError) as err:
+        raise ModelLoadError(f"cannot read the checksum file {recorded} of {path}: {err}") from None
+    expected = fields[0].lower() if fields else ""
+    if len(expected) != 64 or any(c not in "0123456789abcdef" for c in expected):
+        raise ModelLoadError(f"the checksum file {recorded} of {path} holds no SHA-256 hex digest")
     actual = file_sha256(path)
     if actual != expected:
         raise ModelLoadError(
