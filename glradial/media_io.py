@@ -26,7 +26,7 @@ from typing import Iterator, Literal
 import cv2
 import numpy as np
 
-from .atomic import atomic_path, check_output_folder
+from .atomic import atomic_path, atomic_write_bytes, check_output_folder
 from .native_stderr import silenced
 
 __all__ = [
@@ -140,8 +140,8 @@ def write_image(path: str | os.PathLike, image: np.ndarray, order: ChannelOrder 
         ok, encoded = cv2.imencode(_extension(target), pixels, params)
     if not ok:
         raise OSError(f"OpenCV could not encode {str(target)!r}")
-    with atomic_path(target) as tmp:
-        encoded.tofile(tmp)
+    # through a file object, not ndarray.tofile: a short write (full disk) then raises with its errno
+    atomic_write_bytes(target, encoded.tobytes())
     return target
 
 

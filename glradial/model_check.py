@@ -54,6 +54,14 @@ def file_sha256(path: Path) -> str:
     return digest.hexdigest()
 
 
+def write_checksum(path: Path) -> Path:
+    """Record ``path``'s SHA-256 in its checksum file (atomically); returns the checksum file."""
+    from .atomic import atomic_write_text
+
+    path = Path(path)
+    return atomic_write_text(checksum_path(path), f"{file_sha256(path)}  {path.name}\n")
+
+
 def check_checksum(path: Path) -> bool:
     """Compare ``path`` with its checksum file; True if one exists and matches, False if there is
     none; :class:`ModelLoadError` if it does not match or cannot be read."""

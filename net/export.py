@@ -34,6 +34,8 @@ import numpy as np
 import torch
 from torch import nn
 
+from glradial.model_check import write_checksum
+
 from .model import LUMA_WEIGHTS, DistortionNet, ModelConfig
 
 #: Largest |torch - onnxruntime| (lens units) accepted by :func:`check_agreement`.
@@ -122,6 +124,7 @@ def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = 
     onnx.checker.check_model(proto)
     onnx.save(proto, str(tmp))
     tmp.replace(path)
+    write_checksum(path)  # the estimator refuses a model whose recorded SHA-256 differs
     return path
 
 
@@ -172,6 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     entry = proto.metadata_props.add()
     entry.key, entry.value = "onnx_check", json.dumps({"max_abs_diff_vs_torch": err, "atol": ATOL})
     onnx.save(proto, str(path))
+    write_checksum(path)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB); torch vs onnxruntime max |diff| {err:.2e} (atol {ATOL})")
     return 0
 

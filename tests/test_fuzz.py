@@ -10,6 +10,7 @@ policy (glradial.remap.check_numeric_policy), and the Estimator validates models
 from __future__ import annotations
 
 import math
+import os
 import shutil
 from pathlib import Path
 
@@ -499,3 +500,50 @@ def test_bad_models_name_the_problem(env, name, words):
     with pytest.raises(ModelLoadError, match=None) as info:
         Estimator(env["models"][name], threads=1)
     assert words in str(info.value) and env["models"][name].name in str(info.value)
+
+
+# -- a write that fails in the file system names the output and the errno ----------------------------
+def test_write_on_a_full_disk_names_path_and_enospc(tmp_path, monkeypatch, capfd):
+    """ENOSPC simulated where a full disk reports it at the latest (flushing the file to disk)."""
+    import errno
+
+    from glradial import atomic
+
+    def full_disk(fd):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(atomic.os, "fsync", full_disk)
+    target = tmp_path / "x.png"
+    status = cli.main(["stadium", "--seed", "1", "--size", "64x32", "--out", str(target)])
+    lines = [line for line in capfd.readouterr().err.splitlines() if line.strip()]
+    assert status == 1 and len(lines) == 1, lines
+    assert str(target) in lines[0] and "ENOSPC" in lines[0] and "No space left" in lines[0]
+    assert list(tmp_path.iterdir()) == []  # no output, no temporary file
+
+
+def test_file_size_limit_from_the_kernel_names_path_and_errno(tmp_path, capfd):
+    """A real kernel refusal: RLIMIT_FSIZE in a forked child makes write() fail with EFBIG."""
+    import resource
+    import signal
+
+    from test_gl_threads_fork import in_child
+
+    target = tmp_path / "x.png"
+
+    def child() -> int:
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (2048, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
+        noise = np.random.default_rng(0).integers(0, 256, (128, 128, 3), dtype=np.uint8)  # ~49 kB as PNG
+        try:
+            from glradial.media_io import write_image
+
+            write_image(target, noise)
+        except OSError as err:
+            print(f"MESSAGE {err}", flush=True)
+            return 0
+        return 1
+
+    assert in_child(child) == 0
+    message = capfd.readouterr().out
+    assert str(target) in message and "EFBIG" in message, message
+    assert list(tmp_path.iterdir()) == []
