@@ -57,7 +57,10 @@ def load_panorama(item: Any) -> np.ndarray:
     if isinstance(item, (str, os.PathLike)):
         import cv2
 
-        image = cv2.imread(str(item), cv2.IMREAD_COLOR)
+        from .native_stderr import silenced
+
+        with silenced():  # libpng/libjpeg chatter on a corrupt file: the ValueError below says it
+            image = cv2.imread(str(item), cv2.IMREAD_COLOR)
         if image is None:
             raise ValueError(f"cannot read panorama {str(item)!r}")
         return np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))

@@ -24,7 +24,7 @@ from glradial.estimator import Estimator, ModelLoadError, default_model_path
 from glradial.lens import corner_radius, frame_size, lens_to_pixels, pixels_to_lens
 from glradial.stadium import StadiumRenderer, stadium_panorama
 from glradial.stadium_style import sample_style
-from glradial.stmap import lens_stmap
+from glradial.stmap import lens_stmap, read_stmap
 
 U8 = np.zeros((18, 32, 3), np.uint8)
 F32 = np.zeros((18, 32, 3), np.float32)
@@ -157,6 +157,8 @@ case("fit_scale-lens-three", lambda env: fit_scale((0.1, 0.2, 0.3), (32, 18)), T
 case("fit_scale-1e308", lambda env: fit_scale((1e308, 1e308), (32, 18), "full"), ValueError, "fit")
 case("stmap-direction", lambda env: lens_stmap(Lens(-0.1, 0), (32, 18), direction="up"), ValueError, "direction")
 case("stmap-size", lambda env: lens_stmap(Lens(-0.1, 0), (32, -18)), ValueError, "height")
+case("read_stmap-corrupt", lambda env: read_stmap(Path(__file__).parent / "data" / "README.md"), ValueError, "README.md")
+case("read_stmap-missing", lambda env: read_stmap("/nonexistent/map.tif"), FileNotFoundError, "map.tif")
 
 # crops
 case("CropParams-tilt", lambda env: CropParams(0, 95, 0, 60, -0.1, 0), ValueError, "tilt")
@@ -349,6 +351,8 @@ CLI_CASES = [
     ("convert-values", "convert --from glradial --to opencv --size 1920x1080 0.1 0.2 0.3", 2, "two values"),
     ("crops-count", "crops {good} --count 0 --out {tmp}/c --seed 0", 2, "--count"),
     ("crops-not-panorama", "crops {good} --count 2 --out {tmp}/c --seed 0 --size 32x18", 1, "2:1"),
+    ("crops-corrupt-panorama", "crops {trunc} --count 2 --out {tmp}/c2 --seed 0", 1, "trunc.png"),
+    ("stmap-out-folder", "stmap --k1 -0.1 --size 32x18 --out {tmp}/none/m.tif", 1, "none"),
 ]
 
 
