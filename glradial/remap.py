@@ -33,6 +33,7 @@ frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import os
@@ -135,8 +136,26 @@ def check_numeric_policy(lens: Lens, size: tuple[int, int], direction: str, scal
     5 |k2| r_max⁴) W`` (a bound on the source position in pixels and on the Newton slope, with
     ``r_max`` the largest undistorted radius the frame uses) or a Drap-Lefevre inverse coefficient
     (the Newton seed) exceeds float32's largest value. Real lenses are many orders of magnitude
-    inside these bounds (|k| < 10, scales 0.1..10).
+    inside these bounds (|k| < 10, scales 0.1..10). Results are cached per lens, size, direction
+    and scale (a video repeats them; the inverse costs ~60 µs).
     """
+    problem = _numeric_problem(lens.k1, lens.k2, size, direction, scale, scale_name)
+    if problem is not None:
+        raise ValueError(problem)
+
+
+@functools.lru_cache(maxsize=64)
+def _numeric_problem(k1: float, k2: float, size: tuple[int, int], direction: str, scale: float, scale_name: str) -> str | None:
+    """The message of :func:`check_numeric_policy`'s error, or None."""
+    lens = Lens(k1, k2)
+    try:
+        _check_numbers(lens, size, direction, scale, scale_name)
+    except ValueError as err:
+        return str(err)
+    return None
+
+
+def _check_numbers(lens: Lens, size: tuple[int, int], direction: str, scale: float, scale_name: str) -> None:
     for name, value in (("k1", lens.k1), ("k2", lens.k2)):
         if abs(value) > FLOAT32_MAX:
             raise ValueError(f"{name}={value:g} is beyond float32 range (±{FLOAT32_MAX:.4g}), in which the GL shaders compute")
