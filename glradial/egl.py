@@ -204,14 +204,15 @@ class _ThreadGL:
 
     def __init__(self, ctx: moderngl.Context | None = None, resources: dict[str, object] | None = None) -> None:
         self.pid = os.getpid()
+        self.thread_id = threading.get_ident()
         self.ctx = ctx if ctx is not None else create_context()
         self.resources: dict[str, object] = resources if resources is not None else {}
 
     def close(self) -> None:
         """Runs on the ending thread (its context is current there): unbind the context and pool
         it with its resources, or release them and destroy it when the pool is full."""
-        if os.getpid() != self.pid or self.ctx is None:
-            return  # a parent's context: never touched in a child
+        if os.getpid() != self.pid or threading.get_ident() != self.thread_id or self.ctx is None:
+            return  # a parent's context (never touched in a child), or another thread's (at exit)
         ctx, resources = self.ctx, self.resources
         self.ctx, self.resources = None, {}
         make_current(ctx)
@@ -284,6 +285,8 @@ def thread_resource(key: str, factory: Callable[[moderngl.Context], R]) -> R:
 
 
 def _after_fork_in_child() -> None:
+    global _display_lock, _pool_lock
+    _display_lock, _pool_lock = threading.Lock(), threading.Lock()  # another thread may have held them
     holder = getattr(_local, "holder", None)
     if holder is not None:
         _inherited.append(holder)

@@ -50,3 +50,16 @@ def silenced() -> Iterator[None]:
                 os.dup2(_saved_fd, 2)
                 os.close(_saved_fd)
                 _saved_fd = None
+
+
+def _after_fork_in_child() -> None:
+    """A fork while another thread had descriptor 2 silenced: give the child its stderr back."""
+    global _lock, _depth, _saved_fd
+    _lock = threading.Lock()
+    if _saved_fd is not None:
+        os.dup2(_saved_fd, 2)
+        os.close(_saved_fd)
+    _depth, _saved_fd = 0, None
+
+
+os.register_at_fork(after_in_child=_after_fork_in_child)

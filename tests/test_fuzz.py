@@ -551,3 +551,30 @@ def test_file_size_limit_from_the_kernel_names_path_and_errno(tmp_path, capfd):
     message = capfd.readouterr().out
     assert str(target) in message and "EFBIG" in message, message
     assert list(tmp_path.iterdir()) == []
+
+
+def test_native_stderr_is_silenced_only_inside_the_block(capfd):
+    from glradial.native_stderr import silenced
+
+    os.write(2, b"before\n")
+    with silenced():
+        os.write(2, b"libpng error: chatter\n")  # what a native library does: straight to fd 2
+        with silenced():  # nested
+            os.write(2, b"more chatter\n")
+        os.write(2, b"still chatter\n")
+    os.write(2, b"after\n")
+    assert capfd.readouterr().err == "before\nafter\n"
+
+
+def test_fork_inside_a_silenced_block_gives_the_child_its_stderr(capfd):
+    from glradial.native_stderr import silenced
+
+    from test_gl_threads_fork import in_child
+
+    def child() -> int:
+        os.write(2, b"child speaks\n")
+        return 0
+
+    with silenced():
+        assert in_child(child) == 0
+    assert "child speaks" in capfd.readouterr().err
