@@ -136,9 +136,10 @@ def _claim_display() -> str:
                 _display_pid[kind] = pid
                 return kind
     raise GLUnavailableError(
-        f"process {pid} was forked from a process that had already used OpenGL, and so had its own "
-        f"parent: no EGL display is left that none of them initialised (the inherited ones hang). "
-        f"Use multiprocessing's 'spawn' or 'forkserver' start method, or backend='cpu'."
+        f"process {pid} descends through fork from two processes that had used OpenGL (its EGL device "
+        f"and surfaceless displays were both initialised by ancestors, and inherited displays hang): no "
+        f"OpenGL context can be made here. Use multiprocessing's 'spawn' or 'forkserver' start method, "
+        f"or backend='cpu'."
     )
 
 
