@@ -10,6 +10,7 @@ half-written output nor a stray temporary file. An existing target is only repla
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import tempfile
 from pathlib import Path
@@ -63,6 +64,14 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             raise OSError(f"nothing was written for {str(target)!r}")
         os.chmod(tmp, _final_mode(target))
         os.replace(tmp, target)
+    except OSError as err:
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if err.errno is None:
+            raise
+        # name the output and the errno symbol (e.g. ENOSPC on a full disk), not the temporary file
+        symbol = errno.errorcode.get(err.errno, str(err.errno))
+        raise OSError(err.errno, f"cannot write {str(target)!r}: {os.strerror(err.errno)} ({symbol})") from err
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()

@@ -262,6 +262,12 @@ def _panorama_array(panorama: object) -> np.ndarray:
     if array.dtype not in TEXTURE_FORMATS:
         raise TypeError(f"panorama dtype must be uint8, uint16 or float32, got {array.dtype}")
     height, width = array.shape[:2]
+    if height == 0 or width == 0:
+        raise ValueError(f"panorama is empty: shape {array.shape}")
+    if array.dtype.kind == "f":
+        low, high = float(array.min()), float(array.max())
+        if not (np.isfinite(low) and np.isfinite(high)):
+            raise ValueError(f"panorama contains NaN or infinite pixels (min {low}, max {high})")
     if width != 2 * height:
         raise ValueError(f"panorama must be equirectangular 2:1 (W = 2 H), got {width}×{height}")
     return array
@@ -345,7 +351,9 @@ class CropRenderer:
         series_inverse: bool = True,
         ctx: object | None = None,
     ) -> None:
-        from .egl import max_texture_size, thread_context
+        import moderngl
+
+        from .egl import GLOwner, max_texture_size, thread_context
 
         self.size = frame_size(size)
         self.out_size = frame_size(out_size) if out_size is not None else self.size
@@ -369,9 +377,19 @@ class CropRenderer:
         self.dtype = array.dtype
         self.channels = array.shape[2]
         self._squeeze = np.asarray(panorama).ndim == 2
-        self.ctx = ctx if ctx is not None else thread_context()
+        if ctx is not None and not isinstance(ctx, moderngl.Context):
+            raise TypeError(f"ctx must be a moderngl.Context or None, got {type(ctx).__name__} {ctx!r}")
         self._objects: list[object] = []
+        self.ctx = ctx if ctx is not None else thread_context()
+        self._owner = GLOwner("CropRenderer", self.ctx)
+        self._owner.enter()
         limit = max_texture_size(self.ctx)
+        rows = min(int(self.ctx.info["GL_MAX_VIEWPORT_DIMS"][1]), limit)
+        if self.out_size[0] > limit or self.out_size[1] > rows:
+            raise ValueError(
+                f"out_size {self.out_size[0]}×{self.out_size[1]} exceeds this GL driver's limit of {limit} pixels "
+                f"wide and {rows} high per crop (GL_MAX_TEXTURE_SIZE, GL_MAX_VIEWPORT_DIMS)"
+            )
         if array.shape[1] > limit:
             import cv2
 
@@ -459,6 +477,9 @@ class CropRenderer:
         """
         if self._fbo is None:
             raise RuntimeError("CropRenderer was released")
+        self._owner.enter()
+        if isinstance(params, (CropParams, str, bytes)) or not hasattr(params, "__iter__"):
+            raise TypeError(f"params must be a sequence of CropParams, got {type(params).__name__}")
         params = list(params)
         for i, item in enumerate(params):
             if not isinstance(item, CropParams):
@@ -525,8 +546,10 @@ class CropRenderer:
         """Free the GL objects (idempotent)."""
         from .egl import release_objects
 
-        objects, self._objects = getattr(self, "_objects", []), []
+        objects = getattr(self, "_objects", [])
         if objects:
+            self._owner.enter()
+            self._objects = []
             release_objects(self.ctx, *reversed(objects))
         self._fbo = None
         self._rgba_scratch = None

@@ -32,6 +32,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .lens import Lens
+from .model_check import ModelLoadError, check_checksum, check_model
 
 #: File name of the bundled model inside the ``glradial.models`` package.
 DEFAULT_MODEL_NAME = "glradial_k1k2.onnx"
@@ -39,10 +40,6 @@ DEFAULT_MODEL_NAME = "glradial_k1k2.onnx"
 TRAINED_ASPECT = 16.0 / 9.0
 #: Relative aspect deviation beyond which a warning is issued.
 ASPECT_TOLERANCE = 0.02
-
-
-class ModelLoadError(RuntimeError):
-    """The model file exists but is not a usable glradial ONNX model (corrupt, wrong graph)."""
 
 
 def default_model_path() -> Path:
@@ -88,7 +85,7 @@ class Estimator:
     ``mirror_average``: average the outputs for each frame and its left-right mirror (default; see
     the module docstring); ``False`` runs the network once per frame.
     Raises ``FileNotFoundError`` for a missing file and :class:`ModelLoadError` for a file that is
-    not a readable glradial model. Thread-safe: onnxruntime sessions may be run concurrently.
+    not a usable glradial model (see :mod:`glradial.model_check`: structure, checksum, probe). Thread-safe: onnxruntime sessions may be run concurrently.
     """
 
     def __init__(
@@ -110,6 +107,7 @@ class Estimator:
             options.intra_op_num_threads = threads
             options.inter_op_num_threads = 1
         options.log_severity_level = 3
+        check_checksum(path)
         try:
             self._session = ort.InferenceSession(str(path), sess_options=options, providers=["CPUExecutionProvider"])
         except Exception as err:  # onnxruntime raises its own exception types
@@ -118,20 +116,9 @@ class Estimator:
         self.threads = threads
         meta = self._session.get_modelmeta().custom_metadata_map
         self.metadata: dict[str, str] = dict(meta)
-        inputs, outputs = self._session.get_inputs(), self._session.get_outputs()
-        if len(inputs) != 1 or len(outputs) != 1:
-            raise ModelLoadError(f"{path} is not a glradial model: expected 1 input and 1 output")
-        shape = inputs[0].shape
-        if inputs[0].type != "tensor(uint8)" or len(shape) != 4 or shape[3] != 3:
-            raise ModelLoadError(
-                f"{path} is not a glradial model: input must be uint8 N×H×W×3, got {inputs[0].type} {shape}"
-            )
-        if "input_size" in meta:
-            width, height = (int(v) for v in meta["input_size"].split(","))
-        else:
-            height, width = int(shape[1]), int(shape[2])
-        self.input_size: tuple[int, int] = (width, height)
-        self._input_name = inputs[0].name
+        info = check_model(self._session, path)  # names, ranks, dtypes, N×2 output, input size, probe
+        self.input_size: tuple[int, int] = info.input_size
+        self._input_name = info.input_name
 
     @property
     def metrics(self) -> dict:
@@ -170,7 +157,9 @@ class Estimator:
         n = len(images)
         batch = np.concatenate([images, images[:, :, ::-1]]) if self.mirror_average else images
         out = self._session.run(None, {self._input_name: np.ascontiguousarray(batch)})[0]
-        out = np.asarray(out, dtype=np.float64).reshape(-1, 2)
+        out = np.asarray(out, dtype=np.float64)
+        if out.shape != (len(batch), 2):
+            raise ModelLoadError(f"{self.model_path}: output of shape {out.shape} for a batch of {len(batch)}, not {len(batch)}×2")
         return 0.5 * (out[:n] + out[n:]) if self.mirror_average else out
 
     def estimate_batch(self, frames: Sequence[np.ndarray]) -> list[Lens]:

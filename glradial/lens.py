@@ -279,7 +279,10 @@ class Lens:
         if fit == "same":
             return 1.0
         rho = np.array([self.edge_radius((width, height)), self.frame_radius((width, height))])
-        r_u = self.inverse_radius(rho, method="exact")
+        try:
+            r_u = self.inverse_radius(rho, method="exact")
+        except OverflowError:
+            raise ValueError(f"fit={fit!r} is undefined for lens k1={self.k1:g}, k2={self.k2:g}: its inverse overflows") from None
         if not np.all(np.isfinite(r_u)):
             raise ValueError(
                 f"fit={fit!r} is undefined for lens k1={self.k1:g}, k2={self.k2:g} on a {width}×{height} "
@@ -348,7 +351,13 @@ class Lens:
         Example: a centred crop of width ``W'`` out of a ``W``-wide frame has ``s = W / W'``.
         """
         s = _positive("s", s)
-        return Lens(self.k1 / s**2, self.k2 / s**4, self.cx * s, self.cy * s, self.pixel_aspect)
+        s2 = s * s
+        if (s2 == 0.0 and self.k1) or (s2 * s2 == 0.0 and self.k2):
+            raise ValueError(f"s={s:g} rescales lens k1={self.k1:g}, k2={self.k2:g} beyond the float range")
+        k1, k2 = (self.k1 / s2 if self.k1 else 0.0), (self.k2 / s2 / s2 if self.k2 else 0.0)
+        if not (math.isfinite(k1) and math.isfinite(k2)):
+            raise ValueError(f"s={s:g} rescales lens k1={self.k1:g}, k2={self.k2:g} beyond the float range")
+        return Lens(k1, k2, self.cx * s, self.cy * s, self.pixel_aspect)
 
     def _require_centred(self, convention: str) -> None:
         """``ValueError`` unless the lens is centred with square pixels: ``convention``'s pair of

@@ -26,7 +26,8 @@ from typing import Iterator, Literal
 import cv2
 import numpy as np
 
-from .atomic import atomic_path, check_output_folder
+from .atomic import atomic_path, atomic_write_bytes, check_output_folder
+from .native_stderr import silenced
 
 __all__ = [
     "IMAGE_EXTENSIONS",
@@ -108,7 +109,8 @@ def read_image(path: str | os.PathLike, order: ChannelOrder = "rgb") -> np.ndarr
     if media_kind(source) != "image":
         raise ValueError(f"{str(source)!r} is a video, expected an image")
     data = np.fromfile(source, dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    with silenced():
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
     if image is None:
         raise ValueError(f"cannot decode image {str(source)!r}: the file is corrupt or not a {source.suffix} image")
     if image.ndim == 3 and image.shape[2] == 1:
@@ -134,11 +136,12 @@ def write_image(path: str | os.PathLike, image: np.ndarray, order: ChannelOrder 
         raise ValueError(f"{_extension(target)} cannot store {image.dtype} samples (it stores {', '.join(allowed)}){hint}")
     pixels = _swap_rb(image) if order == "rgb" else image
     params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)] if _extension(target) in (".jpg", ".jpeg") else []
-    ok, encoded = cv2.imencode(_extension(target), pixels, params)
+    with silenced():
+        ok, encoded = cv2.imencode(_extension(target), pixels, params)
     if not ok:
         raise OSError(f"OpenCV could not encode {str(target)!r}")
-    with atomic_path(target) as tmp:
-        encoded.tofile(tmp)
+    # through a file object, not ndarray.tofile: a short write (full disk) then raises with its errno
+    atomic_write_bytes(target, encoded.tobytes())
     return target
 
 
@@ -170,8 +173,9 @@ class VideoReader:
         if media_kind(self.path) != "video":
             raise ValueError(f"{str(self.path)!r} is an image, expected a video")
         self.order = order
-        self._cap = cv2.VideoCapture(str(self.path))
-        ok, first = (self._cap.read() if self._cap.isOpened() else (False, None))
+        with silenced():
+            self._cap = cv2.VideoCapture(str(self.path))
+            ok, first = (self._cap.read() if self._cap.isOpened() else (False, None))
         if not ok or first is None:
             self._cap.release()
             raise ValueError(f"cannot read video {str(self.path)!r}: the file is corrupt or its codec is not supported")
@@ -192,7 +196,8 @@ class VideoReader:
         if self._first is not None:
             frame, self._first = self._first, None
         else:
-            ok, frame = self._cap.read()
+            with silenced():
+                ok, frame = self._cap.read()
             if not ok or frame is None:
                 raise StopIteration
         self.frames_read += 1
@@ -243,7 +248,8 @@ class VideoWriter:
         self._writer = None
         self._context = atomic_path(target)
         self._tmp = self._context.__enter__()
-        self._writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*VIDEO_CODECS[ext]), self.fps, self.size)
+        with silenced():
+            self._writer = cv2.VideoWriter(str(self._tmp), cv2.VideoWriter_fourcc(*VIDEO_CODECS[ext]), self.fps, self.size)
         if not self._writer.isOpened():
             self.abort()
             raise OSError(f"OpenCV cannot open a {VIDEO_CODECS[ext]} video writer for {str(target)!r}")

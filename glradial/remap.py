@@ -44,6 +44,7 @@ frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k
 
 from __future__ import annotations
 
+import functools
 import math
 import numbers
 import os
@@ -55,7 +56,7 @@ import cv2
 import moderngl
 import numpy as np
 
-from . import egl
+from . import egl, lensfuncs
 from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
 from .shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES, build_program
 
@@ -71,6 +72,9 @@ _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR
 CPU_MAX_SIDE = 32766
 #: fixed-point maps kept by the CPU backend (each 1080p entry is ~12 MB).
 CPU_MAP_CACHE_SIZE = 8
+#: the shaders compute in float32: the largest finite value and the smallest normal one
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+FLOAT32_TINY = float(np.finfo(np.float32).tiny)
 
 
 # -- validation ---------------------------------------------------------------------------------
@@ -91,6 +95,13 @@ def _check_frame(frame: object) -> tuple[int, int, int]:
         raise ValueError(f"frame is empty: shape {frame.shape}")
     if channels not in (1, 3, 4):
         raise ValueError(f"frame must be H×W×C with C in (1, 3, 4), got shape {frame.shape} ({channels} channels)")
+    if frame.dtype.kind == "f":
+        low, high = float(frame.min()), float(frame.max())  # NaN or ±inf anywhere shows up here
+        if not (math.isfinite(low) and math.isfinite(high)):
+            raise ValueError(
+                f"frame contains NaN or infinite pixels (min {low}, max {high}); interpolation would spread "
+                f"them to their neighbours: replace them first (e.g. np.nan_to_num)"
+            )
     return height, width, channels
 
 
@@ -111,6 +122,8 @@ def _check_fill(fill: object, channels: int, dtype: np.dtype) -> tuple[float, ..
             raise ValueError(f"fill must be finite, got {fill!r}")
         if dtype.kind == "u" and not 0 <= number <= np.iinfo(dtype).max:
             raise ValueError(f"fill {fill!r} is outside the range of {dtype} (0..{np.iinfo(dtype).max})")
+        if abs(number) > FLOAT32_MAX:
+            raise ValueError(f"fill {fill!r} is beyond float32 range (±{FLOAT32_MAX:.4g})")
         out.append(number)
     return tuple(out)
 
@@ -127,6 +140,62 @@ def _lens(lens: object, k2: object = None) -> Lens:
     if not isinstance(lens, (numbers.Real, np.floating, np.integer)) or isinstance(lens, (bool, np.bool_)):
         raise TypeError(f"k1 must be a real number (or lens a glradial.Lens), got {type(lens).__name__} {lens!r}")
     return Lens(lens, 0.0 if k2 is None else k2)  # type: ignore[arg-type]
+
+
+def check_numeric_policy(lens: Lens, size: tuple[int, int], direction: str, scale: float, scale_name: str = "fit") -> None:
+    """The numeric policy both backends share, so that they give the same answer or the same error.
+
+    The shaders compute in float32, the CPU maps in float64. Refused with a ``ValueError`` naming
+    the argument: a coefficient beyond float32 range; a scale outside float32's normal range; a lens
+    and scale whose map overflows float32 on the frame, i.e. where ``r_max (1 + 5 |k1| r_max² +
+    5 |k2| r_max⁴) W`` (a bound on the source position in pixels and on the Newton slope, with
+    ``r_max`` the largest undistorted radius the frame uses) or a Drap-Lefevre inverse coefficient
+    (the Newton seed) exceeds float32's largest value. Real lenses are many orders of magnitude
+    inside these bounds (|k| < 10, scales 0.1..10). Results are cached per lens, size, direction
+    and scale (a video repeats them; the inverse costs ~60 µs).
+    """
+    problem = _numeric_problem(lens.k1, lens.k2, lens.frame_radius(size), size, direction, scale, scale_name)
+    if problem is not None:
+        raise ValueError(problem)
+
+
+@functools.lru_cache(maxsize=64)
+def _numeric_problem(k1: float, k2: float, corner: float, size: tuple[int, int], direction: str, scale: float,
+                     scale_name: str) -> str | None:
+    """The message of :func:`check_numeric_policy`'s error, or None (``corner``: the largest radius
+    of the frame, measured from the principal point, in lens units)."""
+    lens = Lens(k1, k2)
+    try:
+        _check_numbers(lens, corner, size, direction, scale, scale_name)
+    except ValueError as err:
+        return str(err)
+    return None
+
+
+def _check_numbers(lens: Lens, corner: float, size: tuple[int, int], direction: str, scale: float, scale_name: str) -> None:
+    for name, value in (("k1", lens.k1), ("k2", lens.k2)):
+        if abs(value) > FLOAT32_MAX:
+            raise ValueError(f"{name}={value:g} is beyond float32 range (±{FLOAT32_MAX:.4g}), in which the GL shaders compute")
+    if not FLOAT32_TINY <= scale <= FLOAT32_MAX:
+        raise ValueError(f"{scale_name} scale {scale:g} is outside float32's normal range [{FLOAT32_TINY:.4g}, {FLOAT32_MAX:.4g}]")
+    width, _ = size
+    if direction == "undistort":
+        r_max = scale * corner
+    else:
+        for index, b in enumerate(lensfuncs.drap_coefficients(lens.k1, lens.k2), start=1):
+            if not abs(b) <= FLOAT32_MAX:
+                raise ValueError(
+                    f"lens k1={lens.k1:g}, k2={lens.k2:g}: its inverse's coefficient b{index}={b:g} overflows float32; "
+                    f"the coefficients are far outside any real lens"
+                )
+        r_u = float(lens.inverse_radius(corner))
+        r_max = (r_u if math.isfinite(r_u) else lens.fold_radius()) / scale
+    bound = r_max * (1.0 + 5.0 * (abs(lens.k1) * r_max * r_max + abs(lens.k2) * r_max**4 if r_max < 1e60 else math.inf)) * width
+    if not bound <= FLOAT32_MAX:
+        raise ValueError(
+            f"{scale_name} scale {scale:g} with lens k1={lens.k1:g}, k2={lens.k2:g} on a {size[0]}×{size[1]} frame "
+            f"overflows float32 (source positions up to ~{bound:.3g} pixels): use a smaller {scale_name} or smaller coefficients"
+        )
 
 
 def fit_scale(
@@ -161,8 +230,12 @@ class Remapper:
     """
 
     def __init__(self, ctx: moderngl.Context | None = None) -> None:
+        if ctx is not None and not isinstance(ctx, moderngl.Context):
+            raise TypeError(f"ctx must be a moderngl.Context or None, got {type(ctx).__name__} {ctx!r}")
         self._owns_context = ctx is None
         self.ctx: moderngl.Context = egl.create_context() if ctx is None else ctx
+        self._owner = egl.GLOwner("Remapper", self.ctx)
+        self._owner.enter()
         self.max_texture_size = egl.max_texture_size(self.ctx)
         self._programs: dict[tuple[str, str, str], tuple[moderngl.Program, moderngl.VertexArray]] = {}
         self._frame_key: tuple[int, int, int, np.dtype] | None = None
@@ -233,30 +306,49 @@ class Remapper:
         are texelFetch).
         """
         self._check_alive()
+        if not isinstance(source, moderngl.Texture):
+            raise TypeError(f"source must be a moderngl.Texture, got {type(source).__name__} {source!r}")
+        if not isinstance(target, moderngl.Framebuffer):
+            raise TypeError(f"target must be a moderngl.Framebuffer, got {type(target).__name__} {target!r}")
         self._make_current()
         lens = _lens(lens, k2)
         direction = _choice("direction", direction, DIRECTIONS)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
         inverse = _choice("inverse", inverse, INVERSES)
+        units = int(self.ctx.info["GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS"])
+        if isinstance(texture_unit, (bool, np.bool_)) or not isinstance(texture_unit, (numbers.Integral, np.integer)):
+            raise TypeError(f"texture_unit must be an integer, got {type(texture_unit).__name__} {texture_unit!r}")
+        if not 0 <= texture_unit < units:
+            raise ValueError(f"texture_unit must be in 0..{units - 1} (GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS), got {texture_unit}")
         if viewport is None:
             viewport = (0, 0, target.width, target.height)
-        x0, y0, width, height = (int(v) for v in viewport)
+        try:
+            x0, y0, width, height = (v for v in viewport)
+        except (TypeError, ValueError):
+            raise TypeError(f"viewport must be (x, y, width, height) integers, got {viewport!r}") from None
+        for name, value in (("x", x0), ("y", y0)):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
+                raise TypeError(f"viewport {name} must be an integer, got {value!r}")
         size = frame_size((width, height))
+        x0, y0, width, height = int(x0), int(y0), size[0], size[1]
         s = lens.fit_scale(size, fit, direction) if scale is None else _positive("scale", scale)
+        check_numeric_policy(lens, size, direction, s, "fit" if scale is None else "scale")
         lens.check_frame(size, s)
         rgba = _check_fill(fill, 4, np.dtype(np.float32))
         self._draw(source, target, (x0, y0, width, height), lens, direction, s, interpolation, inverse, rgba, texture_unit)
 
     def release(self) -> None:
-        """Free every GL object (and the context if this Remapper made it). Idempotent."""
+        """Free every GL object (and the context if this Remapper made it). Idempotent. Only on the
+        thread that made it (``RuntimeError`` elsewhere)."""
         if self._released:
             return
+        self._owner.enter()
         self._release_frame_objects()
         for program, vao in self._programs.values():
             egl.release_objects(self.ctx, vao, program)
         self._programs.clear()
         if self._owns_context:
-            self.ctx.release()
+            egl.destroy_context(self.ctx)
         self._released = True
 
     def __enter__(self) -> "Remapper":
@@ -276,6 +368,7 @@ class Remapper:
     def _check_alive(self) -> None:
         if self._released:
             raise RuntimeError("this Remapper has been released")
+        self._owner.enter()
 
     def _make_current(self) -> None:
         """Make this Remapper's context the thread's current one before drawing: creating another
@@ -373,6 +466,7 @@ class Remapper:
                 f"pixels per side (GL_MAX_TEXTURE_SIZE); use backend='cpu' for it"
             )
         scale = lens.fit_scale((width, height), fit, direction)
+        check_numeric_policy(lens, (width, height), direction, scale)
         lens.check_frame((width, height), scale)
         if out is None:
             out = np.empty(frame.shape, frame.dtype)
@@ -426,6 +520,7 @@ def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpol
     if max(width, height) > CPU_MAX_SIDE:
         raise ValueError(f"frame {width}×{height} exceeds cv2.remap's limit of {CPU_MAX_SIDE} pixels per side")
     scale = lens.fit_scale((width, height), fit, direction)
+    check_numeric_policy(lens, (width, height), direction, scale)
     lens.check_frame((width, height), scale)
     map1, map2, outside = cpu_maps(lens, (width, height), direction, scale, inverse, interpolation == "nearest")
     result = cv2.remap(frame, map1, map2, _CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
@@ -439,19 +534,14 @@ def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpol
 
 
 # -- module-level functions -----------------------------------------------------------------------
-_local = threading.local()
 _auto_lock = threading.Lock()
 _auto_choice: dict[int, str] = {}
 
 
 def _thread_remapper() -> Remapper:
-    """The calling thread's Remapper on :func:`egl.thread_context` (one per thread and process)."""
-    pid = os.getpid()
-    remapper = getattr(_local, "remapper", None)
-    if remapper is None or getattr(_local, "pid", None) != pid:
-        _local.remapper = Remapper(egl.thread_context())
-        _local.pid = pid
-    return _local.remapper
+    """The calling thread's Remapper on :func:`egl.thread_context` (one per thread and process,
+    released with the thread's context when the thread ends)."""
+    return egl.thread_resource("remapper", Remapper)
 
 
 def auto_backend() -> str:

@@ -24,7 +24,7 @@ from typing import Any
 import moderngl
 import numpy as np
 
-from .egl import check_gl_error, max_texture_size, release_objects, thread_context
+from .egl import GLOwner, check_gl_error, max_texture_size, release_objects, thread_context, thread_resource
 from .shaderlib import build_program
 from .stadium_style import (
     HALF_LENGTH,
@@ -221,7 +221,11 @@ class StadiumRenderer:
     """
 
     def __init__(self, ctx: moderngl.Context | None = None):
+        if ctx is not None and not isinstance(ctx, moderngl.Context):
+            raise TypeError(f"ctx must be a moderngl.Context or None, got {type(ctx).__name__} {ctx!r}")
         self.ctx = ctx if ctx is not None else thread_context()
+        self._owner = GLOwner("StadiumRenderer", self.ctx)
+        self._owner.enter()
         self._max_tex = max_texture_size(self.ctx)
         self.first = build_program(self.ctx, "fullscreen.vert", "stadium.frag", {"STADIUM_PASS": 1})
         self.program = build_program(self.ctx, "fullscreen.vert", "stadium.frag", {"STADIUM_PASS": 2})
@@ -243,6 +247,7 @@ class StadiumRenderer:
         """Free the program, vertex array and framebuffer (idempotent)."""
         if self.program is None:
             return
+        self._owner.enter()
         release_objects(self.ctx, self._fbo, self._tex, self._fbo1, self._tex1, self.vao, self.vao_first,
                         self.program, self.first)
         self._fbo = self._tex = self._fbo1 = self._tex1 = None
@@ -275,6 +280,9 @@ class StadiumRenderer:
         """
         if self.program is None:
             raise RuntimeError("StadiumRenderer was released")
+        self._owner.enter()
+        if not isinstance(style, StadiumStyle):
+            raise TypeError(f"style must be a StadiumStyle, got {type(style).__name__}")
         w, h = _parse_size(size)
         if w > self._max_tex:
             raise ValueError(f"panorama width {w} exceeds the GL texture limit {self._max_tex}")
@@ -315,9 +323,6 @@ class StadiumRenderer:
         return out
 
 
-_renderers: dict[int, StadiumRenderer] = {}
-
-
 def stadium_panorama(seed: int, size: tuple[int, int] = (8192, 4096), **style: Any) -> np.ndarray:
     """Procedural football-stadium panorama for ``seed`` as H×W×3 uint8 RGB (equirectangular).
 
@@ -329,12 +334,7 @@ def stadium_panorama(seed: int, size: tuple[int, int] = (8192, 4096), **style: A
     st = sample_style(seed)
     if style:
         st = st.with_overrides(**style)
-    ctx = thread_context()
-    key = id(ctx)
-    renderer = _renderers.get(key)
-    if renderer is None or renderer.program is None:
-        renderer = _renderers[key] = StadiumRenderer(ctx)
-    return renderer.render(st, size)
+    return thread_resource("stadium_renderer", StadiumRenderer).render(st, size)
 
 
 def stadium_cache_path(seed: int, size: tuple[int, int], cache_dir: str | os.PathLike) -> Path:

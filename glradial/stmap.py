@@ -33,6 +33,7 @@ import numpy as np
 
 from .atomic import atomic_path, check_output_folder
 from .lens import NO_SOURCE, Lens
+from .native_stderr import silenced
 
 __all__ = ["STMAP_EXTENSIONS", "STMAP_NO_SOURCE", "check_stmap_path", "stmap_from_maps", "maps_from_stmap", "lens_stmap", "write_stmap", "read_stmap"]
 
@@ -117,7 +118,8 @@ def write_stmap(path: str | os.PathLike, stmap: np.ndarray) -> Path:
             ok, encoded = cv2.imencode(".tiff", np.ascontiguousarray(stmap[..., ::-1]))  # OpenCV writes BGR
             if not ok:
                 raise OSError(f"OpenCV could not encode a float TIFF for {str(target)!r}")
-            encoded.tofile(tmp)
+            with open(tmp, "wb") as handle:  # not ndarray.tofile: a short write keeps its errno
+                handle.write(encoded.tobytes())
     return target
 
 
@@ -160,7 +162,8 @@ def read_stmap(path: str | os.PathLike) -> np.ndarray:
         return _read_exr(source)
     import cv2
 
-    image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
+    with silenced():
+        image = cv2.imread(str(source), cv2.IMREAD_UNCHANGED)
     if image is None or image.ndim != 3:
         raise ValueError(f"cannot read {str(source)!r} as a 3-channel float STMap")
     return np.ascontiguousarray(image[..., ::-1]).astype(np.float32)

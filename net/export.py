@@ -35,6 +35,7 @@ import torch
 from torch import nn
 
 from glradial.atomic import atomic_path
+from glradial.model_check import write_checksum
 
 from .model import DistortionNet, ModelConfig, normalise_batch
 
@@ -92,6 +93,7 @@ def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = 
                 dynamic_axes={"image": {0: "N"}, "k": {0: "N"}}, opset_version=OPSET, do_constant_folding=True,
             )
         _add_metadata(tmp, model.config, metadata)
+    write_checksum(path)  # the estimator refuses a model whose recorded SHA-256 differs
     return path
 
 
@@ -174,6 +176,7 @@ def main(argv: list[str] | None = None) -> int:
     entry.key, entry.value = "onnx_check", json.dumps({"max_abs_diff_vs_torch": err, "atol": ATOL})
     with atomic_path(path) as tmp:
         onnx.save(proto, str(tmp))
+    write_checksum(path)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.2f} MB); torch vs onnxruntime max |diff| {err:.2e} (atol {ATOL})")
     return 0
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import time
 from pathlib import Path
@@ -211,6 +212,17 @@ def test_export_agrees_with_onnxruntime(tmp_path):
     images = np.random.default_rng(1).integers(0, 256, (4, 36, 64, 3), dtype=np.uint8)
     out = ort.InferenceSession(str(path)).run(None, {"image": images})[0]
     assert np.ptp(out[:, 0]) > 1e-3
+    # the export records the SHA-256 beside the model: the estimator validates and accepts it, and
+    # refuses the same file with one flipped byte
+    from glradial.estimator import Estimator, ModelLoadError
+
+    assert path.with_suffix(".sha256").read_text().split() == [hashlib.sha256(path.read_bytes()).hexdigest(), "m.onnx"]
+    assert Estimator(path, threads=1).input_size == (64, 36)
+    data = bytearray(path.read_bytes())
+    data[-100] ^= 0x01
+    path.write_bytes(bytes(data))
+    with pytest.raises(ModelLoadError, match="SHA-256"):
+        Estimator(path, threads=1)
 
 
 def test_pool_keeps_pairs_adjacent():

@@ -84,7 +84,8 @@ def test_wheel_layout(wheel):
     shipped_shaders = {Path(n).name for n in names if n.startswith("glradial/shaders/")}
     repo_shaders = {p.name for p in (ROOT / "shaders").iterdir() if p.suffix in {".glsl", ".vert", ".frag"}}
     assert repo_shaders <= shipped_shaders, f"missing from wheel: {sorted(repo_shaders - shipped_shaders)}"
-    repo_models = {p.name for p in (ROOT / "glradial" / "models").glob("*.onnx")}
+    models = ROOT / "glradial" / "models"
+    repo_models = {p.name for suffix in ("*.onnx", "*.sha256") for p in models.glob(suffix)}  # checksums too
     shipped_models = {Path(n).name for n in names if n.startswith("glradial/models/")}
     assert repo_models <= shipped_models
     shipped_modules = {n for n in names if n.startswith("glradial/") and n.endswith(".py")}

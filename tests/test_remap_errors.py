@@ -170,7 +170,7 @@ def test_egl_unavailable_names_library_and_cpu_still_works(ctx, monkeypatch):
     # a fresh process state: no cached auto decision, no per-thread Remapper, EGL missing
     monkeypatch.setattr(egl, "thread_context", no_egl)
     monkeypatch.setattr(remap, "_auto_choice", {})
-    monkeypatch.setattr(remap, "_local", threading.local())
+    monkeypatch.setattr(egl, "_local", threading.local())
     image = np.random.default_rng(0).integers(0, 256, (18, 32, 3), dtype=np.uint8)
     expected = correct(image, -0.2, 0.0, backend="cpu")
     assert np.array_equal(correct(image, -0.2, 0.0), expected)  # auto falls back to the CPU

@@ -33,12 +33,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    import cv2
     import numpy as np
 
     from ..atomic import atomic_path, check_output_folder
+    from ..media_io import media_kind, write_image
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style, stadium_split
 
@@ -50,13 +48,16 @@ def run(args: argparse.Namespace) -> int:
     if args.lighting is not None:
         overrides["lighting"] = args.lighting
     target = check_output_folder(args.out)
+    npy = target.suffix.lower() == ".npy"
+    if not npy and media_kind(target) != "image":  # checked before the render
+        raise ValueError(f"--out {str(target)!r} has a video extension; write an image or .npy")
     image = stadium_panorama(args.seed, tuple(args.size), **overrides)
-    with atomic_path(target) as tmp:
-        if target.suffix.lower() == ".npy":
+    if npy:
+        with atomic_path(target) as tmp:
             with open(tmp, "wb") as handle:
                 np.save(handle, image)
-        elif not cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-            raise OSError(f"cannot write {str(target)!r}: unknown or unsupported image extension {Path(target).suffix!r}")
+    else:
+        write_image(target, image)
     width, height = args.size
     style = sample_style(args.seed)
     print(f"wrote {args.out}: {width}x{height} stadium panorama, seed {args.seed} ({stadium_split(args.seed)})")
