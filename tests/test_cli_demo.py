@@ -8,7 +8,7 @@ import pytest
 
 from glradial.cli import main
 from glradial.commands import demo
-from glradial.media_io import read_image
+from glradial.image_io import read_image
 
 
 def test_demo_small_end_to_end(tmp_path, capsys):

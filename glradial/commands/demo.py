@@ -230,7 +230,7 @@ def run(args: argparse.Namespace) -> int:
     from ..remap import correct
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style
-    from ..media_io import write_image
+    from ..image_io import write_image
 
     start = time.monotonic()
     size = args.size
