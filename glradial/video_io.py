@@ -500,13 +500,14 @@ class VideoWriter:
         frame = frame.reformat(format=self._stream.pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
                                dst_color_range=self._range, interpolation="BILINEAR")
         frame.pts = pts
-        frame.time_base = self._stream.time_base
+        frame.time_base = self.info.time_base  # the muxer may give the stream another time base
         return frame
 
     def write(self, image: np.ndarray | av.VideoFrame, pts: int | None = None) -> None:
         frame = image if isinstance(image, av.VideoFrame) else self.frame(image, pts)
         if frame.pts is None:  # number the frames at the frame rate
             frame.pts = round(Fraction(self.frames_written) / self.info.rate / self.info.time_base)
+            frame.time_base = self.info.time_base
         try:
             self._container.mux(self._stream.encode(frame))
         except av.FFmpegError as err:

@@ -96,13 +96,13 @@ def _pan_frames(panorama: np.ndarray, x0: int, y0: int, n: int, step: int, windo
 def test_cut_detected_in_a_synthetic_video(field_panorama, tmp_path):
     """A slow pan over the real field panorama (4 px of panorama per frame), then a cut to another
     part of it, written to and read back from an .mp4: exactly one cut, at the right frame."""
-    from glradial.media_io import VideoReader, VideoWriter
+    from glradial.video_io import VideoInfo, VideoReader, VideoWriter
 
     pano = field_panorama
     shot_a = _pan_frames(pano, 200, 420, 18, 4)
     shot_b = _pan_frames(pano, 1100, 380, 12, -3)
     path = tmp_path / "cut.mp4"
-    with VideoWriter(path, (160, 90), 25) as writer:
+    with VideoWriter(path, VideoInfo.of((160, 90), 25)) as writer:
         for frame in shot_a + shot_b:
             writer.write(frame)
     with VideoReader(path) as reader:
@@ -151,7 +151,7 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     import glradial
     from glradial.video_pipeline import default_estimator, track_video
     from glradial.crops import CropParams, render_crops
-    from glradial.media_io import VideoWriter
+    from glradial.video_io import VideoInfo, VideoWriter
 
     n, cut = 36, 24
     k1 = np.where(np.arange(n) < cut, np.linspace(-0.35, -0.25, n), -0.05)
@@ -161,7 +161,7 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     params += [CropParams(pan=12 + 0.2 * i, tilt=-14, roll=-0.5, hfov=30, k1=truth[i, 0], k2=truth[i, 1]) for i in range(cut, n)]
     frames = render_crops(panorama, params, size=(320, 180))
     path = tmp_path / "zoom.mkv"
-    with VideoWriter(path, (320, 180), 25) as writer:
+    with VideoWriter(path, VideoInfo.of((320, 180), 25, codec="ffv1", pix_fmt="gbrp")) as writer:
         for frame in frames:
             writer.write(frame)
     track = track_video(path, default_estimator(), every=1, window_s=0.6)
