@@ -60,6 +60,10 @@ ChannelOrder = Literal["rgb", "bgr"]
 #: frame rate given to an image sequence read without one (frames per second; FFmpeg's default)
 SEQUENCE_RATE = Fraction(25)
 
+#: a video whose frames end more than this (seconds) before the duration its header states is
+#: reported as truncated (decoders and muxers round durations to a frame or so, never by this much)
+TRUNCATION_TOLERANCE_S = 0.5
+
 #: encoders that take a constant-rate-factor quality (``--crf``) instead of a bit rate
 CRF_ENCODERS = frozenset({"libx264", "libx264rgb", "libx265", "libvpx", "libvpx-vp9", "libaom-av1", "libsvtav1"})
 
@@ -220,6 +224,7 @@ class VideoReader:
         for other in self._container.streams:
             timecode = timecode or other.metadata.get("timecode")
         pix_fmt = context.pix_fmt or "yuv420p"
+        tags = _first_frame_tags(self.path, options)
         self.info = VideoInfo(
             size=(int(context.width), int(context.height)),
             rate=Fraction(rate_found) if rate_found else SEQUENCE_RATE,
@@ -229,10 +234,10 @@ class VideoReader:
             bit_depth=_bit_depth(pix_fmt),
             time_base=Fraction(stream.time_base) if stream.time_base else Fraction(1, 90000),
             timecode=timecode,
-            color_primaries=int(context.color_primaries),
-            color_trc=int(context.color_trc),
-            colorspace=int(context.colorspace),
-            color_range=int(context.color_range),
+            color_primaries=tags[0],
+            color_trc=tags[1],
+            colorspace=tags[2],
+            color_range=tags[3],
             field_order=int(getattr(context, "field_order", 0) or 0),
             bit_rate=int(context.bit_rate or stream.bit_rate or 0) if hasattr(stream, "bit_rate") else int(context.bit_rate or 0),
         )
@@ -242,6 +247,7 @@ class VideoReader:
         self.copied = [s for s in self._container.streams if s is not stream and copy_streams and _copyable(s)]
         self.max_width = max_width
         self.frames_read = 0
+        self._last_pts: int | None = None
         self._format = _rgb_format(self.info.bit_depth, order)
 
     # -- frames --------------------------------------------------------------------------------
@@ -268,6 +274,8 @@ class VideoReader:
                 for frame in packet.decode():
                     image = self._convert(frame)
                     self.frames_read += 1
+                    if frame.pts is not None:
+                        self._last_pts = frame.pts
                     yield VideoFrame(self.frames_read - 1, image, frame.pts)
         except av.FFmpegError as err:
             raise ValueError(
@@ -275,6 +283,27 @@ class VideoReader:
             ) from None
         if self.frames_read == 0:
             raise ValueError(f"cannot read video {str(self.path)!r}: no frame could be decoded")
+        self._check_complete()
+
+    def _check_complete(self) -> None:
+        """``ValueError`` when the frames stop well before the duration the header states (a
+        truncated file): more than :data:`TRUNCATION_TOLERANCE_S` or two frames short."""
+        stream, info = self.stream, self.info
+        if stream.duration:
+            stated = float(stream.duration * stream.time_base)
+        elif self._container.duration:
+            stated = self._container.duration / 1e6
+        else:
+            return
+        start = float(stream.start_time * stream.time_base) if stream.start_time is not None else 0.0
+        if self._last_pts is None:
+            return
+        reached = float(self._last_pts * stream.time_base) - start + 1.0 / info.fps
+        if reached < stated - max(TRUNCATION_TOLERANCE_S, 2.0 / info.fps):
+            raise ValueError(
+                f"input {str(self.path)!r} is truncated: its header says {stated:.2f} s but its frames end at "
+                f"{reached:.2f} s, after {self.frames_read} frames"
+            )
 
     def __iter__(self) -> Iterator[np.ndarray]:
         for item in self.items():
@@ -289,6 +318,17 @@ class VideoReader:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _first_frame_tags(path: Path, options: dict) -> tuple[int, int, int, int]:
+    """Colour tags (primaries, transfer, matrix, range) of the first decoded frame: what the
+    bitstream says (the decoder context before decoding may report defaults instead)."""
+    try:
+        with av.open(str(path), "r", options=options) as container:
+            frame = next(container.decode(video=0))
+            return int(frame.color_primaries), int(frame.color_trc), int(frame.colorspace), int(frame.color_range)
+    except (av.FFmpegError, StopIteration, UnicodeDecodeError):
+        return _UNSPECIFIED, _UNSPECIFIED, _UNSPECIFIED, 0
 
 
 def _copyable(stream: av.stream.Stream) -> bool:
@@ -347,13 +387,16 @@ def _pick_pix_fmt(codec: av.Codec, wanted: str | None, source: str) -> str:
     if not formats or source in formats:
         return source
     depth = _bit_depth(source)
-    source_format = av.VideoFormat(source)
-    chroma = (source_format.components[1].width if len(source_format.components) > 1 else 0, source_format.is_rgb)
+
+    def layout(name: str) -> tuple:
+        fmt = av.VideoFormat(name, 64, 64)  # a size, so that the chroma planes have one
+        return (fmt.is_rgb, tuple(c.width for c in fmt.components[:3]), tuple(c.height for c in fmt.components[:3]))
+
+    wanted_layout = layout(source)
 
     def distance(name: str) -> tuple[int, int, int]:
-        fmt = av.VideoFormat(name)
-        same_chroma = (fmt.components[1].width if len(fmt.components) > 1 else 0, fmt.is_rgb) == chroma
-        return (abs(_bit_depth(name) - depth) + (100 if _bit_depth(name) < depth else 0), 0 if same_chroma else 1, formats.index(name))
+        bits = _bit_depth(name)
+        return (abs(bits - depth) + (100 if bits < depth else 0), 0 if layout(name) == wanted_layout else 1, formats.index(name))
 
     return min(formats, key=distance)
 
@@ -414,23 +457,23 @@ class VideoWriter:
             self._container = av.open(tmp, "w", format="image2" if self.sequence else None)
         except (av.FFmpegError, ValueError) as err:
             raise ValueError(f"FFmpeg cannot write {_error(self.path, err)} (unknown or unsupported output format)") from None
-        supported = self._container.supported_codecs
         name = options.codec
         if name is None:
             if self.sequence:
                 name = {".png": "png", ".tif": "tiff", ".tiff": "tiff", ".jpg": "mjpeg", ".jpeg": "mjpeg"}.get(
                     self.path.suffix.lower(), self._container.default_video_codec)
             else:
+                # the input's codec where FFmpeg has an encoder for it and the container is not
+                # known to refuse it (avformat's list is authoritative only where it is long)
+                supported = self._container.supported_codecs
                 name = info.codec
                 try:
-                    encoder_ok = bool(name) and av.Codec(name, "w") is not None and (not supported or name in supported)
+                    encoder_ok = bool(name) and av.Codec(name, "w") is not None
                 except Exception:
                     encoder_ok = False
-                if not encoder_ok:
+                if not encoder_ok or (len(supported) > 20 and name not in supported):
                     name = self._container.default_video_codec
         codec = _encoder(name)
-        if supported and codec.name not in supported and name not in supported and codec.canonical_name not in supported:
-            raise ValueError(f"the {self.path.suffix or 'output'} container cannot hold {codec.name} video; pick another --codec or extension")
         stream = self._container.add_stream(codec.name, rate=info.rate)
         stream.width, stream.height = info.size
         stream.pix_fmt = _pick_pix_fmt(codec, options.pix_fmt, info.pix_fmt)
@@ -475,7 +518,12 @@ class VideoWriter:
                     f"into {str(self.path)!r}: {err}; choose a container that holds it (.mkv, .mov)"
                 ) from None
         try:
-            self._stream.codec_context.open()
+            try:
+                self._stream.codec_context.open()
+            except av.FFmpegError:
+                # some encoders (MPEG-1/2) take only a standard frame-rate time base
+                self._stream.codec_context.time_base = 1 / info.rate
+                self._stream.codec_context.open()
             self._container.start_encoding()
         except av.FFmpegError as err:
             raise ValueError(f"cannot encode {_error(self.path, err)} (codec {codec.name}, pix_fmt {stream.pix_fmt})") from None
@@ -499,6 +547,9 @@ class VideoWriter:
         frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order))
         frame = frame.reformat(format=self._stream.pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
                                dst_color_range=self._range, interpolation="BILINEAR")
+        # the source's tags, not those of the conversion (which names its matrix even when untagged)
+        frame.colorspace, frame.color_range = self.info.colorspace, self.info.color_range
+        frame.color_primaries, frame.color_trc = self.info.color_primaries, self.info.color_trc
         frame.pts = pts
         frame.time_base = self.info.time_base  # the muxer may give the stream another time base
         return frame
