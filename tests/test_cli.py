@@ -417,3 +417,26 @@ def test_estimate_command_bad_images_get_one_line(tmp_path, capsys):
     write_image(gray16, np.full((36, 64), 40000, np.uint16))
     assert main(["estimate", str(gray16), "--model", str(model)]) == 0
     assert "k1=-0.210000" in capsys.readouterr().out
+
+
+def test_quiet_anywhere_and_progress_on_stderr(tmp_path, capsys):
+    """-q before or after the command silences the bars; without it, an enabled bar (tqdm) draws on
+    its stream with the count, a disabled one draws nothing."""
+    import io
+
+    from glradial.commands import show_progress
+    from glradial.progress import Progress
+
+    parser = build_parser()
+    base = ["correct", "a.png", "b.png", "--k1", "0.1"]
+    assert show_progress(parser.parse_args(["-q", *base])) is False
+    assert show_progress(parser.parse_args([*base, "-q"])) is False
+    assert show_progress(parser.parse_args(base[:3] + ["--quiet"] + base[3:])) is False
+    assert show_progress(parser.parse_args(base)) is None  # auto: only on a terminal
+    drawn, silent = io.StringIO(), io.StringIO()
+    for stream, enabled in ((drawn, True), (silent, False)):
+        with Progress(7, "work", unit="frames", enabled=enabled, stream=stream) as bar:
+            for _ in range(7):
+                bar.update()
+    assert "work" in drawn.getvalue() and "7/7" in drawn.getvalue()
+    assert silent.getvalue() == ""

@@ -49,8 +49,13 @@ def run(args: argparse.Namespace) -> int:
         overrides["supersample"] = args.supersample
     if args.lighting is not None:
         overrides["lighting"] = args.lighting
+    from ..progress import Progress
+    from . import show_progress
+
     target = check_output_folder(args.out)
-    image = stadium_panorama(args.seed, tuple(args.size), **overrides)
+    with Progress(1, "stadium", unit="panoramas", enabled=show_progress(args)) as bar:
+        image = stadium_panorama(args.seed, tuple(args.size), **overrides)
+        bar.update()
     with atomic_path(target) as tmp:
         if target.suffix.lower() == ".npy":
             with open(tmp, "wb") as handle:

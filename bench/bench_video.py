@@ -1,0 +1,122 @@
+"""Video throughput of ``glradial correct`` against FFmpeg transcoding the same clip, in one run.
+
+Makes one clip (``--size``, ``--frames`` at 25 fps, FFmpeg's testsrc2 pattern with a tone,
+H.264 + AAC) in a temporary folder, then times, each ``--repeats`` times taking turns (so that load
+from other processes on a shared machine falls on all alike), keeping the best run of each:
+
+* ``ffmpeg``       the ffmpeg command transcoding the clip with the same codec settings and no
+                   filter (``-c:v libx264 -crf C -preset P -c:a copy``)
+* ``pyav``         the same transcode in this process through PyAV (decode + encode, no RGB)
+* ``fixed lens``   :func:`glradial.video_pipeline.correct_video` with one lens (k1 -0.25, k2 0.05)
+* ``--auto``       pass 1 (:func:`~glradial.video_pipeline.track_video` with the bundled
+                   estimator, every 5th frame) + pass 2 with the per-frame smoothed lens
+
+and prints frames per second and the ratios the issue sets targets for: fixed lens / ffmpeg
+(>= 0.6) and --auto / fixed lens (>= 0.8).
+
+Run: ``python3 bench/bench_video.py [--size 1920x1080] [--frames 150] [--preset medium] [--crf 23]
+[--backend auto] [--repeats 2]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import av
+
+from glradial.video_io import EncodeOptions
+from glradial.video_pipeline import correct_video, default_estimator, track_video
+
+K1, K2 = -0.25, 0.05
+
+
+def make_clip(path: Path, size: str, frames: int) -> None:
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", f"testsrc2=size={size}:rate=25",
+                    "-f", "lavfi", "-i", "sine=frequency=440:sample_rate=48000", "-frames:v", str(frames),
+                    "-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", "18", "-c:a", "aac", "-shortest", str(path)], check=True)
+
+
+def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
+    with av.open(str(source)) as inp, av.open(str(target), "w") as out:
+        vin = inp.streams.video[0]
+        vin.thread_type = "AUTO"
+        ain = inp.streams.audio[0]
+        vout = out.add_stream("libx264", rate=vin.average_rate)
+        vout.width, vout.height, vout.pix_fmt = vin.codec_context.width, vin.codec_context.height, "yuv420p"
+        vout.time_base = vin.time_base
+        vout.codec_context.time_base = vin.time_base
+        vout.codec_context.options = {"crf": f"{crf:g}", "preset": preset}
+        aout = out.add_stream_from_template(ain)
+        for packet in inp.demux(vin, ain):
+            if packet.stream is ain:
+                if packet.dts is not None:
+                    packet.stream = aout
+                    out.mux(packet)
+                continue
+            for frame in packet.decode():
+                frame.pict_type = av.video.frame.PictureType.NONE
+                out.mux(vout.encode(frame))
+        out.mux(vout.encode(None))
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--size", default="1920x1080")
+    parser.add_argument("--frames", type=int, default=150)
+    parser.add_argument("--preset", default="medium")
+    parser.add_argument("--crf", type=float, default=23.0)
+    parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "gl"))
+    parser.add_argument("--repeats", type=int, default=2)
+    args = parser.parse_args()
+    if shutil.which("ffmpeg") is None:
+        sys.exit("bench_video needs the ffmpeg command (make setup installs it)")
+    options = EncodeOptions(codec="libx264", crf=args.crf, preset=args.preset)
+    estimator = default_estimator()
+    with tempfile.TemporaryDirectory() as folder:
+        tmp = Path(folder)
+        clip = tmp / "clip.mp4"
+        make_clip(clip, args.size, args.frames)
+
+        def ffmpeg() -> None:
+            subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-c:v", "libx264", "-crf", f"{args.crf:g}",
+                            "-preset", args.preset, "-pix_fmt", "yuv420p", "-c:a", "copy", str(tmp / "ffmpeg.mp4")], check=True)
+
+        def pyav() -> None:
+            pyav_transcode(clip, tmp / "pyav.mp4", args.crf, args.preset)
+
+        def fixed() -> None:
+            correct_video(clip, tmp / "fixed.mp4", lambda _i: (K1, K2), backend=args.backend, progress=False,
+                          options=options, overwrite=True)
+
+        def auto() -> None:
+            track = track_video(clip, estimator, every=5, progress=False)
+            correct_video(clip, tmp / "auto.mp4", track.lens_at, backend=args.backend, progress=False,
+                          options=options, overwrite=True, frames_expected=track.n_frames)
+
+        paths = {"ffmpeg": ffmpeg, "pyav": pyav, "fixed lens": fixed, "--auto": auto}
+        best = {name: float("inf") for name in paths}
+        for _ in range(args.repeats):
+            for name, run in paths.items():
+                start = time.perf_counter()
+                run()
+                best[name] = min(best[name], time.perf_counter() - start)
+    fps = {name: args.frames / seconds for name, seconds in best.items()}
+    print(f"clip: {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
+          f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}")
+    for name, value in fps.items():
+        print(f"  {name:12s} {value:6.1f} frames/s")
+    print(f"fixed lens / ffmpeg : {fps['fixed lens'] / fps['ffmpeg']:.2f}  (target >= 0.6)")
+    print(f"fixed lens / pyav   : {fps['fixed lens'] / fps['pyav']:.2f}")
+    print(f"--auto / fixed lens : {fps['--auto'] / fps['fixed lens']:.2f}  (target >= 0.8)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
