@@ -140,12 +140,14 @@ class VideoInfo:
 
 @dataclass
 class VideoFrame:
-    """One decoded frame: its ``index`` (0 = first), the ``image`` (see the module conventions) and
-    its presentation timestamp ``pts`` in the stream's time base (None if the source has none)."""
+    """One decoded frame: its ``index`` (0 = first), the ``image`` (see the module conventions),
+    its presentation timestamp ``pts`` in the stream's time base (None if the source has none) and
+    the decoded frame itself (``decoded``, for :meth:`VideoReader.convert` at another size)."""
 
     index: int
     image: np.ndarray
     pts: int | None
+    decoded: av.VideoFrame | None = field(default=None, repr=False)
 
 
 @dataclass
@@ -189,7 +191,8 @@ class VideoReader:
     Iterating yields the frames as arrays (module conventions); :meth:`items` yields
     :class:`VideoFrame` and, with ``copy_streams=True``, the packets of every other stream
     (:class:`CopiedPacket`) in file order, for :class:`VideoWriter`. ``max_width`` downsizes frames
-    wider than it in the conversion (area filter), e.g. for an estimator. ``info`` describes the
+    wider than it in the conversion (area filter), e.g. for an estimator; ``keep_decoded`` hands
+    each decoded frame along too, for :meth:`convert` at another size. ``info`` describes the
     stream. A file that cannot be opened or has no video raises ``ValueError`` naming it; a decoding
     error midway raises ``ValueError`` with the number of frames decoded before it.
     """
@@ -202,6 +205,7 @@ class VideoReader:
         copy_streams: bool = False,
         max_width: int | None = None,
         rate: Fraction | None = None,
+        keep_decoded: bool = False,
     ) -> None:
         if order not in ("rgb", "bgr"):
             raise ValueError(f"order must be 'rgb' or 'bgr', got {order!r}")
@@ -246,15 +250,18 @@ class VideoReader:
             raise ValueError(f"cannot read video {str(self.path)!r}: its video stream has no frame size")
         self.copied = [s for s in self._container.streams if s is not stream and copy_streams and _copyable(s)]
         self.max_width = max_width
+        self.keep_decoded = keep_decoded
         self.frames_read = 0
         self._last_pts: int | None = None
         self._format = _rgb_format(self.info.bit_depth, order)
 
     # -- frames --------------------------------------------------------------------------------
-    def _convert(self, frame: av.VideoFrame) -> np.ndarray:
+    def convert(self, frame: av.VideoFrame, max_width: int | None = None) -> np.ndarray:
+        """A decoded frame as an array (module conventions), at most ``max_width`` px wide (area
+        filter; None = full size)."""
         width, height = frame.width, frame.height
-        if self.max_width is not None and width > self.max_width:
-            width, height = self.max_width, max(1, round(height * self.max_width / width))
+        if max_width is not None and width > max_width:
+            width, height = max_width, max(1, round(height * max_width / width))
         rgb = frame.reformat(
             width=width, height=height, format=self._format, interpolation="AREA",
             src_colorspace=_matrix(frame.colorspace, frame.height), src_color_range=frame.color_range or 1,
@@ -272,11 +279,11 @@ class VideoReader:
                         yield CopiedPacket(packet)
                     continue
                 for frame in packet.decode():
-                    image = self._convert(frame)
+                    image = self.convert(frame, self.max_width)
                     self.frames_read += 1
                     if frame.pts is not None:
                         self._last_pts = frame.pts
-                    yield VideoFrame(self.frames_read - 1, image, frame.pts)
+                    yield VideoFrame(self.frames_read - 1, image, frame.pts, frame if self.keep_decoded else None)
         except av.FFmpegError as err:
             raise ValueError(
                 f"input {_error(self.path, err)} (truncated or corrupt after {self.frames_read} decoded frames)"

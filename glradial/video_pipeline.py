@@ -2,10 +2,10 @@
 
 Pipeline (two passes over the file, so memory does not grow with its length):
 
-1. :func:`track_video` decodes every frame once (converted at most :data:`ESTIMATE_WIDTH` px wide:
-   what the estimators look at), feeds each to a :class:`~glradial.smoothing.ShotDetector` and
-   runs the estimator on the first frame of every shot and then every ``every``-th frame of the
-   shot. The per-shot robust smoother (:func:`~glradial.smoothing.smooth_track`) turns those
+1. :func:`track_video` decodes every frame once, feeds each (converted :data:`DETECT_WIDTH` px
+   wide) to a :class:`~glradial.smoothing.ShotDetector` and runs the estimator (on a copy at most
+   :data:`ESTIMATE_WIDTH` px wide: what the estimators look at) on the first frame of every shot
+   and then every ``every``-th frame of the shot. The per-shot robust smoother (:func:`~glradial.smoothing.smooth_track`) turns those
    samples into a lens for every frame, weighting each sample by the confidence its estimator
    states (``uncertainty_px`` of a :class:`glradial.Lens` subclass; equal weights for a plain lens
    or a pair). A smoothed lens that would fold over on the frame is replaced by the nearest
@@ -49,12 +49,21 @@ __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pi
 #: estimator: RGB uint8 frame -> (k1, k2) or a Lens (a LensEstimate carries uncertainty_px and method)
 EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
 
-#: pass 1 converts frames at most this wide (px) for the shot detector and the estimators: the
-#: CNN looks at 384 px, the line detector at <= 960 px, so a full-size conversion would be wasted
+#: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
+#: detector at <= 960 px, so a full-size conversion would be wasted
 ESTIMATE_WIDTH = 960
+
+#: pass 1 converts every frame this wide (px) for the shot detector, which compares 64 x 36 thumbnails
+DETECT_WIDTH = 64
 
 #: frames queued between two threads of the pipeline (bounded memory: ~3 x depth frames in flight)
 DEPTH = 4
+
+#: pass 2 keeps the previous frame's lens (and so its cached maps) while the next frame's lens
+#: would move no point of the frame by more than this (px of the frame): half the 1/32-px step of
+#: the CPU path's fixed-point maps, which cannot resolve a smaller change anyway. A static or panning
+#: camera then builds its maps once per shot instead of once per frame; a zoom still rebuilds them.
+MAP_REUSE_PX = 1.0 / 64.0
 
 
 class Pipelined:
@@ -196,18 +205,18 @@ def track_video(
     estimates: list[tuple[float, float]] = []
     stated: list[float] = []
     methods: list[str] = []
-    with VideoReader(path, order="rgb", max_width=ESTIMATE_WIDTH) as reader:
+    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True) as reader:
         info = reader.info
         shot, since_start = -1, 0
         with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
             for item in frames:
-                index, frame = item.index, item.image
+                index = item.index
                 stamps.append(float(item.pts * info.time_base) if item.pts is not None else index / info.fps)
-                if detector.update(frame):
+                if detector.update(item.image):
                     shot, since_start = shot + 1, 0
                 if since_start % every == 0:
                     times.append(index)
-                    value = estimator(rgb8_for_estimator(frame))
+                    value = estimator(rgb8_for_estimator(reader.convert(item.decoded, ESTIMATE_WIDTH)))
                     estimates.append(_as_pair(value))
                     sure, method = _confidence(value)
                     stated.append(sure)
@@ -262,10 +271,17 @@ class _FrameCorrector:
         self.backend = auto_backend() if backend == "auto" else backend
         self.fit, self.interpolation = fit, interpolation
         self._remapper = None
+        self._last: np.ndarray | None = None
 
     def __call__(self, image: np.ndarray, k1: float, k2: float) -> np.ndarray:
         from .remap import Remapper, correct
 
+        height, width = image.shape[:2]
+        lens = np.array([k1, k2], dtype=np.float64)
+        if self._last is not None and lens_distance(lens, self._last, corner_radius((width, height))) * width <= MAP_REUSE_PX:
+            k1, k2 = float(self._last[0]), float(self._last[1])
+        else:
+            self._last = lens
         if self.backend == "gl":
             if self._remapper is None:
                 self._remapper = Remapper()

@@ -158,7 +158,12 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
     assert len(pairs) == n
     for i in (3, cut + 1):
         expected = glradial.correct(pairs[i][0], *smooth[i], backend="cpu")
-        assert np.abs(pairs[i][1].astype(int) - expected.astype(int)).max() <= 1  # FFV1 is lossless
+        # FFV1 is lossless, but pass 2 may keep the previous frame's lens where the two move no
+        # point by more than 1/64 px (video_pipeline.MAP_REUSE_PX), which may flip a position to the
+        # neighbouring 1/32-px step of the fixed-point maps: at most 255/32 ~ 8 levels on the steepest
+        # edge, next to nothing on average; a wrong lens (e.g. the other shot's) is off by tens
+        difference = np.abs(pairs[i][1].astype(int) - expected.astype(int))
+        assert difference.max() <= 8 and difference.mean() < 0.1, (difference.max(), difference.mean())
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
