@@ -1,7 +1,10 @@
 """Video throughput of ``glradial correct`` against FFmpeg transcoding the same clip, in one run.
 
-Makes one clip (``--size``, ``--frames`` at 25 fps, FFmpeg's testsrc2 pattern with a tone,
-H.264 + AAC) in a temporary folder, then times, each ``--repeats`` times taking turns (so that load
+Makes one clip in a temporary folder (``--size``, ``--frames`` at 25 fps, H.264 crf 18 + AAC tone):
+``--clip pan`` (default) a broadcast camera panning across a real USL match frame
+(/work/shared/data/real_football, or ``--frame``) through a constant lens (k1 -0.2, k2 0.03), the
+common case; ``--clip zoom`` the same frame zooming in (hfov -25 %) while the lens goes from
+k1 -0.30 to -0.18, so the smoothed lens, and the maps, change on every frame. Then it times, each ``--repeats`` times taking turns (so that load
 from other processes on a shared machine falls on all alike), keeping the best run of each:
 
 * ``ffmpeg``       the ffmpeg command transcoding the clip with the same codec settings and no
@@ -37,10 +40,37 @@ from glradial.video_pipeline import correct_video, default_estimator, track_vide
 K1, K2 = -0.25, 0.05
 
 
-def make_clip(path: Path, size: str, frames: int) -> None:
-    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "lavfi", "-i", f"testsrc2=size={size}:rate=25",
-                    "-f", "lavfi", "-i", "sine=frequency=440:sample_rate=48000", "-frames:v", str(frames),
-                    "-c:v", "libx264", "-pix_fmt", "yuv420p", "-crf", "18", "-c:a", "aac", "-shortest", str(path)], check=True)
+DEFAULT_FRAME = Path("/work/shared/data/real_football/usl_broadcast_0195.jpg")
+
+
+def make_clip(path: Path, size: tuple[int, int], frames: int, kind: str, source: Path) -> None:
+    """Render the clip's frames (crop of the real frame, resized, distorted) into H.264, then mux
+    a 440 Hz AAC tone with the ffmpeg command."""
+    import cv2
+    import numpy as np
+
+    import glradial
+    from glradial.image_io import read_image
+    from glradial.video_io import VideoInfo, VideoWriter
+
+    picture = read_image(source)
+    height, width = picture.shape[:2]
+    video = path.with_name("video_only.mp4")
+    with VideoWriter(video, VideoInfo.of(size, 25, codec="libx264"), options=EncodeOptions(crf=18), overwrite=True) as writer:
+        for i in range(frames):
+            t = i / max(frames - 1, 1)
+            if kind == "pan":
+                crop_w, k1 = int(width * 0.8), -0.2
+                x0 = int(t * (width - crop_w))
+            else:
+                crop_w, k1 = int(width * (0.9 - 0.25 * t)), -0.30 + 0.12 * t
+                x0 = (width - crop_w) // 2
+            crop_h = crop_w * size[1] // size[0]
+            y0 = (height - crop_h) // 2
+            frame = cv2.resize(picture[y0 : y0 + crop_h, x0 : x0 + crop_w], size, interpolation=cv2.INTER_CUBIC)
+            writer.write(glradial.distort(frame, k1, 0.019 * k1 + 0.805 * k1 * k1, backend="cpu"))
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(video), "-f", "lavfi", "-i", "sine=frequency=440:sample_rate=48000",
+                    "-c:v", "copy", "-c:a", "aac", "-shortest", str(path)], check=True)
 
 
 def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
@@ -69,6 +99,8 @@ def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", default="1920x1080")
+    parser.add_argument("--clip", choices=("pan", "zoom"), default="pan")
+    parser.add_argument("--frame", type=Path, default=DEFAULT_FRAME, help="picture the clip is made from")
     parser.add_argument("--frames", type=int, default=150)
     parser.add_argument("--preset", default="medium")
     parser.add_argument("--crf", type=float, default=23.0)
@@ -82,7 +114,7 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as folder:
         tmp = Path(folder)
         clip = tmp / "clip.mp4"
-        make_clip(clip, args.size, args.frames)
+        make_clip(clip, tuple(int(v) for v in args.size.split("x")), args.frames, args.clip, args.frame)
 
         def ffmpeg() -> None:
             subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-c:v", "libx264", "-crf", f"{args.crf:g}",
@@ -114,7 +146,7 @@ def main() -> int:
                 run()
                 best[name] = min(best[name], time.perf_counter() - start)
     fps = {name: args.frames / seconds for name, seconds in best.items()}
-    print(f"clip: {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
+    print(f"clip: {args.clip} over {args.frame.name}, {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
           f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}")
     for name, value in fps.items():
         print(f"  {name:12s} {value:6.1f} frames/s")
