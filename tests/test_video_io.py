@@ -301,3 +301,32 @@ def test_sigterm_and_sighup_mid_video_leave_nothing(tmp_path, signum):
     assert process.returncode == 128 + signum, err
     assert f"stopped by {signal.Signals(signum).name}" in err
     assert _names(tmp_path) == ["in.mkv"]
+
+
+def test_gl_corrector_lives_and_dies_on_its_worker_thread(tmp_path, ctx, monkeypatch):
+    """backend 'gl': the pipeline's worker thread makes its own Remapper (own context), corrects
+    every frame with it like the GL path in memory, and releases it on that thread when it ends."""
+    import threading
+
+    from glradial.remap import Remapper
+    from glradial.video_pipeline import correct_video
+
+    made, released = [], []
+    real_init, real_release = Remapper.__init__, Remapper.release
+
+    def init(self, *args, **kwargs):
+        made.append(threading.current_thread().name)
+        real_init(self, *args, **kwargs)
+
+    def release(self):
+        released.append(threading.current_thread().name)
+        real_release(self)
+
+    monkeypatch.setattr(Remapper, "__init__", init)
+    monkeypatch.setattr(Remapper, "release", release)
+    source = _clip(tmp_path / "in.mkv", ["-c:v", "ffv1", "-pix_fmt", "gbrp"], size="96x54", timecode=None)
+    assert correct_video(source, tmp_path / "gl.mkv", lambda _i: (K1, K2), backend="gl", progress=False) == 10
+    assert made == ["glradial-correct"] and released == ["glradial-correct"]
+    for a, b in zip(_frames(source), _frames(tmp_path / "gl.mkv")):
+        # the GL path in memory on this thread's context: same shaders, same result (lossless FFV1)
+        np.testing.assert_array_equal(b, glradial.correct(a, K1, K2, backend="gl"))
