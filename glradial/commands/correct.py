@@ -185,8 +185,8 @@ def run(args: argparse.Namespace) -> int:
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
     check_overwrite(sidecar, args.overwrite)
-    if _same_file(Path(args.input), sidecar):
-        raise UsageError("--sidecar must differ from INPUT")
+    if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
+        raise UsageError("--sidecar must differ from INPUT and OUTPUT")
     track = track_video(args.input, default_estimator(args.model), every=args.every, window_s=args.window,
                         progress=progress, doubtful_px=args.max_uncertainty or DOUBTFUL_PX)
     for line in doubtful_warnings(track, args.input):
