@@ -15,7 +15,9 @@ from other processes on a shared machine falls on all alike), keeping the best r
                    estimator, every 5th frame) + pass 2 with the per-frame smoothed lens
 
 and prints frames per second and the ratios the issue sets targets for: fixed lens / ffmpeg
-(>= 0.6) and --auto / fixed lens (>= 0.8).
+(>= 0.6) and --auto / fixed lens (>= 0.8). First it times the maps of a new lens at the clip's
+size: ``Lens.maps`` (float32, OpenCV) against the float64 NumPy reference, and the CPU path's whole
+``cpu_maps`` (maps + fixed-point conversion + source-less pixels), each a new lens every call.
 
 Run: ``python3 bench/bench_video.py [--size 1920x1080] [--frames 150] [--preset medium] [--crf 23]
 [--backend auto] [--repeats 2]``.
@@ -96,6 +98,28 @@ def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
         out.mux(vout.encode(None))
 
 
+def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
+    """Median ms per call of each way to build the maps of a lens never seen before."""
+    import numpy as np
+
+    from glradial.lens import Lens
+    from glradial.remap import cpu_maps
+
+    ways = {
+        "Lens.maps (float32)": lambda lens: lens.maps(size),
+        "Lens.maps (float64 reference)": lambda lens: lens.maps(size, dtype=np.float64),
+        "cpu_maps (all of it)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False),
+    }
+    times: dict[str, list[float]] = {name: [] for name in ways}
+    for i in range(calls):
+        for name, build in ways.items():
+            lens = Lens(K1 + 1e-7 * (i + 1) * (1 + len(times[name])), K2)
+            start = time.perf_counter()
+            build(lens)
+            times[name].append(1e3 * (time.perf_counter() - start))
+    return {name: float(np.median(values)) for name, values in times.items()}
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", default="1920x1080")
@@ -109,12 +133,15 @@ def main() -> int:
     args = parser.parse_args()
     if shutil.which("ffmpeg") is None:
         sys.exit("bench_video needs the ffmpeg command (make setup installs it)")
+    size = tuple(int(v) for v in args.size.split("x"))
+    for name, ms in map_times(size).items():
+        print(f"new-lens maps at {args.size}: {name:30s} {ms:6.1f} ms")
     options = EncodeOptions(codec="libx264", crf=args.crf, preset=args.preset)
     estimator = default_estimator()
     with tempfile.TemporaryDirectory() as folder:
         tmp = Path(folder)
         clip = tmp / "clip.mp4"
-        make_clip(clip, tuple(int(v) for v in args.size.split("x")), args.frames, args.clip, args.frame)
+        make_clip(clip, size, args.frames, args.clip, args.frame)
 
         def ffmpeg() -> None:
             subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-c:v", "libx264", "-crf", f"{args.crf:g}",
