@@ -32,6 +32,7 @@ import os
 import queue
 import sys
 import threading
+from fractions import Fraction
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
@@ -186,13 +187,15 @@ def track_video(
     detector: ShotDetector | None = None,
     progress: bool | None = None,
     doubtful_px: float = DOUBTFUL_PX,
+    rate: Fraction | None = None,
 ) -> LensTrack:
     """Pass 1: estimate, detect cuts and smooth; see the module docstring.
 
     ``every`` (frames) is the estimation stride inside a shot; ``window_s`` (seconds) is the
     smoother's half window (longer = steadier, slower to follow a zoom); ``doubtful_px`` (px at
-    1920) the median uncertainty above which a shot is doubtful. Samples are weighted by their
-    stated uncertainty where every estimate states one (else all equally).
+    1920) the median uncertainty above which a shot is doubtful; ``rate`` the frame rate of an
+    image-sequence input (default 25). Samples are weighted by their stated uncertainty where every
+    estimate states one (else all equally).
     """
     if every < 1:
         raise ValueError(f"every must be >= 1 frame, got {every}")
@@ -205,7 +208,7 @@ def track_video(
     estimates: list[tuple[float, float]] = []
     stated: list[float] = []
     methods: list[str] = []
-    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True) as reader:
+    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
         info = reader.info
         shot, since_start = -1, 0
         with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
@@ -308,14 +311,16 @@ def correct_video(
     options: EncodeOptions = EncodeOptions(),
     overwrite: bool = False,
     frames_expected: int | None = None,
+    rate: Fraction | None = None,
 ) -> int:
     """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` into ``target``
     (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.video_io`;
     encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
     track's length): a video with another frame count is an error and leaves no output. A header
-    frame count that differs from the frames decoded gives a warning on stderr with both counts."""
+    frame count that differs from the frames decoded gives a warning on stderr with both counts.
+    ``rate``: frame rate of an image-sequence input (default 25)."""
     corrector = _FrameCorrector(backend, fit, interpolation)
-    with VideoReader(source, order="rgb", copy_streams=True) as reader:
+    with VideoReader(source, order="rgb", copy_streams=True, rate=rate) as reader:
         info = reader.info
         writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
         try:

@@ -149,8 +149,10 @@ def test_codec_options_and_image_sequences(tmp_path):
     assert [p.name for p in sequence_files(pattern)] == [f"f_{i:03d}.png" for i in range(1, 11)]
     assert _names(frames) == [f"f_{i:03d}.png" for i in range(1, 11)]  # no temporary folder left
     assert main(["correct", str(source), str(pattern), "--k1", "-0.1", "-q"]) == 1  # exists: needs -y
-    assert main(["correct", str(pattern), str(tmp_path / "back.mkv"), "--k1", "0.1", "--codec", "ffv1", "-q"]) == 0
-    assert _stream(_probe(tmp_path / "back.mkv"), "video")["nb_read_frames"] == "10"
+    assert main(["correct", str(pattern), str(tmp_path / "back.mkv"), "--k1", "0.1", "--codec", "ffv1", "--rate", "30000/1001", "-q"]) == 0
+    back = _stream(_probe(tmp_path / "back.mkv"), "video")
+    assert (back["nb_read_frames"], back["r_frame_rate"]) == ("10", "30000/1001")
+    assert main(["correct", str(source), str(tmp_path / "r.mkv"), "--k1", "0.1", "--rate", "25", "-q"]) == 2  # videos keep theirs
     # a codec FFmpeg lacks, or options the encoder refuses: one line, nothing written
     for extra, message in ((["--codec", "nosuchcodec"], "no FFmpeg encoder 'nosuchcodec'"),
                            (["--codec", "ffv1", "--crf", "20"], "--crf is for"),

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+from fractions import Fraction
 from pathlib import Path
 
 from . import UsageError, finite_float, positive_float, positive_int, show_progress
@@ -36,6 +37,17 @@ def _bitrate(text: str) -> int:
     if not (value > 0 and value != float("inf")):
         raise argparse.ArgumentTypeError(f"bit rate must be a positive number of bits per second (e.g. 8M, 2500k), got {text!r}")
     return int(round(value))
+
+
+def _rate(text: str) -> Fraction:
+    """argparse type for a frame rate: a positive number or fraction (25, 29.97, 30000/1001)."""
+    try:
+        value = Fraction(text.strip())
+    except (ValueError, ZeroDivisionError):
+        value = Fraction(0)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"frame rate must be a positive number or fraction such as 30000/1001, got {text!r}")
+    return value.limit_denominator(1001) if "/" not in text else value
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -74,6 +86,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     encode.add_argument("--crf", type=finite_float, metavar="Q", help="constant quality for x264/x265/VPx/AV1 (lower = better)")
     encode.add_argument("--bitrate", type=_bitrate, metavar="BPS", help="target bit rate in bits/s, k/M suffix (default for codecs without --crf: the input's)")
     encode.add_argument("--preset", metavar="NAME", help="encoder speed preset, e.g. ultrafast ... veryslow for x264/x265")
+    encode.add_argument("--rate", type=_rate, metavar="FPS",
+                        help="frame rate of an image-sequence INPUT, e.g. 25 or 30000/1001 (default 25; videos keep theirs)")
     encode.add_argument("--pix-fmt", metavar="FMT", help="output pixel format, e.g. yuv420p, yuv422p10le (default: the input's where the encoder takes it)")
     video = parser.add_argument_group("video with --auto")
     video.add_argument("--every", type=positive_int, default=5, metavar="N",
@@ -139,7 +153,7 @@ def run(args: argparse.Namespace) -> int:
         from ..remap import correct
         from ..image_io import read_image, write_image
 
-        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt"):
+        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate"):
             if getattr(args, name) is not None:
                 raise UsageError(f"--{name.replace('_', '-')} is for videos")
         image = read_image(args.input, order="rgb")
@@ -157,7 +171,11 @@ def run(args: argparse.Namespace) -> int:
     from ..video_pipeline import correct_video
 
     encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
-    video = dict(progress=progress, options=encode, overwrite=args.overwrite, **options)
+    from ..video_io import is_sequence
+
+    if args.rate is not None and not is_sequence(args.input):
+        raise UsageError("--rate is for image-sequence inputs (videos keep their own frame rate)")
+    video = dict(progress=progress, options=encode, overwrite=args.overwrite, rate=args.rate, **options)
     if given:
         k1, k2 = args.k1 or 0.0, args.k2 or 0.0
         from ..lens import Lens
@@ -169,7 +187,7 @@ def run(args: argparse.Namespace) -> int:
     if args.lens_track:
         from ..lens_track import load_lens_track
 
-        with VideoReader(args.input) as reader:
+        with VideoReader(args.input, rate=args.rate) as reader:
             info = reader.info
         track = load_lens_track(args.lens_track, info.rate, info.size)
         correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
@@ -188,7 +206,7 @@ def run(args: argparse.Namespace) -> int:
     if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
     track = track_video(args.input, default_estimator(args.model), every=args.every, window_s=args.window,
-                        progress=progress, doubtful_px=args.max_uncertainty or DOUBTFUL_PX)
+                        progress=progress, doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
     correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
