@@ -454,6 +454,11 @@ class VideoWriter:
         self._tmp = tmp
         try:
             self._open(str(tmp), streams)
+        except ValueError as err:
+            self.abort()
+            if str(self.path) in str(err):
+                raise
+            raise ValueError(f"cannot write {str(self.path)!r}: {err}") from None
         except BaseException:
             self.abort()
             raise

@@ -151,12 +151,15 @@ class Pipelined:
             thread.join()
 
 
-def default_estimator(model: str | os.PathLike | None = None) -> EstimatorFn:
-    """The bundled CNN (:class:`glradial.Estimator`), as a frame -> lens function."""
+def default_estimator(model: str | os.PathLike | None = None, method: str | None = None) -> EstimatorFn:
+    """The bundled estimator (:class:`glradial.Estimator`), as a frame -> lens function; ``method``
+    (e.g. "auto", "net", "lines") is handed to ``Estimator.estimate`` when given."""
     from .estimator import Estimator
 
     estimator = Estimator(model) if model is not None else Estimator()
-    return lambda frame: estimator.estimate(frame)
+    if method is None:
+        return lambda frame: estimator.estimate(frame)
+    return lambda frame: estimator.estimate(frame, method=method)
 
 
 def _as_pair(value: object) -> tuple[float, float]:
@@ -371,11 +374,12 @@ def estimate_video(
     every: int = 5,
     window_s: float = 2.0,
     progress: bool | None = None,
+    method: str | None = None,
 ) -> LensTrack:
-    """Per-frame and per-shot lens of a video with the bundled CNN (or ``model``): the first pass
-    of ``glradial correct --auto`` (:func:`track_video`) without the correction. Hook for
-    ``glradial estimate VIDEO``."""
-    return track_video(path, default_estimator(model), every=every, window_s=window_s, progress=progress)
+    """Per-frame and per-shot lens of a video with the bundled estimator (or ``model``, with
+    ``method`` when given): the first pass of ``glradial correct --auto`` (:func:`track_video`)
+    without the correction. Hook for ``glradial estimate VIDEO``."""
+    return track_video(path, default_estimator(model, method), every=every, window_s=window_s, progress=progress)
 
 
 def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_json: bool = False) -> str:

@@ -133,7 +133,7 @@ def test_ten_bit_stays_ten_bit_and_lossless_is_exact(tmp_path):
             assert np.abs(expected.astype(int) - b.astype(int)).max() <= tolerance, pix_fmt
 
 
-def test_codec_options_and_image_sequences(tmp_path):
+def test_codec_options_and_image_sequences(tmp_path, capsys):
     source = _clip(tmp_path / "in.mp4", ["-c:v", "libx264", "-pix_fmt", "yuv420p"], timecode=None)
     out = tmp_path / "out.mkv"
     assert main(["correct", str(source), str(out), "--k1", "-0.1", "--codec", "hevc", "--crf", "30", "--preset", "ultrafast",
@@ -155,10 +155,14 @@ def test_codec_options_and_image_sequences(tmp_path):
     assert main(["correct", str(source), str(tmp_path / "r.mkv"), "--k1", "0.1", "--rate", "25", "-q"]) == 2  # videos keep theirs
     # a codec FFmpeg lacks, or options the encoder refuses: one line, nothing written
     for extra, message in ((["--codec", "nosuchcodec"], "no FFmpeg encoder 'nosuchcodec'"),
-                           (["--codec", "ffv1", "--crf", "20"], "--crf is for"),
+                           (["--codec", "prores", "--crf", "20"], "--crf is for"),
+                           (["--codec", "ffv1"], "does not support 'ffv1'"),
                            (["--codec", "prores", "--pix-fmt", "yuv420p"], "cannot write pix_fmt 'yuv420p'")):
         names = _names(tmp_path)
+        capsys.readouterr()
         assert main(["correct", str(source), str(tmp_path / "x.mov"), "--k1", "-0.1", "-q", *extra]) == 1, extra
+        err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+        assert len(err) == 1 and message in err[0] and "x.mov" in err[0], err
         assert _names(tmp_path) == names
 
 
