@@ -33,7 +33,6 @@ import queue
 import sys
 import threading
 from fractions import Fraction
-from pathlib import Path
 from typing import Callable, Iterable, Iterator
 
 import numpy as np
