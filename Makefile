@@ -40,6 +40,7 @@ bench: $(DEV_STAMP)
 	$(PY) bench/bench_crops.py
 	$(PY) bench/bench_stadium.py
 	$(PY) bench/bench_estimate.py
+	$(PY) bench/bench_video.py
 
 train: $(DEV_STAMP)
 	$(PY) -m net.data --split train --n 80 --split val --n 4 --split test --n 8 --size 4096 2048

@@ -5,17 +5,22 @@ Every subcommand module exposes ``add_parser(subparsers)`` and ``run(args) -> in
 its subcommand is still listed and says why it cannot run.
 
 Exit status: 0 success, 1 bad input or failed work (one line ``glradial: error: ...`` on stderr),
-2 wrong usage (argparse errors and conflicting options), 130 interrupted (Ctrl-C; outputs are
-written atomically, so nothing half-written is left). Set ``GLRADIAL_DEBUG=1`` to get tracebacks.
+2 wrong usage (argparse errors and conflicting options), 130 interrupted (Ctrl-C), 143 terminated
+(SIGTERM), 129 hung up (SIGHUP): the two signals unwind like Ctrl-C, so outputs (written
+atomically) and temporary files are removed and nothing half-written is left. ``-q/--quiet`` may
+stand anywhere on the command line. Set ``GLRADIAL_DEBUG=1`` to get tracebacks.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import re
+import signal
 import sys
+import threading
 from typing import Sequence
 
 from . import __version__
@@ -86,8 +91,37 @@ def build_parser() -> argparse.ArgumentParser:
         except Exception as err:  # a broken module must not break the other commands
             add_parser, run = _unavailable(name, f"{type(err).__name__}: {_one_line(err)}")
         sub = add_parser(subparsers)
+        # -q after the command too; SUPPRESS keeps a -q given before the command
+        sub.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars")
         sub.set_defaults(func=run, _subparser=sub)
     return parser
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM or SIGHUP, raised in the main thread so that everything unwinds as on Ctrl-C."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signal.Signals(signum).name)
+        self.signum = signum
+
+
+def _terminate(signum: int, _frame: object) -> None:
+    raise Terminated(signum)
+
+
+@contextlib.contextmanager
+def _signals_unwind():
+    """SIGTERM and SIGHUP raise :class:`Terminated` while the command runs (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    wanted = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
+    previous = {signum: signal.signal(signum, _terminate) for signum in wanted}
+    try:
+        yield
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -102,7 +136,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     debug = bool(os.environ.get("GLRADIAL_DEBUG"))
     try:
-        return int(args.func(args) or 0)
+        with _signals_unwind():
+            return int(args.func(args) or 0)
+    except Terminated as stop:
+        sys.stderr.write(f"\n{PROG}: stopped by {signal.Signals(stop.signum).name}\n")
+        return 128 + stop.signum
     except KeyboardInterrupt:
         sys.stderr.write(f"\n{PROG}: interrupted\n")
         return 130

@@ -27,7 +27,7 @@ import cv2
 import numpy as np
 
 from .frames import to_rgb8
-from .metrics import CORNER_RADIUS_16_9, max_displacement
+from .metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, max_displacement
 
 __all__ = ["ShotDetector", "detect_cuts", "smooth_shot", "smooth_track", "shot_ids"]
 
@@ -115,6 +115,16 @@ def _tricube(u: np.ndarray) -> np.ndarray:
     return (1.0 - u**3) ** 3
 
 
+#: samples stated more certain than this (lens units; 0.5 px at 1920 wide) weigh no more than it:
+#: no estimate is trusted beyond the sub-pixel accuracy of the line fits
+UNCERTAINTY_FLOOR = 0.5 / REPORT_WIDTH
+
+#: at most this many samples of one shot count as independent when the smoothed lens's
+#: uncertainty is derived: estimates of one shot share the scene, so their errors are correlated
+#: and averaging N of them does not divide the error by sqrt(N) (a conservative choice: at most 2x)
+INDEPENDENT_SAMPLES = 4
+
+
 def smooth_shot(
     times: np.ndarray,
     lenses: np.ndarray,
@@ -124,16 +134,29 @@ def smooth_shot(
     iterations: int = 3,
     min_scale: float = 5e-4,
     radius: float = CORNER_RADIUS_16_9,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Robust local-linear fit of the samples ``lenses`` (N x 2) at ``times`` (N), evaluated at
-    ``query`` (M). Returns ``(smoothed (M x 2), weights (N,))``; weight 0 marks a rejected sample.
+    uncertainty: np.ndarray | None = None,
+    floor: float = UNCERTAINTY_FLOOR,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Robust, confidence-weighted local-linear fit of the samples ``lenses`` (N x 2) at ``times``
+    (N), evaluated at ``query`` (M). Returns ``(smoothed (M x 2), weights (N,), uncertainty (M,))``;
+    weight 0 marks a rejected sample.
 
-    Each query point fits ``k(t) = a + b (t - q)`` with weights ``tricube((t - q) / h) * w_i``, where
-    ``h`` is ``half_window`` frames (widened so that at least 3 samples count) and ``w_i`` are bisquare
-    robustness weights from the samples' residual distance (:func:`glradial.metrics.max_displacement`) over
+    Each query point fits ``k(t) = a + b (t - q)`` with weights ``tricube((t - q) / h) * w_i * c_i``,
+    where ``h`` is ``half_window`` frames (widened so that at least 3 samples count), ``w_i`` are
+    bisquare robustness weights from the samples' residual distance (:func:`glradial.metrics.max_displacement`) over
     ``6 * max(MAD, min_scale)`` (``min_scale`` in lens units: residuals below ~ it are never
-    rejected). Queries outside the sampled span take the fit at the nearest sampled time (no
-    extrapolation).
+    rejected) and ``c_i = 1 / max(u_i, floor)^2`` the confidence of a sample whose estimator stated
+    the uncertainty ``u_i`` (lens units; ``uncertainty=None``: all equal). A sure sample thus
+    outweighs an unsure one and a static or panning camera converges on the sure ones, while the
+    local line still follows a zoom. Queries outside the sampled span take the fit at the nearest
+    sampled time (no extrapolation).
+
+    The returned uncertainty (lens units; NaN without ``uncertainty``) is the samples' combined
+    uncertainty: the larger of ``sqrt(sum(W^2 u^2)) / sum(W)`` (``W`` the fit weights; the spread of
+    a weighted mean of independent errors) and ``sum(W u) / sum(W) / sqrt(INDEPENDENT_SAMPLES)``
+    (correlated errors: no more than a 2x gain), multiplied by ``max(1, e)`` where ``e`` is the
+    weighted RMS of the residuals around the fit in units of their stated uncertainty: samples that
+    scatter more than their stated p90 are believed over their claim.
     """
     times = np.asarray(times, dtype=np.float64)
     lenses = np.asarray(lenses, dtype=np.float64).reshape(-1, 2)
@@ -145,38 +168,55 @@ def smooth_shot(
         raise ValueError(f"times and lenses differ in length: {n} and {len(lenses)}")
     if half_window <= 0:
         raise ValueError(f"half_window must be positive (frames), got {half_window}")
+    given = uncertainty is not None
+    if given:
+        stated = np.asarray(uncertainty, dtype=np.float64).reshape(-1)
+        if len(stated) != n:
+            raise ValueError(f"uncertainty must hold one value per sample ({n}), got {len(stated)}")
+        if not np.all(stated >= 0):  # also refuses NaN
+            raise ValueError(f"uncertainty must be >= 0 (lens units), got {stated[~(stated >= 0)][:3]}")
+        stated = np.maximum(stated, floor)
+    else:
+        stated = np.ones(n)
+    confidence = 1.0 / stated**2
     if n == 1:
-        return np.repeat(lenses, len(query), axis=0), np.ones(1)
+        return np.repeat(lenses, len(query), axis=0), np.ones(1), np.full(len(query), stated[0] if given else np.nan)
     robust = np.ones(n)
 
-    def fit(at: np.ndarray) -> np.ndarray:
+    def fit(at: np.ndarray, spread: bool = False) -> tuple[np.ndarray, np.ndarray]:
         out = np.empty((len(at), 2))
+        sure = np.full(len(at), np.nan)
         for j, q in enumerate(at):
             dt = times - q
-            h = half_window
             nearest = np.sort(np.abs(dt))
-            h = max(h, nearest[min(2, n - 1)] * 1.0001 + 1e-9)
-            w = _tricube(dt / h) * robust
+            h = max(half_window, nearest[min(2, n - 1)] * 1.0001 + 1e-9)
+            w = _tricube(dt / h) * robust * confidence
             if np.count_nonzero(w > 0) == 0:
-                w = _tricube(dt / h) + 1e-12
+                w = (_tricube(dt / h) + 1e-12) * confidence
             sw = w.sum()
             mean_t = (w * dt).sum() / sw
             var_t = (w * (dt - mean_t) ** 2).sum() / sw
             mean_k = (w[:, None] * lenses).sum(axis=0) / sw
-            if var_t > 1e-9 * h * h and np.count_nonzero(w > 1e-6) >= 3:
+            slope = np.zeros(2)
+            if var_t > 1e-9 * h * h and np.count_nonzero(w > 1e-6 * w.max()) >= 3:
                 slope = (w[:, None] * (dt - mean_t)[:, None] * (lenses - mean_k)).sum(axis=0) / (sw * var_t)
-                out[j] = mean_k - slope * mean_t
-            else:
-                out[j] = mean_k
-        return out
+            out[j] = mean_k - slope * mean_t
+            if spread and given:
+                independent = np.sqrt((w * w * stated**2).sum()) / sw
+                combined = max(independent, (w * stated).sum() / sw / np.sqrt(INDEPENDENT_SAMPLES))
+                residual = max_displacement(lenses, out[j] + dt[:, None] * slope, radius)
+                excess = float(np.sqrt((w * (residual / stated) ** 2).sum() / sw))
+                sure[j] = combined * max(1.0, excess)
+        return out, sure
 
     for _ in range(iterations):
-        residual = max_displacement(lenses, fit(times), radius)
+        residual = max_displacement(lenses, fit(times)[0], radius)
         mad = float(np.median(residual))
         u = residual / (6.0 * max(mad, min_scale))
         robust = np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0)
     clamped = np.clip(query, times.min(), times.max())
-    return fit(clamped), robust
+    smoothed, sure = fit(clamped, spread=True)
+    return smoothed, robust, sure
 
 
 def smooth_track(
@@ -188,13 +228,17 @@ def smooth_track(
     iterations: int = 3,
     min_scale: float = 5e-4,
     radius: float = CORNER_RADIUS_16_9,
-) -> tuple[np.ndarray, np.ndarray]:
+    uncertainty: np.ndarray | None = None,
+    floor: float = UNCERTAINTY_FLOOR,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smooth per-frame estimates shot by shot and return a lens for every frame.
 
     ``shots`` is the shot id of every frame (length = frame count, :func:`shot_ids`); ``times``
-    (N, frame indices, strictly increasing) and ``lenses`` (N x 2) are the estimated frames. Every
-    shot must hold at least one estimate. Returns ``(per-frame lenses (n_frames x 2), sample weights
-    (N,))``. Each shot is smoothed with :func:`smooth_shot` independently, so a cut resets it.
+    (N, frame indices, strictly increasing) and ``lenses`` (N x 2) are the estimated frames,
+    ``uncertainty`` (N, lens units, optional) what their estimator stated. Every shot must hold at
+    least one estimate. Returns ``(per-frame lenses (n_frames x 2), sample weights (N,), per-frame
+    uncertainty (n_frames,), NaN without uncertainty)``. Each shot is smoothed with
+    :func:`smooth_shot` independently, so a cut resets it.
     """
     shots = np.asarray(shots)
     times = np.asarray(times, dtype=np.int64)
@@ -203,15 +247,20 @@ def smooth_track(
         raise ValueError(f"estimate times must lie in [0, {len(shots) - 1}], got {times.min()}..{times.max()}")
     if np.any(np.diff(times) <= 0):
         raise ValueError("estimate times must be strictly increasing")
+    if uncertainty is not None:
+        uncertainty = np.asarray(uncertainty, dtype=np.float64).reshape(-1)
+        if len(uncertainty) != len(times):
+            raise ValueError(f"uncertainty must hold one value per estimate ({len(times)}), got {len(uncertainty)}")
     out = np.empty((len(shots), 2))
+    sure = np.full(len(shots), np.nan)
     weights = np.ones(len(times))
     for shot in np.unique(shots):
         frames = np.flatnonzero(shots == shot)
         mine = np.flatnonzero(shots[times] == shot)
         if len(mine) == 0:
             raise ValueError(f"shot {shot} (frames {frames[0]}..{frames[-1]}) has no estimate")
-        out[frames], weights[mine] = smooth_shot(
+        out[frames], weights[mine], sure[frames] = smooth_shot(
             times[mine], lenses[mine], frames, half_window=half_window, iterations=iterations,
-            min_scale=min_scale, radius=radius,
+            min_scale=min_scale, radius=radius, uncertainty=None if uncertainty is None else uncertainty[mine], floor=floor,
         )
-    return out, weights
+    return out, weights, sure

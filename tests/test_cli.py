@@ -17,7 +17,8 @@ import pytest
 import glradial
 from glradial import Lens
 from glradial.cli import build_parser, main
-from glradial.media_io import VideoReader, VideoWriter, probe_video, read_image, write_image
+from glradial.image_io import read_image, write_image
+from glradial.video_io import VideoInfo, VideoReader, VideoWriter, probe_video
 
 from conftest import DATA
 
@@ -78,8 +79,10 @@ def test_correct_k2_defaults_to_zero(tmp_path):
 def _pan_video(path: Path, panorama: np.ndarray, n: int = 30, fps: float = 12.5, cut: int | None = None,
                marker: bool = False, lenses: np.ndarray | None = None) -> None:
     """160×90 frames panning over the real field panorama; optional cut to another area; optional
-    frame index written into pixel (0, 0) (lossless .mkv only); optional per-frame lens applied."""
-    with VideoWriter(path, (160, 90), fps) as writer:
+    frame index written into pixel (0, 0) (lossless .mkv only: FFV1 in planar RGB); optional
+    per-frame lens applied."""
+    lossless = dict(codec="ffv1", pix_fmt="gbrp") if path.suffix == ".mkv" else {}
+    with VideoWriter(path, VideoInfo.of((160, 90), fps, **lossless)) as writer:
         for i in range(n):
             x0, y0, step = (200, 420, 4) if cut is None or i < cut else (1100, 380, -3)
             j = i if cut is None or i < cut else i - cut
@@ -93,7 +96,7 @@ def _pan_video(path: Path, panorama: np.ndarray, n: int = 30, fps: float = 12.5,
 
 
 def test_correct_video_keeps_count_fps_size(tmp_path, field_panorama):
-    source, out = tmp_path / "in.mp4", tmp_path / "out.avi"
+    source, out = tmp_path / "in.mp4", tmp_path / "out.mov"
     _pan_video(source, field_panorama, n=30, fps=12.5)
     assert main(["correct", str(source), str(out), "--k1", str(K1), "--k2", str(K2), "--backend", "cpu"]) == 0
     info = probe_video(out)
@@ -103,9 +106,9 @@ def test_correct_video_keeps_count_fps_size(tmp_path, field_panorama):
         for i, (frame_in, frame_out) in enumerate(zip(a, b)):
             if i % 10 == 0:
                 expected = glradial.correct(frame_in, K1, K2, backend="cpu")
-                # MJPG re-encoding: a few levels on average
+                # H.264 re-encoding at its default quality (crf 23): a few levels on average
                 assert np.abs(frame_out.astype(int) - expected.astype(int)).mean() < 4.0
-    assert _names(tmp_path) == ["in.mp4", "out.avi"]
+    assert _names(tmp_path) == ["in.mp4", "out.mov"]
 
 
 def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypatch):
@@ -155,7 +158,12 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
     assert len(pairs) == n
     for i in (3, cut + 1):
         expected = glradial.correct(pairs[i][0], *smooth[i], backend="cpu")
-        assert np.abs(pairs[i][1].astype(int) - expected.astype(int)).max() <= 1  # FFV1 is lossless
+        # FFV1 is lossless, but pass 2 may keep the previous frame's lens where the two move no
+        # point by more than 1/64 px (video_pipeline.MAP_REUSE_PX), which may flip a position to the
+        # neighbouring 1/32-px step of the fixed-point maps: at most 255/32 ~ 8 levels on the steepest
+        # edge, next to nothing on average; a wrong lens (e.g. the other shot's) is off by tens
+        difference = np.abs(pairs[i][1].astype(int) - expected.astype(int))
+        assert difference.max() <= 8 and difference.mean() < 0.1, (difference.max(), difference.mean())
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
@@ -193,8 +201,15 @@ def _bad_cases(tmp: Path) -> list[tuple[list[str], str, int]]:
         (["correct", str(tmp / "missing.jpg"), str(tmp / "o.png"), "--k1", "0.1"], "does not exist", 1),
         (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1"], "cannot read video", 1),
         (["correct", str(tmp / "broken.png"), str(tmp / "o.png"), "--k1", "0.1"], "cannot decode image", 1),
-        (["correct", road, str(tmp / "o.xyz"), "--k1", "0.1"], "unknown file extension '.xyz'", 1),
-        (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--auto"], "--auto cannot be combined", 2),
+        (["correct", road, str(tmp / "o.xyz"), "--k1", "0.1"], "INPUT is an image but OUTPUT", 2),
+        (["correct", road, road, "--k1", "0.1", "-y"], "OUTPUT must differ from INPUT", 2),
+        (["correct", road, str(tmp / "broken.png"), "--k1", "0.1"], "already exists (overwrite it with -y", 1),
+        (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--codec", "h264"], "--codec is for videos", 2),
+        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1", "--crf", "20", "--bitrate", "2M"], "--crf or --bitrate", 2),
+        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1", "--bitrate", "fast"], "bit rate must be", 2),
+        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--lens-track", "t.csv"], "cannot be combined", 2),
+        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--sidecar", str(tmp / "o.mp4")], "--sidecar must differ", 2),
+        (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--auto"], "--k1/--k2/--cx/--cy/--pixel-aspect/--lens and --auto cannot be combined", 2),
         (["correct", road, str(tmp / "o.png")], "give the lens with --k1", 2),
         (["correct", road, str(tmp / "o.mp4"), "--k1", "0.1"], "INPUT is an image but OUTPUT", 2),
         (["correct", road, str(tmp / "nofolder" / "o.png"), "--k1", "0.1"], "output folder", 1),
@@ -352,7 +367,8 @@ def test_correct_auto_with_an_onnx_model(tmp_path, capsys):
 def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     """The video hook of 'glradial estimate' (glradial.video_pipeline.estimate_video): shots found, every
     frame gets the model's lens, JSON and CSV sidecars agree."""
-    from glradial.video_pipeline import LensTrack, estimate_video, track_report
+    from glradial.lens_track import load_lens_track
+    from glradial.video_pipeline import estimate_video, track_report
 
     model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
     source = tmp_path / "cut.mp4"
@@ -369,9 +385,10 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     assert [r["frame"] for r in document["frames"] if r["k1_raw"] is not None] == [0, 3, 6, 9, 12, 15, 18]
     track.save(tmp_path / "t.json")
     track.save(tmp_path / "t.csv")
-    back = LensTrack.load_csv(tmp_path / "t.csv", track.fps, track.size)
-    np.testing.assert_allclose(back.lens, track.lens, rtol=1e-7)
-    np.testing.assert_array_equal(back.shot, track.shot)
+    for name in ("t.csv", "t.json"):
+        back = load_lens_track(tmp_path / name, track.rate, track.size)
+        np.testing.assert_allclose(back.lens, track.lens, rtol=1e-7)
+        np.testing.assert_array_equal(back.shot, track.shot)
     assert json.loads((tmp_path / "t.json").read_text())["shots"] == track.per_shot()
 
 
@@ -394,7 +411,7 @@ def test_estimate_command_on_a_video_prints_shots(tmp_path, field_panorama, caps
 
 
 def test_estimate_command_bad_images_get_one_line(tmp_path, capsys):
-    """Missing and corrupt images (read by glradial.media_io.read_image) get one named error line."""
+    """Missing and corrupt images (read by glradial.image_io.read_image) get one named error line."""
     model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
     assert main(["estimate", str(tmp_path / "missing.png"), "--model", str(model)]) == 1
     assert "missing.png" in _error_line(capsys)
@@ -406,3 +423,26 @@ def test_estimate_command_bad_images_get_one_line(tmp_path, capsys):
     write_image(gray16, np.full((36, 64), 40000, np.uint16))
     assert main(["estimate", str(gray16), "--model", str(model)]) == 0
     assert "k1=-0.210000" in capsys.readouterr().out
+
+
+def test_quiet_anywhere_and_progress_on_stderr(tmp_path, capsys):
+    """-q before or after the command silences the bars; without it, an enabled bar (tqdm) draws on
+    its stream with the count, a disabled one draws nothing."""
+    import io
+
+    from glradial.commands import show_progress
+    from glradial.progress import Progress
+
+    parser = build_parser()
+    base = ["correct", "a.png", "b.png", "--k1", "0.1"]
+    assert show_progress(parser.parse_args(["-q", *base])) is False
+    assert show_progress(parser.parse_args([*base, "-q"])) is False
+    assert show_progress(parser.parse_args(base[:3] + ["--quiet"] + base[3:])) is False
+    assert show_progress(parser.parse_args(base)) is None  # auto: only on a terminal
+    drawn, silent = io.StringIO(), io.StringIO()
+    for stream, enabled in ((drawn, True), (silent, False)):
+        with Progress(7, "work", unit="frames", enabled=enabled, stream=stream) as bar:
+            for _ in range(7):
+                bar.update()
+    assert "work" in drawn.getvalue() and "7/7" in drawn.getvalue()
+    assert silent.getvalue() == ""

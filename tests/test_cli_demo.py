@@ -10,7 +10,7 @@ import pytest
 from glradial.cli import main
 from glradial.commands import demo
 from glradial.lens import corner_radius, lens_to_pixels
-from glradial.media_io import read_image
+from glradial.image_io import read_image
 from glradial.metrics import max_displacement_px
 
 

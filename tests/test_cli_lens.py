@@ -13,7 +13,8 @@ import pytest
 import glradial
 from glradial import Lens
 from glradial.cli import main
-from glradial.media_io import VideoReader, VideoWriter, read_image, write_image
+from glradial.image_io import read_image, write_image
+from glradial.video_io import VideoInfo, VideoReader, VideoWriter
 from glradial.stmap import lens_stmap, read_stmap
 
 from conftest import DATA
@@ -46,7 +47,7 @@ def test_correct_with_an_opencv_calibration_file(tmp_path, small_photo):
     calibration = tmp_path / "calib.json"
     calibration.write_text(json.dumps({"camera_matrix": K_OFF, "dist_coeffs": DIST, "size": [1280, 720]}))
     out = tmp_path / "out.png"
-    assert main(["correct", str(source), str(out), "--lens", str(calibration), "--backend", "cpu"]) == 0
+    assert main(["correct", str(source), str(out), "-y", "--lens", str(calibration), "--backend", "cpu"]) == 0
     camera = np.array(K_OFF)
     camera[:2, :2] /= 4.0
     camera[:2, 2] = (camera[:2, 2] + 0.5) / 4.0 - 0.5
@@ -61,16 +62,16 @@ def test_correct_with_principal_point_options_and_lens_files(tmp_path, small_pho
     lens = Lens(-0.3, 0.05, 0.05, -0.02, 0.98)
     expected = glradial.correct(image, lens, fit="crop", backend="cpu")
     out = tmp_path / "a.png"
-    assert main(["correct", str(source), str(out), "--k1", "-0.3", "--k2", "0.05", "--cx", "0.05", "--cy", "-0.02",
+    assert main(["correct", str(source), str(out), "-y", "--k1", "-0.3", "--k2", "0.05", "--cx", "0.05", "--cy", "-0.02",
                  "--pixel-aspect", "0.98", "--fit", "crop", "--backend", "cpu"]) == 0
     np.testing.assert_array_equal(read_image(out), expected)
     own = tmp_path / "lens.json"  # glradial's own numbers
     own.write_text(json.dumps({"k1": -0.3, "k2": 0.05, "cx": 0.05, "cy": -0.02, "pixel_aspect": 0.98}))
-    assert main(["correct", str(source), str(out), "--lens", str(own), "--fit", "crop", "--backend", "cpu"]) == 0
+    assert main(["correct", str(source), str(out), "-y", "--lens", str(own), "--fit", "crop", "--backend", "cpu"]) == 0
     np.testing.assert_array_equal(read_image(out), expected)
     estimate = tmp_path / "estimate.json"  # a line of 'glradial estimate --json'
     estimate.write_text(json.dumps({"path": "frame.png", "k1": -0.3, "k2": 0.05}))
-    assert main(["correct", str(source), str(out), "--lens", str(estimate), "--backend", "cpu"]) == 0
+    assert main(["correct", str(source), str(out), "-y", "--lens", str(estimate), "--backend", "cpu"]) == 0
     np.testing.assert_array_equal(read_image(out), glradial.correct(image, -0.3, 0.05, backend="cpu"))
 
 
@@ -82,7 +83,7 @@ def test_lens_file_from_convert_json(tmp_path, small_photo, capsys):
     converted = tmp_path / "converted.json"
     converted.write_text(capsys.readouterr().out)
     out = tmp_path / "b.png"
-    assert main(["correct", str(source), str(out), "--lens", str(converted), "--backend", "cpu"]) == 0
+    assert main(["correct", str(source), str(out), "-y", "--lens", str(converted), "--backend", "cpu"]) == 0
     np.testing.assert_array_equal(read_image(out), glradial.correct(image, -0.2, 0.04, backend="cpu"))
 
 
@@ -91,17 +92,17 @@ def test_correct_video_with_a_lens_file(tmp_path):
     for i, frame in enumerate(frames):
         frame[:, 8 * i : 8 * i + 8] = 250
     source, out, lens_file = tmp_path / "in.mkv", tmp_path / "out.mkv", tmp_path / "lens.json"
-    with VideoWriter(source, (64, 36), 10.0) as writer:
+    with VideoWriter(source, VideoInfo.of((64, 36), 10, codec="ffv1", pix_fmt="gbrp")) as writer:  # lossless RGB
         for frame in frames:
             writer.write(frame)
     lens_file.write_text(json.dumps({"camera_matrix": [[60.0, 0, 40.0], [0, 61.0, 15.0], [0, 0, 1]],
                                      "dist_coeffs": [-0.2, 0.03, 0, 0]}))  # size: the video's
-    assert main(["correct", str(source), str(out), "--lens", str(lens_file), "--backend", "cpu"]) == 0
+    assert main(["correct", str(source), str(out), "-y", "--lens", str(lens_file), "--backend", "cpu"]) == 0
     lens = Lens.from_opencv([[60.0, 0, 40.0], [0, 61.0, 15.0], [0, 0, 1]], [-0.2, 0.03, 0, 0], (64, 36))
     with VideoReader(source) as a, VideoReader(out) as b:
         pairs = list(zip(a, b))
     assert len(pairs) == 4
-    for frame_in, frame_out in pairs:  # FFV1 is lossless
+    for frame_in, frame_out in pairs:  # FFV1 in planar RGB is lossless
         np.testing.assert_array_equal(frame_out, glradial.correct(frame_in, lens, backend="cpu"))
 
 
@@ -141,7 +142,7 @@ def test_lens_option_errors(tmp_path, small_photo, capsys, args, contents, words
         lens_file.write_text(contents if isinstance(contents, str) else json.dumps(contents))
     argv = [a.format(lens=lens_file, missing=tmp_path / "none.json") for a in args]
     out = tmp_path / "out.png"
-    assert main(["correct", str(source), str(out), *argv]) == status
+    assert main(["correct", str(source), str(out), "-y", *argv]) == status
     import re
 
     assert re.search(words, _error_line(capsys)), words

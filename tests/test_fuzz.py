@@ -336,7 +336,7 @@ CLI_CASES = [
     ("correct-trunc-png", "correct {trunc} {tmp}/o.png --k1 -0.1", 1, "trunc.png"),
     ("correct-empty-png", "correct {empty} {tmp}/o.png --k1 -0.1", 1, "empty.png"),
     ("correct-bad-video", "correct {bad_video} {tmp}/o.mp4 --k1 -0.1", 1, "bad.mp4"),
-    ("correct-out-ext", "correct {good} {tmp}/o.bmpx --k1 -0.1", 1, ".bmpx"),
+    ("correct-out-ext", "correct {good} {tmp}/o.bmpx --k1 -0.1", 2, "o.bmpx"),
     ("correct-out-folder", "correct {good} {tmp}/no/such/o.png --k1 -0.1", 1, "no/such"),
     ("correct-model-n3", "correct {good} {tmp}/o.png --auto --model {model_n_by_3}", 1, "N×2"),
     ("correct-model-missing", "correct {good} {tmp}/o.png --auto --model {tmp}/none.onnx", 1, "none.onnx"),
@@ -541,7 +541,7 @@ def test_file_size_limit_from_the_kernel_names_path_and_errno(tmp_path, capfd):
         resource.setrlimit(resource.RLIMIT_FSIZE, (2048, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
         noise = np.random.default_rng(0).integers(0, 256, (128, 128, 3), dtype=np.uint8)  # ~49 kB as PNG
         try:
-            from glradial.media_io import write_image
+            from glradial.image_io import write_image
 
             write_image(target, noise)
         except OSError as err:

@@ -31,7 +31,7 @@ def synthetic_track(seed: int = 0, n: int = 240, cut: int = 140, every: int = 3)
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_smoothing_beats_raw_and_rejects_outliers(seed):
     truth, times, raw, outliers, shots, _ = synthetic_track(seed)
-    smoothed, weights = smooth_track(times, raw, shots, half_window=20)
+    smoothed, weights, _ = smooth_track(times, raw, shots, half_window=20)
     raw_error = max_displacement(raw, truth[times]) * WIDTH_PX
     smooth_error = max_displacement(smoothed[times], truth[times]) * WIDTH_PX
     # the noise alone is ~2-4 px (sigma 0.02 on k1 at r = 0.57: 0.02 * 0.19 * 1920 ~ 7 px);
@@ -50,7 +50,7 @@ def test_smoothing_beats_raw_and_rejects_outliers(seed):
 
 def test_cut_resets_the_smoother():
     truth, times, raw, _, shots, cut = synthetic_track(seed=3)
-    smoothed, _ = smooth_track(times, raw, shots, half_window=20)
+    smoothed, _, _ = smooth_track(times, raw, shots, half_window=20)
     jump = max_displacement(truth[cut - 1], truth[cut]) * WIDTH_PX
     assert jump > 100  # the two shots' lenses differ by > 100 px of displacement
     # frames on both sides of the cut follow their own shot: a smoother across the cut would mix
@@ -59,7 +59,7 @@ def test_cut_resets_the_smoother():
     error = max_displacement(smoothed[near], truth[near]) * WIDTH_PX
     assert error.max() < 12.0, error
     # the same data smoothed as one shot (no reset) is visibly wrong near the cut: the check above can fail
-    one_shot, _ = smooth_track(times, raw, np.zeros_like(shots), half_window=20)
+    one_shot, _, _ = smooth_track(times, raw, np.zeros_like(shots), half_window=20)
     assert (max_displacement(one_shot[near], truth[near]) * WIDTH_PX).max() > 30.0
 
 
@@ -70,7 +70,7 @@ def test_smoothing_follows_a_zoom_without_lag():
     k1 = np.linspace(-0.4, -0.1, n)
     truth = np.stack([k1, manifold_k2(k1)], 1)
     times = np.arange(0, n, 4)
-    smoothed, _ = smooth_shot(times, truth[times], np.arange(n), half_window=15)
+    smoothed, _, _ = smooth_shot(times, truth[times], np.arange(n), half_window=15)
     inside = slice(0, times[-1] + 1)
     # k2 is quadratic in k1, so a line through it is off by its curvature over the window only
     assert (max_displacement(smoothed[inside], truth[inside]) * WIDTH_PX).max() < 0.5
@@ -97,13 +97,13 @@ def _pan_frames(panorama: np.ndarray, x0: int, y0: int, n: int, step: int, windo
 def test_cut_detected_in_a_synthetic_video(field_panorama, tmp_path):
     """A slow pan over the real field panorama (4 px of panorama per frame), then a cut to another
     part of it, written to and read back from an .mp4: exactly one cut, at the right frame."""
-    from glradial.media_io import VideoReader, VideoWriter
+    from glradial.video_io import VideoInfo, VideoReader, VideoWriter
 
     pano = field_panorama
     shot_a = _pan_frames(pano, 200, 420, 18, 4)
     shot_b = _pan_frames(pano, 1100, 380, 12, -3)
     path = tmp_path / "cut.mp4"
-    with VideoWriter(path, (160, 90), 25) as writer:
+    with VideoWriter(path, VideoInfo.of((160, 90), 25)) as writer:
         for frame in shot_a + shot_b:
             writer.write(frame)
     with VideoReader(path) as reader:
@@ -152,7 +152,7 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     import glradial
     from glradial.video_pipeline import default_estimator, track_video
     from glradial.crops import CropParams, render_crops
-    from glradial.media_io import VideoWriter
+    from glradial.video_io import VideoInfo, VideoWriter
 
     n, cut = 36, 24
     k1 = np.where(np.arange(n) < cut, np.linspace(-0.35, -0.25, n), -0.05)
@@ -162,7 +162,7 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     params += [CropParams(pan=12 + 0.2 * i, tilt=-14, roll=-0.5, hfov=30, k1=truth[i, 0], k2=truth[i, 1]) for i in range(cut, n)]
     frames = render_crops(panorama, params, size=(320, 180))
     path = tmp_path / "zoom.mkv"
-    with VideoWriter(path, (320, 180), 25) as writer:
+    with VideoWriter(path, VideoInfo.of((320, 180), 25, codec="ffv1", pix_fmt="gbrp")) as writer:
         for frame in frames:
             writer.write(frame)
     track = track_video(path, default_estimator(), every=1, window_s=0.6)
@@ -188,3 +188,71 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     # reset: right after the cut the smoothed lens is the second shot's, not a blend with the first
     second = np.median(track.raw[cut:], axis=0)
     assert np.all(max_displacement(track.lens[cut : cut + 3], second) * WIDTH_PX < 0.5 * max_displacement(truth[0], truth[cut]) * WIDTH_PX)
+
+
+def _confident_track(seed: int, k1_of_t, n: int = 150, every: int = 3, sure: float = 0.3):
+    """Known lens trajectory ``k1_of_t`` (k2 on the manifold) sampled every ``every`` frames by an
+    estimator that states its uncertainty honestly (error ~ N(0, (u / 1.645)^2) in px at 1920, so u
+    is its p90): a fraction ``sure`` of sure samples (u = 2 px), the others unsure (u = 40 px), a
+    third of which are gross outliers far beyond even that (e.g. a fit locked on a wrong structure).
+    With the unsure samples in the majority the robust (MAD) step alone cannot tell them apart."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    truth = np.stack([k1_of_t(t), manifold_k2(k1_of_t(t))], 1)
+    times = np.arange(0, n, every)
+    u_px = np.where(rng.random(len(times)) < sure, 2.0, 40.0)
+    per_px = 1.0 / (WIDTH_PX * 0.5737**3)  # k1 change that moves the 16:9 corner by 1 px at 1920
+    raw = truth[times].copy()
+    raw[:, 0] += rng.normal(0.0, u_px / 1.645) * per_px
+    gross = (u_px > 10) & (rng.random(len(times)) < 0.33)
+    raw[gross, 0] += rng.choice([-1, 1], gross.sum()) * 150 * per_px
+    return truth, times, raw, u_px
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_confidence_weighting_converges_on_a_static_camera(seed):
+    truth, times, raw, u_px = _confident_track(seed, lambda t: np.full(t.shape, -0.3))
+    shots = np.zeros(len(truth), dtype=int)
+    plain, _, none = smooth_track(times, raw, shots, half_window=40)
+    weighted, _, stated = smooth_track(times, raw, shots, half_window=40, uncertainty=u_px / WIDTH_PX)
+    plain_err = max_displacement(plain, truth) * WIDTH_PX
+    weighted_err = max_displacement(weighted, truth) * WIDTH_PX
+    assert np.all(np.isnan(none))
+    # the sure samples (2 px p90 each, ~15 in a window) pin the lens to ~1 px or better (the first
+    # and last frames fit a line to one side only, hence 1.25 rather than 2 / sqrt(15));
+    # weighting all samples equally lets the 40-px ones pull it several px away
+    assert np.percentile(weighted_err, 90) < 1.25, np.percentile(weighted_err, 90)
+    assert np.mean(weighted_err) < 0.5 * np.mean(plain_err)
+    # the smoothed uncertainty is stated below the single sure sample's 2 px (evidence combined,
+    # at most 2x: INDEPENDENT_SAMPLES) and still covers the actual error on >= 90 % of frames
+    stated_px = stated * WIDTH_PX
+    assert np.all(stated_px <= 2.0 + 1e-9) and np.all(stated_px >= 0.5)
+    assert np.mean(weighted_err <= stated_px) >= 0.9
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_confidence_weighting_still_follows_a_zoom(seed):
+    """A zoom from k1 -0.45 to -0.15 over 150 frames (a 92 px change along the manifold) with the same
+    mixed-confidence estimates: the weighted local line tracks it within ~1 px."""
+    truth, times, raw, u_px = _confident_track(seed, lambda t: -0.45 + 0.3 * t / 149.0)
+    shots = np.zeros(len(truth), dtype=int)
+    assert max_displacement(truth[0], truth[-1]) * WIDTH_PX > 80
+    # the same window as the static camera: the local line, not a short window, follows the zoom
+    weighted, _, stated = smooth_track(times, raw, shots, half_window=40, uncertainty=u_px / WIDTH_PX)
+    inside = slice(0, times[-1] + 1)
+    error = max_displacement(weighted[inside], truth[inside]) * WIDTH_PX
+    assert np.percentile(error, 90) < 1.5, np.percentile(error, 90)
+
+
+def test_unsure_shot_keeps_a_large_uncertainty():
+    """Only unsure samples (40 px) that scatter as stated: the smoothed lens is never claimed better
+    than 40 / 2 px, so 'correct --auto' can flag the shot as doubtful."""
+    rng = np.random.default_rng(5)
+    n = 60
+    times = np.arange(0, n, 3)
+    per_px = 1.0 / (WIDTH_PX * 0.5737**3)
+    raw = np.stack([-0.3 + rng.normal(0, 40 / 1.645, len(times)) * per_px, np.full(len(times), manifold_k2(-0.3))], 1)
+    _, _, stated = smooth_track(times, raw, np.zeros(n, int), half_window=30, uncertainty=np.full(len(times), 40 / WIDTH_PX))
+    assert np.all(stated * WIDTH_PX >= 20.0 - 1e-6)
+    with pytest.raises(ValueError, match="uncertainty must be >= 0"):
+        smooth_track(times, raw, np.zeros(n, int), uncertainty=np.full(len(times), np.nan))

@@ -4,36 +4,68 @@ from __future__ import annotations
 
 import argparse
 import os
+from fractions import Fraction
 from pathlib import Path
 
-from . import UsageError, add_lens_options, lens_from_args, lens_given, positive_float, positive_int, show_progress
+from . import UsageError, add_lens_options, finite_float, lens_from_args, lens_given, positive_float, positive_int, show_progress
 
 DESCRIPTION = """\
 Undistort INPUT into OUTPUT. Images: PNG, JPEG, TIFF (8- and 16-bit and float32 TIFF kept, alpha
-kept). Videos: .mp4/.m4v/.mov (MPEG-4), .avi (Motion JPEG), .mkv (lossless FFV1): the container and
-codec follow OUTPUT's extension, frame rate, frame size and frame count are kept, audio is dropped.
-The lens is given (--k1/--k2, width-normalised: image width = 1, origin at the image centre,
-p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel; --cx/--cy/--pixel-aspect for an off-centre
-principal point and non-square pixels; or --lens FILE, e.g. an OpenCV calibration) or estimated by
-the bundled CNN (--auto, centred model).
-For a video, --auto estimates every Nth frame, detects shot cuts, smooths the lens within each
-shot and writes the per-frame lens to a sidecar (OUTPUT.lens.csv by default). Outputs appear only
-when complete."""
+kept). Videos: anything FFmpeg reads (MP4, MOV, MXF, TS, MKV, WebM ...; image sequences as
+frame_%04d.png), written through FFmpeg (PyAV): audio, subtitle and data streams are copied
+untouched; frame rate, timestamps, timecode, colour tags and field order are kept; 10- and 12-bit
+sources are processed at 16 bits and written back at their depth. The output codec is the input's
+where an encoder exists (else the container's default); --codec, --crf/--bitrate, --preset and
+--pix-fmt choose another. The lens is given (--k1/--k2, width-normalised: image width = 1, origin
+at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel; --cx/--cy/--pixel-aspect
+for an off-centre principal point and non-square pixels; or --lens FILE, e.g. an OpenCV
+calibration), read per frame from a lens track (--lens-track) or estimated (--auto, centred model). For a video, --auto estimates every Nth frame,
+detects shot cuts, smooths the lens within each shot weighting each estimate by its stated
+confidence, warns about every shot whose lens is doubtful (uncertainty above --max-uncertainty)
+and writes the per-frame lens to a sidecar (OUTPUT.lens.csv by default; format in docs/CLI.md),
+which can be edited and fed back with --lens-track. Outputs appear only when complete; an existing
+OUTPUT is replaced only with -y."""
+
+
+def _bitrate(text: str) -> int:
+    """argparse type for a bit rate in bits per second, with an optional k/M/G suffix (8M, 2500k)."""
+    scale = {"k": 1e3, "m": 1e6, "g": 1e9}.get(text[-1:].lower(), 1.0)
+    number = text[:-1] if scale != 1.0 else text
+    try:
+        value = float(number) * scale
+    except ValueError:
+        value = -1.0
+    if not (value > 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"bit rate must be a positive number of bits per second (e.g. 8M, 2500k), got {text!r}")
+    return int(round(value))
+
+
+def _rate(text: str) -> Fraction:
+    """argparse type for a frame rate: a positive number or fraction (25, 29.97, 30000/1001)."""
+    try:
+        value = Fraction(text.strip())
+    except (ValueError, ZeroDivisionError):
+        value = Fraction(0)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f"frame rate must be a positive number or fraction such as 30000/1001, got {text!r}")
+    return value.limit_denominator(1001) if "/" not in text else value
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "correct",
-        help="undistort an image or a video (given lens or --auto)",
+        help="undistort an image or a video (given lens, lens track or --auto)",
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("input", metavar="INPUT", help="image or video to correct")
-    parser.add_argument("output", metavar="OUTPUT", help="corrected file; its extension picks the format")
-    lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --auto)")
+    parser.add_argument("input", metavar="INPUT", help="image, video or image sequence (frame_%%04d.png) to correct")
+    parser.add_argument("output", metavar="OUTPUT", help="corrected file or image sequence; its extension picks the format")
+    parser.add_argument("-y", "--overwrite", action="store_true", help="replace OUTPUT (and the sidecar) if it exists")
+    lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE, --lens-track or --auto)")
     add_lens_options(lens)
-    lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled CNN")
+    lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
+    lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)")
     render = parser.add_argument_group("rendering")
     render.add_argument(
         "--fit", choices=("same", "crop", "full"), default="same",
@@ -49,53 +81,83 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="gl = GLSL shaders through EGL, cpu = the same maps through cv2.remap, auto = the faster "
         "one on this machine (default: auto)",
     )
+    encode = parser.add_argument_group("video encoding")
+    encode.add_argument("--codec", metavar="NAME", help="FFmpeg encoder or codec: h264, hevc, prores, ffv1, ... (default: the input's)")
+    encode.add_argument("--crf", type=finite_float, metavar="Q", help="constant quality for x264/x265/VPx/AV1 (lower = better)")
+    encode.add_argument("--bitrate", type=_bitrate, metavar="BPS", help="target bit rate in bits/s, k/M suffix (default for codecs without --crf: the input's)")
+    encode.add_argument("--preset", metavar="NAME", help="encoder speed preset, e.g. ultrafast ... veryslow for x264/x265")
+    encode.add_argument("--rate", type=_rate, metavar="FPS",
+                        help="frame rate of an image-sequence INPUT, e.g. 25 or 30000/1001 (default 25; videos keep theirs)")
+    encode.add_argument("--pix-fmt", metavar="FMT", help="output pixel format, e.g. yuv420p, yuv422p10le (default: the input's where the encoder takes it)")
     video = parser.add_argument_group("video with --auto")
     video.add_argument("--every", type=positive_int, default=5, metavar="N",
                        help="estimate every N-th frame of each shot, plus each shot's first frame (frames; default 5)")
     video.add_argument("--window", type=positive_float, default=2.0, metavar="SECONDS",
                        help="half width of the per-shot smoothing window (seconds; default 2.0)")
+    video.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
+                       help="warn about shots whose smoothed lens is less sure than this (px at 1920 wide, ~p90; default 10)")
     video.add_argument("--sidecar", metavar="PATH",
                        help="per-frame lens file: .csv or .json (default: OUTPUT.lens.csv)")
     return parser
 
 
-def _check_paths(args: argparse.Namespace) -> tuple[str, str]:
-    from ..media_io import media_kind
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def _check_paths(args: argparse.Namespace) -> str:
+    from ..image_io import check_overwrite, media_kind
+    from ..video_io import is_sequence, sequence_files
 
     source, target = Path(args.input), Path(args.output)
-    if not source.exists():
+    if not is_sequence(source) and not source.exists():
         raise FileNotFoundError(f"input file {str(source)!r} does not exist")
     kind_in, kind_out = media_kind(source), media_kind(target)
     if kind_in != kind_out:
-        raise UsageError(f"INPUT is {'an' if kind_in == 'image' else 'a'} {kind_in} but OUTPUT {str(target)!r} has {'an' if kind_out == 'image' else 'a'} {kind_out} extension")
-    if target.exists() and os.path.samefile(source, target):
-        raise UsageError("OUTPUT must differ from INPUT")
+        raise UsageError(f"INPUT is {'an' if kind_in == 'image' else 'a'} {kind_in} but OUTPUT {str(target)!r} is {'an' if kind_out == 'image' else 'a'} {kind_out} name")
+    if _same_file(source, target) or os.path.abspath(source) == os.path.abspath(target):
+        raise UsageError("OUTPUT must differ from INPUT (glradial never writes over its input)")
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
         raise FileNotFoundError(f"output folder {str(folder)!r} does not exist")
-    return kind_in, kind_out
+    if is_sequence(target):
+        if not args.overwrite and sequence_files(target):
+            raise FileExistsError(f"output files {str(target)!r} already exist (overwrite them with -y/--overwrite)")
+    else:
+        check_overwrite(target, args.overwrite)
+    return kind_in
 
 
 def run(args: argparse.Namespace) -> int:
     given = lens_given(args)
-    if args.auto and given:
-        raise UsageError("--auto cannot be combined with --k1/--k2/--cx/--cy/--pixel-aspect/--lens")
-    if not args.auto and not given:
-        raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect) or --lens FILE, or --auto to estimate it")
+    sources = [name for name, used in (("--k1/--k2/--cx/--cy/--pixel-aspect/--lens", given), ("--auto", args.auto),
+                                       ("--lens-track", args.lens_track)) if used]
+    if len(sources) > 1:
+        raise UsageError(f"{' and '.join(sources)} cannot be combined: give the lens one way")
+    if not sources:
+        raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect) or --lens FILE, --lens-track, "
+                         "or --auto to estimate it")
     if args.model is not None and not args.auto:
         raise UsageError("--model needs --auto")
-    if args.sidecar is not None and not args.auto:
-        raise UsageError("--sidecar needs --auto")
-    kind, _ = _check_paths(args)
+    for name in ("sidecar", "max_uncertainty"):
+        if getattr(args, name) is not None and not args.auto:
+            raise UsageError(f"--{name.replace('_', '-')} needs --auto")
+    if args.crf is not None and args.bitrate is not None:
+        raise UsageError("give --crf or --bitrate, not both")
+    kind = _check_paths(args)
     progress = show_progress(args)
     options = dict(fit=args.fit, interpolation=args.interpolation, backend=args.backend)
 
     if kind == "image":
         from ..remap import correct
-        from ..media_io import read_image, write_image
+        from ..image_io import read_image, write_image
 
-        if args.sidecar is not None:
-            raise UsageError("--sidecar is for videos")
+        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate"):
+            if getattr(args, name) is not None:
+                raise UsageError(f"--{name.replace('_', '-')} is for videos")
         from ..lens import Lens
 
         image = read_image(args.input, order="rgb")
@@ -107,30 +169,51 @@ def run(args: argparse.Namespace) -> int:
             lens = Lens(k1, k2)
         else:
             lens = lens_from_args(args, (image.shape[1], image.shape[0]))
-        write_image(args.output, correct(image, lens, **options), order="rgb")
+        write_image(args.output, correct(image, lens, **options), order="rgb", overwrite=args.overwrite)
         return 0
 
+    from ..video_io import EncodeOptions, VideoReader
     from ..video_pipeline import correct_video
 
-    if not args.auto:
-        from ..media_io import VideoReader
+    encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
+    from ..video_io import is_sequence
 
-        with VideoReader(args.input) as reader:
+    if args.rate is not None and not is_sequence(args.input):
+        raise UsageError("--rate is for image-sequence inputs (videos keep their own frame rate)")
+    video = dict(progress=progress, options=encode, overwrite=args.overwrite, rate=args.rate, **options)
+    if given:
+        with VideoReader(args.input, rate=args.rate) as reader:
             size = reader.info.size
         lens = lens_from_args(args, size)  # validated before any frame is decoded
-        correct_video(args.input, args.output, lambda _i: lens, progress=progress, **options)
+        correct_video(args.input, args.output, lambda _i: lens, **video)
         return 0
 
-    from ..video_pipeline import default_estimator, rgb8_for_estimator, track_video
+    if args.lens_track:
+        from ..lens_track import load_lens_track
+
+        with VideoReader(args.input, rate=args.rate) as reader:
+            info = reader.info
+        track = load_lens_track(args.lens_track, info.rate, info.size)
+        correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+        return 0
+
+    import sys
+
     from ..atomic import check_output_folder
+    from ..image_io import check_overwrite
+    from ..lens_track import DOUBTFUL_PX
+    from ..video_pipeline import default_estimator, doubtful_warnings, track_video
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
-    estimator = default_estimator(args.model)
-    track = track_video(args.input, lambda frame: estimator(rgb8_for_estimator(frame)), every=args.every,
-                        window_s=args.window, progress=progress)
-    correct_video(args.input, args.output, lambda i: tuple(track.lens[min(i, track.n_frames - 1)]),
-                  progress=progress, **options)
+    check_overwrite(sidecar, args.overwrite)
+    if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
+        raise UsageError("--sidecar must differ from INPUT and OUTPUT")
+    track = track_video(args.input, default_estimator(args.model), every=args.every, window_s=args.window,
+                        progress=progress, doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate)
+    for line in doubtful_warnings(track, args.input):
+        sys.stderr.write(line + "\n")
+    correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
     try:
         track.save(sidecar)
     except BaseException:
@@ -139,7 +222,9 @@ def run(args: argparse.Namespace) -> int:
     shots = track.per_shot()
     print(f"{args.input}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
-        print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}")
+        sure = f" uncertainty {shot['uncertainty_px']:.1f} px" if shot["uncertainty_px"] is not None else ""
+        flag = " DOUBTFUL" if shot["doubtful"] else ""
+        print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
     return 0
 
 
@@ -149,4 +234,3 @@ def _pair(value: object) -> tuple[float, float]:
         return float(k1), float(value.k2)  # type: ignore[attr-defined]
     a, b = value  # type: ignore[misc]
     return float(a), float(b)
-

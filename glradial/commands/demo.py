@@ -217,17 +217,29 @@ def _find_model(explicit: str | None) -> Path | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..crops import CropParams, render_crops
-    from ..lens import Lens, corner_radius, lens_to_pixels
-    from ..remap import correct
-    from ..stadium import stadium_panorama
-    from ..stadium_style import sample_style
-    from ..media_io import write_image
+    from ..progress import Progress
+    from . import show_progress
 
     if args.source == "real":
         from .demo_real import run_real
 
-        return run_real(args)
+        return run_real(args)  # about a second: no progress bar
+    bar = Progress(5, "demo", unit="steps", enabled=show_progress(args))
+    try:
+        return _run(args, bar)
+    finally:
+        bar.close()
+
+
+def _run(args: argparse.Namespace, bar) -> int:
+    """The demo's five steps (panorama, frame, estimate, correct, figure), one bar step each."""
+    from ..crops import CropParams, render_crops
+    from ..image_io import write_image
+    from ..lens import Lens, corner_radius, lens_to_pixels
+    from ..remap import correct
+    from ..stadium import stadium_panorama
+    from ..stadium_style import sample_style
+
     start = time.monotonic()
     size = args.size
     true_lens = Lens(args.k1, args.k2)
@@ -241,11 +253,13 @@ def run(args: argparse.Namespace) -> int:
     style = sample_style(args.seed)
     pano_size = (args.panorama_width, args.panorama_width // 2)
     panorama = stadium_panorama(args.seed, pano_size)
+    bar.update()
     log(f"stadium {args.seed}: {pano_size[0]}x{pano_size[1]} panorama, camera '{style.camera_kind}' at "
         f"({style.camera[0]:.0f}, {style.camera[1]:.0f}, {style.camera[2]:.0f}) m")
     pan, tilt = aim(style, tuple(args.target))
     params = CropParams(pan=pan, tilt=tilt, roll=0.7, hfov=args.hfov, k1=true_lens.k1, k2=true_lens.k2)
     frame = render_crops(panorama, [params], size=size)[0]
+    bar.update()
     log(f"frame {size[0]}x{size[1]}: pan {pan:.1f}°, tilt {tilt:.1f}°, roll 0.7°, hfov {args.hfov:g}°, "
         f"true k1={true_lens.k1:.4f} k2={true_lens.k2:.4f}")
 
@@ -266,7 +280,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"estimated k1={used[0]:+.4f} k2={used[1]:+.4f}")
         print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
 
+    bar.update()
     corrected = correct(frame, used[0], used[1], fit="same")
+    bar.update()
     used_lens = Lens(*used)
     chords, straight = [], []
     bow, residual = 0.0, 0.0
@@ -307,6 +323,7 @@ def run(args: argparse.Namespace) -> int:
     write_image(out / "distorted.png", frame)
     write_image(out / "corrected.png", corrected)
     write_image(out / "demo.png", figure)
+    bar.update()
     log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
     return 0
 

@@ -32,7 +32,7 @@ LINES_NAME = "usl_broadcast_0195.json"
 def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """The shipped real frame (H x W x 3 uint8 RGB) and its reference lines ``{name: 2 x 2 end
     points in pixels of that frame}``."""
-    from ..media_io import read_image
+    from ..image_io import read_image
 
     data = resources.files("glradial.data")
     frame = read_image(Path(str(data.joinpath(FRAME_NAME))))
@@ -56,7 +56,7 @@ def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, i
 def run_real(args: argparse.Namespace) -> int:
     """``glradial demo --source real``: see the module docstring."""
     from ..lens import Lens, corner_radius
-    from ..media_io import write_image
+    from ..image_io import write_image
     from ..metrics import max_displacement_px
     from ..remap import correct, distort
     from .demo import _distance_to_chord, _find_model, compose_figure

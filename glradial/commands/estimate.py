@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..media_io import media_kind, read_image
-from . import positive_int
+from ..image_io import media_kind, read_image
+from . import positive_int, show_progress
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT image with the bundled CNN (ONNX, onnxruntime). Each image
@@ -14,10 +14,12 @@ is read as RGB, treated as a whole 16:9 broadcast frame and resized with area in
 network input. Prints one line per image: the path, k1 and k2 (width-normalised: image width = 1,
 origin at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel), or with --json
 one JSON object per line {"path", "k1", "k2"}. Images of another aspect ratio are squashed to 16:9
-(a warning says so). Videos (by extension): shot cuts are detected, every --every-th frame of each
-shot is estimated and the estimates are smoothed within the shot as 'glradial correct --auto' does;
-prints one line per shot (first and last frame, median k1, k2), or per frame with --per-frame, or
-one JSON document per video with --json."""
+(a warning says so). Videos (anything FFmpeg reads that is not a still image; image sequences as
+frame_%04d.png): shot cuts are detected, every --every-th frame of each
+shot is estimated and the estimates are smoothed within the shot (weighted by the confidence each
+estimate states) as 'glradial correct --auto' does; prints one line per shot (first and last frame,
+median k1, k2, and where the estimator states them the uncertainty in px at 1920 wide, the methods
+and DOUBTFUL above 10 px), or per frame with --per-frame, or one JSON document per video with --json."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -44,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         if media_kind(path) == "video":
             from ..video_pipeline import estimate_video, track_report
 
-            track = estimate_video(path, model=args.model, every=args.every)
+            track = estimate_video(path, model=args.model, every=args.every, progress=show_progress(args))
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             continue
         lens = estimator.estimate(rgb8_for_estimator(read_image(path)))

@@ -36,7 +36,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..atomic import atomic_path, check_output_folder
-    from ..media_io import media_kind, write_image
+    from ..image_io import media_kind, write_image
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style, stadium_split
 
@@ -47,11 +47,16 @@ def run(args: argparse.Namespace) -> int:
         overrides["supersample"] = args.supersample
     if args.lighting is not None:
         overrides["lighting"] = args.lighting
+    from ..progress import Progress
+    from . import show_progress
+
     target = check_output_folder(args.out)
     npy = target.suffix.lower() == ".npy"
     if not npy and media_kind(target) != "image":  # checked before the render
         raise ValueError(f"--out {str(target)!r} has a video extension; write an image or .npy")
-    image = stadium_panorama(args.seed, tuple(args.size), **overrides)
+    with Progress(1, "stadium", unit="panoramas", enabled=show_progress(args)) as bar:
+        image = stadium_panorama(args.seed, tuple(args.size), **overrides)
+        bar.update()
     if npy:
         with atomic_path(target) as tmp:
             with open(tmp, "wb") as handle:

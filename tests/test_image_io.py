@@ -1,4 +1,4 @@
-"""glradial.media_io and glradial.atomic: bit depth, channel order, fps/size/frame count, atomic writes,
+"""glradial.image_io and glradial.atomic: bit depth, channel order, atomic writes, overwrite,
 clear errors on bad files."""
 
 from __future__ import annotations
@@ -11,14 +11,7 @@ import numpy as np
 import pytest
 
 from glradial.atomic import atomic_path, atomic_write_text
-from glradial.media_io import (
-    VideoReader,
-    VideoWriter,
-    media_kind,
-    probe_video,
-    read_image,
-    write_image,
-)
+from glradial.image_io import media_kind, read_image, write_image
 
 
 def _files(folder: Path) -> list[str]:
@@ -73,68 +66,15 @@ def test_image_errors_are_clear_and_leave_nothing(tmp_path):
     (tmp_path / "bad.png").write_bytes(b"not a png at all")
     with pytest.raises(ValueError, match="cannot decode image"):
         read_image(tmp_path / "bad.png")
-    with pytest.raises(ValueError, match="unknown file extension '.xyz'"):
-        media_kind(tmp_path / "a.xyz")
+    # a still image by its extension, everything else (any FFmpeg format, image sequences) a video
+    assert [media_kind(name) for name in ("a.PNG", "a.xyz", "a.mxf", "f_%04d.png")] == ["image", "video", "video", "video"]
+    with pytest.raises(ValueError, match="not a still-image name"):
+        write_image(tmp_path / "a.mp4", np.zeros((4, 4, 3), np.uint8))
     with pytest.raises(ValueError, match=r"\.jpg cannot store uint16"):
         write_image(tmp_path / "deep.jpg", np.zeros((4, 4, 3), np.uint16))
     with pytest.raises(FileNotFoundError, match="output folder"):
         write_image(tmp_path / "no" / "such.png", np.zeros((4, 4, 3), np.uint8))
     assert _files(tmp_path) == ["bad.png"]
-
-
-def _synthetic_video(path: Path, n: int = 30, size=(160, 90), fps: float = 12.5) -> np.ndarray:
-    """A moving gradient + square; returns the frames written (RGB)."""
-    width, height = size
-    yy, xx = np.mgrid[0:height, 0:width]
-    frames = []
-    with VideoWriter(path, size, fps) as writer:
-        for i in range(n):
-            frame = np.stack([(xx * 255 // width), (yy * 255 // height), np.full_like(xx, 40)], -1).astype(np.uint8)
-            frame[30:60, 10 + 3 * i : 40 + 3 * i] = (250, 250, 250)
-            writer.write(frame)
-            frames.append(frame)
-    return np.array(frames)
-
-
-@pytest.mark.parametrize("ext", [".mp4", ".avi", ".mkv"])
-def test_video_round_trip_keeps_count_fps_size(tmp_path, ext):
-    path = tmp_path / f"v{ext}"
-    frames = _synthetic_video(path)
-    info = probe_video(path)
-    assert info.size == (160, 90)
-    assert info.frame_count == 30
-    assert info.fps == pytest.approx(12.5, rel=1e-3)
-    with VideoReader(path) as reader:
-        back = np.array(list(reader))
-    # lossy codecs: mean error of a few grey levels (mp4v/MJPG at default quality); FFV1 is lossless
-    error = np.abs(back.astype(int) - frames.astype(int)).mean()
-    assert error < (0.01 if ext == ".mkv" else 6.0), error
-    # channel order kept: the red channel carries the horizontal gradient
-    assert np.corrcoef(back[0, 80, :, 0], np.arange(160))[0, 1] > 0.99
-    assert _files(tmp_path) == [f"v{ext}"]  # no temporary file left
-
-
-def test_video_writer_abort_leaves_nothing(tmp_path):
-    path = tmp_path / "out.mp4"
-    with pytest.raises(KeyboardInterrupt):
-        with VideoWriter(path, (32, 18), 25) as writer:
-            writer.write(np.zeros((18, 32, 3), np.uint8))
-            raise KeyboardInterrupt
-    assert _files(tmp_path) == []
-    with pytest.raises(ValueError, match="18×32×3 uint8"):
-        with VideoWriter(path, (32, 18), 25) as writer:
-            writer.write(np.zeros((18, 30, 3), np.uint8))
-    assert _files(tmp_path) == []
-
-
-def test_corrupt_and_missing_videos(tmp_path):
-    (tmp_path / "broken.mp4").write_bytes(os.urandom(2000))
-    with pytest.raises(ValueError, match="cannot read video"):
-        VideoReader(tmp_path / "broken.mp4")
-    with pytest.raises(FileNotFoundError, match="nope.mp4"):
-        VideoReader(tmp_path / "nope.mp4")
-    with pytest.raises(ValueError, match="image extension"):
-        VideoWriter(tmp_path / "x.png", (32, 18), 25)
 
 
 def test_atomic_helpers(tmp_path):
@@ -149,6 +89,15 @@ def test_atomic_helpers(tmp_path):
         with atomic_path(tmp_path / "empty.txt"):
             pass
     assert _files(tmp_path) == ["t.txt"]
+
+
+def test_overwrite_is_refused_unless_asked(tmp_path):
+    write_image(tmp_path / "a.png", np.zeros((4, 4, 3), np.uint8))
+    with pytest.raises(FileExistsError, match="a.png' already exists"):
+        write_image(tmp_path / "a.png", np.ones((4, 4, 3), np.uint8), overwrite=False)
+    assert read_image(tmp_path / "a.png").max() == 0 and _files(tmp_path) == ["a.png"]
+    write_image(tmp_path / "a.png", np.ones((4, 4, 3), np.uint8), overwrite=True)
+    assert read_image(tmp_path / "a.png").max() == 1
 
 
 def test_outputs_get_ordinary_permissions(tmp_path):

@@ -1,0 +1,190 @@
+"""Video throughput of ``glradial correct`` against FFmpeg transcoding the same clip, in one run.
+
+Makes one clip in a temporary folder (``--size``, ``--frames`` at 25 fps, H.264 crf 18 + AAC tone):
+``--clip pan`` (default) a broadcast camera panning across a real USL match frame
+(/work/shared/data/real_football, or ``--frame``) through a constant lens (k1 -0.2, k2 0.03), the
+common case; ``--clip zoom`` the same frame zooming in (hfov -25 %) while the lens goes from
+k1 -0.30 to -0.18, so the smoothed lens, and the maps, change on every frame. Then it times, each ``--repeats`` times taking turns (so that load
+from other processes on a shared machine falls on all alike), keeping the best run of each:
+
+* ``ffmpeg``       the ffmpeg command transcoding the clip with the same codec settings and no
+                   filter (``-c:v libx264 -crf C -preset P -c:a copy``)
+* ``pyav``         the same transcode in this process through PyAV (decode + encode, no RGB)
+* ``fixed lens``   :func:`glradial.video_pipeline.correct_video` with one lens (k1 -0.25, k2 0.05)
+* ``--auto``       pass 1 (:func:`~glradial.video_pipeline.track_video` with the bundled
+                   estimator, every 5th frame) + pass 2 with the per-frame smoothed lens
+
+and prints frames per second and the ratios the issue sets targets for: fixed lens / ffmpeg
+(>= 0.6) and --auto / fixed lens (>= 0.8). First it times the maps of a new lens at the clip's
+size: ``Lens.maps`` (float32, OpenCV) against the float64 NumPy reference, and the CPU path's whole
+``cpu_maps`` (maps + fixed-point conversion + source-less pixels), each a new lens every call.
+
+Run: ``python3 bench/bench_video.py [--size 1920x1080] [--frames 150] [--preset medium] [--crf 23]
+[--backend auto] [--repeats 2]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import av
+
+from glradial.video_io import EncodeOptions
+from glradial.video_pipeline import correct_video, default_estimator, track_video
+
+K1, K2 = -0.25, 0.05
+
+
+DEFAULT_FRAME = Path("/work/shared/data/real_football/usl_broadcast_0195.jpg")
+
+
+def make_clip(path: Path, size: tuple[int, int], frames: int, kind: str, source: Path) -> None:
+    """Render the clip's frames (crop of the real frame, resized, distorted) into H.264, then mux
+    a 440 Hz AAC tone with the ffmpeg command."""
+    import cv2
+    import numpy as np
+
+    import glradial
+    from glradial.image_io import read_image
+    from glradial.video_io import VideoInfo, VideoWriter
+
+    picture = read_image(source)
+    height, width = picture.shape[:2]
+    video = path.with_name("video_only.mp4")
+    with VideoWriter(video, VideoInfo.of(size, 25, codec="libx264"), options=EncodeOptions(crf=18), overwrite=True) as writer:
+        for i in range(frames):
+            t = i / max(frames - 1, 1)
+            if kind == "pan":
+                crop_w, k1 = int(width * 0.8), -0.2
+                x0 = int(t * (width - crop_w))
+            else:
+                crop_w, k1 = int(width * (0.9 - 0.25 * t)), -0.30 + 0.12 * t
+                x0 = (width - crop_w) // 2
+            crop_h = crop_w * size[1] // size[0]
+            y0 = (height - crop_h) // 2
+            frame = cv2.resize(picture[y0 : y0 + crop_h, x0 : x0 + crop_w], size, interpolation=cv2.INTER_CUBIC)
+            writer.write(glradial.distort(frame, k1, 0.019 * k1 + 0.805 * k1 * k1, backend="cpu"))
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(video), "-f", "lavfi", "-i", "sine=frequency=440:sample_rate=48000",
+                    "-c:v", "copy", "-c:a", "aac", "-shortest", str(path)], check=True)
+
+
+def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
+    with av.open(str(source)) as inp, av.open(str(target), "w") as out:
+        vin = inp.streams.video[0]
+        vin.thread_type = "AUTO"
+        ain = inp.streams.audio[0]
+        vout = out.add_stream("libx264", rate=vin.average_rate)
+        vout.width, vout.height, vout.pix_fmt = vin.codec_context.width, vin.codec_context.height, "yuv420p"
+        vout.time_base = vin.time_base
+        vout.codec_context.time_base = vin.time_base
+        vout.codec_context.options = {"crf": f"{crf:g}", "preset": preset}
+        aout = out.add_stream_from_template(ain)
+        for packet in inp.demux(vin, ain):
+            if packet.stream is ain:
+                if packet.dts is not None:
+                    packet.stream = aout
+                    out.mux(packet)
+                continue
+            for frame in packet.decode():
+                frame.pict_type = av.video.frame.PictureType.NONE
+                out.mux(vout.encode(frame))
+        out.mux(vout.encode(None))
+
+
+def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
+    """Median ms per call of each way to build the maps of a lens never seen before."""
+    import numpy as np
+
+    from glradial.lens import Lens
+    from glradial.remap import cpu_maps
+
+    ways = {
+        "Lens.maps (float32)": lambda lens: lens.maps(size),
+        "Lens.maps (float64 reference)": lambda lens: lens.maps(size, dtype=np.float64),
+        "cpu_maps (all of it)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False),
+    }
+    times: dict[str, list[float]] = {name: [] for name in ways}
+    for i in range(calls):
+        for name, build in ways.items():
+            lens = Lens(K1 + 1e-7 * (i + 1) * (1 + len(times[name])), K2)
+            start = time.perf_counter()
+            build(lens)
+            times[name].append(1e3 * (time.perf_counter() - start))
+    return {name: float(np.median(values)) for name, values in times.items()}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--size", default="1920x1080")
+    parser.add_argument("--clip", choices=("pan", "zoom"), default="pan")
+    parser.add_argument("--frame", type=Path, default=DEFAULT_FRAME, help="picture the clip is made from")
+    parser.add_argument("--frames", type=int, default=150)
+    parser.add_argument("--preset", default="medium")
+    parser.add_argument("--crf", type=float, default=23.0)
+    parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "gl"))
+    parser.add_argument("--repeats", type=int, default=2)
+    args = parser.parse_args()
+    if shutil.which("ffmpeg") is None:
+        sys.exit("bench_video needs the ffmpeg command (make setup installs it)")
+    size = tuple(int(v) for v in args.size.split("x"))
+    for name, ms in map_times(size).items():
+        print(f"new-lens maps at {args.size}: {name:30s} {ms:6.1f} ms")
+    options = EncodeOptions(codec="libx264", crf=args.crf, preset=args.preset)
+    estimator = default_estimator()
+    with tempfile.TemporaryDirectory() as folder:
+        tmp = Path(folder)
+        clip = tmp / "clip.mp4"
+        make_clip(clip, size, args.frames, args.clip, args.frame)
+
+        def ffmpeg() -> None:
+            subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-c:v", "libx264", "-crf", f"{args.crf:g}",
+                            "-preset", args.preset, "-pix_fmt", "yuv420p", "-c:a", "copy", str(tmp / "ffmpeg.mp4")], check=True)
+
+        def pyav() -> None:
+            pyav_transcode(clip, tmp / "pyav.mp4", args.crf, args.preset)
+
+        def fixed() -> None:
+            correct_video(clip, tmp / "fixed.mp4", lambda _i: (K1, K2), backend=args.backend, progress=False,
+                          options=options, overwrite=True)
+
+        passes: dict[str, float] = {"pass 1": float("inf"), "pass 2": float("inf")}
+
+        def auto() -> None:
+            start = time.perf_counter()
+            track = track_video(clip, estimator, every=5, progress=False)
+            middle = time.perf_counter()
+            correct_video(clip, tmp / "auto.mp4", track.lens_at, backend=args.backend, progress=False,
+                          options=options, overwrite=True, frames_expected=track.n_frames)
+            passes["pass 1"] = min(passes["pass 1"], middle - start)
+            passes["pass 2"] = min(passes["pass 2"], time.perf_counter() - middle)
+
+        paths = {"ffmpeg": ffmpeg, "pyav": pyav, "fixed lens": fixed, "--auto": auto}
+        best = {name: float("inf") for name in paths}
+        for _ in range(args.repeats):
+            for name, run in paths.items():
+                start = time.perf_counter()
+                run()
+                best[name] = min(best[name], time.perf_counter() - start)
+    fps = {name: args.frames / seconds for name, seconds in best.items()}
+    print(f"clip: {args.clip} over {args.frame.name}, {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
+          f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}")
+    for name, value in fps.items():
+        print(f"  {name:12s} {value:6.1f} frames/s")
+    print(f"  --auto pass 1 (decode, cuts, estimates, smoothing) {1e3 * passes['pass 1'] / args.frames:.1f} ms/frame, "
+          f"pass 2 (correct + encode) {1e3 * passes['pass 2'] / args.frames:.1f} ms/frame; fixed lens "
+          f"{1e3 * best['fixed lens'] / args.frames:.1f} ms/frame")
+    print(f"fixed lens / ffmpeg : {fps['fixed lens'] / fps['ffmpeg']:.2f}  (target >= 0.6)")
+    print(f"fixed lens / pyav   : {fps['fixed lens'] / fps['pyav']:.2f}")
+    print(f"--auto / fixed lens : {fps['--auto'] / fps['fixed lens']:.2f}  (target >= 0.8)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
