@@ -79,12 +79,14 @@ class Chain:
 @dataclass(frozen=True)
 class LineEvidence:
     """Chains found in one frame: ``size`` is the frame ``(W, H)``, ``width`` the detection width
-    (px), ``overlays`` the number of chains dropped as broadcast graphics."""
+    (px), ``overlays`` the number of chains dropped as broadcast graphics, ``edge_density`` the
+    share of unmasked pixels that are Canny edges (high for noise, near 0 for a blank frame)."""
 
     chains: list[Chain]
     size: tuple[int, int]
     width: int
     overlays: int = 0
+    edge_density: float = 0.0
 
 
 def gray_copy(frame: np.ndarray, max_width: int = DETECT_WIDTH) -> np.ndarray:
@@ -164,6 +166,7 @@ def _edge_points(g, gx, gy, valid):
     """Sub-pixel step-edge points ``(x, y, direction)`` (direction of the gradient in [0, 2 pi))."""
     edges = cv2.Canny(np.clip(g, 0, 255).astype(np.uint8), CANNY_LOW, CANNY_HIGH, L2gradient=True)
     ys, xs = np.nonzero((edges > 0) & valid)
+    density = len(xs) / max(int(valid.sum()), 1)
     ex, ey = gx[ys, xs], gy[ys, xs]
     mag = np.hypot(ex, ey)
     ok = mag > 1e-6
@@ -176,7 +179,7 @@ def _edge_points(g, gx, gy, valid):
     offset = np.where(denom < -1e-6, 0.5 * (before - after) / np.where(denom < -1e-6, denom, -1.0), 0.0)
     offset = np.clip(offset, -0.5, 0.5)
     direction = np.mod(np.arctan2(dy, dx), 2.0 * np.pi)
-    return xs + offset * dx, ys + offset * dy, direction, ys, xs
+    return xs + offset * dx, ys + offset * dy, direction, ys, xs, density
 
 
 class _Pieces:
@@ -302,7 +305,7 @@ def detect_chains(frame: np.ndarray) -> LineEvidence:
     ridge_mask = np.zeros((height, width), np.uint8)
     ridge_mask[riy, rix] = 1
     near_ridge = cv2.dilate(ridge_mask, np.ones((5, 5), np.uint8)) > 0
-    ex, ey, edir, eiy, eix = _edge_points(g, gx, gy, valid & ~near_ridge)
+    ex, ey, edir, eiy, eix, density = _edge_points(g, gx, gy, valid & ~near_ridge)
     chains: list[Chain] = []
     overlays = 0
     for kind, (xs, ys, ang, iy, ix), bins, period in (
@@ -330,4 +333,4 @@ def detect_chains(frame: np.ndarray) -> LineEvidence:
             scale = width_full / width
             full = (pts[order] + 0.5) * np.array([scale, height_full / height]) - 0.5
             chains.append(Chain(pixels_to_lens(full, (width_full, height_full)), kind, length))
-    return LineEvidence(chains, (width_full, height_full), width, overlays)
+    return LineEvidence(chains, (width_full, height_full), width, overlays, density)
