@@ -53,7 +53,7 @@ K1_STEP = 0.025
 #: Points per chain after averaging consecutive points in groups.
 MAX_CHAIN_POINTS = 32
 #: Per-point localisation noise and per-chain error floor (px of the detection copy).
-SIGMA_POINT, SIGMA_FLOOR = 0.25, 0.12
+SIGMA_POINT, SIGMA_FLOOR = 0.25, 0.08
 #: Robust loss scale (chi² units) of one chain.
 ROBUST_T = 9.0
 #: Loose prior of k2 around the manifold, and of k1 around the CNN (lens units).
@@ -62,6 +62,8 @@ K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.05, 0.3
 STRAIGHT_RMS, INFORMATIVE_RMS = 0.6, 1.0
 #: A chain whose residual at the fitted lens exceeds this many floors is reported as not used.
 USED_CHI = 3.0
+#: After the first fit, chains above this many times the median chain residual (chi) are dropped.
+OUTLIER_CHI = 3.0
 #: Points farther than this (px, and 3 robust sigmas) from their chain's line at the coarse lens are dropped.
 TRIM_PX = 1.0
 
@@ -207,32 +209,8 @@ def _displacement_sigma(cov: np.ndarray) -> float:
     return float(np.sqrt(max(float(var.max()), 0.0)))
 
 
-def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) -> LineFit:
-    """Fit ``(k1, k2)`` to the chains of ``evidence`` (see the module docstring).
-
-    ``prior``: the CNN's ``(k1, k2)`` (only k1 is used, as a weak prior). Returns a :class:`LineFit`
-    with ``ok=False`` (and the prior, or ``(0, 0)``, as the lens) when no chain passes screening.
-    """
-    fallback = prior if prior is not None else (0.0, 0.0)
-    prior_k1 = float(prior[0]) if prior is not None else None
-    points, chain, counts = _compact(evidence)
-    problem = _Problem(points, chain, counts, evidence.width)
-    if problem.n == 0:
-        return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, 0, False)
-    grid = np.arange(K1_RANGE[0], K1_RANGE[1] + 1e-9, K1_STEP)
-    mse = problem.chain_mse(grid, manifold_k2(grid))  # (L, C)
-    best = np.min(mse, axis=0)
-    worst = np.max(np.where(np.isfinite(mse), mse, 0.0), axis=0)
-    keep = (best <= STRAIGHT_RMS**2) & (worst >= INFORMATIVE_RMS**2)
-    if not keep.any():
-        return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, 0, False)
-    problem = problem.subset(keep)
-    candidates = problem.n
-    cost = _cost(problem, grid, manifold_k2(grid), prior_k1)
-    k1 = float(grid[int(np.argmin(cost))])
-    k2 = float(manifold_k2(k1))
-    problem = _trim(problem, k1, k2)
-    # Newton steps on a quadratic fitted to a 3 x 3 stencil of the cost
+def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None) -> tuple[float, float, np.ndarray | None]:
+    """Newton steps on a quadratic fitted to a 3 x 3 stencil of the cost -> (k1, k2, Hessian)."""
     h1, h2 = 0.02, 0.02
     hessian = None
     for _ in range(6):
@@ -266,6 +244,42 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
             h1, h2 = max(h1 / 2, 0.004), max(h2 / 2, 0.004)
             if not accepted:
                 break
+    return k1, k2, hessian
+
+
+def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) -> LineFit:
+    """Fit ``(k1, k2)`` to the chains of ``evidence`` (see the module docstring).
+
+    ``prior``: the CNN's ``(k1, k2)`` (only k1 is used, as a weak prior). Returns a :class:`LineFit`
+    with ``ok=False`` (and the prior, or ``(0, 0)``, as the lens) when no chain passes screening.
+    """
+    fallback = prior if prior is not None else (0.0, 0.0)
+    prior_k1 = float(prior[0]) if prior is not None else None
+    points, chain, counts = _compact(evidence)
+    problem = _Problem(points, chain, counts, evidence.width)
+    if problem.n == 0:
+        return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, 0, False)
+    grid = np.arange(K1_RANGE[0], K1_RANGE[1] + 1e-9, K1_STEP)
+    mse = problem.chain_mse(grid, manifold_k2(grid))  # (L, C)
+    best = np.min(mse, axis=0)
+    worst = np.max(np.where(np.isfinite(mse), mse, 0.0), axis=0)
+    keep = (best <= STRAIGHT_RMS**2) & (worst >= INFORMATIVE_RMS**2)
+    if not keep.any():
+        return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, 0, False)
+    problem = problem.subset(keep)
+    candidates = problem.n
+    cost = _cost(problem, grid, manifold_k2(grid), prior_k1)
+    k1 = float(grid[int(np.argmin(cost))])
+    k2 = float(manifold_k2(k1))
+    problem = _trim(problem, k1, k2)
+    k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
+    # drop the chains the fitted lens does not straighten (arcs that passed screening, mis-linked
+    # chains) and fit again with the rest
+    chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
+    inliers = chi <= OUTLIER_CHI**2 * max(1.0, float(np.median(chi)))
+    if 0 < inliers.sum() < problem.n:
+        problem = problem.subset(inliers)
+        k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
     chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
     used = int(np.sum(chi <= USED_CHI**2 * np.maximum(1.0, 1.0)))
     sigma = math.inf

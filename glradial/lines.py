@@ -53,9 +53,9 @@ MIN_PIECE_POINTS = 8
 #: and perpendicular offset (px, plus a share of the gap) of one piece's ends from the other's line.
 LINK_GAP, LINK_ANGLE, LINK_OFFSET, LINK_OFFSET_PER_GAP = 80.0, 6.0, 1.5, 0.02
 #: Chains shorter than this (px of the detection copy, along their direction) are dropped.
-MIN_CHAIN_LENGTH = 40.0
+MIN_CHAIN_LENGTH = 60.0
 #: Graphics test: a chain whose points all lie within this many px of one row (or column)...
-OVERLAY_FLATNESS = 0.35
+OVERLAY_FLATNESS = 0.5
 #: ...and which lies at least this share of the frame height (width) from the centre row (column).
 OVERLAY_OFF_CENTRE = 0.12
 #: A uniform border row/column (letterbox): standard deviation below this (grey levels).
@@ -281,12 +281,14 @@ def _link(p: _Pieces, signed: bool) -> list[list[int]]:
 
 
 def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
-    """Pixel-straight, axis-aligned and off the centre row/column: broadcast graphics."""
+    """Pixel-straight, axis-aligned and off the centre row/column: broadcast graphics. Flatness is
+    the 2-98 percentile range across the axis, so a corner or a crossing line at an end does not
+    hide a graphics edge."""
     height, width = shape
-    if np.ptp(y) <= 2 * OVERLAY_FLATNESS and abs(y.mean() - (height - 1) / 2) > OVERLAY_OFF_CENTRE * height:
-        return True
-    if np.ptp(x) <= 2 * OVERLAY_FLATNESS and abs(x.mean() - (width - 1) / 2) > OVERLAY_OFF_CENTRE * width:
-        return True
+    for across, centre, extent in ((y, (height - 1) / 2, height), (x, (width - 1) / 2, width)):
+        lo, hi = np.percentile(across, [2, 98])
+        if hi - lo <= 2 * OVERLAY_FLATNESS and abs(np.median(across) - centre) > OVERLAY_OFF_CENTRE * extent:
+            return True
     return False
 
 

@@ -27,11 +27,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--split", choices=("test", "val"), default="test",
                         help="stadium split: test (reported figures, default) or val (choosing between checkpoints)")
     parser.add_argument("--threads", type=positive_int, help="onnxruntime threads (default: all cores)")
+    parser.add_argument("--frames", metavar="DIR", help="instead: evaluate net, lines and auto on the (nearly) undistorted "
+                        "real frames of DIR with known lenses applied (glradial.real_eval; writes real.md to --out)")
+    parser.add_argument("--calibrated", metavar="JSON", action="append", default=[],
+                        help="with --frames: also a calibrated camera (frames + known lens; see glradial.real_eval)")
+    parser.add_argument("--procedural", type=int, default=0, metavar="N",
+                        help="with --frames: also N held-out procedural stadium crops (default 0)")
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
     from ..estimator import default_model_path
+
+    if args.frames or args.calibrated:
+        from ..real_eval import evaluate_folder
+
+        evaluate_folder(args.frames, args.out, calibrated=args.calibrated, procedural=args.procedural,
+                        model=args.model, threads=args.threads)
+        print(f"wrote {args.out}/real.md", flush=True)
+        return 0
 
     try:
         from ..net.evaluate import main
