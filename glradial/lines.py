@@ -130,13 +130,12 @@ def _derivatives(g: np.ndarray) -> tuple[np.ndarray, ...]:
 
 def _ridge_points(gx, gy, gxx, gyy, gxy, valid):
     """Sub-pixel centres of bright ridges: ``(x, y, angle)`` arrays (angle of the line in [0, pi))."""
-    half_diff = 0.5 * (gxx - gyy)
-    root = np.sqrt(half_diff * half_diff + gxy * gxy)
-    lam = 0.5 * (gxx + gyy) - root  # most negative eigenvalue
-    other = 0.5 * (gxx + gyy) + root
-    cand = valid & (lam < -RIDGE_MIN_CURVATURE) & (other > 0.5 * lam)
-    ys, xs = np.nonzero(cand)
+    root = cv2.magnitude(cv2.subtract(gxx, gyy) * 0.5, gxy)
+    lam = cv2.subtract(cv2.add(gxx, gyy) * 0.5, root)  # most negative eigenvalue
+    ys, xs = np.nonzero((lam < -RIDGE_MIN_CURVATURE) & valid)
     l1, a, b, c = lam[ys, xs], gxx[ys, xs], gyy[ys, xs], gxy[ys, xs]
+    line_like = (a + b - l1) > 0.5 * l1  # the other eigenvalue is not as negative (not a blob)
+    ys, xs, l1, a, b, c = ys[line_like], xs[line_like], l1[line_like], a[line_like], b[line_like], c[line_like]
     # eigenvector of lam: (c, lam - a) or (lam - b, c), whichever is longer (numerically stable)
     v1x, v1y, v2x, v2y = c, l1 - a, l1 - b, c
     use1 = v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y
