@@ -55,15 +55,15 @@ MAX_CHAIN_POINTS = 32
 #: Per-point localisation noise and per-chain error floor (px of the detection copy).
 SIGMA_POINT, SIGMA_FLOOR = 0.25, 0.08
 #: Robust loss scale (chi² units) of one chain.
-ROBUST_T = 9.0
+ROBUST_T = 3.0
 #: Loose prior of k2 around the manifold, and of k1 around the CNN (lens units).
 K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.05, 0.3
 #: Screening thresholds (px RMS of the detection copy).
-STRAIGHT_RMS, INFORMATIVE_RMS = 0.6, 1.0
+STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 1.0
 #: A chain whose residual at the fitted lens exceeds this many floors is reported as not used.
 USED_CHI = 3.0
 #: After the first fit, chains above this many times the median chain residual (chi) are dropped.
-OUTLIER_CHI = 3.0
+OUTLIER_CHI = 2.0
 #: Points farther than this (px, and 3 robust sigmas) from their chain's line at the coarse lens are dropped.
 TRIM_PX = 1.0
 

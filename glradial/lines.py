@@ -314,7 +314,7 @@ def detect_chains(frame: np.ndarray) -> LineEvidence:
         ("edge", (ex, ey, edir, eiy, eix), EDGE_BINS, 2 * np.pi),
     ):
         pieces = _Pieces(xs, ys, ang, iy, ix, bins, period, (height, width))
-        for group in _link(pieces, signed=kind == "edge"):
+        for group in _link(pieces, signed=False):  # an edge may change polarity along a line (boards, chessboards)
             if float(np.sum(pieces.hi[group] - pieces.lo[group])) < 0.5 * MIN_CHAIN_LENGTH:
                 continue
             idx = np.concatenate([pieces.members[k] for k in group])
