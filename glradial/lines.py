@@ -291,10 +291,11 @@ def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
     return False
 
 
-def detect_chains(frame: np.ndarray) -> LineEvidence:
-    """Find the chains of a uint8 RGB/gray frame (see the module docstring)."""
+def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH) -> LineEvidence:
+    """Find the chains of a uint8 RGB/gray frame (see the module docstring), detecting on a copy at
+    most ``max_width`` pixels wide."""
     height_full, width_full = frame.shape[:2]
-    gray = gray_copy(frame)
+    gray = gray_copy(frame, max_width)
     height, width = gray.shape
     g = cv2.GaussianBlur(gray, (0, 0), SMOOTH_SIGMA)
     gx, gy, gxx, gyy, gxy = _derivatives(g)

@@ -10,7 +10,8 @@ Sources (each reported separately):
       ``NAME/paper``) and from the extended range (``NAME/extended``: k1 in [-1.0, 0.4], k2 on or
       above the manifold by ``|N(0, 0.05)|``, as real wide pitch cameras are).
     * **Real panoramas** (2:1 images in the folder): crops rendered by :class:`glradial.CropRenderer`
-      with known :class:`glradial.CropParams`, paper and extended lenses.
+      with known :class:`glradial.CropParams`, paper and extended lenses (poses: pan as the paper,
+      tilt :data:`PANORAMA_TILT`, field of view :data:`PANORAMA_HFOV`).
     * **Calibrated cameras** (``--calibrated FILE.json``): frames with a lens measured independently,
       ``{"name": ..., "frames": [paths], "k1": ..., "k2": ...}`` or OpenCV's ``"camera_matrix"``,
       ``"dist_coeffs"`` and ``"size"`` instead of k1, k2 (converted with
@@ -41,6 +42,11 @@ METHOD_NAMES = ("net", "lines", "auto")
 #: Extended range of real lenses: k1 bounds, and the spread of k2 above the manifold.
 EXTENDED_K1 = (-1.0, 0.4)
 EXTENDED_K2_SPREAD = 0.05
+#: Poses of crops from a real panorama: its camera stands at pitch level (stadium_01), so the view is
+#: tilted about the horizon to show the boards and stands (the paper's downward tilt shows only
+#: grass there), and a 1024-wide panorama has too few pixels for fields of view under 45 degrees.
+PANORAMA_TILT = (-10.0, 10.0)
+PANORAMA_HFOV = (45.0, 60.0)
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 
 
@@ -167,7 +173,7 @@ def _distorted(frame: np.ndarray, lenses: Iterable[tuple[float, float]]):
 def _panorama_crops(panorama: np.ndarray, lenses: list[tuple[float, float]], seed: int):
     from .crops import CropParams, CropRenderer, sample_crop_params
 
-    poses = sample_crop_params(len(lenses), seed, hfov=(30.0, 60.0))
+    poses = sample_crop_params(len(lenses), seed, hfov=PANORAMA_HFOV, tilt=PANORAMA_TILT)
     params = [CropParams(p.pan, p.tilt, p.roll, p.hfov, k1, k2) for p, (k1, k2) in zip(poses, lenses)]
     with CropRenderer(panorama, size=PAPER_SIZE, supersample=2) as renderer:
         frames = renderer.render(params)[..., :3]
