@@ -92,26 +92,19 @@ def lines_uncertainty(sigma_px: float) -> float:
     return LINES_UNCERTAINTY_SCALE * sigma_px + LINES_UNCERTAINTY_FLOOR_PX
 
 
-def net_estimate(k1: float, k2: float, frame: np.ndarray | None = None, evidence: object = None) -> LensEstimate:
+def net_estimate(k1: float, k2: float, frame: np.ndarray | None = None, edge_density: float | None = None) -> LensEstimate:
     """The CNN's answer with its calibrated bound, or :data:`NO_EVIDENCE_UNCERTAINTY_PX` when the
-    frame is blank or noise (``frame``: the uint8 frame; ``evidence``: its
-    :class:`glradial.lines.LineEvidence` when already computed)."""
+    uint8 ``frame`` is blank, or is noise: ``edge_density`` (of its
+    :class:`glradial.lines.LineEvidence`, when the frame gave no line fit) above
+    :data:`NOISE_EDGE_DENSITY`."""
     uncertainty = NET_UNCERTAINTY_PX
-    if frame is not None and _no_structure(frame, evidence):
-        uncertainty = NO_EVIDENCE_UNCERTAINTY_PX
+    if frame is not None:
+        from .lines import gray_copy
+
+        blank = float(gray_copy(frame, 320).std()) < BLANK_STD
+        if blank or (edge_density is not None and edge_density > NOISE_EDGE_DENSITY):
+            uncertainty = NO_EVIDENCE_UNCERTAINTY_PX
     return LensEstimate(float(k1), float(k2), uncertainty, "net", 0)
-
-
-def _no_structure(frame: np.ndarray, evidence: object) -> bool:
-    from .lines import gray_copy
-
-    gray = gray_copy(frame, 320)
-    if float(gray.std()) < BLANK_STD:
-        return True
-    if evidence is not None and getattr(evidence, "chains", None):
-        return False
-    density = getattr(evidence, "edge_density", None)
-    return density is not None and density > NOISE_EDGE_DENSITY
 
 
 def line_candidates(frame: np.ndarray, net: tuple[float, float]) -> tuple[LensEstimate, LensEstimate | None]:
@@ -121,10 +114,10 @@ def line_candidates(frame: np.ndarray, net: tuple[float, float]) -> tuple[LensEs
     from .lines import detect_chains
 
     evidence = detect_chains(frame)
-    fallback = net_estimate(net[0], net[1], frame, evidence)
     fit = fit_lines(evidence, prior=net)
     if not fit.ok or not (math.isfinite(fit.k1) and math.isfinite(fit.k2) and math.isfinite(fit.sigma_px)):
-        return fallback, None
+        return net_estimate(net[0], net[1], frame, evidence.edge_density), None
+    fallback = net_estimate(net[0], net[1], frame)
     return fallback, LensEstimate(fit.k1, fit.k2, lines_uncertainty(fit.sigma_px), "lines", fit.chains)
 
 

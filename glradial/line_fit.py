@@ -161,16 +161,18 @@ class _Problem:
         lam[np.isnan(lam)] = np.inf
         return lam
 
-    def chi2(self, k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
-        """Per lens and chain ``n_c e_c / (SIGMA_POINT² + n_c SIGMA_FLOOR²)`` -> (L, C)."""
-        e = self.chain_mse(k1, k2)
+    def chi2(self, k1: np.ndarray, k2: np.ndarray, mse: np.ndarray | None = None) -> np.ndarray:
+        """Per lens and chain ``n_c e_c / (SIGMA_POINT² + n_c SIGMA_FLOOR²)`` -> (L, C) (``mse``:
+        :meth:`chain_mse` of these lenses when already computed)."""
+        e = self.chain_mse(k1, k2) if mse is None else mse
         return self.counts * e / (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2)
 
 
-def _cost(problem: _Problem, k1: np.ndarray, k2: np.ndarray, prior_k1: float | None) -> np.ndarray:
+def _cost(problem: _Problem, k1: np.ndarray, k2: np.ndarray, prior_k1: float | None,
+          mse: np.ndarray | None = None) -> np.ndarray:
     k1 = np.asarray(k1, np.float64)
     k2 = np.asarray(k2, np.float64)
-    chi = problem.chi2(k1, k2)
+    chi = problem.chi2(k1, k2, mse)
     total = (ROBUST_T * np.log1p(chi / ROBUST_T)).sum(axis=1)
     total = total + ((k2 - manifold_k2(k1)) / K2_PRIOR_SIGMA) ** 2
     if prior_k1 is not None:
@@ -268,7 +270,7 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
         return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, 0, False)
     problem = problem.subset(keep)
     candidates = problem.n
-    cost = _cost(problem, grid, manifold_k2(grid), prior_k1)
+    cost = _cost(problem, grid, manifold_k2(grid), prior_k1, mse[:, keep])
     k1 = float(grid[int(np.argmin(cost))])
     k2 = float(manifold_k2(k1))
     problem = _trim(problem, k1, k2)

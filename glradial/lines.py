@@ -15,8 +15,8 @@ What is detected:
     * **Step edges** (ad boards, stand fronts, roofs): Canny pixels away from ridges, moved to the
       sub-pixel maximum of the gradient magnitude along the gradient (parabola through 3 samples).
 
-Grouping: points are binned by orientation (ridges: 6 bins over 180 degrees; edges: 12 bins over 360
-degrees, so the two polarities never mix), split into connected pieces, and pieces are linked into
+Grouping: points are binned by orientation (6 bins over 180 degrees), split into connected pieces
+(per bin, so a line crossing a circle or another line stays apart from it), and pieces are linked into
 chains across gaps (players, nets, shadows) when they are nearly collinear. Masked first: a margin
 along the frame border and any letterbox (uniform rows or columns at the border). Chains that are
 pixel-straight and exactly horizontal or vertical away from the frame centre are taken for broadcast
@@ -45,8 +45,9 @@ RIDGE_MIN_CURVATURE = 1.5
 CANNY_LOW, CANNY_HIGH = 30, 70
 #: Points this close (pixels) to the frame border or a letterbox are ignored.
 BORDER_MARGIN = 4
-#: Orientation bins: ridges (over 180 degrees) and edges (over 360 degrees).
-RIDGE_BINS, EDGE_BINS = 6, 12
+#: Orientation bins over 180 degrees (30 degrees each) for ridges and edges. The two edges of a
+#: thick line (opposite polarity) share a bin but do not touch; thin lines are ridges.
+ORIENTATION_BINS = 6
 #: Pieces with fewer points are dropped before linking.
 MIN_PIECE_POINTS = 8
 #: Linking: largest gap (px) between two pieces' extents, angle (degrees) between their directions,
@@ -129,25 +130,30 @@ def _derivatives(g: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 def _ridge_points(gx, gy, gxx, gyy, gxy, valid):
-    """Sub-pixel centres of bright ridges: ``(x, y, angle)`` arrays (angle of the line in [0, pi))."""
-    root = cv2.magnitude(cv2.subtract(gxx, gyy) * 0.5, gxy)
-    lam = cv2.subtract(cv2.add(gxx, gyy) * 0.5, root)  # most negative eigenvalue
-    ys, xs = np.nonzero((lam < -RIDGE_MIN_CURVATURE) & valid)
-    l1, a, b, c = lam[ys, xs], gxx[ys, xs], gyy[ys, xs], gxy[ys, xs]
-    line_like = (a + b - l1) > 0.5 * l1  # the other eigenvalue is not as negative (not a blob)
-    ys, xs, l1, a, b, c = ys[line_like], xs[line_like], l1[line_like], a[line_like], b[line_like], c[line_like]
+    """Sub-pixel centres of bright ridges: ``(x, y, angle, row, column)`` arrays (angle of the line
+    in [0, pi); row, column: the integer pixel of each point)."""
+    half_trace = cv2.addWeighted(gxx, 0.5, gyy, 0.5, 0.0)
+    root = cv2.magnitude(cv2.addWeighted(gxx, 0.5, gyy, -0.5, 0.0), gxy)
+    lam = cv2.subtract(half_trace, root)  # most negative eigenvalue
+    strong = cv2.compare(lam, -RIDGE_MIN_CURVATURE, cv2.CMP_LT)
+    # a ridge, not a blob: the other eigenvalue (half_trace + root) is not as negative
+    line_like = cv2.compare(cv2.addWeighted(half_trace, 1.0, root, 1.0, 0.0), cv2.multiply(lam, 0.5), cv2.CMP_GT)
+    idx = np.flatnonzero(cv2.bitwise_and(strong, line_like, mask=valid))
+    ys, xs = np.divmod(idx, lam.shape[1])
+    l1, a, b, c = lam.ravel()[idx], gxx.ravel()[idx], gyy.ravel()[idx], gxy.ravel()[idx]
     # eigenvector of lam: (c, lam - a) or (lam - b, c), whichever is longer (numerically stable)
-    v1x, v1y, v2x, v2y = c, l1 - a, l1 - b, c
-    use1 = v1x * v1x + v1y * v1y >= v2x * v2x + v2y * v2y
-    nx, ny = np.where(use1, v1x, v2x), np.where(use1, v1y, v2y)
-    norm = np.hypot(nx, ny)
-    ok = norm > 1e-9
-    nx, ny = nx / np.where(ok, norm, 1.0), ny / np.where(ok, norm, 1.0)
-    t = -(nx * gx[ys, xs] + ny * gy[ys, xs]) / l1
-    ox, oy = t * nx, t * ny
+    v1y, v2x = l1 - a, l1 - b
+    use1 = c * c + v1y * v1y >= v2x * v2x + c * c
+    nx, ny = np.where(use1, c, v2x), np.where(use1, v1y, c)
+    norm2 = nx * nx + ny * ny
+    ok = norm2 > 1e-12
+    # Newton step along the normal: offset = -(n . grad) n / (n^T H n), n^T H n = lam |n|^2
+    step = -(nx * gx.ravel()[idx] + ny * gy.ravel()[idx]) / (l1 * np.where(ok, norm2, 1.0))
+    ox, oy = step * nx, step * ny
     keep = ok & (np.abs(ox) <= 0.5) & (np.abs(oy) <= 0.5)
+    ys, xs, nx, ny = ys[keep], xs[keep], nx[keep], ny[keep]
     angle = np.mod(np.arctan2(nx, -ny), np.pi)  # line direction is perpendicular to the normal
-    return xs[keep] + ox[keep], ys[keep] + oy[keep], angle[keep], ys[keep], xs[keep]
+    return xs + ox[keep], ys + oy[keep], angle, ys, xs
 
 
 def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -161,17 +167,22 @@ def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return top * (1 - fy) + bottom * fy
 
 
-def _edge_points(g, gx, gy, valid):
-    """Sub-pixel step-edge points ``(x, y, direction)`` (direction of the gradient in [0, 2 pi))."""
+def _edge_points(g, gx, gy, valid, near_ridge):
+    """Sub-pixel step-edge points ``(x, y, direction, row, column, density)``: direction of the
+    gradient in [0, 2 pi); ``valid`` (uint8) masks the frame, edges where ``near_ridge`` are
+    dropped (the flanks of thin lines); density: share of valid pixels that are edges."""
     edges = cv2.Canny(np.clip(g, 0, 255).astype(np.uint8), CANNY_LOW, CANNY_HIGH, L2gradient=True)
-    ys, xs = np.nonzero((edges > 0) & valid)
-    density = len(xs) / max(int(valid.sum()), 1)
+    edges = cv2.bitwise_and(edges, edges, mask=valid)
+    density = cv2.countNonZero(edges) / max(cv2.countNonZero(valid), 1)
+    edges[near_ridge > 0] = 0
+    idx = np.flatnonzero(edges)
+    ys, xs = np.divmod(idx, edges.shape[1])
     ex, ey = gx[ys, xs], gy[ys, xs]
     mag = np.hypot(ex, ey)
     ok = mag > 1e-6
     ys, xs, ex, ey, mag = ys[ok], xs[ok], ex[ok], ey[ok], mag[ok]
     dx, dy = ex / mag, ey / mag
-    magnitude = np.hypot(gx, gy)
+    magnitude = cv2.magnitude(gx, gy)
     before = _bilinear(magnitude, xs - dx, ys - dy)
     after = _bilinear(magnitude, xs + dx, ys + dy)
     denom = before - 2.0 * mag + after
@@ -182,22 +193,28 @@ def _edge_points(g, gx, gy, valid):
 
 
 class _Pieces:
-    """Connected same-orientation pieces of one kind: per-piece centre, unit axis, extent along it
-    (``lo``, ``hi``, px), mean direction (radians) and the point indices of each piece."""
+    """Connected same-orientation, same-kind pieces: per-piece centre, unit axis, extent along it
+    (``lo``, ``hi``, px), kind (0 ridge, 1 edge) and the point indices of each piece.
 
-    def __init__(self, xs, ys, angle, iy, ix, bins, period, shape):
+    Ridge and edge points never touch (edges within 2 px of a ridge were dropped), so each
+    orientation bin takes one connected-components pass for both kinds."""
+
+    def __init__(self, xs, ys, angle, kind, iy, ix, bins, shape):
         self.x, self.y = xs, ys
         empty = np.zeros(0)
-        self.centre, self.axis, self.lo, self.hi, self.direction = np.zeros((0, 2)), np.zeros((0, 2)), empty, empty, empty
+        self.centre, self.axis, self.lo, self.hi = np.zeros((0, 2)), np.zeros((0, 2)), empty, empty
+        self.kind = np.zeros(0, np.intp)
         self.members: list[np.ndarray] = []
         if len(xs) == 0:
             return
-        b = (np.floor(angle / period * bins + 0.5).astype(np.intp)) % bins
+        b = (np.floor(angle / np.pi * bins + 0.5).astype(np.intp)) % bins
         # connected pieces of each orientation bin (a line crossing a circle stays apart from it)
         key = np.zeros(len(xs), np.int64)
         mask = np.zeros(shape, np.uint8)
+        by_bin = np.argsort(b, kind="stable")
+        bounds = np.searchsorted(b[by_bin], np.arange(bins + 1))
         for k in range(bins):
-            sel = np.flatnonzero(b == k)
+            sel = by_bin[bounds[k]:bounds[k + 1]]
             if len(sel) == 0:
                 continue
             y0, y1 = int(iy[sel].min()), int(iy[sel].max()) + 1
@@ -205,8 +222,8 @@ class _Pieces:
             roi = mask[y0:y1, x0:x1]
             roi[:] = 0
             roi[iy[sel] - y0, ix[sel] - x0] = 1
-            _, labels = cv2.connectedComponents(roi, connectivity=8)
-            key[sel] = labels[iy[sel] - y0, ix[sel] - x0].astype(np.int64) * bins + k
+            _, labels = cv2.connectedComponentsWithAlgorithm(roi, 8, cv2.CV_32S, cv2.CCL_SAUF)
+            key[sel] = (labels[iy[sel] - y0, ix[sel] - x0].astype(np.int64) * bins + k) * 2 + kind[sel]
         order = np.argsort(key, kind="stable")
         key_sorted = key[order]
         starts = np.flatnonzero(np.r_[True, key_sorted[1:] != key_sorted[:-1]])
@@ -230,15 +247,14 @@ class _Pieces:
         s = dx * self.axis[group, 0] + dy * self.axis[group, 1]
         bounds = np.r_[0, np.cumsum(cnt.astype(np.intp))[:-1]]
         self.lo, self.hi = np.minimum.reduceat(s, bounds), np.maximum.reduceat(s, bounds)
-        unit = np.exp(1j * angle[order])
-        self.direction = np.angle(np.bincount(group, unit.real, n) + 1j * np.bincount(group, unit.imag, n))
         self.members = np.split(order, bounds[1:])
+        self.kind = kind[order[bounds]]
 
     def __len__(self) -> int:
         return len(self.members)
 
 
-def _link(p: _Pieces, signed: bool) -> list[list[int]]:
+def _link(p: _Pieces) -> list[list[int]]:
     """Union pieces that continue each other (collinear within tolerance, gap <= LINK_GAP)."""
     n = len(p)
     parent = list(range(n))
@@ -250,11 +266,8 @@ def _link(p: _Pieces, signed: bool) -> list[list[int]]:
         return i
 
     if n > 1:
-        i, j = np.nonzero(np.triu(np.abs(p.axis @ p.axis.T) >= np.cos(np.radians(LINK_ANGLE)), 1))
-        if signed:
-            diff = np.abs(np.angle(np.exp(1j * (p.direction[i] - p.direction[j]))))
-            near = diff <= np.radians(3 * LINK_ANGLE)
-            i, j = i[near], j[near]
+        aligned = np.abs(p.axis @ p.axis.T) >= np.cos(np.radians(LINK_ANGLE))
+        i, j = np.nonzero(np.triu(aligned & (p.kind[:, None] == p.kind[None, :]), 1))  # ridges with ridges
         half = 0.5 * (p.hi - p.lo)
         reach = np.hypot(*(p.centre[i] - p.centre[j]).T) <= half[i] + half[j] + LINK_GAP + 2.0
         i, j = i[reach], j[reach]
@@ -285,6 +298,8 @@ def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
     hide a graphics edge."""
     height, width = shape
     for across, centre, extent in ((y, (height - 1) / 2, height), (x, (width - 1) / 2, width)):
+        if np.ptp(across) > 0.05 * extent:  # far from axis-aligned: skip the percentiles
+            continue
         lo, hi = np.percentile(across, [2, 98])
         if hi - lo <= 2 * OVERLAY_FLATNESS and abs(np.median(across) - centre) > OVERLAY_OFF_CENTRE * extent:
             return True
@@ -300,39 +315,46 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH) -> LineEvide
     g = cv2.GaussianBlur(gray, (0, 0), SMOOTH_SIGMA)
     gx, gy, gxx, gyy, gxy = _derivatives(g)
     x0, y0, x1, y1 = content_box(gray)
-    valid = np.zeros((height, width), bool)
+    valid = np.zeros((height, width), np.uint8)
     m = BORDER_MARGIN
-    valid[y0 + m: y1 - m, x0 + m: x1 - m] = True
+    valid[y0 + m: y1 - m, x0 + m: x1 - m] = 1
     rx, ry, rangle, riy, rix = _ridge_points(gx, gy, gxx, gyy, gxy, valid)
     ridge_mask = np.zeros((height, width), np.uint8)
     ridge_mask[riy, rix] = 1
-    near_ridge = cv2.dilate(ridge_mask, np.ones((5, 5), np.uint8)) > 0
-    ex, ey, edir, eiy, eix, density = _edge_points(g, gx, gy, valid & ~near_ridge)
+    near_ridge = cv2.dilate(ridge_mask, np.ones((5, 5), np.uint8))
+    ex, ey, edir, eiy, eix, density = _edge_points(g, gx, gy, valid, near_ridge)
     chains: list[Chain] = []
     overlays = 0
-    for kind, (xs, ys, ang, iy, ix), bins, period in (
-        ("ridge", (rx, ry, rangle, riy, rix), RIDGE_BINS, np.pi),
-        ("edge", (ex, ey, edir, eiy, eix), EDGE_BINS, 2 * np.pi),
-    ):
-        pieces = _Pieces(xs, ys, ang, iy, ix, bins, period, (height, width))
-        for group in _link(pieces, signed=False):  # an edge may change polarity along a line (boards, chessboards)
-            if float(np.sum(pieces.hi[group] - pieces.lo[group])) < 0.5 * MIN_CHAIN_LENGTH:
-                continue
-            idx = np.concatenate([pieces.members[k] for k in group])
-            x, y = xs[idx], ys[idx]
-            pts = np.stack([x, y], axis=1)
-            centre = pts.mean(axis=0)
-            w, v = np.linalg.eigh(np.cov((pts - centre).T))
-            s = (pts - centre) @ v[:, 1]
-            length = float(np.ptp(s))
-            if length < MIN_CHAIN_LENGTH:
-                continue
-            if _is_overlay(x, y, (height, width)):
-                overlays += 1
-                continue
-            order = np.argsort(s)
-            # back to full-frame pixel centres, then lens units
-            scale = width_full / width
-            full = (pts[order] + 0.5) * np.array([scale, height_full / height]) - 0.5
-            chains.append(Chain(pixels_to_lens(full, (width_full, height_full)), kind, length))
+    xs, ys = np.concatenate([rx, ex]), np.concatenate([ry, ey])
+    kinds = np.r_[np.zeros(len(rx), np.intp), np.ones(len(ex), np.intp)]
+    pieces = _Pieces(xs, ys, np.concatenate([rangle, np.mod(edir, np.pi)]), kinds,
+                     np.concatenate([riy, eiy]), np.concatenate([rix, eix]), ORIENTATION_BINS, (height, width))
+    extent = pieces.hi - pieces.lo
+    for group in _link(pieces):  # an edge may change polarity along a line (boards, chessboards)
+        if len(group) == 1 and extent[group[0]] < MIN_CHAIN_LENGTH:
+            continue
+        # extent of the pieces' ends along the longest piece's axis: a cheap bound on the length
+        longest = group[int(np.argmax(pieces.hi[group] - pieces.lo[group]))]
+        ends = np.concatenate([pieces.centre[group] + pieces.lo[group, None] * pieces.axis[group],
+                               pieces.centre[group] + pieces.hi[group, None] * pieces.axis[group]])
+        if np.ptp(ends @ pieces.axis[longest]) < MIN_CHAIN_LENGTH:
+            continue
+        idx = np.concatenate([pieces.members[k] for k in group])
+        x, y = xs[idx], ys[idx]
+        pts = np.stack([x, y], axis=1)
+        centre = pts.mean(axis=0)
+        w, v = np.linalg.eigh(np.cov((pts - centre).T))
+        s = (pts - centre) @ v[:, 1]
+        length = float(np.ptp(s))
+        if length < MIN_CHAIN_LENGTH:
+            continue
+        if _is_overlay(x, y, (height, width)):
+            overlays += 1
+            continue
+        order = np.argsort(s)
+        # back to full-frame pixel centres, then lens units
+        scale = width_full / width
+        full = (pts[order] + 0.5) * np.array([scale, height_full / height]) - 0.5
+        kind = "edge" if pieces.kind[group[0]] else "ridge"
+        chains.append(Chain(pixels_to_lens(full, (width_full, height_full)), kind, length))
     return LineEvidence(chains, (width_full, height_full), width, overlays, density)

@@ -35,7 +35,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from .lens import Lens
-from .lens_estimate import choose, line_candidates, net_estimate
+from .lens_estimate import NET_UNCERTAINTY_PX, LensEstimate, choose, line_candidates
 from .metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px
 
 METHOD_NAMES = ("net", "lines", "auto")
@@ -47,6 +47,9 @@ EXTENDED_K2_SPREAD = 0.05
 #: grass there), and a 1024-wide panorama has too few pixels for fields of view under 45 degrees.
 PANORAMA_TILT = (-10.0, 10.0)
 PANORAMA_HFOV = (45.0, 60.0)
+#: A frame carries its own lens when every method reads its unmodified frame farther than this
+#: from no lens (px at 1920): the CNN's 90 % bound.
+OWN_LENS_PX = NET_UNCERTAINTY_PX
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 
 
@@ -211,15 +214,19 @@ def run_sources(evaluator: Callable[[np.ndarray], dict], sources: dict[str, Iter
     return samples
 
 
-def summarise(samples: list[Sample]) -> dict:
+def summarise(samples: list[Sample], own_lens: set[str] = frozenset()) -> dict:
     """Per source (and ``all real`` = every non-procedural source) and method: n, median, p90,
-    A beats B, share inside the stated bound, share of lines answers."""
+    A beats B, share inside the stated bound, share of lines answers. ``own_lens``: frame names
+    whose unmodified frame carries its own lens; with any, ``all real without own-lens frames``
+    is added (sources ``NAME/...`` of those frames left out)."""
     groups: dict[str, list[Sample]] = {}
     for s in samples:
         groups.setdefault(s.source, []).append(s)
     real = [s for s in samples if not s.source.startswith("procedural")]
     if real and len(groups) > 1:
         groups["all real"] = real
+        if own_lens:
+            groups["all real without own-lens frames"] = [s for s in real if s.source.split("/")[0] not in own_lens]
     out: dict = {}
     for name, group in groups.items():
         truth = np.array([s.truth for s in group])
@@ -288,6 +295,11 @@ def plot(samples: list[Sample], out: Path, stem: str) -> list[str]:
     return [path.name]
 
 
+def _from_no_lens(estimate: LensEstimate) -> float:
+    """Maximum displacement (px at 1920) of an estimate from no lens."""
+    return float(max_displacement_px(np.array([estimate.k1, estimate.k2]), np.zeros(2)))
+
+
 def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrated: list[str] = (), lenses: int = 12,
                     procedural: int = 0, model: str | None = None, threads: int | None = None, seed: int = 0,
                     progress: Callable[[str], None] | None = print) -> dict:
@@ -321,7 +333,8 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     if not sources:
         raise ValueError("nothing to evaluate: give a frames folder, a calibrated camera or procedural > 0")
     samples = run_sources(evaluator or Evaluator(model, threads), sources, progress)
-    summary = summarise(samples)
+    own_lens = {name for name, est in own.items() if min(_from_no_lens(e) for e in est.values()) > OWN_LENS_PX}
+    summary = summarise(samples, own_lens)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     figures = plot(samples, out, "real")
@@ -336,8 +349,10 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
                  "| frame | method | k1 | k2 | displacement px | chains |\n| --- | --- | ---: | ---: | ---: | ---: |\n")
         for name, estimates in own.items():
             for method, e in estimates.items():
-                floor = float(max_displacement_px(np.array([e.k1, e.k2]), np.zeros(2)))
-                text += f"| {name} | {method} | {e.k1:+.3f} | {e.k2:+.3f} | {floor:.1f} | {e.chains} |\n"
+                text += f"| {name} | {method} | {e.k1:+.3f} | {e.k2:+.3f} | {_from_no_lens(e):.1f} | {e.chains} |\n"
+        if own_lens:
+            text += (f"\nRead as carrying their own lens (every method reads more than {OWN_LENS_PX:g} px from no lens): "
+                     f"{', '.join(sorted(own_lens))}; the row 'all real without own-lens frames' leaves them out.\n")
     text += "".join(f"\n![{f}]({f})\n" for f in figures)
     atomic_write_text(out / "real.md", text)
     own_json = {name: {m: e.as_dict() for m, e in est.items()} for name, est in own.items()}
