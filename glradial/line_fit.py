@@ -60,6 +60,9 @@ ROBUST_T = 3.0
 K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.05, 0.3
 #: Screening thresholds (px RMS of the detection copy).
 STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 1.0
+#: A fit needs at least this many chains that agree with it: one chain cannot be checked against
+#: anything (an arc that some lens straightens passes screening on its own).
+MIN_CHAINS = 2
 #: A chain whose residual at the fitted lens exceeds this many floors is reported as not used.
 USED_CHI = 3.0
 #: After the first fit, chains above this many times the median chain residual (chi) are dropped.
@@ -296,4 +299,4 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
                 sigma = _displacement_sigma(cov)
         except np.linalg.LinAlgError:
             pass
-    return LineFit(float(k1), float(k2), sigma, used, candidates, used > 0 and math.isfinite(sigma))
+    return LineFit(float(k1), float(k2), sigma, used, candidates, used >= MIN_CHAINS and math.isfinite(sigma))

@@ -45,6 +45,11 @@ def test_summarise_against_hand_computed_figures():
     # the truth's k2 is on the manifold: 'lines' ties method B (not a win), 'net' has k2 off its own manifold
     assert table["lines"]["a_beats_b"] == 0.0
     assert "| a | net | 3 |" in markdown(summarise(samples), "t")
+    # frames that carry their own lens are left out of the extra aggregate row
+    other = [Sample("b/paper", truth, samples[0].estimates)]
+    grouped = summarise(samples + other, own_lens={"a"})
+    assert grouped["all real"]["net"]["n"] == 4
+    assert grouped["all real without own-lens frames"]["net"]["n"] == 1
 
 
 def test_bad_inputs_name_what_is_wrong(tmp_path):
