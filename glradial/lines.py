@@ -35,8 +35,9 @@ import numpy as np
 
 from .lens import pixels_to_lens
 
-#: Largest width (pixels) of the gray copy lines are detected on.
-DETECT_WIDTH = 960
+#: Largest width (pixels) of the gray copy lines are detected on (800: as accurate as 960 on validation
+#: crops, 2/3 of the pixels; docs/LINES.md).
+DETECT_WIDTH = 800
 #: Gaussian smoothing (pixels of the detection copy) before the derivatives.
 SMOOTH_SIGMA = 1.2
 #: Smallest ridge strength: the most negative Hessian eigenvalue, in grey levels (0..255) per px².
