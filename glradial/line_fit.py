@@ -286,7 +286,7 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
         problem = problem.subset(inliers)
         k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
     chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
-    used = int(np.sum(chi <= USED_CHI**2 * np.maximum(1.0, 1.0)))
+    used = int(np.sum(chi <= USED_CHI**2))
     sigma = math.inf
     if hessian is not None:
         try:

@@ -201,7 +201,6 @@ class _Pieces:
     orientation bin takes one connected-components pass for both kinds."""
 
     def __init__(self, xs, ys, angle, kind, iy, ix, bins, shape):
-        self.x, self.y = xs, ys
         empty = np.zeros(0)
         self.centre, self.axis, self.lo, self.hi = np.zeros((0, 2)), np.zeros((0, 2)), empty, empty
         self.kind = np.zeros(0, np.intp)
