@@ -113,7 +113,7 @@ def line_candidates(frame: np.ndarray, net: tuple[float, float]) -> tuple[LensEs
     from .line_fit import fit_lines
     from .lines import detect_chains
 
-    evidence = detect_chains(frame)
+    evidence = detect_chains(frame, lens_hint=net)
     fit = fit_lines(evidence, prior=net)
     if not fit.ok or not (math.isfinite(fit.k1) and math.isfinite(fit.k2) and math.isfinite(fit.sigma_px)):
         return net_estimate(net[0], net[1], frame, evidence.edge_density), None

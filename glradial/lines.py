@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .lens import pixels_to_lens
+from .lens import lens_to_pixels, pixels_to_lens
 
 #: Largest width (pixels) of the gray copy lines are detected on (800: as accurate as 960 on validation
 #: crops, 2/3 of the pixels; docs/LINES.md).
@@ -306,9 +306,25 @@ def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
     return False
 
 
-def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH) -> LineEvidence:
+def _undistorted(x: np.ndarray, y: np.ndarray, size: tuple[int, int], lens: tuple[float, float]):
+    """Detection-copy pixels undistorted with ``lens`` (exact inverse); pixels with no undistorted
+    point (beyond the lens's reach) are kept as they are."""
+    from .lensfuncs import undistort_point_exact
+
+    p_d = pixels_to_lens(np.stack([x, y], axis=1), size)
+    p_u, valid = undistort_point_exact(p_d, float(lens[0]), float(lens[1]))
+    q = lens_to_pixels(np.where(valid[:, None], p_u, p_d), size)
+    return q[:, 0], q[:, 1]
+
+
+def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
+                  lens_hint: tuple[float, float] | None = None) -> LineEvidence:
     """Find the chains of a uint8 RGB/gray frame (see the module docstring), detecting on a copy at
-    most ``max_width`` pixels wide."""
+    most ``max_width`` pixels wide.
+
+    ``lens_hint``: a rough ``(k1, k2)`` (e.g. the CNN's). Pieces are then linked where they continue
+    each other once undistorted with it, so strongly curved lines (k1 near -0.7 at the frame edge)
+    still form long chains; the chains' points stay those of the frame."""
     height_full, width_full = frame.shape[:2]
     gray = gray_copy(frame, max_width)
     height, width = gray.shape
@@ -327,7 +343,8 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH) -> LineEvide
     overlays = 0
     xs, ys = np.concatenate([rx, ex]), np.concatenate([ry, ey])
     kinds = np.r_[np.zeros(len(rx), np.intp), np.ones(len(ex), np.intp)]
-    pieces = _Pieces(xs, ys, np.concatenate([rangle, np.mod(edir, np.pi)]), kinds,
+    lx, ly = _undistorted(xs, ys, (width, height), lens_hint) if lens_hint is not None else (xs, ys)
+    pieces = _Pieces(lx, ly, np.concatenate([rangle, np.mod(edir, np.pi)]), kinds,
                      np.concatenate([riy, eiy]), np.concatenate([rix, eix]), ORIENTATION_BINS, (height, width))
     extent = pieces.hi - pieces.lo
     for group in _link(pieces):  # an edge may change polarity along a line (boards, chessboards)
