@@ -166,3 +166,17 @@ def test_lens_estimate_validates_its_fields():
         LensEstimate(0.0, 0.0, -1.0)
     with pytest.raises(ValueError, match="chains"):
         LensEstimate(0.0, 0.0, 1.0, "net", -1)
+
+
+@pytest.mark.parametrize("seed", [8, 9])
+def test_a_wide_pitch_camera_above_the_manifold_is_read_with_a_rough_hint(seed):
+    """The issue's real pitch cameras: k1 = -0.72, k2 = 0.50 (0.1 above the manifold). With a hint as
+    far off as the CNN is on them (k1 -0.59 on the manifold), pieces are linked in the roughly
+    undistorted frame and the fit reads the lens. Measured 1.4 and 1.8 px with 14 chains (without the
+    hint 8.8 and 52 px from 2-3 chains: the curved pieces do not link); the bound leaves room for the
+    manifold prior's pull on k2."""
+    k1, k2 = -0.72, 0.50
+    frame = distorted(pitch(seed), k1, k2)
+    fit = fit_lines(detect_chains(frame, lens_hint=(-0.59, float(manifold_k2(-0.59)))), prior=(-0.59, 0.27))
+    assert fit.ok and fit.chains >= 8
+    assert error_px(fit, k1, k2) < 3.0, fit
