@@ -107,14 +107,20 @@ def net_estimate(k1: float, k2: float, frame: np.ndarray | None = None, edge_den
     return LensEstimate(float(k1), float(k2), uncertainty, "net", 0)
 
 
-def line_candidates(frame: np.ndarray, net: tuple[float, float]) -> tuple[LensEstimate, LensEstimate | None]:
-    """The CNN's estimate of the uint8 RGB ``frame`` (``net`` = its ``(k1, k2)``) and the line fit's
-    (``None`` when the frame has no usable lines or the fit fails), each with its bound."""
+def fit_frame(frame: np.ndarray, net: tuple[float, float]):
+    """The line evidence of the uint8 RGB ``frame`` (pieces linked with the CNN's ``net`` lens as the
+    hint) and its :class:`glradial.line_fit.LineFit` (the CNN's k1 as the prior)."""
     from .line_fit import fit_lines
     from .lines import detect_chains
 
     evidence = detect_chains(frame, lens_hint=net)
-    fit = fit_lines(evidence, prior=net)
+    return evidence, fit_lines(evidence, prior=net)
+
+
+def line_candidates(frame: np.ndarray, net: tuple[float, float]) -> tuple[LensEstimate, LensEstimate | None]:
+    """The CNN's estimate of the uint8 RGB ``frame`` (``net`` = its ``(k1, k2)``) and the line fit's
+    (``None`` when the frame has no usable lines or the fit fails), each with its bound."""
+    evidence, fit = fit_frame(frame, net)
     if not fit.ok or not (math.isfinite(fit.k1) and math.isfinite(fit.k2) and math.isfinite(fit.sigma_px)):
         return net_estimate(net[0], net[1], frame, evidence.edge_density), None
     fallback = net_estimate(net[0], net[1], frame)

@@ -368,9 +368,7 @@ def calibrate(n: int = 200, panoramas: int = 4, model: str | None = None, thread
     """Measure the constants of :mod:`glradial.lens_estimate` on ``n`` procedural crops of the
     **validation** split: the CNN's 90th-percentile error, and the scale that puts 90 % of the line
     fits' errors inside ``scale * sigma_px + LINES_UNCERTAINTY_FLOOR_PX``."""
-    from .line_fit import fit_lines
-    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX
-    from .lines import detect_chains
+    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, fit_frame
 
     evaluator = Evaluator(model, threads)
     net_err, ratios, line_err = [], [], []
@@ -378,7 +376,7 @@ def calibrate(n: int = 200, panoramas: int = 4, model: str | None = None, thread
         est = evaluator.estimator
         nk = est.run(est.preprocess(frame)[None])[0]
         net_err.append(float(max_displacement_px(np.array(nk), np.array([k1, k2]))))
-        fit = fit_lines(detect_chains(frame), prior=(float(nk[0]), float(nk[1])))
+        _, fit = fit_frame(frame, (float(nk[0]), float(nk[1])))
         if fit.ok and math.isfinite(fit.sigma_px):
             e = float(max_displacement_px(np.array([fit.k1, fit.k2]), np.array([k1, k2])))
             line_err.append(e)
