@@ -35,7 +35,7 @@ SOURCES = ("net", "lines")
 #: 90th percentile of the CNN's maximum displacement error (px at 1920) on validation crops.
 NET_UNCERTAINTY_PX = 16.0
 #: A line fit's 90 % bound: scale on its 1-sigma displacement plus a floor (px at 1920).
-LINES_UNCERTAINTY_SCALE = 0.33
+LINES_UNCERTAINTY_SCALE = 0.27
 LINES_UNCERTAINTY_FLOOR_PX = 0.5
 #: Stated for a frame with no usable structure (blank, noise): half the displacement between the
 #: ends of the real-lens range k1 in [-1.0, 0.4] on the manifold (px at 1920).
