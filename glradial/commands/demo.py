@@ -261,7 +261,7 @@ def run(args: argparse.Namespace) -> int:
     else:
         from ..estimator import Estimator
 
-        estimate = Estimator(model).estimate(frame)
+        estimate = Estimator(model).estimate(frame, method="net")  # the demo shows the model itself
         used = (float(estimate.k1), float(estimate.k2)) if hasattr(estimate, "k1") else tuple(map(float, estimate))
         source = "estimated"
         error = displacement_error_px((true_lens.k1, true_lens.k2), used, size)
