@@ -190,8 +190,8 @@ class Estimator:
         method = check_method(method)
         if isinstance(frames, np.ndarray) and frames.ndim == 4:
             frames = list(frames)
-        if isinstance(frames, (str, bytes)) or not isinstance(frames, (Sequence, np.ndarray)):
-            raise TypeError(f"frames must be a sequence of NumPy arrays, got {type(frames).__name__}")
+        if isinstance(frames, (str, bytes, np.ndarray)) or not hasattr(frames, "__iter__"):
+            raise TypeError(f"frames must be a sequence of NumPy arrays (or an N×H×W×C array), got {type(frames).__name__}")
         frames = [_as_frame(f, i) for i, f in enumerate(frames)]
         if not frames:
             return []
