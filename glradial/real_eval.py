@@ -274,8 +274,12 @@ def plot(samples: list[Sample], out: Path, stem: str) -> list[str]:
     from .atomic import atomic_path
 
     sources = sorted({s.source for s in samples})
-    fig, axes = plt.subplots(1, len(sources), figsize=(3.2 * len(sources), 3.2), squeeze=False)
-    for ax, source in zip(axes[0], sources):
+    cols = min(4, len(sources))
+    rows = -(-len(sources) // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.0 * rows), squeeze=False)
+    for ax in axes.ravel()[len(sources):]:
+        ax.set_visible(False)
+    for ax, source in zip(axes.ravel(), sources):
         group = [s for s in samples if s.source == source]
         truth = np.array([s.truth for s in group])
         for method in METHOD_NAMES:
@@ -286,7 +290,8 @@ def plot(samples: list[Sample], out: Path, stem: str) -> list[str]:
         ax.set_title(source, fontsize=8)
         ax.set_xlabel("max displacement error, px at 1920")
         ax.grid(alpha=0.3)
-    axes[0][0].set_ylabel("share of frames")
+    for row in axes:
+        row[0].set_ylabel("share of frames")
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
     path = out / f"{stem}_errors.png"
