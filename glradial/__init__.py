@@ -31,6 +31,7 @@ _EXPORTS = {
     "estimate": "estimator",
     "Estimator": "estimator",
     "ModelLoadError": "estimator",
+    "LensEstimate": "lens_estimate",
 }
 
 __all__ = sorted(_EXPORTS) + ["__version__"]

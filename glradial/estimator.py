@@ -8,8 +8,15 @@ Convention:
     geometry the lens refers to, as in training (crops rendered as 1280 x 720 frames). A frame of
     another aspect ratio is squashed to 16:9 and the result describes that squashed geometry
     (a warning says so). Crop letterboxes before estimating.
-    Output: :class:`glradial.Lens` ``(k1, k2)`` in width-normalised lens units (image width = 1,
-    origin at the frame centre): forward model ``p_d = p_u (1 + k1 r^2 + k2 r^4)``.
+    Output: :class:`glradial.LensEstimate`, a :class:`glradial.Lens` ``(k1, k2)`` in width-normalised
+    lens units (image width = 1, origin at the frame centre): forward model
+    ``p_d = p_u (1 + k1 r^2 + k2 r^4)``, with ``method`` ("net" or "lines"), ``uncertainty_px``
+    (a ~90 % bound on the maximum displacement error, px at 1920) and ``chains``.
+
+Methods: ``"net"`` is the CNN alone; ``"lines"`` fits the lens that straightens the frame's pitch
+lines and straight edges (:mod:`glradial.lines`, :mod:`glradial.line_fit`; the CNN is its prior);
+``"auto"`` (default) takes the line fit when its bound beats the CNN's. Frames without usable lines
+get the CNN's answer, labelled ``method="net"`` (docs/LINES.md).
 
 The ONNX graph takes uint8 ``N x H x W x 3`` RGB and does the rest of the preprocessing itself
 (``/ 255``, mean/std normalisation, NHWC -> NCHW; see the model's metadata and docs/MODEL.md).
@@ -32,6 +39,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .lens import Lens
+from .lens_estimate import LensEstimate, Method, check_method, estimate_with_lines, net_estimate
 from .model_check import ModelLoadError, check_checksum, check_model
 
 #: File name of the bundled model inside the ``glradial.models`` package.
@@ -162,19 +170,28 @@ class Estimator:
             raise ModelLoadError(f"{self.model_path}: output of shape {out.shape} for a batch of {len(batch)}, not {len(batch)}×2")
         return 0.5 * (out[:n] + out[n:]) if self.mirror_average else out
 
-    def estimate_batch(self, frames: Sequence[np.ndarray]) -> list[Lens]:
-        """Estimate each frame of a sequence (or an ``N x H x W x C`` array) in one session call."""
+    def estimate_batch(self, frames: Sequence[np.ndarray], method: Method = "auto") -> list[LensEstimate]:
+        """Estimate each frame of a sequence (or an ``N x H x W x C`` array); the CNN runs in one
+        session call. ``method``: ``"net"`` (the CNN), ``"lines"`` (the line fit, the CNN as its
+        prior; the CNN's answer when a frame has no usable lines) or ``"auto"`` (the line fit when
+        its calibrated bound beats the CNN's); each :class:`~glradial.lens_estimate.LensEstimate`
+        says which method produced it and how sure it is (``uncertainty_px``, px at 1920)."""
+        method = check_method(method)
         if isinstance(frames, np.ndarray) and frames.ndim == 4:
             frames = list(frames)
-        frames = list(frames)
+        if isinstance(frames, (str, bytes, np.ndarray)) or not hasattr(frames, "__iter__"):
+            raise TypeError(f"frames must be a sequence of NumPy arrays (or an N×H×W×C array), got {type(frames).__name__}")
+        frames = [_as_frame(f, i) for i, f in enumerate(frames)]
         if not frames:
             return []
-        batch = np.stack([self.preprocess(_as_frame(f, i)) for i, f in enumerate(frames)])
-        return [Lens(float(k1), float(k2)) for k1, k2 in self.run(batch)]
+        net = self.run(np.stack([self.preprocess(f) for f in frames]))
+        if method == "net":
+            return [net_estimate(k1, k2, frame) for frame, (k1, k2) in zip(frames, net)]
+        return [estimate_with_lines(frame, (float(k1), float(k2)), method) for frame, (k1, k2) in zip(frames, net)]
 
-    def estimate(self, frame: np.ndarray) -> Lens:
-        """Estimate one frame's lens."""
-        return self.estimate_batch([_as_frame(frame)])[0]
+    def estimate(self, frame: np.ndarray, method: Method = "auto") -> LensEstimate:
+        """Estimate one frame's lens (``method`` as in :meth:`estimate_batch`)."""
+        return self.estimate_batch([_as_frame(frame)], method)[0]
 
     __call__ = estimate
 
@@ -192,6 +209,8 @@ def default_estimator() -> Estimator:
         return _default
 
 
-def estimate(frame: np.ndarray) -> Lens:
-    """Estimate the radial lens of one RGB frame with the bundled model (see the module docstring)."""
-    return default_estimator().estimate(frame)
+def estimate(frame: np.ndarray, method: Method = "auto") -> LensEstimate:
+    """Estimate the radial lens of one RGB frame with the bundled model and the frame's lines
+    (``method``: ``"auto"``, ``"net"`` or ``"lines"``; see :meth:`Estimator.estimate_batch`)."""
+    check_method(method)
+    return default_estimator().estimate(frame, method)

@@ -124,7 +124,7 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
     noise[rng.random(n) < 0.1] += rng.normal(0, 0.3, 2)
     calls = []
 
-    def fake_estimator(_model=None):
+    def fake_estimator(_model=None, _method=None):
         def estimate(frame):
             assert frame.dtype == np.uint8 and frame.shape == (90, 160, 3)
             index = int(frame[0, 0, 0])
@@ -167,7 +167,7 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr("glradial.video_pipeline.default_estimator", lambda model=None: (lambda frame: Lens(-0.2, 0.03)))
+    monkeypatch.setattr("glradial.video_pipeline.default_estimator", lambda model=None, method=None: (lambda frame: Lens(-0.2, 0.03)))
     source, out = tmp_path / "in.png", tmp_path / "out.png"
     write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
     assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0
@@ -377,8 +377,10 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     assert track.n_frames == 20 and track.per_shot()[1]["first_frame"] == 12
     np.testing.assert_allclose(track.lens, np.tile([-0.21, 0.04], (20, 1)), atol=1e-6)
     text = track_report(track, "cut.mp4")
-    assert text.splitlines() == ["cut.mp4: shot 0 frames 0-11 k1=-0.210000 k2=0.040000",
-                                 "cut.mp4: shot 1 frames 12-19 k1=-0.210000 k2=0.040000"]
+    shots = text.splitlines()  # the constant model's lens, then the uncertainty and method it states
+    assert len(shots) == 2 and all("method=net" in line and "uncertainty=" in line for line in shots)
+    assert shots[0].startswith("cut.mp4: shot 0 frames 0-11 k1=-0.210000 k2=0.040000 ")
+    assert shots[1].startswith("cut.mp4: shot 1 frames 12-19 k1=-0.210000 k2=0.040000 ")
     document = json.loads(track_report(track, "cut.mp4", per_frame=True, as_json=True))
     assert len(document["frames"]) == 20 and document["fps"] == pytest.approx(25)
     # raw estimates on frames 0, 3, 6, 9 (shot 0) and 12, 15, 18 (shot 1)
@@ -402,8 +404,8 @@ def test_estimate_command_on_a_video_prints_shots(tmp_path, field_panorama, caps
     write_image(image, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (128, 72)))
     assert main(["estimate", str(video), str(image), "--model", str(model), "--every", "4"]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines[0] == f"{video}: shot 0 frames 0-11 k1=-0.210000 k2=0.040000"
-    assert lines[1] == f"{video}: shot 1 frames 12-19 k1=-0.210000 k2=0.040000"
+    assert lines[0].startswith(f"{video}: shot 0 frames 0-11 k1=-0.210000 k2=0.040000 ") and "method=net" in lines[0]
+    assert lines[1].startswith(f"{video}: shot 1 frames 12-19 k1=-0.210000 k2=0.040000 ") and "method=net" in lines[1]
     assert lines[2].startswith(f"{image}\tk1=-0.210000")
     assert main(["estimate", str(video), "--model", str(model), "--json", "--per-frame"]) == 0
     document = json.loads(capsys.readouterr().out)

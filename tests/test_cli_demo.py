@@ -21,7 +21,8 @@ def test_demo_small_end_to_end(tmp_path, capsys):
 
     out = tmp_path / "demo"
     model = constant_model(tmp_path / "const.onnx", -0.30, 0.07)
-    assert main(["demo", "--source", "stadium", "--out", str(out), "--size", "320x180", "--panorama-width", "1024", "--model", str(model)]) == 0
+    assert main(["demo", "--source", "stadium", "--out", str(out), "--size", "320x180", "--panorama-width", "1024",
+                 "--model", str(model), "--method", "net"]) == 0
     printed = capsys.readouterr().out
     figure = read_image(out / "demo.png")
     distorted = read_image(out / "distorted.png")
@@ -84,12 +85,13 @@ def test_reference_lines_lie_on_the_rendered_pitch_lines():
 # -- the real frame (default source) ----------------------------------------------------------------
 
 def test_bundled_reference_lines_lie_on_painted_lines():
-    """The shipped end points trace painted lines of the shipped frame: along each line the frame is
-    brighter than 5 px to both sides nearly everywhere (players crossing it are the exceptions),
-    and 12 px beside it almost nowhere: an independent check of the measured end points."""
+    """The shipped end points trace painted lines of the undistorted frame the demo starts from:
+    along each line the frame is brighter than 5 px to both sides nearly everywhere (players
+    crossing it are the exceptions), and 12 px beside it almost nowhere: an independent check of
+    the measured end points and of the frame's own lens that was removed."""
     from glradial.commands.demo_real import bundled_frame
 
-    frame, lines = bundled_frame()
+    frame, lines, _own = bundled_frame()
     for name, ends in lines.items():
         t = np.linspace(0.0, 1.0, 300)[:, None]
         points = ends[0] + t * (ends[1] - ends[0])
@@ -105,7 +107,7 @@ def test_distorted_reference_lines_follow_the_distorted_paint():
     from glradial import Lens, distort
     from glradial.commands.demo_real import bundled_frame, line_positions
 
-    frame, lines = bundled_frame()
+    frame, lines, _own = bundled_frame()
     size = (frame.shape[1], frame.shape[0])
     lens = Lens(-0.45, 0.019 * -0.45 + 0.805 * 0.45**2)
     scale = lens.fit_scale(size, "crop", "distort")
@@ -119,7 +121,7 @@ def test_real_demo_without_model_straightens_exactly(tmp_path, capsys, monkeypat
     monkeypatch.setattr(demo, "_find_model", lambda explicit: None)
     assert main(["demo", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
-    assert "no model shipped" in printed and "real broadcast frame" in printed
+    assert "no model shipped" in printed and "real broadcast frame" in printed and "own lens" in printed
     bow = float(printed.split("reference lines: up to ")[1].split(" px")[0])
     assert bow > 3.0  # the default lens visibly bends the lines
     assert "px from straight in the distorted frame, 0.0 px after correction" in printed, printed
@@ -129,14 +131,31 @@ def test_real_demo_without_model_straightens_exactly(tmp_path, capsys, monkeypat
 
 
 def test_real_demo_reports_the_estimate_error(tmp_path, capsys):
-    """A stand-in model answering (-0.30, 0.07): the printed error is the metric of the difference."""
+    """With a stand-in model answering (-0.30, 0.07): method net prints exactly that, method auto
+    (the line fit on this frame) prints its own estimate; either way the printed error is the
+    metric of the printed difference."""
     from test_cli import constant_model
 
     from glradial.metrics import max_displacement_px
 
     model = constant_model(tmp_path / "const.onnx", -0.30, 0.07)
-    assert main(["demo", "--out", str(tmp_path / "d"), "--model", str(model)]) == 0
+    for method in ("net", "auto"):
+        assert main(["demo", "--out", str(tmp_path / method), "--model", str(model), "--method", method]) == 0
+        printed = capsys.readouterr().out
+        line = next(row for row in printed.splitlines() if row.startswith("estimated k1="))
+        k1, k2 = (float(line.split(f"{name}=")[1].split()[0]) for name in ("k1", "k2"))
+        if method == "net":
+            assert (k1, k2) == (-0.30, 0.07) and "(net, stated uncertainty" in line
+        error = float(max_displacement_px((demo.DEFAULT_K1, demo.DEFAULT_K2), (k1, k2)))
+        assert abs(float(printed.split("max displacement error: ")[1].split(" px")[0]) - error) <= 0.06
+
+
+def test_real_demo_recovers_the_applied_lens_with_the_shipped_model(tmp_path, capsys):
+    """The shipped model and the line fit on the default demo: the applied lens comes back within
+    the line fit's stated uncertainty and the reference lines end up within a pixel of straight."""
+    assert main(["demo", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
-    assert "estimated k1=-0.3000 k2=+0.0700" in printed
-    error = float(max_displacement_px((demo.DEFAULT_K1, demo.DEFAULT_K2), (-0.30, 0.07)))
-    assert f"max displacement error: {error:.1f} px" in printed
+    error = float(printed.split("max displacement error: ")[1].split(" px")[0])
+    stated = float(printed.split("stated uncertainty ")[1].split(" px")[0])
+    assert error <= stated, printed
+    assert float(printed.split("px from straight in the distorted frame, ")[1].split(" px")[0]) < 1.0, printed

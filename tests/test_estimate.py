@@ -53,15 +53,15 @@ def test_shipped_model_metadata_and_bad_frames():
 def test_shipped_model_gives_finite_lens_and_consistent_paths(field_panorama):
     frame = np.ascontiguousarray(field_panorama[300:300 + 405, 500:500 + 720])  # a 16:9 view of a real photo
     est = Estimator(threads=1)
-    lens = est(frame)
+    lens = est(frame, method="net")
     assert isinstance(lens, glradial.Lens)
     assert np.isfinite([lens.k1, lens.k2]).all()
     assert -1.5 < lens.k1 < 1.0
     # batch, float input and the module-level function give the same numbers
-    batch = est.estimate_batch([frame, frame[::-1]])
+    batch = est.estimate_batch([frame, frame[::-1]], method="net")
     assert batch[0] == lens
-    assert glradial.estimate(frame).k1 == pytest.approx(lens.k1, abs=1e-6)
-    as_float = est(frame.astype(np.float32) / 255.0)
+    assert glradial.estimate(frame, method="net").k1 == pytest.approx(lens.k1, abs=1e-6)
+    as_float = est(frame.astype(np.float32) / 255.0, method="net")
     assert as_float.k1 == pytest.approx(lens.k1, abs=1e-6)
 
 
@@ -80,7 +80,7 @@ def test_shipped_model_beats_the_mean_baseline_on_held_out_stadiums():
     with CropRenderer(pano, size=(1280, 720), out_size=(384, 216)) as renderer:
         frames = renderer.render(params)[..., :3]
     labels = np.array([(p.k1, p.k2) for p in params])
-    pred = np.array([(lens.k1, lens.k2) for lens in Estimator(threads=1).estimate_batch(list(frames))])
+    pred = np.array([(lens.k1, lens.k2) for lens in Estimator(threads=1).estimate_batch(list(frames), method="net")])
     radii = np.linspace(0.0, 0.7, 64)
 
     def dl(y, k):
@@ -106,10 +106,10 @@ def test_mirror_average_is_the_mean_of_frame_and_mirror(field_panorama):
     # twice the input size: the area resize (an integer factor) commutes with mirroring exactly
     frame = np.ascontiguousarray(field_panorama[200:200 + 2 * height, 300:300 + 2 * width])
     mirror = np.ascontiguousarray(frame[:, ::-1])
-    a, b = single(frame), single(mirror)
+    a, b = single(frame, method="net"), single(mirror, method="net")
     assert (a.k1, a.k2) != (b.k1, b.k2)  # the network alone is not mirror-invariant
     averaged = Estimator(threads=1)
-    both = averaged.estimate_batch([frame, mirror])
+    both = averaged.estimate_batch([frame, mirror], method="net")
     for lens in both:
         assert lens.k1 == pytest.approx((a.k1 + b.k1) / 2, abs=1e-6)
         assert lens.k2 == pytest.approx((a.k2 + b.k2) / 2, abs=1e-6)

@@ -203,7 +203,7 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
     # shot 0 is estimated surely (2 px), shot 1 only doubtfully (40 px; four equal samples: stated
     # 40 / 2 = 20 px, the most a shot's evidence may gain, smoothing.INDEPENDENT_SAMPLES)
     monkeypatch.setattr("glradial.video_pipeline.default_estimator",
-                        lambda model=None: lambda f: _Estimate(-0.2, 0.03, 2.0, "lines") if f[0, 0, 0] < 12 else _Estimate(-0.1, 0.01, 40.0, "net"))
+                        lambda model=None, method=None: lambda f: _Estimate(-0.2, 0.03, 2.0, "lines") if f[0, 0, 0] < 12 else _Estimate(-0.1, 0.01, 40.0, "net"))
     auto = tmp_path / "auto.mkv"
     assert main(["correct", str(source), str(auto), "--auto", "--every", "3", "--backend", "cpu", "-q"]) == 0
     captured = capsys.readouterr()

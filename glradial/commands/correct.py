@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import sys
 from fractions import Fraction
 from pathlib import Path
 
@@ -65,6 +66,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_lens_options(lens)
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
+    lens.add_argument("--method", choices=("auto", "net", "lines"),
+                      help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
     lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)")
     render = parser.add_argument_group("rendering")
     render.add_argument(
@@ -142,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
                          "or --auto to estimate it")
     if args.model is not None and not args.auto:
         raise UsageError("--model needs --auto")
+    if args.method is not None and not args.auto:
+        raise UsageError("--method needs --auto")
     for name in ("sidecar", "max_uncertainty"):
         if getattr(args, name) is not None and not args.auto:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
@@ -162,10 +167,17 @@ def run(args: argparse.Namespace) -> int:
 
         image = read_image(args.input, order="rgb")
         if args.auto:
+            from ..lens_track import DOUBTFUL_PX
             from ..video_pipeline import default_estimator, rgb8_for_estimator
 
-            k1, k2 = _pair(default_estimator(args.model)(rgb8_for_estimator(image)))
-            print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}")
+            estimate = default_estimator(args.model, args.method)(rgb8_for_estimator(image))
+            k1, k2 = _pair(estimate)
+            method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
+            stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
+            print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}{stated}")
+            if uncertainty is not None and uncertainty > DOUBTFUL_PX:
+                print(f"glradial: warning: the estimate of {args.input} is doubtful (uncertainty {uncertainty:.1f} px > "
+                      f"{DOUBTFUL_PX:g} px at 1920 wide); check the result or give the lens", file=sys.stderr)
             lens = Lens(k1, k2)
         else:
             lens = lens_from_args(args, (image.shape[1], image.shape[0]))
@@ -197,8 +209,6 @@ def run(args: argparse.Namespace) -> int:
         correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
         return 0
 
-    import sys
-
     from ..atomic import check_output_folder
     from ..image_io import check_overwrite
     from ..lens_track import DOUBTFUL_PX
@@ -209,7 +219,7 @@ def run(args: argparse.Namespace) -> int:
     check_overwrite(sidecar, args.overwrite)
     if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
-    track = track_video(args.input, default_estimator(args.model), every=args.every, window_s=args.window,
+    track = track_video(args.input, default_estimator(args.model, args.method), every=args.every, window_s=args.window,
                         progress=progress, doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")

@@ -50,6 +50,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--target", type=finite_float, nargs=2, default=(-18.0, 6.0), metavar=("X", "Y"),
                         help="pitch point the camera aims at, metres from the centre spot along / across the pitch (default -18 6)")
     parser.add_argument("--model", metavar="ONNX", help="ONNX model to use instead of the bundled one")
+    parser.add_argument("--method", choices=("auto", "net", "lines"), default="auto",
+                        help="estimation method (default auto: the pitch-line fit when it is surer than the CNN)")
     return parser
 
 
@@ -204,6 +206,30 @@ def compose_figure(distorted: np.ndarray, corrected: np.ndarray, chords: list[np
 
 
 # -- run ----------------------------------------------------------------------------------------
+def estimate_and_report(frame: np.ndarray, true_lens, args: argparse.Namespace, log) -> "Lens":
+    """The lens the demo corrects with: the estimate of ``frame`` by ``args.method`` with the
+    bundled model (or ``args.model``), printed beside the true lens with its maximum displacement
+    error (px at 1920) and the uncertainty it states; the true lens when no model is shipped."""
+    from ..lens import corner_radius
+
+    model = _find_model(args.model)
+    if model is None:
+        print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
+              "correcting with the true lens", flush=True)
+        return true_lens
+    from ..estimator import Estimator
+
+    estimate = Estimator(model).estimate(frame, method=args.method)
+    size = (frame.shape[1], frame.shape[0])
+    error = float(max_displacement_px((true_lens.k1, true_lens.k2), (estimate.k1, estimate.k2), radius=corner_radius(size)))
+    log(f"estimated with {model.name} (method {args.method} -> {estimate.method}, {estimate.chains} line chains)")
+    print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
+    print(f"estimated k1={estimate.k1:+.4f} k2={estimate.k2:+.4f} ({estimate.method}, stated uncertainty "
+          f"{estimate.uncertainty_px:.1f} px)")
+    print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
+    return estimate
+
+
 def _find_model(explicit: str | None) -> Path | None:
     if explicit:
         path = Path(explicit)
@@ -263,22 +289,8 @@ def _run(args: argparse.Namespace, bar) -> int:
     log(f"frame {size[0]}x{size[1]}: pan {pan:.1f}°, tilt {tilt:.1f}°, roll 0.7°, hfov {args.hfov:g}°, "
         f"true k1={true_lens.k1:.4f} k2={true_lens.k2:.4f}")
 
-    model = _find_model(args.model)
-    if model is None:
-        print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
-              "correcting with the true lens", flush=True)
-        used, source = (true_lens.k1, true_lens.k2), "true"
-    else:
-        from ..estimator import Estimator
-
-        estimate = Estimator(model).estimate(frame)
-        used = (float(estimate.k1), float(estimate.k2)) if hasattr(estimate, "k1") else tuple(map(float, estimate))
-        source = "estimated"
-        error = float(max_displacement_px((true_lens.k1, true_lens.k2), used, radius=corner_radius(size)))
-        log(f"estimated with {model.name}: k1={used[0]:.4f} k2={used[1]:.4f}")
-        print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
-        print(f"estimated k1={used[0]:+.4f} k2={used[1]:+.4f}")
-        print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
+    estimate = estimate_and_report(frame, true_lens, args, log)
+    used, source = (estimate.k1, estimate.k2), ("estimated" if estimate is not true_lens else "true")
 
     bar.update()
     corrected = correct(frame, used[0], used[1], fit="same")

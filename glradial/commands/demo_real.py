@@ -1,7 +1,9 @@
 """The real-frame half of ``glradial demo`` (``--source real``, the default).
 
 A real 1280 x 720 broadcast frame shipped with glradial (``glradial/data/``, BSD-2-Clause, see the
-README there) is taken as the undistorted picture. A known lens is applied to it with
+README there) is made the undistorted picture: its camera's own barrel lens (measured once from its
+pitch lines and recorded beside it, ``own_lens``) is removed with :func:`glradial.correct` at
+``fit="crop"``; the reference lines were measured on that undistorted picture. A known lens is applied to it with
 :func:`glradial.distort` at ``fit="crop"`` (every pixel of the distorted frame has a source, so it
 looks like a real camera's frame), the lens is estimated from the distorted frame alone, and the
 frame is corrected with the estimate (``fit="same"``).
@@ -29,17 +31,24 @@ FRAME_NAME = "usl_broadcast_0195.jpg"
 LINES_NAME = "usl_broadcast_0195.json"
 
 
-def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The shipped real frame (H x W x 3 uint8 RGB) and its reference lines ``{name: 2 x 2 end
-    points in pixels of that frame}``."""
+def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray], "Lens"]:
+    """The shipped real frame made undistorted (H x W x 3 uint8 RGB: its own lens removed with
+    ``correct(fit="crop")``), its reference lines ``{name: 2 x 2 end points in pixels of that
+    undistorted frame}``, and the frame's own lens (both measured; see ``glradial/data/README.md``)."""
     from ..image_io import read_image
+    from ..lens import Lens
+    from ..remap import correct
 
     data = resources.files("glradial.data")
-    frame = read_image(Path(str(data.joinpath(FRAME_NAME))))
+    shipped = read_image(Path(str(data.joinpath(FRAME_NAME))))
     spec = json.loads(data.joinpath(LINES_NAME).read_text(encoding="utf-8"))
-    if tuple(spec["size"]) != (frame.shape[1], frame.shape[0]):
-        raise ValueError(f"{LINES_NAME} describes a {spec['size']} frame, {FRAME_NAME} is {frame.shape[1]}x{frame.shape[0]}")
-    return frame, {name: np.asarray(ends, dtype=np.float64) for name, ends in spec["lines"].items()}
+    size = (shipped.shape[1], shipped.shape[0])
+    if tuple(spec["size"]) != size:
+        raise ValueError(f"{LINES_NAME} describes a {spec['size']} frame, {FRAME_NAME} is {size[0]}x{size[1]}")
+    own = Lens(spec["own_lens"]["k1"], spec["own_lens"]["k2"])
+    frame = correct(shipped, own, fit="crop")
+    lines = {name: np.asarray(ends, dtype=np.float64) for name, ends in spec["lines_after_removing_own_lens"].items()}
+    return frame, lines, own
 
 
 def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, int], samples: int = 400):
@@ -55,18 +64,17 @@ def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, i
 
 def run_real(args: argparse.Namespace) -> int:
     """``glradial demo --source real``: see the module docstring."""
-    from ..lens import Lens, corner_radius
+    from ..lens import Lens
     from ..image_io import write_image
-    from ..metrics import max_displacement_px
     from ..remap import correct, distort
-    from .demo import _distance_to_chord, _find_model, compose_figure
+    from .demo import _distance_to_chord, compose_figure, estimate_and_report
 
     start = time.monotonic()
 
     def log(text: str) -> None:
         print(f"[{time.monotonic() - start:5.1f}s] {text}", flush=True)
 
-    original, lines = bundled_frame()
+    original, lines, own = bundled_frame()
     size = (original.shape[1], original.shape[0])
     true_lens = Lens(args.k1, args.k2)
     true_lens.check_frame(size)
@@ -74,24 +82,12 @@ def run_real(args: argparse.Namespace) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     frame = distort(original, true_lens.k1, true_lens.k2, fit=scale)
-    log(f"real broadcast frame {FRAME_NAME} ({size[0]}x{size[1]}) with the known lens k1={true_lens.k1:.4f} "
-        f"k2={true_lens.k2:.4f} applied (fit=crop, scale {scale:.4f})")
+    log(f"real broadcast frame {FRAME_NAME} ({size[0]}x{size[1]}): its own lens k1={own.k1:.4f} k2={own.k2:.4f} "
+        f"removed, the known lens k1={true_lens.k1:.4f} k2={true_lens.k2:.4f} applied (fit=crop, scale {scale:.4f})")
 
-    model = _find_model(args.model)
-    if model is None:
-        print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
-              "correcting with the true lens", flush=True)
-        used, source = true_lens, "true"
-    else:
-        from ..estimator import Estimator
-
-        used, source = Estimator(model).estimate(frame), "estimated"
-        error = float(max_displacement_px((true_lens.k1, true_lens.k2), (used.k1, used.k2), radius=corner_radius(size)))
-        log(f"estimated with {model.name}: k1={used.k1:.4f} k2={used.k2:.4f}")
-        print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
-        print(f"estimated k1={used.k1:+.4f} k2={used.k2:+.4f}")
-        print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
-    used = Lens(float(used.k1), float(used.k2))
+    estimate = estimate_and_report(frame, true_lens, args, log)
+    source = "estimated" if estimate is not true_lens else "true"
+    used = Lens(float(estimate.k1), float(estimate.k2))
     corrected = correct(frame, used.k1, used.k2, fit="same")
 
     chords, straight = [], []

@@ -6,14 +6,18 @@ import argparse
 import json
 
 from ..image_io import media_kind, read_image
+from ..lens_estimate import METHODS
 from . import positive_int, show_progress
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT image with the bundled CNN (ONNX, onnxruntime). Each image
 is read as RGB, treated as a whole 16:9 broadcast frame and resized with area interpolation to the
-network input. Prints one line per image: the path, k1 and k2 (width-normalised: image width = 1,
-origin at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel), or with --json
-one JSON object per line {"path", "k1", "k2"}. Images of another aspect ratio are squashed to 16:9
+network input; with --method auto (default) or lines, the lens that straightens the frame's pitch
+lines and straight edges is fitted too (docs/LINES.md). Prints one line per image: the path, k1 and
+k2 (width-normalised: image width = 1, origin at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4);
+negative k1 = barrel), the method that produced them (net or lines), the uncertainty (a ~90 % bound
+on the maximum displacement error, px of a 1920-wide frame) and the line chains used, or with
+--json one JSON object per line {"path", "k1", "k2", "method", "uncertainty_px", "chains"}. Images of another aspect ratio are squashed to 16:9
 (a warning says so). Videos (anything FFmpeg reads that is not a still image; image sequences as
 frame_%04d.png): shot cuts are detected, every --every-th frame of each
 shot is estimated and the estimates are smoothed within the shot (weighted by the confidence each
@@ -34,6 +38,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--every", type=positive_int, default=5, metavar="N",
                         help="videos: estimate every N-th frame of each shot (frames; default 5)")
     parser.add_argument("--per-frame", action="store_true", help="videos: one line (or JSON row) per frame")
+    parser.add_argument("--method", choices=METHODS, default="auto",
+                        help="auto (default: the line fit when it is surer than the CNN), net (the CNN alone) or "
+                             "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
     return parser
 
 
@@ -46,12 +53,13 @@ def run(args: argparse.Namespace) -> int:
         if media_kind(path) == "video":
             from ..video_pipeline import estimate_video, track_report
 
-            track = estimate_video(path, model=args.model, every=args.every, progress=show_progress(args))
+            track = estimate_video(path, model=args.model, every=args.every, progress=show_progress(args), method=args.method)
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             continue
-        lens = estimator.estimate(rgb8_for_estimator(read_image(path)))
+        lens = estimator.estimate(rgb8_for_estimator(read_image(path)), method=args.method)
         if args.json:
-            print(json.dumps({"path": path, "k1": lens.k1, "k2": lens.k2}), flush=True)
+            print(json.dumps({"path": path, **lens.as_dict()}), flush=True)
         else:
-            print(f"{path}\tk1={lens.k1:.6f}\tk2={lens.k2:.6f}", flush=True)
+            print(f"{path}\tk1={lens.k1:.6f}\tk2={lens.k2:.6f}\tmethod={lens.method}\t"
+                  f"uncertainty={lens.uncertainty_px:.1f}px\tchains={lens.chains}", flush=True)
     return 0

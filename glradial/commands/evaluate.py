@@ -43,7 +43,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "evaluate", help="evaluate the estimator on held-out stadium crops", description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    return add_arguments(parser)
+    add_arguments(parser)
+    real = parser.add_argument_group("real frames (net, lines and auto side by side; glradial.real_eval)")
+    real.add_argument("--frames", metavar="DIR", help="instead: evaluate net, lines and auto on the (nearly) undistorted "
+                      "real frames of DIR with known lenses applied (writes real.md to --out)")
+    real.add_argument("--calibrated", metavar="JSON", action="append", default=[],
+                      help="with --frames: also a calibrated camera (frames + known lens; see glradial.real_eval)")
+    real.add_argument("--procedural", type=non_negative_int, default=0, metavar="N",
+                      help="with --frames: also N held-out procedural stadium crops (default 0)")
+    return parser
 
 
 def settings(args: argparse.Namespace, command: str):
@@ -59,6 +67,14 @@ def settings(args: argparse.Namespace, command: str):
 def run(args: argparse.Namespace) -> int:
     from ..estimator import default_model_path
     from ..evaluation import OnnxPredictor, evaluate
+
+    if args.frames or args.calibrated:
+        from ..real_eval import evaluate_folder
+
+        evaluate_folder(args.frames, args.out, calibrated=args.calibrated, procedural=args.procedural,
+                        model=args.model, threads=args.threads)
+        print(f"wrote {args.out}/real.md", flush=True)
+        return 0
 
     model = str(args.model or default_model_path())
     chosen = settings(args, "glradial evaluate")  # checks the options before the model loads
