@@ -51,6 +51,19 @@ PANORAMA_HFOV = (45.0, 60.0)
 #: than this (px at 1920; the CNN's 90 % bound) and than the fit's own bound. The CNN's reading is
 #: not used for this: its pincushion on close-ups is a known failure (issue 17).
 OWN_LENS_PX = NET_UNCERTAINTY_PX
+
+
+def agreed_own_lens(estimates: dict[str, LensEstimate]) -> Lens | None:
+    """The frame's own lens when two independent readings agree on one: the line fit (on lines) and
+    the CNN (on texture) both read the unmodified frame more than :data:`OWN_LENS_PX` from no lens,
+    and closer to each other than the CNN's own bound. Then the line fit's lens (the surer one);
+    else ``None``. Used by ``remove_own_lens`` to make such a frame undistorted before applying
+    known lenses: the figures then measure the estimators, not the broadcast camera's lens."""
+    lines, net = estimates["lines"], estimates["net"]
+    if lines.method != "lines" or min(_from_no_lens(lines), _from_no_lens(net)) <= OWN_LENS_PX:
+        return None
+    apart = float(max_displacement_px(np.array([lines.k1, lines.k2]), np.array([net.k1, net.k2])))
+    return Lens(lines.k1, lines.k2) if apart <= net.uncertainty_px else None
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 
 
@@ -308,10 +321,13 @@ def _from_no_lens(estimate: LensEstimate) -> float:
 
 def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrated: list[str] = (), lenses: int = 12,
                     procedural: int = 0, model: str | None = None, threads: int | None = None, seed: int = 0,
-                    progress: Callable[[str], None] | None = print) -> dict:
+                    progress: Callable[[str], None] | None = print, remove_own_lens: bool = False) -> dict:
     """Build the sources (see the module docstring), evaluate, and write ``real.md``,
-    ``real_metrics.json`` and ``real_errors.png`` into ``out``. Returns the summary."""
+    ``real_metrics.json`` and ``real_errors.png`` into ``out``. Returns the summary.
+    ``remove_own_lens``: a frame whose own lens the line fit and the CNN agree on
+    (:func:`agreed_own_lens`) is first corrected with it (``fit="crop"``)."""
     from .atomic import atomic_write_text
+    from .remap import correct
 
     if isinstance(lenses, bool) or not isinstance(lenses, int) or lenses < 1:
         raise ValueError(f"lenses must be a positive integer, got {lenses!r}")
@@ -320,12 +336,17 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     cams = [load_calibrated(c) for c in calibrated]
     sources: dict[str, Iterable] = {}
     own: dict[str, dict] = {}
+    removed: dict[str, Lens] = {}
     evaluator = None
     if frames_dir is not None:
         frames, panoramas = frames_in(frames_dir)
         evaluator = Evaluator(model, threads)
         for i, (name, f) in enumerate(frames):
             own[name] = evaluator(f)
+            found = agreed_own_lens(own[name]) if remove_own_lens else None
+            if found is not None:
+                removed[name] = found
+                f = correct(f, found, fit="crop")
             sources[f"{name}/paper"] = _distorted(f, paper_lenses(lenses, seed * 1000 + i))
             sources[f"{name}/extended"] = _distorted(f, extended_lenses(lenses, seed * 1000 + 500 + i))
         for i, (name, pano) in enumerate(panoramas):
@@ -339,8 +360,8 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     if not sources:
         raise ValueError("nothing to evaluate: give a frames folder, a calibrated camera or procedural > 0")
     samples = run_sources(evaluator or Evaluator(model, threads), sources, progress)
-    own_lens = {name for name, est in own.items()
-                if est["lines"].method == "lines" and _from_no_lens(est["lines"]) > max(OWN_LENS_PX, est["lines"].uncertainty_px)}
+    own_lens = {name for name, est in own.items() if name not in removed
+                and est["lines"].method == "lines" and _from_no_lens(est["lines"]) > max(OWN_LENS_PX, est["lines"].uncertainty_px)}
     summary = summarise(samples, own_lens)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -358,6 +379,12 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
             for method, e in estimates.items():
                 text += (f"| {name} | {method} ({e.method}) | {e.k1:+.3f} | {e.k2:+.3f} | {_from_no_lens(e):.1f} | "
                          f"{e.uncertainty_px:.1f} | {e.chains} |\n")
+        if removed:
+            text += ("\nOwn lens removed before the known lenses were applied (the line fit and the CNN agree "
+                     f"within the CNN's bound, both more than {OWN_LENS_PX:g} px from no lens; `--remove-own-lens`): "
+                     + ", ".join(f"{n} (k1 {lens.k1:+.3f}, k2 {lens.k2:+.3f})" for n, lens in sorted(removed.items()))
+                     + ". The line fit then reads these frames as straight by construction; the CNN's reading is "
+                     "the independent check.\n")
         if own_lens:
             text += (f"\nRead as carrying their own lens (the line fit reads more than {OWN_LENS_PX:g} px and more than its "
                      "bound from no lens): "
@@ -365,7 +392,9 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     text += "".join(f"\n![{f}]({f})\n" for f in figures)
     atomic_write_text(out / "real.md", text)
     own_json = {name: {m: e.as_dict() for m, e in est.items()} for name, est in own.items()}
-    atomic_write_text(out / "real_metrics.json", json.dumps({"summary": summary, "own_lens": own_json}, indent=1))
+    removed_json = {name: {"k1": lens.k1, "k2": lens.k2} for name, lens in removed.items()}
+    atomic_write_text(out / "real_metrics.json",
+                      json.dumps({"summary": summary, "own_lens": own_json, "own_lens_removed": removed_json}, indent=1))
     return summary
 
 

@@ -113,3 +113,21 @@ def test_cli_evaluate_frames_writes_the_table(tmp_path):
     summary = json.loads((out / "real_metrics.json").read_text())["summary"]
     # a clean drawing of straight lines: the lines method reads the applied lenses closely
     assert summary["pitch/paper"]["lines"]["median_px"] < 2.0
+
+
+def test_agreed_own_lens_needs_both_readings_far_from_no_lens_and_close_to_each_other():
+    """A frame's own lens is removed only when the line fit and the CNN agree on it: known answers
+    for agreement (the bundled USL frame's readings), disagreement, near-pinhole and no line fit."""
+    from glradial.lens_estimate import LensEstimate
+    from glradial.real_eval import agreed_own_lens
+
+    lines = LensEstimate(-0.2305, 0.0432, uncertainty_px=7.7, method="lines", chains=2)
+    net = LensEstimate(-0.248, 0.051, uncertainty_px=16.0, method="net")
+    found = agreed_own_lens({"lines": lines, "net": net})
+    assert (found.k1, found.k2) == (lines.k1, lines.k2)
+    opposite = LensEstimate(0.2, 0.05, uncertainty_px=16.0, method="net")
+    assert agreed_own_lens({"lines": lines, "net": opposite}) is None
+    small = LensEstimate(-0.02, 0.0, uncertainty_px=3.0, method="lines", chains=4)  # 3.6 px from no lens
+    assert agreed_own_lens({"lines": small, "net": LensEstimate(-0.03, 0.0, uncertainty_px=16.0)}) is None
+    fallback = LensEstimate(-0.248, 0.051, uncertainty_px=16.0, method="net")  # 'lines' fell back to the net
+    assert agreed_own_lens({"lines": fallback, "net": net}) is None

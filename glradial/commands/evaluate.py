@@ -51,6 +51,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                       help="with --frames: also a calibrated camera (frames + known lens; see glradial.real_eval)")
     real.add_argument("--procedural", type=non_negative_int, default=0, metavar="N",
                       help="with --frames: also N held-out procedural stadium crops (default 0)")
+    real.add_argument("--remove-own-lens", action="store_true",
+                      help="with --frames: first correct a frame whose own lens the line fit and the CNN agree on "
+                           "(broadcast cameras are rarely pinhole), then apply the known lenses")
     return parser
 
 
@@ -72,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
         from ..real_eval import evaluate_folder
 
         evaluate_folder(args.frames, args.out, calibrated=args.calibrated, procedural=args.procedural,
-                        model=args.model, threads=args.threads)
+                        model=args.model, threads=args.threads, remove_own_lens=args.remove_own_lens)
         print(f"wrote {args.out}/real.md", flush=True)
         return 0
 
