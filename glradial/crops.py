@@ -578,7 +578,7 @@ def render_crops(
 def load_panorama(item: object) -> np.ndarray:
     """A panorama as H×W×3 uint8 RGB: arrays through :func:`glradial.frames.to_rgb8` (grey repeated,
     alpha dropped, 16-bit and float scaled); paths read (image files through OpenCV, ``.npy``
-    arrays such as the stadium cache through NumPy)."""
+    arrays such as the stadium cache, or a crop producer's panoramas, mapped by NumPy)."""
     from .frames import to_rgb8
 
     if isinstance(item, (str, os.PathLike)):
@@ -589,7 +589,7 @@ def load_panorama(item: object) -> np.ndarray:
             if image is None:
                 raise ValueError(f"cannot read panorama {str(item)!r}")
             return np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
-        item = np.load(item)
+        item = np.load(item, mmap_mode="r")  # mapped: only what a uint8 RGB array needs is copied
     return to_rgb8(np.asarray(item), "panorama")
 
 
