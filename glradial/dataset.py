@@ -31,7 +31,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .atomic import atomic_path, atomic_write_text
+from .atomic import atomic_write_text
 from .crops import CropParams, PanoramaRenderers, sample_crop_params, supersample_grid
 from .lens import InverseMethod, frame_size
 from .metrics import PAPER_SIZE
@@ -208,11 +208,10 @@ def write_crops_dataset(
 
 
 def _write_image(path: Path, image: np.ndarray) -> None:
-    import cv2
+    """Write the RGB crop atomically; a failed write names ``path`` and the errno (e.g. ENOSPC)."""
+    from .image_io import write_image
 
-    with atomic_path(path) as tmp:
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-            raise OSError(f"cannot write {str(path)!r}")
+    write_image(path, image)
 
 
 def read_labels(path: str | os.PathLike) -> tuple[list[dict[str, str]], list[CropParams]]:

@@ -70,21 +70,24 @@ def test_dataset_is_deterministic(ctx, tmp_path, pano_files) -> None:
 def test_interrupted_write_leaves_no_partial_files_and_resumes(ctx, tmp_path, pano_files, monkeypatch) -> None:
     write_crops_dataset(pano_files, tmp_path / "whole", count=12, seed=3, size=SIZE, out_size=OUT)
     out = tmp_path / "cut"
-    real_imwrite = cv2.imwrite
+    from glradial import atomic, image_io
+
+    real_write = image_io.atomic_write_bytes
     calls = {"n": 0}
 
-    def failing_imwrite(path, image, *args):
+    def failing_write(path, data):
         calls["n"] += 1
         if calls["n"] == 6:
             # Simulate a crash in the middle of writing: a partial file, then the interruption.
-            Path(path).write_bytes(b"\x89PNG partial")
-            raise KeyboardInterrupt
-        return real_imwrite(path, image, *args)
+            with atomic.atomic_path(path) as tmp:
+                tmp.write_bytes(data[: len(data) // 2])
+                raise KeyboardInterrupt
+        return real_write(path, data)
 
-    monkeypatch.setattr(cv2, "imwrite", failing_imwrite)
+    monkeypatch.setattr(image_io, "atomic_write_bytes", failing_write)
     with pytest.raises(KeyboardInterrupt):
         write_crops_dataset(pano_files, out, count=12, seed=3, size=SIZE, out_size=OUT)
-    monkeypatch.setattr(cv2, "imwrite", real_imwrite)
+    monkeypatch.setattr(image_io, "atomic_write_bytes", real_write)
     images = sorted(p for p in out.rglob("*.png"))
     assert len(images) == 5  # the five finished ones, no partial sixth, no temporary file
     assert not list(out.rglob(".*"))
@@ -94,6 +97,32 @@ def test_interrupted_write_leaves_no_partial_files_and_resumes(ctx, tmp_path, pa
     summary = write_crops_dataset(pano_files, out, count=12, seed=3, size=SIZE, out_size=OUT)
     assert summary.skipped == 5 and summary.written == 7
     assert _tree(out) == _tree(tmp_path / "whole")
+
+
+def test_full_disk_names_the_image_and_the_errno(ctx, tmp_path, pano_files, monkeypatch) -> None:
+    """ENOSPC where a full disk reports it at the latest (flushing the file); the third file written
+    is the second crop (the manifest is the first)."""
+    import errno
+    import os
+
+    from glradial import atomic
+
+    calls = {"n": 0}
+    real_fsync = atomic.os.fsync
+
+    def full_disk(fd):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_fsync(fd)
+
+    monkeypatch.setattr(atomic.os, "fsync", full_disk)
+    out = tmp_path / "ds"
+    with pytest.raises(OSError) as info:
+        write_crops_dataset(pano_files[:1], out, count=3, seed=0, size=SIZE, out_size=OUT)
+    second = out / "train" / "0000001.png"
+    assert info.value.errno == errno.ENOSPC and str(second) in str(info.value) and "ENOSPC" in str(info.value)
+    assert sorted(p.name for p in (out / "train").iterdir()) == ["0000000.png"]  # no partial or temporary file
 
 
 def test_resume_with_other_settings_is_refused(ctx, tmp_path, pano_files) -> None:
