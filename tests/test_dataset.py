@@ -131,6 +131,60 @@ def test_resume_with_other_settings_is_refused(ctx, tmp_path, pano_files) -> Non
         write_crops_dataset(pano_files[:2], tmp_path / "ds", count=2, seed=2, size=SIZE, out_size=OUT)
 
 
+def test_bad_panoramas_are_refused_before_anything_is_written(tmp_path, pano_files, capsys) -> None:
+    from glradial.cli import main
+
+    fake = tmp_path / "fake.png"
+    fake.write_text("not an image")
+    square = tmp_path / "square.png"
+    cv2.imwrite(str(square), np.zeros((40, 40, 3), np.uint8))
+    empty = tmp_path / "empty.npy"
+    np.save(empty, np.zeros((3, 5), np.uint8))
+    for bad, words in ((fake, "cannot read panorama"), (square, "2:1"), (empty, "2:1"), (tmp_path / "none.png", "does not exist")):
+        out = tmp_path / "cr"
+        # the bad file last: the good ones before it must not start a dataset either
+        argv = ["crops", str(pano_files[0]), str(bad), "--count", "2", "--out", str(out), "--seed", "0", "--size", "64x36"]
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert words in err and str(bad) in err, err
+        assert not out.exists()
+    # the folder is free for a run with other inputs
+    assert main(["crops", str(pano_files[1]), "--count", "2", "--out", str(tmp_path / "cr"), "--seed", "0", "--size", "64x36"]) == 0
+
+
+def test_a_first_run_that_fails_before_its_first_crop_leaves_nothing(ctx, tmp_path, pano_files, monkeypatch) -> None:
+    # A panorama whose header is fine but whose pixels cannot be decoded passes the up-front check.
+    truncated = tmp_path / "truncated.png"
+    truncated.write_bytes(pano_files[0].read_bytes()[:200])
+    out = tmp_path / "cr"
+    with pytest.raises(ValueError, match="cannot read panorama"):
+        write_crops_dataset([truncated], out, count=2, seed=0, size=SIZE, out_size=OUT)
+    assert not out.exists()
+    # In an existing folder, only what the run made goes; the folder and its other files stay.
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(ValueError, match="cannot read panorama"):
+        write_crops_dataset([truncated], out, count=2, seed=0, size=SIZE, out_size=OUT)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    summary = write_crops_dataset(pano_files[:1], out, count=2, seed=0, size=SIZE, out_size=OUT)
+    assert summary.written == 2
+
+
+def test_a_manifest_without_crops_does_not_bind_the_folder(ctx, tmp_path, pano_files) -> None:
+    # What a run killed (SIGKILL) between its manifest and its first crop leaves.
+    killed = tmp_path / "killed"
+    write_crops_dataset(pano_files[:2], killed, count=2, seed=1, size=SIZE, out_size=OUT)
+    for path in sorted(killed.rglob("*"), reverse=True):
+        if path.name != "manifest.json":
+            path.unlink() if path.is_file() else path.rmdir()
+    summary = write_crops_dataset(pano_files[2:], killed, count=2, seed=7, size=SIZE, out_size=OUT)
+    assert summary.written == 2 and summary.skipped == 0
+    write_crops_dataset(pano_files[2:], tmp_path / "clean", count=2, seed=7, size=SIZE, out_size=OUT)
+    assert _tree(killed) == _tree(tmp_path / "clean")  # the new manifest replaced the old one
+    with pytest.raises(ValueError, match="other settings"):  # now it holds crops: other settings are refused
+        write_crops_dataset(pano_files[2:], killed, count=2, seed=8, size=SIZE, out_size=OUT)
+
+
 @pytest.mark.parametrize("count", [1, 2, 3, 7, 20, 218])
 def test_assign_splits_partitions_panoramas(count) -> None:
     names = assign_splits(count, (0.8, 0.1, 0.1), seed=4)
