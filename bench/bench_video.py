@@ -2,7 +2,7 @@
 
 Makes one clip in a temporary folder (``--size``, ``--frames`` at 25 fps, H.264 crf 18 + AAC tone):
 ``--clip pan`` (default) a broadcast camera panning across a real USL match frame
-(/work/shared/data/real_football, or ``--frame``) through a constant lens (k1 -0.2, k2 0.03), the
+(the one shipped in the package, glradial/data/usl_broadcast_0195.jpg, or ``--frame``) through a constant lens (k1 -0.2, k2 0.03), the
 common case; ``--clip zoom`` the same frame zooming in (hfov -25 %) while the lens goes from
 k1 -0.30 to -0.18, so the smoothed lens, and the maps, change on every frame. Then it times, each ``--repeats`` times taking turns (so that load
 from other processes on a shared machine falls on all alike), keeping the best run of each:
@@ -42,7 +42,13 @@ from glradial.video_pipeline import correct_video, default_estimator, track_vide
 K1, K2 = -0.25, 0.05
 
 
-DEFAULT_FRAME = Path("/work/shared/data/real_football/usl_broadcast_0195.jpg")
+def bundled_frame_path() -> Path:
+    """The real broadcast frame shipped in the package (the one ``glradial demo-real`` uses)."""
+    from importlib import resources
+
+    from glradial.commands.demo_real import FRAME_NAME
+
+    return Path(str(resources.files("glradial.data").joinpath(FRAME_NAME)))
 
 
 def make_clip(path: Path, size: tuple[int, int], frames: int, kind: str, source: Path) -> None:
@@ -120,17 +126,25 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
     return {name: float(np.median(values)) for name, values in times.items()}
 
 
-def main() -> int:
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", default="1920x1080")
     parser.add_argument("--clip", choices=("pan", "zoom"), default="pan")
-    parser.add_argument("--frame", type=Path, default=DEFAULT_FRAME, help="picture the clip is made from")
+    parser.add_argument("--frame", type=Path, default=None,
+                        help="picture the clip is made from (default: the frame shipped in glradial/data)")
     parser.add_argument("--frames", type=int, default=150)
     parser.add_argument("--preset", default="medium")
     parser.add_argument("--crf", type=float, default=23.0)
     parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "gl"))
     parser.add_argument("--repeats", type=int, default=2)
-    args = parser.parse_args()
+    args = parser.parse_args(argv)
+    if args.frame is None:
+        args.frame = bundled_frame_path()
+    return args
+
+
+def main() -> int:
+    args = parse_args()
     if shutil.which("ffmpeg") is None:
         sys.exit("bench_video needs the ffmpeg command (make setup installs it)")
     size = tuple(int(v) for v in args.size.split("x"))

@@ -22,22 +22,34 @@ Convention:
   ``panoramas`` of each crop's source.
 * A worker that fails raises ``RuntimeError`` with its traceback in the reader; one that dies (killed,
   e.g. by the out-of-memory killer, even halfway through sending a batch) raises ``RuntimeError``
-  naming its exit code instead of leaving the reader waiting. Workers exit when the reading process
-  is gone.
+  naming its exit code instead of leaving the reader waiting; one that dies before running any
+  glradial code (typically: the main script, imported again by the spawned worker, starts a producer
+  itself because it lacks an ``if __name__ == "__main__":`` guard) raises ``RuntimeError`` saying so.
+  Workers exit when the reading process is gone.
+* Workers never receive panorama arrays through their start arguments (a pickled array larger than
+  the 64 KiB pipe buffer blocks the parent forever when the worker dies while starting): each array
+  is saved once to a ``.npy`` file in a private temporary folder, which the workers map
+  (``mmap_mode="r"``); the folder is removed when the producer is closed or garbage-collected.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import multiprocessing as mp
 import os
 import queue
+import shutil
+import tempfile
 import time
 import traceback
+import weakref
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Iterator, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
+from .atomic import atomic_path
 from .crops import CropParams, PanoramaRenderers, crop_labels, load_panorama, sample_crop_params
 from .lens import frame_size
 from .lensfuncs import LENS_NEWTON_STEPS
@@ -131,8 +143,23 @@ class _Renderer:
         self.renderers.close()
 
 
+def _spill_panoramas(panoramas: Sequence[Any], folder: Path) -> list[Any]:
+    """``panoramas`` with every array replaced by the path of a ``.npy`` copy in ``folder`` (written
+    atomically); paths are kept as they are."""
+    spilled: list[Any] = []
+    for i, item in enumerate(panoramas):
+        if isinstance(item, np.ndarray):
+            path = folder / f"panorama-{i:06d}.npy"
+            with atomic_path(path) as tmp:
+                np.save(tmp, item)
+            item = str(path)
+        spilled.append(item)
+    return spilled
+
+
 def _worker_main(worker: int, workers: int, config: _Config, out: Any, stop: Any, lp_num_threads: int | None,
-                 parent: int) -> None:
+                 parent: int, started: Any) -> None:
+    started[worker] = 1  # glradial code runs: the worker got past importing the main module
     if lp_num_threads is not None:
         os.environ["LP_NUM_THREADS"] = str(lp_num_threads)
     renderer = None
@@ -180,6 +207,7 @@ class CropProducer:
         self._procs: list[Any] = []
         self._queues: list[Any] = []
         self._renderer: _Renderer | None = None
+        self._cleanup: weakref.finalize | None = None
         if workers == 0:
             if lp_num_threads is not None:  # takes effect if this process has no GL context yet
                 os.environ.setdefault("LP_NUM_THREADS", str(lp_num_threads))
@@ -187,12 +215,16 @@ class CropProducer:
             return
         ctx = mp.get_context("spawn")
         self._stop = ctx.Event()
+        self._started = ctx.Array("b", workers, lock=False)
         try:
+            folder = Path(tempfile.mkdtemp(prefix="glradial-crops-"))
+            self._cleanup = weakref.finalize(self, shutil.rmtree, folder, ignore_errors=True)
+            worker_config = dataclasses.replace(config, panoramas=_spill_panoramas(config.panoramas, folder))
             for worker in range(workers):
                 out = ctx.Queue(maxsize=prefetch)
                 proc = ctx.Process(
                     target=_worker_main,
-                    args=(worker, workers, config, out, self._stop, lp_num_threads, os.getpid()),
+                    args=(worker, workers, worker_config, out, self._stop, lp_num_threads, os.getpid(), self._started),
                     name=f"glradial-crops-{worker}",
                     daemon=True,
                 )
@@ -261,6 +293,13 @@ class CropProducer:
         proc.join(timeout=10)
         code = proc.exitcode
         self.close()
+        if not self._started[worker]:
+            return RuntimeError(
+                f"crop worker {worker} died while starting (exit code {code}), before running any glradial code: "
+                f"the worker imports the main module again, so a script that makes a crop producer with workers >= 1 "
+                f"must do it under 'if __name__ == \"__main__\":' (see 'Safe importing of main module' in the "
+                f"multiprocessing documentation); the worker's own error is on standard error"
+            )
         hint = " (killed: look for the out-of-memory killer; every worker holds its panoramas)" if code == -9 else ""
         return RuntimeError(f"crop worker {worker} died (exit code {code}){hint}")
 
@@ -287,6 +326,8 @@ class CropProducer:
         for out in self._queues:
             out.close()
             out.cancel_join_thread()
+        if self._cleanup is not None:  # the workers are gone: nothing maps the panorama files now
+            self._cleanup()
 
     def __enter__(self) -> "CropProducer":
         return self

@@ -578,7 +578,7 @@ def render_crops(
 def load_panorama(item: object) -> np.ndarray:
     """A panorama as H×W×3 uint8 RGB: arrays through :func:`glradial.frames.to_rgb8` (grey repeated,
     alpha dropped, 16-bit and float scaled); paths read (image files through OpenCV, ``.npy``
-    arrays such as the stadium cache through NumPy)."""
+    arrays such as the stadium cache, or a crop producer's panoramas, mapped by NumPy)."""
     from .frames import to_rgb8
 
     if isinstance(item, (str, os.PathLike)):
@@ -589,8 +589,48 @@ def load_panorama(item: object) -> np.ndarray:
             if image is None:
                 raise ValueError(f"cannot read panorama {str(item)!r}")
             return np.ascontiguousarray(cv2.cvtColor(image, cv2.COLOR_BGR2RGB))
-        item = np.load(item)
+        item = np.load(item, mmap_mode="r")  # mapped: only what a uint8 RGB array needs is copied
     return to_rgb8(np.asarray(item), "panorama")
+
+
+def panorama_file_size(path: str | os.PathLike) -> tuple[int, int]:
+    """``(width, height)`` of the panorama file ``path`` (an image file or a ``.npy`` array, as
+    :func:`load_panorama` reads them), checked before any work is done: ``FileNotFoundError`` if it is
+    missing, ``ValueError`` naming it if it is not a readable panorama or not 2:1 (W = 2 H). Image
+    sizes come from the header (Pillow) where it knows the format; other files are decoded (OpenCV).
+    A file whose header is fine but whose pixels are corrupt is caught only when it is rendered."""
+    name = str(path)
+    if not os.path.isfile(name):
+        raise FileNotFoundError(f"panorama {name!r} does not exist or is not a file")
+    if name.endswith(".npy"):
+        try:
+            shape = np.load(name, mmap_mode="r").shape
+        except Exception as err:  # noqa: BLE001 - any failure means "not a readable array"
+            raise ValueError(f"cannot read panorama {name!r}: not a NumPy .npy array ({err})") from None
+        if len(shape) not in (2, 3):
+            raise ValueError(f"panorama {name!r} must be an H×W or H×W×C array, got shape {shape}")
+        height, width = int(shape[0]), int(shape[1])
+    else:
+        from PIL import Image
+
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", Image.DecompressionBombWarning)
+                with Image.open(name) as image:
+                    width, height = image.size
+        except Exception:  # noqa: BLE001 - a format Pillow does not know, or not an image: ask OpenCV
+            import cv2
+
+            from .native_stderr import silenced
+
+            with silenced():
+                decoded = cv2.imread(name, cv2.IMREAD_UNCHANGED)
+            if decoded is None:
+                raise ValueError(f"cannot read panorama {name!r}: not an image file") from None
+            height, width = decoded.shape[:2]
+    if height < 1 or width != 2 * height:
+        raise ValueError(f"panorama {name!r} must be equirectangular 2:1 (W = 2 H), got {width}×{height}")
+    return width, height
 
 
 class PanoramaRenderers:

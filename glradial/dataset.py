@@ -15,11 +15,13 @@ assigned to train/val/test as a whole (never one panorama in two splits): they a
 ``default_rng(seed)`` and cut by the split fractions (each non-empty split gets at least one
 panorama when there are enough). Every file is written to a temporary name in its folder and
 renamed when complete (``glradial.atomic``), so an interrupted run leaves only complete files, and
-a rerun skips them.
+a rerun skips them. The manifest binds the folder only once it holds a crop: a run that fails (or
+is killed) before its first crop does not stop a later run with other settings.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
@@ -31,8 +33,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .atomic import atomic_path, atomic_write_text
-from .crops import CropParams, PanoramaRenderers, sample_crop_params, supersample_grid
+from .atomic import atomic_write_text
+from .crops import CropParams, PanoramaRenderers, panorama_file_size, sample_crop_params, supersample_grid
 from .lens import InverseMethod, frame_size
 from .metrics import PAPER_SIZE
 
@@ -114,8 +116,11 @@ def write_crops_dataset(
 ) -> DatasetSummary:
     """Write ``count`` crops of ``panoramas`` (image files, 2:1) to ``out_dir`` (see the module docstring).
 
-    Resumes: files already present are complete (atomic writes) and skipped; a ``manifest.json``
-    with other settings or inputs is an error (``ValueError``). ``progress(n)`` is called with the
+    Every panorama is checked (:func:`~glradial.crops.panorama_file_size`: readable, 2:1) before
+    anything is written. Resumes: files already present are complete (atomic writes) and skipped; a
+    ``manifest.json`` with other settings or inputs is an error (``ValueError``) once the folder
+    holds a crop, and is replaced while it holds none. A first run that fails before its first crop
+    removes what it made (manifest, split folders, ``out_dir``). ``progress(n)`` is called with the
     number of crops finished (written or skipped) since the last call. ``size``, ``out_size``,
     ``inverse`` and ``supersample`` are as in :class:`~glradial.crops.CropRenderer`.
     """
@@ -133,12 +138,14 @@ def write_crops_dataset(
     paths = [Path(p) for p in panoramas]
     if not paths:
         raise ValueError("at least one panorama is needed")
-    for path in paths:
-        if not path.is_file():
-            raise FileNotFoundError(f"panorama {str(path)!r} does not exist")
+    for path in paths:  # every input checked before anything is written
+        panorama_file_size(path)
     ids = _panorama_ids(paths)
     split_of = assign_splits(len(paths), splits, seed)
     out = Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise NotADirectoryError(f"out_dir {str(out)!r} exists and is not a folder")
+    made_out = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
 
     manifest = {
@@ -156,40 +163,36 @@ def write_crops_dataset(
         ],
     }
     manifest_path = out / "manifest.json"
-    if manifest_path.exists():
+    fresh = not manifest_path.exists()
+    if not fresh:
         old = json.loads(manifest_path.read_text())
         if old != manifest:
-            changed = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
-            raise ValueError(
-                f"{str(out)!r} holds a crops dataset made with other settings ({', '.join(changed)} differ); "
-                f"use another folder or the same arguments to resume"
-            )
-    else:
+            if _holds_crops(out):
+                changed = sorted(k for k in set(old) | set(manifest) if old.get(k) != manifest.get(k))
+                raise ValueError(
+                    f"{str(out)!r} holds a crops dataset made with other settings ({', '.join(changed)} differ); "
+                    f"use another folder, the same arguments to resume, or delete the folder"
+                )
+            fresh = True  # left by a run that wrote no crop (killed early): it binds nothing
+    if fresh:
         atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
 
     params = sample_crop_params(count, seed, size=size)
     files = [Path(split_of[i % len(paths)]) / f"{i:07d}.{image_format}" for i in range(count)]
-    for split in set(split_of):
-        (out / split).mkdir(exist_ok=True)
-        for stale in (out / split).glob(f".*.tmp.{image_format}"):  # left by a killed run (SIGKILL)
-            stale.unlink()
-
-    written = skipped = 0
-    with PanoramaRenderers(paths, size=size, out_size=out_size, inverse=inverse, supersample=grid) as renderers:
-        for p_index in range(len(paths)):
-            mine = range(p_index, count, len(paths))
-            todo = [i for i in mine if not (out / files[i]).is_file()]
-            skipped += len(mine) - len(todo)
-            if progress is not None and len(mine) > len(todo):
-                progress(len(mine) - len(todo))
-            for start in range(0, len(todo), CHUNK):
-                chunk = todo[start : start + CHUNK]
-                images = renderers.render([params[i] for i in chunk], [p_index] * len(chunk))
-                for i, image in zip(chunk, images):
-                    _write_image(out / files[i], image)
-                    written += 1
-                if progress is not None:
-                    progress(len(chunk))
+    made_splits = [out / split for split in sorted(set(split_of)) if not (out / split).exists()]
+    try:
+        written, skipped = _write_crops(out, paths, files, params, size, out_size, inverse, grid, split_of, image_format, progress)
+    except BaseException:
+        if fresh and not _holds_crops(out):  # a first run that failed before its first crop leaves nothing
+            for folder in made_splits:
+                _remove_stale(folder, image_format)
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
+            manifest_path.unlink(missing_ok=True)
+            if made_out:
+                with contextlib.suppress(OSError):
+                    out.rmdir()
+        raise
 
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
@@ -207,12 +210,57 @@ def write_crops_dataset(
     return DatasetSummary(out, written, skipped, per_split, labels)
 
 
-def _write_image(path: Path, image: np.ndarray) -> None:
-    import cv2
+def _holds_crops(out: Path) -> bool:
+    """Whether ``out`` holds any finished crop (or a labels file) of a crops dataset."""
+    if (out / "labels.csv").exists():
+        return True
+    return any(
+        f.suffix[1:] in FORMATS and not f.name.startswith(".")
+        for split in SPLITS if (out / split).is_dir() for f in (out / split).iterdir()
+    )
 
-    with atomic_path(path) as tmp:
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
-            raise OSError(f"cannot write {str(path)!r}")
+
+def _remove_stale(folder: Path, image_format: str) -> None:
+    """Remove the temporary files a killed run (SIGKILL) left in ``folder``."""
+    for stale in folder.glob(f".*.tmp.{image_format}"):
+        stale.unlink()
+
+
+def _write_crops(
+    out: Path, paths: list[Path], files: list[Path], params: list[CropParams], size: tuple[int, int],
+    out_size: tuple[int, int], inverse: str, grid: tuple[int, int], split_of: list[str], image_format: str,
+    progress: Callable[[int], None] | None,
+) -> tuple[int, int]:
+    """Render and write the crops whose file is missing -> ``(written, skipped)``."""
+    count = len(files)
+    for split in set(split_of):
+        (out / split).mkdir(exist_ok=True)
+        _remove_stale(out / split, image_format)
+    written = skipped = 0
+    with PanoramaRenderers(paths, size=size, out_size=out_size, inverse=inverse, supersample=grid) as renderers:  # type: ignore[arg-type]
+        for p_index in range(len(paths)):
+            mine = range(p_index, count, len(paths))
+            todo = [i for i in mine if not (out / files[i]).is_file()]
+            skipped += len(mine) - len(todo)
+            if progress is not None and len(mine) > len(todo):
+                progress(len(mine) - len(todo))
+            for start in range(0, len(todo), CHUNK):
+                chunk = todo[start : start + CHUNK]
+                images = renderers.render([params[i] for i in chunk], [p_index] * len(chunk))
+                for i, image in zip(chunk, images):
+                    _write_image(out / files[i], image)
+                    written += 1
+                if progress is not None:
+                    progress(len(chunk))
+
+    return written, skipped
+
+
+def _write_image(path: Path, image: np.ndarray) -> None:
+    """Write the RGB crop atomically; a failed write names ``path`` and the errno (e.g. ENOSPC)."""
+    from .image_io import write_image
+
+    write_image(path, image)
 
 
 def read_labels(path: str | os.PathLike) -> tuple[list[dict[str, str]], list[CropParams]]:

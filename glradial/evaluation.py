@@ -42,10 +42,12 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from .crops import PAPER_RANGES
 from .metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px, median_interval
 
 __all__ = [
     "TRAINING_MEAN",
+    "lens_mean",
     "K1_BINS",
     "HFOV_BINS",
     "method_b",
@@ -59,10 +61,18 @@ __all__ = [
     "plots",
 ]
 
-#: Mean (k1, k2) of the paper's training distribution: k1 ~ U[-0.7, 0.3] -> -0.2; the manifold
-#: (:func:`glradial.metrics.manifold_k2`) is quadratic, so E[k2] = m(E[k1]) + 0.805 Var[k1]
-#: = 0.019 (-0.2) + 0.805 (0.04 + 1/12) (the noise has mean 0).
-TRAINING_MEAN = (-0.2, 0.09548333333333334)
+def lens_mean(k1_range: tuple[float, float] = PAPER_RANGES["k1"]) -> tuple[float, float]:
+    """Mean ``(k1, k2)`` of the crops' lens distribution: ``k1 ~ U[k1_range]`` and ``k2 =``
+    :func:`~glradial.metrics.manifold_k2` ``(k1)`` + zero-mean noise (the rare lenses that
+    :func:`~glradial.crops.sample_crop_params` redraws because they fold over are ignored). The
+    manifold is a quadratic, so Simpson's rule over ``k1_range`` is its exact mean."""
+    low, high = (float(v) for v in k1_range)
+    mid = (low + high) / 2
+    return mid, float((manifold_k2(low) + 4 * manifold_k2(mid) + manifold_k2(high)) / 6)
+
+
+#: Mean (k1, k2) of the paper's training distribution (:data:`glradial.crops.PAPER_RANGES`).
+TRAINING_MEAN = lens_mean()
 #: Bins of the breakdown tables.
 K1_BINS = [(-0.7, -0.5), (-0.5, -0.3), (-0.3, -0.1), (-0.1, 0.1), (0.1, 0.3)]
 HFOV_BINS = [(15.0, 25.0), (25.0, 35.0), (35.0, 45.0), (45.0, 60.0)]

@@ -166,3 +166,64 @@ def test_reader_gets_an_error_not_a_hang_when_a_worker_is_killed_mid_batch() -> 
         assert isinstance(outcome[0], RuntimeError) and "exit code -9" in str(outcome[0]), outcome
     finally:
         stream.close()
+
+
+
+_SCRIPT_BODY = """
+import numpy as np
+from glradial import crop_batches
+
+pano = np.random.default_rng(0).integers(0, 256, (256, 512, 3), dtype=np.uint8)  # 393 KB > a 64 KiB pipe
+with crop_batches([pano], 4, seed=1, size=(64, 36), out_size=(16, 16), workers=2, lp_num_threads=1) as stream:
+    batch = next(stream)
+print("images", batch.images.shape, int(batch.images.sum()))
+"""
+
+
+def _run_script(tmp_path: Path, text: str) -> "subprocess.CompletedProcess[str]":
+    """Run ``text`` as ``python script.py`` with its own TMPDIR (``tmp_path / "tmp"``)."""
+    import os
+    import subprocess
+    import sys
+
+    script = tmp_path / "train_script.py"
+    script.write_text(text)
+    (tmp_path / "tmp").mkdir()
+    root = str(Path(__file__).resolve().parents[1])
+    env = {**os.environ, "TMPDIR": str(tmp_path / "tmp"), "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    # 60 s: the script takes a few seconds on a loaded 2-core machine; before the fix it never ended (the
+    # parent blocked writing the pickled panorama into the pipe of a worker that had died while starting).
+    return subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=60)
+
+
+def test_unguarded_script_fails_clearly_instead_of_hanging(tmp_path) -> None:
+    # README's example saved as a script without a main guard: each spawned worker imports the script
+    # again and starts a producer itself, which multiprocessing refuses, so the worker dies at start-up.
+    done = _run_script(tmp_path, _SCRIPT_BODY)
+    assert done.returncode != 0, done.stdout
+    assert "died while starting" in done.stderr and 'if __name__ == "__main__":' in done.stderr, done.stderr[-3000:]
+    assert not list((tmp_path / "tmp").iterdir())  # the parent's and the workers' panorama folders are gone
+
+
+def test_guarded_script_streams_crops_and_leaves_no_files(tmp_path) -> None:
+    body = "\n".join("    " + line for line in _SCRIPT_BODY.strip().splitlines())
+    done = _run_script(tmp_path, f"def main():\n{body}\n\n\nif __name__ == '__main__':\n    main()\n")
+    assert done.returncode == 0, done.stderr[-3000:]
+    # The same batch rendered in this process (workers=0): the workers see the same panorama pixels.
+    pano = np.random.default_rng(0).integers(0, 256, (256, 512, 3), dtype=np.uint8)
+    with crop_batches([pano], 4, seed=1, size=(64, 36), out_size=(16, 16)) as stream:
+        want = next(stream).images
+    assert done.stdout.split() == ["images", "(4,", "16,", "16,", "3)", str(int(want.sum()))]
+    assert not list((tmp_path / "tmp").iterdir())
+
+
+def test_workers_get_panorama_arrays_through_files_removed_on_close() -> None:
+    pano = _synthetic_panorama(4)
+    stream = crop_batches([pano, PANO], 2, seed=0, out_size=(16, 16), size=(64, 36), workers=1, lp_num_threads=1)
+    folder = stream._cleanup.peek()[2][0]
+    files = sorted(folder.iterdir())
+    assert [f.name for f in files] == ["panorama-000000.npy"]
+    assert np.array_equal(np.load(files[0]), pano)
+    next(stream)
+    stream.close()
+    assert not folder.exists()

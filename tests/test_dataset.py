@@ -70,21 +70,24 @@ def test_dataset_is_deterministic(ctx, tmp_path, pano_files) -> None:
 def test_interrupted_write_leaves_no_partial_files_and_resumes(ctx, tmp_path, pano_files, monkeypatch) -> None:
     write_crops_dataset(pano_files, tmp_path / "whole", count=12, seed=3, size=SIZE, out_size=OUT)
     out = tmp_path / "cut"
-    real_imwrite = cv2.imwrite
+    from glradial import atomic, image_io
+
+    real_write = image_io.atomic_write_bytes
     calls = {"n": 0}
 
-    def failing_imwrite(path, image, *args):
+    def failing_write(path, data):
         calls["n"] += 1
         if calls["n"] == 6:
             # Simulate a crash in the middle of writing: a partial file, then the interruption.
-            Path(path).write_bytes(b"\x89PNG partial")
-            raise KeyboardInterrupt
-        return real_imwrite(path, image, *args)
+            with atomic.atomic_path(path) as tmp:
+                tmp.write_bytes(data[: len(data) // 2])
+                raise KeyboardInterrupt
+        return real_write(path, data)
 
-    monkeypatch.setattr(cv2, "imwrite", failing_imwrite)
+    monkeypatch.setattr(image_io, "atomic_write_bytes", failing_write)
     with pytest.raises(KeyboardInterrupt):
         write_crops_dataset(pano_files, out, count=12, seed=3, size=SIZE, out_size=OUT)
-    monkeypatch.setattr(cv2, "imwrite", real_imwrite)
+    monkeypatch.setattr(image_io, "atomic_write_bytes", real_write)
     images = sorted(p for p in out.rglob("*.png"))
     assert len(images) == 5  # the five finished ones, no partial sixth, no temporary file
     assert not list(out.rglob(".*"))
@@ -96,10 +99,90 @@ def test_interrupted_write_leaves_no_partial_files_and_resumes(ctx, tmp_path, pa
     assert _tree(out) == _tree(tmp_path / "whole")
 
 
+def test_full_disk_names_the_image_and_the_errno(ctx, tmp_path, pano_files, monkeypatch) -> None:
+    """ENOSPC where a full disk reports it at the latest (flushing the file); the third file written
+    is the second crop (the manifest is the first)."""
+    import errno
+    import os
+
+    from glradial import atomic
+
+    calls = {"n": 0}
+    real_fsync = atomic.os.fsync
+
+    def full_disk(fd):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+        return real_fsync(fd)
+
+    monkeypatch.setattr(atomic.os, "fsync", full_disk)
+    out = tmp_path / "ds"
+    with pytest.raises(OSError) as info:
+        write_crops_dataset(pano_files[:1], out, count=3, seed=0, size=SIZE, out_size=OUT)
+    second = out / "train" / "0000001.png"
+    assert info.value.errno == errno.ENOSPC and str(second) in str(info.value) and "ENOSPC" in str(info.value)
+    assert sorted(p.name for p in (out / "train").iterdir()) == ["0000000.png"]  # no partial or temporary file
+
+
 def test_resume_with_other_settings_is_refused(ctx, tmp_path, pano_files) -> None:
     write_crops_dataset(pano_files[:2], tmp_path / "ds", count=2, seed=1, size=SIZE, out_size=OUT)
     with pytest.raises(ValueError, match="seed"):
         write_crops_dataset(pano_files[:2], tmp_path / "ds", count=2, seed=2, size=SIZE, out_size=OUT)
+
+
+def test_bad_panoramas_are_refused_before_anything_is_written(tmp_path, pano_files, capsys) -> None:
+    from glradial.cli import main
+
+    fake = tmp_path / "fake.png"
+    fake.write_text("not an image")
+    square = tmp_path / "square.png"
+    cv2.imwrite(str(square), np.zeros((40, 40, 3), np.uint8))
+    empty = tmp_path / "empty.npy"
+    np.save(empty, np.zeros((3, 5), np.uint8))
+    for bad, words in ((fake, "cannot read panorama"), (square, "2:1"), (empty, "2:1"), (tmp_path / "none.png", "does not exist")):
+        out = tmp_path / "cr"
+        # the bad file last: the good ones before it must not start a dataset either
+        argv = ["crops", str(pano_files[0]), str(bad), "--count", "2", "--out", str(out), "--seed", "0", "--size", "64x36"]
+        assert main(argv) == 1
+        err = capsys.readouterr().err
+        assert words in err and str(bad) in err, err
+        assert not out.exists()
+    # the folder is free for a run with other inputs
+    assert main(["crops", str(pano_files[1]), "--count", "2", "--out", str(tmp_path / "cr"), "--seed", "0", "--size", "64x36"]) == 0
+
+
+def test_a_first_run_that_fails_before_its_first_crop_leaves_nothing(ctx, tmp_path, pano_files, monkeypatch) -> None:
+    # A panorama whose header is fine but whose pixels cannot be decoded passes the up-front check.
+    truncated = tmp_path / "truncated.png"
+    truncated.write_bytes(pano_files[0].read_bytes()[:200])
+    out = tmp_path / "cr"
+    with pytest.raises(ValueError, match="cannot read panorama"):
+        write_crops_dataset([truncated], out, count=2, seed=0, size=SIZE, out_size=OUT)
+    assert not out.exists()
+    # In an existing folder, only what the run made goes; the folder and its other files stay.
+    out.mkdir()
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(ValueError, match="cannot read panorama"):
+        write_crops_dataset([truncated], out, count=2, seed=0, size=SIZE, out_size=OUT)
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+    summary = write_crops_dataset(pano_files[:1], out, count=2, seed=0, size=SIZE, out_size=OUT)
+    assert summary.written == 2
+
+
+def test_a_manifest_without_crops_does_not_bind_the_folder(ctx, tmp_path, pano_files) -> None:
+    # What a run killed (SIGKILL) between its manifest and its first crop leaves.
+    killed = tmp_path / "killed"
+    write_crops_dataset(pano_files[:2], killed, count=2, seed=1, size=SIZE, out_size=OUT)
+    for path in sorted(killed.rglob("*"), reverse=True):
+        if path.name != "manifest.json":
+            path.unlink() if path.is_file() else path.rmdir()
+    summary = write_crops_dataset(pano_files[2:], killed, count=2, seed=7, size=SIZE, out_size=OUT)
+    assert summary.written == 2 and summary.skipped == 0
+    write_crops_dataset(pano_files[2:], tmp_path / "clean", count=2, seed=7, size=SIZE, out_size=OUT)
+    assert _tree(killed) == _tree(tmp_path / "clean")  # the new manifest replaced the old one
+    with pytest.raises(ValueError, match="other settings"):  # now it holds crops: other settings are refused
+        write_crops_dataset(pano_files[2:], killed, count=2, seed=8, size=SIZE, out_size=OUT)
 
 
 @pytest.mark.parametrize("count", [1, 2, 3, 7, 20, 218])

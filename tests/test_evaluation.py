@@ -115,6 +115,21 @@ def test_training_mean_is_the_mean_of_the_paper_distribution():
 
     k = np.array([(p.k1, p.k2) for p in sample_crop_params(20000, 7)])
     assert k.mean(axis=0) == pytest.approx(TRAINING_MEAN, abs=2e-3)
+    # The value derived by hand before: E[k2] = 0.019 E[k1] + 0.805 (E[k1]^2 + (b - a)^2 / 12), k1 ~ U[a, b].
+    assert TRAINING_MEAN == pytest.approx((-0.2, 0.019 * -0.2 + 0.805 * (0.04 + 1 / 12)), rel=1e-12)
+    assert TRAINING_MEAN == pytest.approx((-0.2, 0.09548333333333334), rel=1e-12)
+
+
+@pytest.mark.parametrize("k1_range", [(-0.5, -0.1), (-0.3, 0.3), (0.0, 0.2)])
+def test_lens_mean_follows_the_sampling_range(k1_range):
+    # Same Monte Carlo bound as above (k2's spread is smaller on these narrower ranges).
+    from glradial.crops import sample_crop_params
+    from glradial.evaluation import lens_mean
+
+    a, b = k1_range
+    k = np.array([(p.k1, p.k2) for p in sample_crop_params(20000, 3, k1=k1_range)])
+    assert k.mean(axis=0) == pytest.approx(lens_mean(k1_range), abs=2e-3)
+    assert lens_mean(k1_range)[1] == pytest.approx(0.019 * (a + b) / 2 + 0.805 * (((a + b) / 2) ** 2 + (b - a) ** 2 / 12), rel=1e-12)
 
 
 def test_plots_without_matplotlib_say_so(tmp_path, monkeypatch, capsys):

@@ -1,0 +1,29 @@
+"""bench/bench_video.py runs from a checkout alone: its default picture is the frame shipped in the package."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+
+import glradial
+from glradial.commands.demo_real import bundled_frame
+from glradial.image_io import read_image
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _bench_video():
+    spec = importlib.util.spec_from_file_location("bench_video", ROOT / "bench" / "bench_video.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_default_frame_is_the_packaged_one() -> None:
+    args = _bench_video().parse_args([])
+    frame = Path(args.frame).resolve()
+    assert frame.is_relative_to(Path(glradial.__file__).resolve().parent / "data"), frame
+    assert np.array_equal(read_image(frame), bundled_frame()[0])
+    assert _bench_video().parse_args(["--frame", "x.png"]).frame == Path("x.png")
