@@ -109,6 +109,7 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def _check_paths(args: argparse.Namespace) -> str:
+    from ..atomic import check_output_folder
     from ..image_io import check_overwrite, media_kind
     from ..video_io import is_sequence, sequence_files
 
@@ -120,9 +121,7 @@ def _check_paths(args: argparse.Namespace) -> str:
         raise UsageError(f"INPUT is {'an' if kind_in == 'image' else 'a'} {kind_in} but OUTPUT {str(target)!r} is {'an' if kind_out == 'image' else 'a'} {kind_out} name")
     if _same_file(source, target) or os.path.abspath(source) == os.path.abspath(target):
         raise UsageError("OUTPUT must differ from INPUT (glradial never writes over its input)")
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise FileNotFoundError(f"output folder {str(folder)!r} does not exist")
+    check_output_folder(target)
     if is_sequence(target):
         if not args.overwrite and sequence_files(target):
             raise FileExistsError(f"output files {str(target)!r} already exist (overwrite them with -y/--overwrite)")
