@@ -126,7 +126,7 @@ def test_stmap_with_principal_point(tmp_path):
     np.testing.assert_array_equal(read_stmap(out), expected)
     calibration = tmp_path / "calib.json"
     calibration.write_text(json.dumps({"camera_matrix": K_OFF, "dist_coeffs": DIST, "size": [1280, 720]}))
-    assert main(["stmap", "--lens", str(calibration), "--size", "128x72", "--out", str(out)]) == 0
+    assert main(["stmap", "--lens", str(calibration), "--size", "128x72", "--out", str(out), "-y"]) == 0
     np.testing.assert_allclose(read_stmap(out), lens_stmap(Lens.from_opencv(K_OFF, DIST, (1280, 720)), (128, 72)))
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -254,3 +255,29 @@ def test_command_writes_the_panorama(ctx, tmp_path):
     assert command.run(args) == 0
     written = cv2.cvtColor(cv2.imread(str(out)), cv2.COLOR_BGR2RGB)
     assert np.array_equal(written, stadium_panorama(4, (256, 128)))
+
+
+def test_command_replaces_an_existing_out_only_with_y(ctx, tmp_path, capsys, monkeypatch):
+    from glradial.cli import main
+
+    out = tmp_path / "pano.png"
+    out.write_bytes(b"keep me")
+    monkeypatch.setattr("glradial.stadium.stadium_panorama", lambda *a, **k: pytest.fail("render started before the check"))
+    assert main(["stadium", "--seed", "4", "--size", "64x32", "--out", str(out)]) == 1
+    assert f"output {str(out)!r} already exists (overwrite it with -y/--overwrite)" in capsys.readouterr().err
+    assert out.read_bytes() == b"keep me" and list(tmp_path.iterdir()) == [out]
+    monkeypatch.undo()
+    assert main(["stadium", "--seed", "4", "--size", "64x32", "--out", str(out), "--overwrite"]) == 0
+    written = cv2.cvtColor(cv2.imread(str(out)), cv2.COLOR_BGR2RGB)
+    assert np.array_equal(written, stadium_panorama(4, (64, 32)))
+
+
+@pytest.mark.parametrize("name", ["s.bmpx", "s.mp4", "s"])
+def test_command_names_an_unknown_image_extension(tmp_path, capsys, name):
+    from glradial.cli import main
+
+    assert main(["stadium", "--seed", "1", "--size", "64x32", "--out", str(tmp_path / name)]) == 1
+    err = capsys.readouterr().err
+    suffix = repr(Path(name).suffix or "(none)")
+    assert f"unknown image extension {suffix}; use .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
+    assert "video" not in err and list(tmp_path.iterdir()) == []

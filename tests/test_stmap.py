@@ -116,6 +116,18 @@ def test_stmap_bad_input(tmp_path, capsys):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_stmap_replaces_an_existing_out_only_with_y(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "m.npy"
+    out.write_bytes(b"keep me")
+    monkeypatch.setattr("glradial.stmap.lens_stmap", lambda *a, **k: pytest.fail("work started before the check"))
+    assert main(["stmap", "--k1", "-0.1", "--size", "32x18", "--out", str(out)]) == 1
+    assert f"output {str(out)!r} already exists (overwrite it with -y/--overwrite)" in capsys.readouterr().err
+    assert out.read_bytes() == b"keep me" and list(tmp_path.iterdir()) == [out]
+    monkeypatch.undo()
+    assert main(["stmap", "--k1", "-0.1", "--size", "32x18", "--out", str(out), "-y"]) == 0
+    np.testing.assert_array_equal(read_stmap(out), lens_stmap(Lens(-0.1, 0.0), (32, 18)))
+
+
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg command (installed by make's set-up)")
 def test_exr_stmap_decodes_in_ffmpeg_as_written(tmp_path):
     """An independent EXR decoder (FFmpeg's) reads the same float32 S, T, B planes: proof that the
