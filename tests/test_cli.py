@@ -208,7 +208,7 @@ def _bad_cases(tmp: Path) -> list[tuple[list[str], str, int]]:
         (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1", "--crf", "20", "--bitrate", "2M"], "--crf or --bitrate", 2),
         (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1", "--bitrate", "fast"], "bit rate must be", 2),
         (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--lens-track", "t.csv"], "cannot be combined", 2),
-        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--sidecar", str(tmp / "o.mp4")], "--sidecar must differ", 2),
+        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--sidecar", str(tmp / "o.mp4")], "must end in .csv or .json", 2),
         (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--auto"], "--k1/--k2/--cx/--cy/--pixel-aspect/--lens and --auto cannot be combined", 2),
         (["correct", road, str(tmp / "o.png")], "give the lens with --k1", 2),
         (["correct", road, str(tmp / "o.mp4"), "--k1", "0.1"], "INPUT is an image but OUTPUT", 2),

@@ -90,9 +90,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="frame rate of an image-sequence INPUT, e.g. 25 or 30000/1001 (default 25; videos keep theirs)")
     encode.add_argument("--pix-fmt", metavar="FMT", help="output pixel format, e.g. yuv420p, yuv422p10le (default: the input's where the encoder takes it)")
     video = parser.add_argument_group("video with --auto")
-    video.add_argument("--every", type=positive_int, default=5, metavar="N",
+    video.add_argument("--every", type=positive_int, default=None, metavar="N",
                        help="estimate every N-th frame of each shot, plus each shot's first frame (frames; default 5)")
-    video.add_argument("--window", type=positive_float, default=2.0, metavar="SECONDS",
+    video.add_argument("--window", type=positive_float, default=None, metavar="SECONDS",
                        help="half width of the per-shot smoothing window (seconds; default 2.0)")
     video.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
                        help="warn about shots whose smoothed lens is less sure than this (px at 1920 wide, ~p90; default 10)")
@@ -141,9 +141,11 @@ def run(args: argparse.Namespace) -> int:
                          "or --auto to estimate it")
     if args.model is not None and not args.auto:
         raise UsageError("--model needs --auto")
-    for name in ("sidecar", "max_uncertainty"):
+    for name in ("sidecar", "max_uncertainty", "every", "window"):
         if getattr(args, name) is not None and not args.auto:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
+    if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
+        raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
     if args.crf is not None and args.bitrate is not None:
         raise UsageError("give --crf or --bitrate, not both")
     kind = _check_paths(args)
@@ -154,7 +156,8 @@ def run(args: argparse.Namespace) -> int:
         from ..remap import correct
         from ..image_io import read_image, write_image
 
-        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate"):
+        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "every", "window",
+                     "max_uncertainty"):
             if getattr(args, name) is not None:
                 raise UsageError(f"--{name.replace('_', '-')} is for videos")
         from ..lens import Lens
@@ -208,8 +211,9 @@ def run(args: argparse.Namespace) -> int:
     check_overwrite(sidecar, args.overwrite)
     if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
-    track = track_video(args.input, default_estimator(args.model), every=args.every, window_s=args.window,
-                        progress=progress, doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate)
+    given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
+    track = track_video(args.input, default_estimator(args.model), progress=progress,  # its defaults: every 5, window 2 s
+                        doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
     correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
