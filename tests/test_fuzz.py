@@ -323,8 +323,15 @@ def _cli_files(tmp: Path) -> dict[str, str]:
     (tmp / "trunc.png").write_bytes(data[: len(data) // 2])
     (tmp / "bad.mp4").write_bytes(b"not a video at all" * 10)
     (tmp / "empty.png").write_bytes(b"")
+    from fractions import Fraction
+
+    from glradial.video_io import EncodeOptions, VideoInfo, VideoWriter
+
+    with VideoWriter(tmp / "clip.mp4", VideoInfo.of((64, 36), Fraction(25)), options=EncodeOptions(codec="libx264")) as writer:
+        for value in range(0, 250, 50):
+            writer.write(np.full((36, 64, 3), value, np.uint8))
     return {"good": str(good), "trunc": str(tmp / "trunc.png"), "bad_video": str(tmp / "bad.mp4"),
-            "empty": str(tmp / "empty.png"), "tmp": str(tmp)}
+            "empty": str(tmp / "empty.png"), "video": str(tmp / "clip.mp4"), "tmp": str(tmp)}
 
 
 CLI_CASES = [
@@ -366,6 +373,12 @@ CLI_CASES = [
     ("correct-every-on-an-image", "correct {good} {tmp}/o.png --auto --every 3", 2, "--every is for videos"),
     ("correct-max-uncertainty-on-an-image", "correct {good} {tmp}/o.png --auto --max-uncertainty 5", 2, "--max-uncertainty is for videos"),
     ("correct-sidecar-txt", "correct {bad_video} {tmp}/o.mp4 --auto --sidecar {tmp}/side.txt", 2, "--sidecar '{tmp}/side.txt' must end in .csv or .json"),
+    # a preset the encoder does not know: one line naming it and the encoder's presets (x264's own
+    # "x264 [error]" lines silenced); an encoder without presets refuses --preset instead of ignoring it
+    ("correct-preset-unknown", "correct {video} {tmp}/o.mp4 --k1 -0.2 --preset ludicrous", 1,
+     "--preset 'ludicrous' is not a preset of libx264 (ultrafast superfast veryfast faster fast medium slow slower veryslow placebo)"),
+    ("correct-preset-ffv1", "correct {video} {tmp}/o.mkv --k1 -0.2 --codec ffv1 --preset slow", 1,
+     "--preset 'slow': encoder ffv1 has no presets"),
     ("correct-out-folder-is-a-file", "correct {good} {good}/o.png --k1 -0.1", 1, "good.png' is a file, not a folder"),
 ]
 
@@ -565,6 +578,17 @@ def test_file_size_limit_from_the_kernel_names_path_and_errno(tmp_path, capfd):
     message = capfd.readouterr().out
     assert str(target) in message and "EFBIG" in message, message
     assert list(tmp_path.iterdir()) == []
+
+
+def test_encoder_statistics_are_silenced(cli_env, capfd):
+    """x265 prints its statistics on stderr when its context is freed: a quiet run prints nothing there."""
+    out = Path(cli_env["tmp"]) / "x265.mkv"
+    status = cli.main(["-q", "correct", cli_env["video"], str(out), "--k1", "-0.2", "--codec", "libx265", "--preset", "superfast"])
+    import gc
+
+    gc.collect()
+    err = capfd.readouterr().err
+    assert status == 0 and out.is_file() and err == "", err
 
 
 def test_native_stderr_is_silenced_only_inside_the_block(capfd):
