@@ -185,9 +185,9 @@ def run(args: argparse.Namespace) -> int:
     video = dict(progress=progress, options=encode, overwrite=args.overwrite, rate=args.rate, **options)
     if given:
         with VideoReader(args.input, rate=args.rate) as reader:
-            size = reader.info.size
-        lens = lens_from_args(args, size)  # validated before any frame is decoded
-        correct_video(args.input, args.output, lambda _i: lens, **video)
+            info = reader.info
+        lens = lens_from_args(args, info.size)  # validated before any frame is decoded
+        _summary(args.output, correct_video(args.input, args.output, lambda _i: lens, **video), info.frame_count)
         return 0
 
     if args.lens_track:
@@ -196,7 +196,8 @@ def run(args: argparse.Namespace) -> int:
         with VideoReader(args.input, rate=args.rate) as reader:
             info = reader.info
         track = load_lens_track(args.lens_track, info.rate, info.size)
-        correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+        written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+        _summary(args.output, written, info.frame_count)
         return 0
 
     import sys
@@ -211,17 +212,24 @@ def run(args: argparse.Namespace) -> int:
     check_overwrite(sidecar, args.overwrite)
     if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
+    from ..video_io import VideoWriter
+
+    with VideoReader(args.input, rate=args.rate, copy_streams=True) as reader:
+        info = reader.info
+        # the encoder, its options and the container are checked before the estimation pass: open and drop
+        VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
     given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
     track = track_video(args.input, default_estimator(args.model), progress=progress,  # its defaults: every 5, window 2 s
                         doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
-    correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+    written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
     try:
         track.save(sidecar)
     except BaseException:
         Path(args.output).unlink(missing_ok=True)  # both outputs or neither
         raise
+    _summary(args.output, written, info.frame_count)
     shots = track.per_shot()
     print(f"{args.input}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
@@ -229,6 +237,13 @@ def run(args: argparse.Namespace) -> int:
         flag = " DOUBTFUL" if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
     return 0
+
+
+def _summary(output: str, written: int, header: int) -> None:
+    """The line every video run ends with (stdout, also with -q): frames read and written, and the
+    count the input's header states (-1: none), so that a short output is never silent."""
+    stated = f"{header} frames" if header > 0 else "unknown"
+    print(f"wrote {output}: {written} frames read and written (input header: {stated})", flush=True)
 
 
 def _pair(value: object) -> tuple[float, float]:
