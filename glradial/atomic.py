@@ -16,7 +16,7 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_folder"]
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_folder", "temporary_folder"]
 
 
 def check_output_folder(path: str | os.PathLike) -> Path:
@@ -95,6 +95,18 @@ def _naming(err: OSError, target: Path, context: str = "") -> OSError:
         named = OSError(message)
     named.errno = err.errno  # without strerror, str() is the message alone (no "[Errno 2]" prefix)
     return named
+
+
+def temporary_folder(target: str | os.PathLike, prefix: str) -> Path:
+    """A new hidden folder ``.<prefix><random>.tmp`` beside ``target`` (for outputs made of many
+    files, moved into place by the caller); an unwritable folder raises ``OSError`` naming
+    ``target`` and the errno symbol, not the temporary name."""
+    target = Path(target)
+    folder = target.parent if str(target.parent) else Path(".")
+    try:
+        return Path(tempfile.mkdtemp(prefix=f".{prefix}", suffix=".tmp", dir=folder))
+    except OSError as err:
+        raise _naming(err, target, "cannot create a folder in its folder: ") from err
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:

@@ -32,7 +32,6 @@ import glob
 import os
 import re
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -41,7 +40,7 @@ from typing import Iterator, Literal, Union
 import av
 import numpy as np
 
-from .atomic import atomic_path, check_output_folder
+from .atomic import atomic_path, check_output_folder, temporary_folder
 from .image_io import check_overwrite
 from .native_stderr import silenced
 
@@ -464,9 +463,8 @@ class VideoWriter:
         self.frames_written = 0
         self._closed = False
         self._atomic = None
-        folder = self.path.parent if str(self.path.parent) else Path(".")
         if self.sequence:
-            self._tmpdir: Path | None = Path(tempfile.mkdtemp(prefix=f".{self.path.name.split('%')[0]}", suffix=".tmp", dir=folder))
+            self._tmpdir: Path | None = temporary_folder(self.path, self.path.name.split('%')[0])
             tmp = self._tmpdir / self.path.name
         else:
             self._tmpdir = None

@@ -383,6 +383,7 @@ CLI_CASES = [
      "--preset 'ludicrous' is not a preset of libx264 (ultrafast superfast veryfast faster fast medium slow slower veryslow placebo)"),
     ("correct-preset-ffv1", "correct {video} {tmp}/o.mkv --k1 -0.2 --codec ffv1 --preset slow", 1,
      "--preset 'slow': encoder ffv1 has no presets"),
+    ("correct-sequence-out-unwritable", "correct {video} /proc/f_%04d.png --k1 -0.1", 1, "cannot write '/proc/f_%04d.png': cannot create a folder"),
     ("correct-out-folder-is-a-file", "correct {good} {good}/o.png --k1 -0.1", 1, "good.png' is a file, not a folder"),
 ]
 
