@@ -76,25 +76,15 @@ def test_correct_with_principal_point_options_and_lens_files(tmp_path, small_pho
     np.testing.assert_array_equal(read_image(out), glradial.correct(image, -0.3, 0.05, backend="cpu"))
 
 
-def test_lens_file_from_convert_json(tmp_path, small_photo, capsys):
+@pytest.mark.parametrize("target", ["ffmpeg", "opencv"])
+def test_lens_file_from_convert_json(tmp_path, small_photo, capsys, target):
     """'glradial convert --json' output: its k1, k2 are in the --to convention, the glradial pair
-    is what --lens uses."""
+    is what --lens uses (also with --to opencv, whose output holds camera_matrix and dist_coeffs)."""
     source, image = small_photo
-    assert main(["convert", "--from", "width", "--to", "ffmpeg", "--size", "320x180", "--json", "-0.2", "0.04"]) == 0
+    assert main(["convert", "--from", "width", "--to", target, "--size", "320x180", "--json", "-0.2", "0.04"]) == 0
     converted = tmp_path / "converted.json"
     converted.write_text(capsys.readouterr().out)
     out = tmp_path / "b.png"
-    assert main(["correct", str(source), str(out), "-y", "--lens", str(converted), "--backend", "cpu"]) == 0
-    np.testing.assert_array_equal(read_image(out), glradial.correct(image, -0.2, 0.04, backend="cpu"))
-
-
-def test_lens_file_from_convert_json_to_opencv_uses_the_glradial_pair(tmp_path, small_photo, capsys):
-    """convert --json --to opencv also holds camera_matrix and dist_coeffs: still convert's format."""
-    source, image = small_photo
-    assert main(["convert", "--from", "width", "--to", "opencv", "--size", "320x180", "--json", "-0.2", "0.04"]) == 0
-    converted = tmp_path / "converted.json"
-    converted.write_text(capsys.readouterr().out)
-    out = tmp_path / "c.png"
     assert main(["correct", str(source), str(out), "-y", "--lens", str(converted), "--backend", "cpu"]) == 0
     np.testing.assert_array_equal(read_image(out), glradial.correct(image, -0.2, 0.04, backend="cpu"))
 

@@ -21,6 +21,8 @@ from glradial.stadium_style import (
     stadium_split,
 )
 
+from conftest import check_existing_out_needs_y
+
 # A main-camera stadium (camera on the halfway line, ~120 m from the far touchline), chosen by its
 # style so that the test survives changes of the style sampler.
 SEED = next(s for s in range(200) if sample_style(s).camera_kind == "main")
@@ -258,16 +260,9 @@ def test_command_writes_the_panorama(ctx, tmp_path):
 
 
 def test_command_replaces_an_existing_out_only_with_y(ctx, tmp_path, capsys, monkeypatch):
-    from glradial.cli import main
-
     out = tmp_path / "pano.png"
-    out.write_bytes(b"keep me")
-    monkeypatch.setattr("glradial.stadium.stadium_panorama", lambda *a, **k: pytest.fail("render started before the check"))
-    assert main(["stadium", "--seed", "4", "--size", "64x32", "--out", str(out)]) == 1
-    assert f"output {str(out)!r} already exists (overwrite it with -y/--overwrite)" in capsys.readouterr().err
-    assert out.read_bytes() == b"keep me" and list(tmp_path.iterdir()) == [out]
-    monkeypatch.undo()
-    assert main(["stadium", "--seed", "4", "--size", "64x32", "--out", str(out), "--overwrite"]) == 0
+    argv = ["stadium", "--seed", "4", "--size", "64x32", "--out", str(out)]
+    check_existing_out_needs_y(argv, out, "glradial.stadium.stadium_panorama", monkeypatch, capsys)
     written = cv2.cvtColor(cv2.imread(str(out)), cv2.COLOR_BGR2RGB)
     assert np.array_equal(written, stadium_panorama(4, (64, 32)))
 

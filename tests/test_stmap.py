@@ -13,6 +13,7 @@ import pytest
 from glradial import Lens
 from glradial.cli import main
 from glradial.stmap import STMAP_NO_SOURCE, lens_stmap, maps_from_stmap, read_stmap, write_stmap
+from conftest import check_existing_out_needs_y
 
 SIZE = (96, 54)
 
@@ -118,13 +119,8 @@ def test_stmap_bad_input(tmp_path, capsys):
 
 def test_stmap_replaces_an_existing_out_only_with_y(tmp_path, capsys, monkeypatch):
     out = tmp_path / "m.npy"
-    out.write_bytes(b"keep me")
-    monkeypatch.setattr("glradial.stmap.lens_stmap", lambda *a, **k: pytest.fail("work started before the check"))
-    assert main(["stmap", "--k1", "-0.1", "--size", "32x18", "--out", str(out)]) == 1
-    assert f"output {str(out)!r} already exists (overwrite it with -y/--overwrite)" in capsys.readouterr().err
-    assert out.read_bytes() == b"keep me" and list(tmp_path.iterdir()) == [out]
-    monkeypatch.undo()
-    assert main(["stmap", "--k1", "-0.1", "--size", "32x18", "--out", str(out), "-y"]) == 0
+    argv = ["stmap", "--k1", "-0.1", "--size", "32x18", "--out", str(out)]
+    check_existing_out_needs_y(argv, out, "glradial.stmap.lens_stmap", monkeypatch, capsys)
     np.testing.assert_array_equal(read_stmap(out), lens_stmap(Lens(-0.1, 0.0), (32, 18)))
 
 
