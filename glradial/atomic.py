@@ -16,17 +16,20 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_folder"]
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_folder", "temporary_folder"]
 
 
 def check_output_folder(path: str | os.PathLike) -> Path:
     """Return ``path`` as a ``Path`` after checking that its folder exists and it is not a folder.
 
-    Raises ``FileNotFoundError`` / ``IsADirectoryError`` naming the path.
+    Raises ``FileNotFoundError`` (no such folder), ``NotADirectoryError`` (the folder's name is a
+    file) or ``IsADirectoryError`` (``path`` is a folder), naming the path.
     """
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
+        if folder.exists():
+            raise NotADirectoryError(f"output folder {str(folder)!r} is a file, not a folder (for {str(target)!r})")
         raise FileNotFoundError(f"output folder {str(folder)!r} does not exist (for {str(target)!r})")
     if target.is_dir():
         raise IsADirectoryError(f"output {str(target)!r} is a folder, expected a file name")
@@ -53,9 +56,12 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     nothing, the temporary file is removed and ``path`` is left untouched.
     """
     target = check_output_folder(path)
-    fd, tmp_name = tempfile.mkstemp(
-        prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent if str(target.parent) else "."
-    )
+    try:
+        fd, tmp_name = tempfile.mkstemp(
+            prefix=f".{target.stem}.", suffix=f".tmp{target.suffix}", dir=target.parent if str(target.parent) else "."
+        )
+    except OSError as err:  # an unwritable folder (permissions, read-only or pseudo file system)
+        raise _naming(err, target, "cannot create a file in its folder: ") from err
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -69,13 +75,38 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
             tmp.unlink()
         if err.errno is None:
             raise
-        # name the output and the errno symbol (e.g. ENOSPC on a full disk), not the temporary file
-        symbol = errno.errorcode.get(err.errno, str(err.errno))
-        raise OSError(err.errno, f"cannot write {str(target)!r}: {os.strerror(err.errno)} ({symbol})") from err
+        raise _naming(err, target) from err
     except BaseException:
         with contextlib.suppress(OSError):
             tmp.unlink()
         raise
+
+
+def _naming(err: OSError, target: Path, context: str = "") -> OSError:
+    """``err`` (an ``OSError`` with an errno) restated for the output ``target`` with its errno
+    symbol (e.g. ENOSPC on a full disk), never the temporary file's name; same class and errno."""
+    if err.errno is None:
+        return err
+    symbol = errno.errorcode.get(err.errno, str(err.errno))
+    message = f"cannot write {str(target)!r}: {context}{os.strerror(err.errno)} ({symbol})"
+    try:
+        named = type(err)(message)
+    except TypeError:
+        named = OSError(message)
+    named.errno = err.errno  # without strerror, str() is the message alone (no "[Errno 2]" prefix)
+    return named
+
+
+def temporary_folder(target: str | os.PathLike, prefix: str) -> Path:
+    """A new hidden folder ``.<prefix><random>.tmp`` beside ``target`` (for outputs made of many
+    files, moved into place by the caller); an unwritable folder raises ``OSError`` naming
+    ``target`` and the errno symbol, not the temporary name."""
+    target = Path(target)
+    folder = target.parent if str(target.parent) else Path(".")
+    try:
+        return Path(tempfile.mkdtemp(prefix=f".{prefix}", suffix=".tmp", dir=folder))
+    except OSError as err:
+        raise _naming(err, target, "cannot create a folder in its folder: ") from err
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:

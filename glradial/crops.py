@@ -158,6 +158,10 @@ def sample_crop_params(
     """
     if isinstance(n, bool) or not isinstance(n, (numbers.Integral, np.integer)) or n < 0:
         raise ValueError(f"n must be a non-negative integer, got {n!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (numbers.Integral, np.integer)):
+        raise TypeError(f"seed must be an integer >= 0, got {seed!r} ({type(seed).__name__})")
+    if seed < 0:
+        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     unknown = set(ranges) - set(PAPER_RANGES)
     if unknown:
         raise TypeError(f"unknown range(s) {sorted(unknown)}; known: {sorted(PAPER_RANGES)}")

@@ -32,7 +32,6 @@ import glob
 import os
 import re
 import shutil
-import tempfile
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -41,8 +40,9 @@ from typing import Iterator, Literal, Union
 import av
 import numpy as np
 
-from .atomic import atomic_path, check_output_folder
+from .atomic import atomic_path, check_output_folder, temporary_folder
 from .image_io import check_overwrite
+from .native_stderr import silenced
 
 __all__ = [
     "EncodeOptions",
@@ -66,6 +66,11 @@ TRUNCATION_TOLERANCE_S = 0.5
 
 #: encoders that take a constant-rate-factor quality (``--crf``) instead of a bit rate
 CRF_ENCODERS = frozenset({"libx264", "libx264rgb", "libx265", "libvpx", "libvpx-vp9", "libaom-av1", "libsvtav1"})
+
+#: x264's and x265's presets, fastest first: their FFmpeg 'preset' option is a free string that the
+#: library itself checks when the encoder opens (FFmpeg cannot list them)
+X26X_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower", "veryslow", "placebo")
+_LIBRARY_PRESETS = {"libx264": X26X_PRESETS, "libx264rgb": X26X_PRESETS, "libx265": X26X_PRESETS}
 
 _PATTERN = re.compile(r"%(0?\d*)d")
 
@@ -385,6 +390,21 @@ def _encoder(name: str) -> av.Codec:
         raise ValueError(f"no FFmpeg encoder {name!r} in this build (see 'ffmpeg -encoders')") from None
 
 
+def _check_preset(encoder: str, context: av.CodecContext, preset: str) -> None:
+    """``ValueError`` when ``encoder`` has no ``preset`` option or ``preset`` is not one of its presets
+    (FFmpeg's list of the option's named values, else :data:`X26X_PRESETS` for x264/x265; an
+    encoder whose presets neither knows is left to refuse it when it opens)."""
+    supported = getattr(context, "supported_options", None)
+    if supported is None:  # a PyAV without option introspection
+        return
+    option = next((o for o in supported.private if o.name == "preset"), None)
+    if option is None:
+        raise ValueError(f"--preset {preset!r}: encoder {encoder} has no presets")
+    presets = [choice.name for choice in (option.choices or [])] or list(_LIBRARY_PRESETS.get(encoder, ()))
+    if presets and preset not in presets:
+        raise ValueError(f"--preset {preset!r} is not a preset of {encoder} ({' '.join(presets)})")
+
+
 def _pick_pix_fmt(codec: av.Codec, wanted: str | None, source: str) -> str:
     formats = [f.name for f in (codec.video_formats or [])]
     if wanted is not None:
@@ -443,9 +463,8 @@ class VideoWriter:
         self.frames_written = 0
         self._closed = False
         self._atomic = None
-        folder = self.path.parent if str(self.path.parent) else Path(".")
         if self.sequence:
-            self._tmpdir: Path | None = Path(tempfile.mkdtemp(prefix=f".{self.path.name.split('%')[0]}", suffix=".tmp", dir=folder))
+            self._tmpdir: Path | None = temporary_folder(self.path, self.path.name.split('%')[0])
             tmp = self._tmpdir / self.path.name
         else:
             self._tmpdir = None
@@ -507,6 +526,7 @@ class VideoWriter:
                 raise ValueError(f"--crf is for {', '.join(sorted(CRF_ENCODERS))}; use --bitrate with {codec.name}")
             codec_options["crf"] = f"{options.crf:g}"
         if options.preset is not None:
+            _check_preset(codec.name, context, options.preset)
             codec_options["preset"] = options.preset
         bitrate = options.bitrate
         if bitrate is None and options.crf is None and codec.name not in CRF_ENCODERS and info.bit_rate > 0:
@@ -517,6 +537,7 @@ class VideoWriter:
         if info.timecode and not self.sequence:
             stream.metadata["timecode"] = info.timecode
         self._stream = stream
+        self._codec_name, self._pix_fmt = stream.codec_context.name, stream.pix_fmt
         self._depth = _bit_depth(stream.pix_fmt)
         self._matrix = _matrix(info.colorspace, info.size[1])
         self._range = info.color_range or (2 if stream.pix_fmt.startswith("yuvj") else 1)
@@ -530,23 +551,25 @@ class VideoWriter:
                     f"into {str(self.path)!r}: {err}; choose a container that holds it (.mkv, .mov)"
                 ) from None
         try:
-            try:
-                self._stream.codec_context.open()
-            except av.FFmpegError:
-                # some encoders (MPEG-1/2) take only a standard frame-rate time base
-                self._stream.codec_context.time_base = 1 / info.rate
-                self._stream.codec_context.open()
-            self._container.start_encoding()
+            with silenced():  # the encoder's own log lines on a refusal: the ValueError below says it
+                try:
+                    self._stream.codec_context.open()
+                except av.FFmpegError:
+                    # some encoders (MPEG-1/2) take only a standard frame-rate time base
+                    self._stream.codec_context.time_base = 1 / info.rate
+                    self._stream.codec_context.open()
+                self._container.start_encoding()
         except av.FFmpegError as err:
-            raise ValueError(f"cannot encode {_error(self.path, err)} (codec {codec.name}, pix_fmt {stream.pix_fmt})") from None
+            preset = f", preset {options.preset!r}" if options.preset is not None else ""
+            raise ValueError(f"cannot encode {_error(self.path, err)} (codec {codec.name}, pix_fmt {stream.pix_fmt}{preset})") from None
 
     @property
     def codec(self) -> str:
-        return self._stream.codec_context.name
+        return self._codec_name
 
     @property
     def pix_fmt(self) -> str:
-        return self._stream.pix_fmt
+        return self._pix_fmt
 
     def frame(self, image: np.ndarray, pts: int | None = None) -> av.VideoFrame:
         """The encoder-ready frame for ``image`` (RGB -> the output pix_fmt); thread-safe, so a
@@ -557,7 +580,7 @@ class VideoWriter:
             raise ValueError(f"video frames must be {height}×{width}×3 uint8 or uint16, got shape {image.shape} {image.dtype}")
         depth = 8 if image.dtype == np.uint8 else 16
         frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order))
-        frame = frame.reformat(format=self._stream.pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
+        frame = frame.reformat(format=self._pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
                                dst_color_range=self._range, interpolation="BILINEAR")
         # the source's tags, not those of the conversion (which names its matrix even when untagged)
         frame.colorspace, frame.color_range = self.info.colorspace, self.info.color_range
@@ -594,8 +617,11 @@ class VideoWriter:
         if self._closed:
             return self.path
         try:
-            self._container.mux(self._stream.encode(None))
-            self._container.close()
+            with silenced():  # x265 prints its statistics when its context is freed: free it here
+                self._container.mux(self._stream.encode(None))
+                self._container.close()
+                self._container = self._stream = None
+                self._copies = {}
         except av.FFmpegError as err:
             self.abort()
             raise OSError(f"cannot write {_error(self.path, err)}") from None
@@ -623,10 +649,13 @@ class VideoWriter:
         """Drop everything written so far; the target is left untouched. No-op once finished."""
         container = getattr(self, "_container", None)
         if container is not None and not self._closed:
-            try:
-                container.close()
-            except Exception:
-                pass
+            with silenced():  # the encoder's statistics, printed when its context is freed
+                try:
+                    container.close()
+                except Exception:
+                    pass
+                del container
+                self._container = self._stream = None
         self._closed = True
         if self._tmpdir is not None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)

@@ -48,3 +48,18 @@ def road() -> np.ndarray:
 @pytest.fixture(scope="session")
 def field_panorama() -> np.ndarray:
     return read_rgb("panorama_field_2048x1024.jpg")
+
+
+def check_existing_out_needs_y(argv: list[str], out: Path, expensive: str, monkeypatch, capsys) -> None:
+    """The CLI's overwrite rule for a command writing the single file ``out``: without -y an existing
+    ``out`` is refused (one error line, file untouched, no temporary file) before ``expensive`` (the
+    dotted name of the function doing the work) is called; with -y the command succeeds."""
+    from glradial.cli import main
+
+    out.write_bytes(b"keep me")
+    with monkeypatch.context() as patch:
+        patch.setattr(expensive, lambda *a, **k: pytest.fail(f"{expensive} ran before the overwrite check"))
+        assert main(argv) == 1
+    assert f"output {str(out)!r} already exists (overwrite it with -y/--overwrite)" in capsys.readouterr().err
+    assert out.read_bytes() == b"keep me" and list(out.parent.iterdir()) == [out]
+    assert main([*argv, "-y"]) == 0

@@ -18,7 +18,7 @@ import glradial
 from glradial import Lens
 from glradial.cli import build_parser, main
 from glradial.image_io import read_image, write_image
-from glradial.video_io import VideoInfo, VideoReader, VideoWriter, probe_video
+from glradial.video_io import EncodeOptions, VideoInfo, VideoReader, VideoWriter, probe_video
 
 from conftest import DATA
 
@@ -109,6 +109,50 @@ def test_correct_video_keeps_count_fps_size(tmp_path, field_panorama):
                 # H.264 re-encoding at its default quality (crf 23): a few levels on average
                 assert np.abs(frame_out.astype(int) - expected.astype(int)).mean() < 4.0
     assert _names(tmp_path) == ["in.mp4", "out.mov"]
+
+
+def _decoded_frames(path: Path) -> int:
+    """Frames FFmpeg decodes from ``path``, counted with PyAV directly (not glradial's reader)."""
+    import av
+
+    with av.open(str(path)) as container:
+        return sum(1 for _ in container.decode(video=0))
+
+
+def test_correct_video_says_frames_read_and_written_even_when_quiet(tmp_path, capsys):
+    """An MPEG-TS has no frame count in its header: cut short, it decodes without error, so the
+    one summary line (stdout, kept with -q) is what tells the user that the output is short."""
+    rng = np.random.default_rng(0)
+    whole, cut, out = tmp_path / "whole.ts", tmp_path / "cut.ts", tmp_path / "out.mp4"
+    with VideoWriter(whole, VideoInfo.of((64, 36), 25), options=EncodeOptions(codec="libx264")) as writer:
+        for _ in range(100):
+            writer.write(rng.integers(0, 256, (36, 64, 3), dtype=np.uint8))  # noise: ~equal bytes per frame
+    data = whole.read_bytes()
+    cut.write_bytes(data[: len(data) // 2 // 188 * 188])  # whole TS packets: a clean cut, no decoding error
+    decodable = _decoded_frames(cut)
+    assert 20 < decodable < 80
+    assert main(["-q", "correct", str(cut), str(out), "--k1", "-0.2", "--backend", "cpu"]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        f"wrote {out}: {decodable} frames read and written (input header: unknown)"]
+    assert _decoded_frames(out) == decodable
+    assert main(["correct", str(whole), str(out), "--k1", "-0.2", "--backend", "cpu", "-y", "-q"]) == 0
+    assert capsys.readouterr().out.splitlines() == [f"wrote {out}: 100 frames read and written (input header: unknown)"]
+    mp4 = tmp_path / "again.mp4"
+    assert main(["correct", str(out), str(mp4), "--k1", "0.1", "--backend", "cpu", "-q"]) == 0  # an MP4 states its count
+    assert capsys.readouterr().out.splitlines() == [f"wrote {mp4}: 100 frames read and written (input header: 100 frames)"]
+
+
+def test_correct_auto_checks_the_encoder_before_estimating(tmp_path, capfd, monkeypatch):
+    source, out = tmp_path / "in.mp4", tmp_path / "out.mp4"
+    with VideoWriter(source, VideoInfo.of((64, 36), 25), options=EncodeOptions(codec="libx264")) as writer:
+        for value in (0, 100, 200):
+            writer.write(np.full((36, 64, 3), value, np.uint8))
+    monkeypatch.setattr("glradial.video_pipeline.track_video", lambda *a, **k: pytest.fail("estimation started"))
+    assert main(["correct", str(source), str(out), "--auto", "--preset", "ludicrous"]) == 1
+    lines = [line for line in capfd.readouterr().err.splitlines() if line.strip()]
+    assert lines == [f"glradial: error: cannot write {str(out)!r}: --preset 'ludicrous' is not a preset of libx264 "
+                     "(ultrafast superfast veryfast faster fast medium slow slower veryslow placebo)"]
+    assert _names(tmp_path) == ["in.mp4"]
 
 
 def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypatch):
@@ -208,7 +252,7 @@ def _bad_cases(tmp: Path) -> list[tuple[list[str], str, int]]:
         (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1", "--crf", "20", "--bitrate", "2M"], "--crf or --bitrate", 2),
         (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--k1", "0.1", "--bitrate", "fast"], "bit rate must be", 2),
         (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--lens-track", "t.csv"], "cannot be combined", 2),
-        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--sidecar", str(tmp / "o.mp4")], "--sidecar must differ", 2),
+        (["correct", str(tmp / "broken.mp4"), str(tmp / "o.mp4"), "--auto", "--sidecar", str(tmp / "o.mp4")], "must end in .csv or .json", 2),
         (["correct", road, str(tmp / "o.png"), "--k1", "0.1", "--auto"], "--k1/--k2/--cx/--cy/--pixel-aspect/--lens and --auto cannot be combined", 2),
         (["correct", road, str(tmp / "o.png")], "give the lens with --k1", 2),
         (["correct", road, str(tmp / "o.mp4"), "--k1", "0.1"], "INPUT is an image but OUTPUT", 2),

@@ -70,16 +70,18 @@ def test_correct_with_principal_point_options_and_lens_files(tmp_path, small_pho
     assert main(["correct", str(source), str(out), "-y", "--lens", str(own), "--fit", "crop", "--backend", "cpu"]) == 0
     np.testing.assert_array_equal(read_image(out), expected)
     estimate = tmp_path / "estimate.json"  # a line of 'glradial estimate --json'
-    estimate.write_text(json.dumps({"path": "frame.png", "k1": -0.3, "k2": 0.05}))
+    estimate.write_text(json.dumps({"path": "frame.png", "k1": -0.3, "k2": 0.05, "method": "net", "uncertainty_px": 3.2,
+                                    "chains": 2, "source": "frame.png"}))
     assert main(["correct", str(source), str(out), "-y", "--lens", str(estimate), "--backend", "cpu"]) == 0
     np.testing.assert_array_equal(read_image(out), glradial.correct(image, -0.3, 0.05, backend="cpu"))
 
 
-def test_lens_file_from_convert_json(tmp_path, small_photo, capsys):
+@pytest.mark.parametrize("target", ["ffmpeg", "opencv"])
+def test_lens_file_from_convert_json(tmp_path, small_photo, capsys, target):
     """'glradial convert --json' output: its k1, k2 are in the --to convention, the glradial pair
-    is what --lens uses."""
+    is what --lens uses (also with --to opencv, whose output holds camera_matrix and dist_coeffs)."""
     source, image = small_photo
-    assert main(["convert", "--from", "width", "--to", "ffmpeg", "--size", "320x180", "--json", "-0.2", "0.04"]) == 0
+    assert main(["convert", "--from", "width", "--to", target, "--size", "320x180", "--json", "-0.2", "0.04"]) == 0
     converted = tmp_path / "converted.json"
     converted.write_text(capsys.readouterr().out)
     out = tmp_path / "b.png"
@@ -114,7 +116,7 @@ def test_stmap_with_principal_point(tmp_path):
     np.testing.assert_array_equal(read_stmap(out), expected)
     calibration = tmp_path / "calib.json"
     calibration.write_text(json.dumps({"camera_matrix": K_OFF, "dist_coeffs": DIST, "size": [1280, 720]}))
-    assert main(["stmap", "--lens", str(calibration), "--size", "128x72", "--out", str(out)]) == 0
+    assert main(["stmap", "--lens", str(calibration), "--size", "128x72", "--out", str(out), "-y"]) == 0
     np.testing.assert_allclose(read_stmap(out), lens_stmap(Lens.from_opencv(K_OFF, DIST, (1280, 720)), (128, 72)))
 
 
@@ -132,6 +134,14 @@ def test_stmap_with_principal_point(tmp_path):
          "p1=0.01", 1),
         (["--lens", "{lens}"], {"k1": 0.1, "pixel_aspect": -1}, "pixel_aspect must be positive", 1),
         (["--lens", "{missing}"], None, "lens file .* does not exist", 1),
+        # a misspelt key must not silently become k2 = 0: the error names it and the accepted keys
+        (["--lens", "{lens}"], {"k1": -0.2, "k_2": 0.05}, "unknown key\\(s\\) 'k_2'; accepted: .*k2, method, path, pixel_aspect", 1),
+        (["--lens", "{lens}"], {"camera_matrix": K_OFF, "dist_coeffs": DIST, "size": [1280, 720], "rms": 0.3},
+         "OpenCV calibration\\) has unknown key\\(s\\) 'rms'; accepted: camera_matrix, dist_coeffs, size", 1),
+        (["--lens", "{lens}"], {"glradial": [-0.2, 0.0], "k3": 0.1}, "convert --json' output\\) has unknown key\\(s\\) 'k3'", 1),
+        # the CLI has no approximate=True: say what to do on the command line
+        (["--lens", "{lens}"], {"camera_matrix": K_OFF, "dist_coeffs": [-0.2, 0, 0, 0, 0.02], "size": [1280, 720]},
+         "k3=0.02. Set p1, p2, k3 ... to 0 in the file .* 'glradial convert --from opencv .*--approximate", 1),
         (["--k1", "-0.1", "--pixel-aspect", "0"], None, "expected a positive number", 2),
     ],
 )
@@ -145,5 +155,7 @@ def test_lens_option_errors(tmp_path, small_photo, capsys, args, contents, words
     assert main(["correct", str(source), str(out), "-y", *argv]) == status
     import re
 
-    assert re.search(words, _error_line(capsys)), words
+    line = _error_line(capsys)
+    assert re.search(words, line), (words, line)
+    assert "approximate=True" not in line
     assert not out.exists()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -19,6 +20,8 @@ from glradial.stadium_style import (
     split_seeds,
     stadium_split,
 )
+
+from conftest import check_existing_out_needs_y
 
 # A main-camera stadium (camera on the halfway line, ~120 m from the far touchline), chosen by its
 # style so that the test survives changes of the style sampler.
@@ -254,3 +257,22 @@ def test_command_writes_the_panorama(ctx, tmp_path):
     assert command.run(args) == 0
     written = cv2.cvtColor(cv2.imread(str(out)), cv2.COLOR_BGR2RGB)
     assert np.array_equal(written, stadium_panorama(4, (256, 128)))
+
+
+def test_command_replaces_an_existing_out_only_with_y(ctx, tmp_path, capsys, monkeypatch):
+    out = tmp_path / "pano.png"
+    argv = ["stadium", "--seed", "4", "--size", "64x32", "--out", str(out)]
+    check_existing_out_needs_y(argv, out, "glradial.stadium.stadium_panorama", monkeypatch, capsys)
+    written = cv2.cvtColor(cv2.imread(str(out)), cv2.COLOR_BGR2RGB)
+    assert np.array_equal(written, stadium_panorama(4, (64, 32)))
+
+
+@pytest.mark.parametrize("name", ["s.bmpx", "s.mp4", "s"])
+def test_command_names_an_unknown_image_extension(tmp_path, capsys, name):
+    from glradial.cli import main
+
+    assert main(["stadium", "--seed", "1", "--size", "64x32", "--out", str(tmp_path / name)]) == 1
+    err = capsys.readouterr().err
+    suffix = repr(Path(name).suffix or "(none)")
+    assert f"unknown image extension {suffix}; use .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
+    assert "video" not in err and list(tmp_path.iterdir()) == []

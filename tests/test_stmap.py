@@ -13,6 +13,7 @@ import pytest
 from glradial import Lens
 from glradial.cli import main
 from glradial.stmap import STMAP_NO_SOURCE, lens_stmap, maps_from_stmap, read_stmap, write_stmap
+from conftest import check_existing_out_needs_y
 
 SIZE = (96, 54)
 
@@ -114,6 +115,13 @@ def test_stmap_bad_input(tmp_path, capsys):
     assert "folds over" in capsys.readouterr().err
     assert main(["stmap", "--k1", "nan", "--size", "96x54", "--out", str(tmp_path / "m.tif")]) == 2
     assert list(tmp_path.iterdir()) == []
+
+
+def test_stmap_replaces_an_existing_out_only_with_y(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "m.npy"
+    argv = ["stmap", "--k1", "-0.1", "--size", "32x18", "--out", str(out)]
+    check_existing_out_needs_y(argv, out, "glradial.stmap.lens_stmap", monkeypatch, capsys)
+    np.testing.assert_array_equal(read_stmap(out), lens_stmap(Lens(-0.1, 0.0), (32, 18)))
 
 
 @pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs the ffmpeg command (installed by make's set-up)")

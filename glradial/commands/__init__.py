@@ -104,8 +104,17 @@ LENS_FILE_HELP = (
     "(glradial units; what 'glradial estimate --json' prints, cx, cy, pixel_aspect optional; or the output of "
     "'glradial convert --json'), or an OpenCV "
     "calibration {\"camera_matrix\": 3x3, \"dist_coeffs\": [k1, k2, 0, 0(, 0)], \"size\": [W, H]} "
-    "(size: the calibration's frame size in pixels; default the frame's own)"
+    "(size: the calibration's frame size in pixels; default the frame's own); any other key is refused"
 )
+
+#: keys of each lens-file format (any other key is an error: a misspelt "k_2" must not become k2 = 0)
+LENS_KEYS = {"k1", "k2", "cx", "cy", "pixel_aspect"}
+#: what a line of 'glradial estimate --json' adds to the lens (ignored)
+ESTIMATE_KEYS = {"path", "method", "uncertainty_px", "chains", "source"}
+#: 'glradial convert --json' (its "glradial" pair is the lens; the rest describes the conversion)
+CONVERT_KEYS = {"from", "to", "size", "glradial", "k1", "k2", "camera_matrix", "dist_coeffs"}
+#: an OpenCV calibration
+OPENCV_KEYS = {"camera_matrix", "dist_coeffs", "size"}
 
 
 def add_lens_options(group: argparse._ArgumentGroup, *, k1_required: bool = False) -> None:
@@ -155,21 +164,51 @@ def read_lens_file(path: str, size: tuple[int, int] | None = None):
         raise ValueError(f"lens file {str(source)!r} is not JSON: {err}") from None
     if not isinstance(document, dict):
         raise ValueError(f"lens file {str(source)!r} must hold a JSON object, got {type(document).__name__}")
+    if "glradial" in document:  # 'glradial convert --json': its k1, k2 are in the --to convention
+        _check_keys(source, document, CONVERT_KEYS, "'glradial convert --json' output")
+        pair = document["glradial"]
+        if not isinstance(pair, list) or len(pair) != 2:
+            raise ValueError(f"lens file {str(source)!r}: \"glradial\" must be [k1, k2], got {pair!r}")
+        return Lens(*pair)
     if "camera_matrix" in document or "dist_coeffs" in document:
+        _check_keys(source, document, OPENCV_KEYS, "an OpenCV calibration")
         if "camera_matrix" not in document or "dist_coeffs" not in document:
             raise ValueError(f"lens file {str(source)!r}: an OpenCV calibration needs both camera_matrix and dist_coeffs")
         calibrated = document.get("size", size)
         if calibrated is None:
             raise ValueError(f"lens file {str(source)!r}: an OpenCV calibration needs \"size\": [W, H] (pixels)")
-        return Lens.from_opencv(document["camera_matrix"], document["dist_coeffs"], tuple(calibrated))
-    if "glradial" in document:  # 'glradial convert --json': its k1, k2 are in the --to convention
-        pair = document["glradial"]
-        if not isinstance(pair, list) or len(pair) != 2:
-            raise ValueError(f"lens file {str(source)!r}: \"glradial\" must be [k1, k2], got {pair!r}")
-        return Lens(*pair)
+        try:
+            return Lens.from_opencv(document["camera_matrix"], document["dist_coeffs"], tuple(calibrated))
+        except ValueError as err:
+            raise ValueError(_cli_advice(source, str(err))) from None
     if "k1" not in document:
         raise ValueError(
             f"lens file {str(source)!r} has neither \"k1\" nor an OpenCV \"camera_matrix\": keys {sorted(document)}"
         )
-    fields = ("k1", "k2", "cx", "cy", "pixel_aspect")
-    return Lens(**{name: document[name] for name in fields if name in document})
+    _check_keys(source, document, LENS_KEYS | ESTIMATE_KEYS, "glradial's numbers")
+    return Lens(**{name: document[name] for name in sorted(LENS_KEYS) if name in document})
+
+
+def _check_keys(source: Path, document: dict, known: set[str], kind: str) -> None:
+    """``ValueError`` naming the keys of ``document`` outside ``known`` and the accepted ones."""
+    unknown = sorted(set(document) - known)
+    if unknown:
+        raise ValueError(
+            f"lens file {str(source)!r} ({kind}) has unknown key(s) {', '.join(map(repr, unknown))}; "
+            f"accepted: {', '.join(sorted(known))}"
+        )
+
+
+#: the Python API's advice in :meth:`glradial.Lens.from_opencv`'s error, which the CLI has no option for
+_API_HINT = "Pass approximate=True to keep k1, k2 only."
+
+
+def _cli_advice(source: Path, message: str) -> str:
+    """``message`` of :meth:`Lens.from_opencv` with the Python-only advice replaced by command-line advice."""
+    if _API_HINT not in message:
+        return f"lens file {str(source)!r}: {message}"
+    return f"lens file {str(source)!r}: " + message.replace(
+        _API_HINT,
+        "Set p1, p2, k3 ... to 0 in the file to keep k1, k2 only (an approximation), or get centred numbers with "
+        "'glradial convert --from opencv --to width --approximate --size WxH --focal FX K1 K2 P1 P2 K3'.",
+    )

@@ -93,9 +93,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="frame rate of an image-sequence INPUT, e.g. 25 or 30000/1001 (default 25; videos keep theirs)")
     encode.add_argument("--pix-fmt", metavar="FMT", help="output pixel format, e.g. yuv420p, yuv422p10le (default: the input's where the encoder takes it)")
     video = parser.add_argument_group("video with --auto")
-    video.add_argument("--every", type=positive_int, default=5, metavar="N",
+    video.add_argument("--every", type=positive_int, default=None, metavar="N",
                        help="estimate every N-th frame of each shot, plus each shot's first frame (frames; default 5)")
-    video.add_argument("--window", type=positive_float, default=2.0, metavar="SECONDS",
+    video.add_argument("--window", type=positive_float, default=None, metavar="SECONDS",
                        help="half width of the per-shot smoothing window (seconds; default 2.0)")
     video.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
                        help="warn about shots whose smoothed lens is less sure than this (px at 1920 wide, ~p90; default 10)")
@@ -112,6 +112,7 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def _check_paths(args: argparse.Namespace) -> str:
+    from ..atomic import check_output_folder
     from ..image_io import check_overwrite, media_kind
     from ..video_io import is_sequence, sequence_files
 
@@ -123,9 +124,7 @@ def _check_paths(args: argparse.Namespace) -> str:
         raise UsageError(f"INPUT is {'an' if kind_in == 'image' else 'a'} {kind_in} but OUTPUT {str(target)!r} is {'an' if kind_out == 'image' else 'a'} {kind_out} name")
     if _same_file(source, target) or os.path.abspath(source) == os.path.abspath(target):
         raise UsageError("OUTPUT must differ from INPUT (glradial never writes over its input)")
-    folder = target.parent if str(target.parent) else Path(".")
-    if not folder.is_dir():
-        raise FileNotFoundError(f"output folder {str(folder)!r} does not exist")
+    check_output_folder(target)
     if is_sequence(target):
         if not args.overwrite and sequence_files(target):
             raise FileExistsError(f"output files {str(target)!r} already exist (overwrite them with -y/--overwrite)")
@@ -147,9 +146,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--model needs --auto")
     if args.method is not None and not args.auto:
         raise UsageError("--method needs --auto")
-    for name in ("sidecar", "max_uncertainty"):
+    for name in ("sidecar", "max_uncertainty", "every", "window"):
         if getattr(args, name) is not None and not args.auto:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
+    if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
+        raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
     if args.crf is not None and args.bitrate is not None:
         raise UsageError("give --crf or --bitrate, not both")
     kind = _check_paths(args)
@@ -160,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
         from ..remap import correct
         from ..image_io import read_image, write_image
 
-        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate"):
+        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "every", "window",
+                     "max_uncertainty"):
             if getattr(args, name) is not None:
                 raise UsageError(f"--{name.replace('_', '-')} is for videos")
         from ..lens import Lens
@@ -195,9 +197,9 @@ def run(args: argparse.Namespace) -> int:
     video = dict(progress=progress, options=encode, overwrite=args.overwrite, rate=args.rate, **options)
     if given:
         with VideoReader(args.input, rate=args.rate) as reader:
-            size = reader.info.size
-        lens = lens_from_args(args, size)  # validated before any frame is decoded
-        correct_video(args.input, args.output, lambda _i: lens, **video)
+            info = reader.info
+        lens = lens_from_args(args, info.size)  # validated before any frame is decoded
+        _summary(args.output, correct_video(args.input, args.output, lambda _i: lens, **video), info.frame_count)
         return 0
 
     if args.lens_track:
@@ -206,7 +208,8 @@ def run(args: argparse.Namespace) -> int:
         with VideoReader(args.input, rate=args.rate) as reader:
             info = reader.info
         track = load_lens_track(args.lens_track, info.rate, info.size)
-        correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+        written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+        _summary(args.output, written, info.frame_count)
         return 0
 
     from ..atomic import check_output_folder
@@ -219,16 +222,24 @@ def run(args: argparse.Namespace) -> int:
     check_overwrite(sidecar, args.overwrite)
     if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
-    track = track_video(args.input, default_estimator(args.model, args.method), every=args.every, window_s=args.window,
-                        progress=progress, doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate)
+    from ..video_io import VideoWriter
+
+    with VideoReader(args.input, rate=args.rate, copy_streams=True) as reader:
+        info = reader.info
+        # the encoder, its options and the container are checked before the estimation pass: open and drop
+        VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
+    given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
+    track = track_video(args.input, default_estimator(args.model, args.method), progress=progress,  # its defaults: every 5, window 2 s
+                        doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
-    correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+    written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
     try:
         track.save(sidecar)
     except BaseException:
         Path(args.output).unlink(missing_ok=True)  # both outputs or neither
         raise
+    _summary(args.output, written, info.frame_count)
     shots = track.per_shot()
     print(f"{args.input}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
@@ -236,6 +247,13 @@ def run(args: argparse.Namespace) -> int:
         flag = " DOUBTFUL" if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
     return 0
+
+
+def _summary(output: str, written: int, header: int) -> None:
+    """The line every video run ends with (stdout, also with -q): frames read and written, and the
+    count the input's header states (-1: none), so that a short output is never silent."""
+    stated = f"{header} frames" if header > 0 else "unknown"
+    print(f"wrote {output}: {written} frames read and written (input header: {stated})", flush=True)
 
 
 def _pair(value: object) -> tuple[float, float]:

@@ -11,8 +11,8 @@ Render the procedural football-stadium panorama of SEED as an equirectangular RG
 (longitude 0 at the centre column, + to the right; latitude +90 deg at the top row; W = 2 H is
 usual). The seed decides everything: stadium shape, colours, lighting, mowing stripes, camera
 position (main broadcast platform, other tribune positions, behind a goal, pitch side). Seeds
-split into train / val / test by SEED % 10: 0-7 train, 8 val, 9 test. Formats: any image
-extension OpenCV writes (.png, .jpg, .tif, ...) or .npy (H x W x 3 uint8 array)."""
+split into train / val / test by SEED % 10: 0-7 train, 8 val, 9 test. Formats: .png, .jpg, .jpeg,
+.tif, .tiff or .npy (H x W x 3 uint8 array). An existing --out is replaced only with -y."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -27,7 +27,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="N x N samples on geometric edges, 1..4 (default: the seed's style, 2)")
     parser.add_argument("--lighting", choices=("day", "overcast", "night"), default=None,
                         help="override the seed's lighting")
-    parser.add_argument("--out", required=True, metavar="FILE", help="output image (.png, .jpg, ...) or .npy")
+    parser.add_argument("--out", required=True, metavar="FILE", help="output image (.png, .jpg, .jpeg, .tif, .tiff) or .npy")
+    parser.add_argument("-y", "--overwrite", action="store_true", help="replace --out if it exists")
     parser.add_argument("--info", action="store_true", help="also print the seed's style (camera, lighting, split)")
     return parser
 
@@ -36,7 +37,7 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from ..atomic import atomic_path, check_output_folder
-    from ..image_io import media_kind, write_image
+    from ..image_io import IMAGE_EXTENSIONS, check_overwrite, is_image_path, write_image
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style, stadium_split
 
@@ -50,10 +51,12 @@ def run(args: argparse.Namespace) -> int:
     from ..progress import Progress
     from . import show_progress
 
-    target = check_output_folder(args.out)
+    target = check_output_folder(args.out)  # everything about --out is checked before the render
     npy = target.suffix.lower() == ".npy"
-    if not npy and media_kind(target) != "image":  # checked before the render
-        raise ValueError(f"--out {str(target)!r} has a video extension; write an image or .npy")
+    if not npy and not is_image_path(target):
+        known = ", ".join(sorted(IMAGE_EXTENSIONS))
+        raise ValueError(f"--out {str(target)!r}: unknown image extension {target.suffix or '(none)'!r}; use {known} or .npy")
+    check_overwrite(target, args.overwrite)
     with Progress(1, "stadium", unit="panoramas", enabled=show_progress(args)) as bar:
         image = stadium_panorama(args.seed, tuple(args.size), **overrides)
         bar.update()

@@ -14,7 +14,8 @@ bottom-left corner of the source, x right, y down in pixels, row 0 at the top), 
 with no source hold S = T = -1. --direction undistort: apply the map to the distorted footage to
 correct it (as 'glradial correct'); distort: apply it to an undistorted render to add the lens.
 Formats: .exr (float32 R, G, B, ZIP-compressed: what Nuke and Gyroflow load), .tif or .tiff
-(uncompressed float32 RGB TIFF), .npy (H x W x 3 float32 array)."""
+(uncompressed float32 RGB TIFF), .npy (H x W x 3 float32 array). An existing --out is replaced only
+with -y."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -31,13 +32,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--inverse", choices=("exact", "drap"), default="exact",
                         help="with --direction distort: exact inverse (Newton) or the paper's Drap-Lefevre polynomial (default: exact)")
     parser.add_argument("--out", required=True, metavar="FILE", help="output .exr (recommended), .tif/.tiff or .npy")
+    parser.add_argument("-y", "--overwrite", action="store_true", help="replace --out if it exists")
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..atomic import check_output_folder
+    from ..image_io import check_overwrite
     from ..stmap import check_stmap_path, lens_stmap, write_stmap
 
-    check_stmap_path(args.out)
+    check_overwrite(check_output_folder(check_stmap_path(args.out)), args.overwrite)  # before any work
     lens = lens_from_args(args, args.size)
     stmap = lens_stmap(lens, args.size, direction=args.direction, fit=args.fit, inverse=args.inverse)
     write_stmap(args.out, stmap)
