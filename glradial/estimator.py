@@ -38,6 +38,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .frames import to_rgb8
 from .lens import Lens
 from .lens_estimate import LensEstimate, Method, check_method, estimate_with_lines, net_estimate
 from .model_check import ModelLoadError, check_checksum, check_model
@@ -58,31 +59,13 @@ def default_model_path() -> Path:
 
 
 def _as_frame(frame: Any, index: int | None = None) -> np.ndarray:
+    """A frame for the estimator (:func:`glradial.frames.to_rgb8`; floats outside [0, 1] refused,
+    at least 2×2 pixels)."""
     where = "frame" if index is None else f"frames[{index}]"
-    if not isinstance(frame, np.ndarray):
-        raise TypeError(f"{where} must be a NumPy array, got {type(frame).__name__}")
-    if frame.ndim == 2:
-        frame = frame[:, :, None]
-    if frame.ndim != 3 or frame.shape[2] not in (1, 3, 4):
-        raise ValueError(f"{where} must be H×W or H×W×C with C in (1, 3, 4), got shape {frame.shape}")
-    if frame.shape[0] < 2 or frame.shape[1] < 2:
-        raise ValueError(f"{where} must be at least 2×2 pixels, got shape {frame.shape}")
-    if frame.dtype == np.uint8:
-        pass
-    elif frame.dtype in (np.float32, np.float64):
-        if not np.isfinite(frame).all():
-            raise ValueError(f"{where} contains NaN or infinite values")
-        low, high = float(frame.min()), float(frame.max())
-        if low < 0.0 or high > 1.0:
-            raise ValueError(f"float {where} must have values in [0, 1], got [{low:g}, {high:g}]")
-        frame = np.rint(frame * 255.0).astype(np.uint8)
-    else:
-        raise TypeError(f"{where} dtype must be uint8 or float32/float64 in [0, 1], got {frame.dtype}")
-    if frame.shape[2] == 1:
-        frame = np.repeat(frame, 3, axis=2)
-    elif frame.shape[2] == 4:
-        frame = frame[:, :, :3]
-    return np.ascontiguousarray(frame)
+    rgb = to_rgb8(frame, where, clip=False)
+    if rgb.shape[0] < 2 or rgb.shape[1] < 2:
+        raise ValueError(f"{where} must be at least 2×2 pixels, got shape {np.shape(frame)}")
+    return rgb
 
 
 class Estimator:

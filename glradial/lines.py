@@ -1,7 +1,7 @@
 """Line evidence for lens estimation: sub-pixel points on image structures that should be straight.
 
 Convention:
-    Input: an RGB (or gray) ``H x W (x C)`` uint8 frame, as :func:`glradial.estimator._as_frame`
+    Input: an RGB (or gray) ``H x W (x C)`` uint8 frame, as :func:`glradial.frames.to_rgb8`
     accepts. Detection runs on a gray copy at most :data:`DETECT_WIDTH` pixels wide (area
     interpolation). Output points are in **lens units of the frame** (image width = 1, origin at the
     frame centre, y down; :func:`glradial.lens.pixels_to_lens`), so they do not depend on the

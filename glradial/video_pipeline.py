@@ -37,6 +37,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
+from .frames import to_rgb8
 from .lens import Lens, corner_radius
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .metrics import REPORT_WIDTH, max_displacement
@@ -221,7 +222,7 @@ def track_video(
                     shot, since_start = shot + 1, 0
                 if since_start % every == 0:
                     times.append(index)
-                    value = estimator(rgb8_for_estimator(reader.convert(item.decoded, ESTIMATE_WIDTH)))
+                    value = estimator(to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
                     estimates.append(_as_pair(value))
                     sure, method = _confidence(value)
                     stated.append(sure)
@@ -416,15 +417,3 @@ def doubtful_warnings(track: LensTrack, source: str) -> list[str]:
                 f"> {track.doubtful_px:g} px at 1920 wide; check the shot or give its lens in a --lens-track file"
             )
     return lines
-
-
-def rgb8_for_estimator(frame: np.ndarray) -> np.ndarray:
-    """RGB uint8 H×W×3 for the estimator: 16-bit/float scaled, alpha dropped, grey expanded."""
-    frame = np.asarray(frame)
-    if frame.dtype == np.uint16:
-        frame = (frame / 257.0 + 0.5).astype(np.uint8)
-    elif frame.dtype in (np.float32, np.float64):
-        frame = (np.clip(frame, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
-    if frame.ndim == 2:
-        frame = np.repeat(frame[:, :, None], 3, axis=2)
-    return np.ascontiguousarray(frame[:, :, :3])

@@ -170,9 +170,10 @@ def run(args: argparse.Namespace) -> int:
         image = read_image(args.input, order="rgb")
         if args.auto:
             from ..lens_track import DOUBTFUL_PX
-            from ..video_pipeline import default_estimator, rgb8_for_estimator
+            from ..frames import to_rgb8
+            from ..video_pipeline import default_estimator
 
-            estimate = default_estimator(args.model, args.method)(rgb8_for_estimator(image))
+            estimate = default_estimator(args.model, args.method)(to_rgb8(image))
             k1, k2 = _pair(estimate)
             method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
             stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""

@@ -45,7 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..video_pipeline import rgb8_for_estimator
+    from ..frames import to_rgb8
     from ..estimator import Estimator
 
     estimator = Estimator(args.model, threads=args.threads)
@@ -56,7 +56,7 @@ def run(args: argparse.Namespace) -> int:
             track = estimate_video(path, model=args.model, every=args.every, progress=show_progress(args), method=args.method)
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             continue
-        lens = estimator.estimate(rgb8_for_estimator(read_image(path)), method=args.method)
+        lens = estimator.estimate(to_rgb8(read_image(path)), method=args.method)
         if args.json:
             print(json.dumps({"path": path, **lens.as_dict()}), flush=True)
         else:
