@@ -29,7 +29,7 @@ import numpy as np
 from .frames import to_rgb8
 from .metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, max_displacement
 
-__all__ = ["ShotDetector", "detect_cuts", "smooth_shot", "smooth_track", "shot_ids"]
+__all__ = ["ShotDetector", "detect_cuts", "hold_static", "smooth_shot", "smooth_track", "shot_ids"]
 
 # -- shot cuts --------------------------------------------------------------------------------
 @dataclass
@@ -123,6 +123,15 @@ UNCERTAINTY_FLOOR = 0.5 / REPORT_WIDTH
 #: uncertainty is derived: estimates of one shot share the scene, so their errors are correlated
 #: and averaging N of them does not divide the error by sqrt(N) (a conservative choice: at most 2x)
 INDEPENDENT_SAMPLES = 4
+#: A shot whose accepted estimates agree with one constant lens is held at that lens: the mean
+#: square of their normalised residuals (maximum displacement from the constant, over the stated
+#: uncertainty read as a 90 % bound, i.e. 1.645 sigma) is at most this (a chi-square per sample:
+#: 1 is pure noise; 2 leaves room for the estimators' correlated errors). A static or panning
+#: camera then does not wobble, and its frames share one set of correction maps; a zoom whose
+#: change shows above the stated noise keeps the local-linear track.
+STATIC_CHI2 = 2.0
+#: a stated ~90 % bound read as a normal error's: u90 = 1.645 sigma
+P90_SIGMA = 1.645
 
 
 def smooth_shot(
@@ -263,4 +272,26 @@ def smooth_track(
             times[mine], lenses[mine], frames, half_window=half_window, iterations=iterations,
             min_scale=min_scale, radius=radius, uncertainty=None if uncertainty is None else uncertainty[mine], floor=floor,
         )
+        if uncertainty is not None:
+            out[frames] = hold_static(out[frames], lenses[mine], uncertainty[mine], weights[mine], radius, floor)
     return out, weights, sure
+
+
+def hold_static(track: np.ndarray, samples: np.ndarray, uncertainty: np.ndarray, weights: np.ndarray,
+                radius: float = CORNER_RADIUS_16_9, floor: float = UNCERTAINTY_FLOOR) -> np.ndarray:
+    """One shot's smoothed ``track`` (M x 2), or the shot's constant lens for every frame when its
+    estimates show no change (see :data:`STATIC_CHI2`). ``samples`` (N x 2) are the shot's estimates,
+    ``uncertainty`` (N, lens units, stated ~90 % bounds, at least ``floor``) and ``weights`` (N,
+    the robust weights of :func:`smooth_shot`; 0 = rejected) theirs. The constant is the
+    inverse-variance weighted mean of the accepted samples."""
+    accepted = np.asarray(weights) > 0
+    if accepted.sum() < 2:
+        return track
+    sigma = np.maximum(np.asarray(uncertainty, dtype=np.float64)[accepted], floor) / P90_SIGMA
+    mine = np.asarray(samples, dtype=np.float64)[accepted]
+    w = 1.0 / sigma**2
+    constant = (mine * w[:, None]).sum(axis=0) / w.sum()
+    chi2 = float(np.mean((max_displacement(mine, constant, radius) / sigma) ** 2))
+    if chi2 <= STATIC_CHI2:
+        return np.broadcast_to(constant, track.shape).copy()
+    return track

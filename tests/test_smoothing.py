@@ -256,3 +256,39 @@ def test_unsure_shot_keeps_a_large_uncertainty():
     assert np.all(stated * WIDTH_PX >= 20.0 - 1e-6)
     with pytest.raises(ValueError, match="uncertainty must be >= 0"):
         smooth_track(times, raw, np.zeros(n, int), uncertainty=np.full(len(times), np.nan))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_a_static_camera_gets_one_lens_for_the_whole_shot(seed):
+    """With stated uncertainties, a static camera's track is held at one lens (no wobble, one set of
+    maps), within the stated uncertainty of the truth on >= 90 % of frames; a zoom of the same
+    length is not held (92 px of change is far above any stated uncertainty)."""
+    truth, times, raw, u_px = _confident_track(seed, lambda t: np.full(t.shape, -0.3))
+    shots = np.zeros(len(truth), dtype=int)
+    held, _, stated = smooth_track(times, raw, shots, half_window=40, uncertainty=u_px / WIDTH_PX)
+    assert len(np.unique(held, axis=0)) == 1
+    assert np.mean(max_displacement(held, truth) * WIDTH_PX <= stated * WIDTH_PX) >= 0.9
+    zoom_truth, times, raw, u_px = _confident_track(seed, lambda t: -0.45 + 0.3 * t / 149.0)
+    followed, _, _ = smooth_track(times, raw, shots, half_window=40, uncertainty=u_px / WIDTH_PX)
+    assert len(np.unique(followed, axis=0)) > 100
+
+
+def test_hold_static_known_answers():
+    """The rule on hand-made samples: two estimates 2 sigma apart in displacement (chi-square 1 each
+    around their mean) are held at the inverse-variance mean; 4 sigma apart (chi-square 4) are not;
+    rejected samples (weight 0) do not count; one accepted sample is not enough."""
+    from glradial.smoothing import P90_SIGMA, STATIC_CHI2, hold_static
+
+    r = 0.5737
+    u = np.array([2.0, 2.0]) / WIDTH_PX  # stated 90 % bounds, lens units
+    sigma = u[0] / P90_SIGMA
+    dk1 = 2 * sigma / r**3  # a k1 difference that moves the 16:9 corner by 2 sigma
+    track = np.array([[-0.3, 0.07], [-0.29, 0.07], [-0.28, 0.07]])
+    near = np.array([[-0.3, 0.07], [-0.3 + dk1, 0.07]])
+    held = hold_static(track, near, u, np.ones(2))
+    assert STATIC_CHI2 >= 1.0 and np.allclose(held, near.mean(axis=0)) and len(np.unique(held, axis=0)) == 1
+    far = np.array([[-0.3, 0.07], [-0.3 + 2 * dk1, 0.07]])
+    assert np.array_equal(hold_static(track, far, u, np.ones(2)), track)
+    assert np.array_equal(hold_static(track, near, u, np.array([1.0, 0.0])), track)
+    three = np.vstack([near, [[0.2, 0.0]]])  # a gross outlier the robust step rejected
+    assert np.allclose(hold_static(track, three, np.append(u, u[0]), np.array([1.0, 1.0, 0.0])), near.mean(axis=0))
