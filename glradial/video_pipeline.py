@@ -373,7 +373,7 @@ def estimate_video(
 ) -> LensTrack:
     """Per-frame and per-shot lens of a video with the bundled estimator (or ``model``, with
     ``method`` when given): the first pass of ``glradial correct --auto`` (:func:`track_video`)
-    without the correction. Hook for ``glradial estimate VIDEO``."""
+    without the correction (what ``glradial estimate VIDEO`` prints, with the estimator it loaded)."""
     return track_video(path, default_estimator(model, method), every=every, window_s=window_s, progress=progress)
 
 

@@ -51,9 +51,11 @@ def run(args: argparse.Namespace) -> int:
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:
         if media_kind(path) == "video":
-            from ..video_pipeline import estimate_video, track_report
+            from ..video_pipeline import track_report, track_video
 
-            track = estimate_video(path, model=args.model, every=args.every, progress=show_progress(args), method=args.method)
+            # the estimator loaded above (its --threads), not a second one per video
+            track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method), every=args.every,
+                                progress=show_progress(args))
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             continue
         lens = estimator.estimate(to_rgb8(read_image(path)), method=args.method)
