@@ -171,10 +171,10 @@ def run(args: argparse.Namespace) -> int:
         if args.auto:
             from ..lens_track import DOUBTFUL_PX
             from ..frames import to_rgb8
-            from ..video_pipeline import default_estimator
+            from ..video_pipeline import _as_pair, default_estimator
 
             estimate = default_estimator(args.model, args.method)(to_rgb8(image))
-            k1, k2 = _pair(estimate)
+            k1, k2 = _as_pair(estimate)
             method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
             stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
             print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}{stated}")
@@ -255,11 +255,3 @@ def _summary(output: str, written: int, header: int) -> None:
     count the input's header states (-1: none), so that a short output is never silent."""
     stated = f"{header} frames" if header > 0 else "unknown"
     print(f"wrote {output}: {written} frames read and written (input header: {stated})", flush=True)
-
-
-def _pair(value: object) -> tuple[float, float]:
-    k1 = getattr(value, "k1", None)
-    if k1 is not None:
-        return float(k1), float(value.k2)  # type: ignore[attr-defined]
-    a, b = value  # type: ignore[misc]
-    return float(a), float(b)
