@@ -142,11 +142,7 @@ def run(args: argparse.Namespace) -> int:
     if not sources:
         raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect) or --lens FILE, --lens-track, "
                          "or --auto to estimate it")
-    if args.model is not None and not args.auto:
-        raise UsageError("--model needs --auto")
-    if args.method is not None and not args.auto:
-        raise UsageError("--method needs --auto")
-    for name in ("sidecar", "max_uncertainty", "every", "window"):
+    for name in ("model", "method", "sidecar", "max_uncertainty", "every", "window"):
         if getattr(args, name) is not None and not args.auto:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
     if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
