@@ -41,7 +41,7 @@ import av
 import numpy as np
 
 from .atomic import atomic_path, check_output_folder, temporary_folder
-from .image_io import check_overwrite
+from .image_io import _check_input as _check_file, check_overwrite
 from .native_stderr import silenced
 
 __all__ = [
@@ -183,11 +183,7 @@ def _check_input(path: str | os.PathLike) -> str:
         if not sequence_files(source):
             raise FileNotFoundError(f"input image sequence {str(source)!r} matches no file")
         return str(source)
-    if not source.exists():
-        raise FileNotFoundError(f"input file {str(source)!r} does not exist")
-    if source.is_dir():
-        raise IsADirectoryError(f"input {str(source)!r} is a folder, expected a file")
-    return str(source)
+    return str(_check_file(source))
 
 
 class VideoReader:
