@@ -50,6 +50,7 @@ __all__ = [
     "VideoFrame",
     "VideoReader",
     "VideoWriter",
+    "check_video_overwrite",
     "is_sequence",
     "probe_video",
     "sequence_files",
@@ -91,6 +92,15 @@ def sequence_files(pattern: str | os.PathLike) -> list[Path]:
     folder = pattern.parent if str(pattern.parent) else Path(".")
     wildcard = _PATTERN.sub("*", glob.escape(pattern.name))
     return sorted(p for p in folder.glob(wildcard) if regex.match(p.name))
+
+
+def check_video_overwrite(path: str | os.PathLike, overwrite: bool) -> None:
+    """:func:`~glradial.image_io.check_overwrite` for an output file or an image-sequence pattern
+    (``FileExistsError`` when any file of the sequence exists and ``overwrite`` is false)."""
+    if not is_sequence(path):
+        check_overwrite(path, overwrite)
+    elif not overwrite and sequence_files(path):
+        raise FileExistsError(f"output files {str(path)!r} already exist (overwrite them with -y/--overwrite)")
 
 
 def _error(path: object, err: BaseException) -> str:
@@ -451,11 +461,7 @@ class VideoWriter:
         self.path = check_output_folder(path)
         self.info, self.order, self.options = info, order, options
         self.sequence = is_sequence(self.path)
-        if self.sequence:
-            if not overwrite and sequence_files(self.path):
-                raise FileExistsError(f"output files {str(self.path)!r} already exist (overwrite them with -y/--overwrite)")
-        else:
-            check_overwrite(self.path, overwrite)
+        check_video_overwrite(self.path, overwrite)
         self.frames_written = 0
         self._closed = False
         self._atomic = None

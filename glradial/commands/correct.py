@@ -113,8 +113,8 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def _check_paths(args: argparse.Namespace) -> str:
     from ..atomic import check_output_folder
-    from ..image_io import check_overwrite, media_kind
-    from ..video_io import is_sequence, sequence_files
+    from ..image_io import media_kind
+    from ..video_io import check_video_overwrite, is_sequence
 
     source, target = Path(args.input), Path(args.output)
     if not is_sequence(source) and not source.exists():
@@ -125,11 +125,7 @@ def _check_paths(args: argparse.Namespace) -> str:
     if _same_file(source, target) or os.path.abspath(source) == os.path.abspath(target):
         raise UsageError("OUTPUT must differ from INPUT (glradial never writes over its input)")
     check_output_folder(target)
-    if is_sequence(target):
-        if not args.overwrite and sequence_files(target):
-            raise FileExistsError(f"output files {str(target)!r} already exist (overwrite them with -y/--overwrite)")
-    else:
-        check_overwrite(target, args.overwrite)
+    check_video_overwrite(target, args.overwrite)
     return kind_in
 
 
