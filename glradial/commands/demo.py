@@ -261,7 +261,7 @@ def _run(args: argparse.Namespace, bar) -> int:
     """The demo's five steps (panorama, frame, estimate, correct, figure), one bar step each."""
     from ..crops import CropParams, render_crops
     from ..image_io import write_image
-    from ..lens import Lens, corner_radius, lens_to_pixels
+    from ..lens import Lens, lens_to_pixels
     from ..remap import correct
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style
