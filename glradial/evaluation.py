@@ -51,6 +51,7 @@ __all__ = [
     "K1_BINS",
     "HFOV_BINS",
     "method_b",
+    "a_beats_b",
     "deviation_correlation",
     "metrics",
     "breakdown",
@@ -89,6 +90,13 @@ def method_b(pred: np.ndarray) -> np.ndarray:
     return np.stack([pred[:, 0], manifold_k2(pred[:, 0])], axis=1)
 
 
+def a_beats_b(pred: np.ndarray, labels: np.ndarray) -> float:
+    """Share of rows where method A (``pred``, both coefficients) has a smaller distortion loss
+    against ``labels`` than method B (:func:`method_b` of ``pred``); ties count as not beating."""
+    pred = np.asarray(pred, np.float64)
+    return float(np.mean(distortion_loss(labels, pred) < distortion_loss(labels, method_b(pred))))
+
+
 def deviation_correlation(pred: np.ndarray, labels: np.ndarray) -> float | None:
     """Correlation of ``k2_hat - m(k1_hat)`` with ``k2 - m(k1)`` (``None`` if either is constant)."""
     dev_pred = pred[:, 1] - manifold_k2(pred[:, 0])
@@ -117,7 +125,7 @@ def metrics(pred: np.ndarray, labels: np.ndarray) -> dict:
         "median_max_px": float(np.median(px_a)),
         "median_max_px_ci95": median_interval(px_a),
         "p90_max_px": float(np.percentile(px_a, 90)),
-        "a_beats_b": float((dl_a < dl_b).mean()),
+        "a_beats_b": a_beats_b(pred, labels),
         "k2_deviation_corr": deviation_correlation(pred, labels),
         "b_mean_dl": float(dl_b.mean()),
         "b_median_max_px": float(np.median(px_b)),

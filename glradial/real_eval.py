@@ -34,9 +34,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
+from .evaluation import a_beats_b
 from .lens import Lens
 from .lens_estimate import NET_UNCERTAINTY_PX, LensEstimate, choose, line_candidates
-from .metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px
+from .metrics import PAPER_SIZE, manifold_k2, max_displacement_px
 
 METHOD_NAMES = ("net", "lines", "auto")
 #: Extended range of real lenses: k1 bounds, and the spread of k2 above the manifold.
@@ -249,14 +250,12 @@ def summarise(samples: list[Sample], own_lens: set[str] = frozenset()) -> dict:
             est = [s.estimates[method] for s in group]
             pred = np.array([(e.k1, e.k2) for e in est])
             err = max_displacement_px(pred, truth)
-            method_b = np.stack([pred[:, 0], manifold_k2(pred[:, 0])], axis=1)
-            a_beats_b = float(np.mean(distortion_loss(truth, pred) < distortion_loss(truth, method_b)))
             bound = np.array([e.uncertainty_px for e in est])
             out[name][method] = {
                 "n": len(group),
                 "median_px": float(np.median(err)),
                 "p90_px": float(np.percentile(err, 90)),
-                "a_beats_b": a_beats_b,
+                "a_beats_b": a_beats_b(pred, truth),
                 "inside_bound": float(np.mean(err <= bound)),
                 "lines_share": float(np.mean([e.method == "lines" for e in est])),
             }

@@ -5,7 +5,6 @@ and distort)."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from glradial.cli import main
 from glradial.commands import demo

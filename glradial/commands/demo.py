@@ -16,6 +16,7 @@ import argparse
 import math
 import time
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -206,6 +207,29 @@ def compose_figure(distorted: np.ndarray, corrected: np.ndarray, chords: list[np
 
 
 # -- run ----------------------------------------------------------------------------------------
+def timed_log() -> Callable[[str], None]:
+    """A printer that prefixes each line with the seconds since it was made (both demo sources)."""
+    start = time.monotonic()
+
+    def log(text: str) -> None:
+        print(f"[{time.monotonic() - start:5.1f}s] {text}", flush=True)
+
+    return log
+
+
+def write_outputs(out: Path, frame: np.ndarray, corrected: np.ndarray, chords: list[np.ndarray],
+                  straight: list[np.ndarray], labels: tuple[str, str, str, str], log: Callable[[str], None]) -> None:
+    """Compose the figure (:func:`compose_figure`) and write ``demo.png``, ``distorted.png`` and
+    ``corrected.png`` to ``out`` (both demo sources)."""
+    from ..image_io import write_image
+
+    figure = compose_figure(frame, corrected, chords, straight, labels)
+    write_image(out / "distorted.png", frame)
+    write_image(out / "corrected.png", corrected)
+    write_image(out / "demo.png", figure)
+    log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
+
+
 def estimate_and_report(frame: np.ndarray, true_lens, args: argparse.Namespace, log) -> "Lens":
     """The lens the demo corrects with: the estimate of ``frame`` by ``args.method`` with the
     bundled model (or ``args.model``), printed beside the true lens with its maximum displacement
@@ -260,21 +284,17 @@ def run(args: argparse.Namespace) -> int:
 def _run(args: argparse.Namespace, bar) -> int:
     """The demo's five steps (panorama, frame, estimate, correct, figure), one bar step each."""
     from ..crops import CropParams, render_crops
-    from ..image_io import write_image
-    from ..lens import Lens, corner_radius, lens_to_pixels
+    from ..lens import Lens, lens_to_pixels
     from ..remap import correct
     from ..stadium import stadium_panorama
     from ..stadium_style import sample_style
 
-    start = time.monotonic()
+    log = timed_log()
     size = args.size
     true_lens = Lens(args.k1, args.k2)
     true_lens.check_frame(size)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-
-    def log(text: str) -> None:
-        print(f"[{time.monotonic() - start:5.1f}s] {text}", flush=True)
 
     style = sample_style(args.seed)
     pano_size = (args.panorama_width, args.panorama_width // 2)
@@ -331,12 +351,8 @@ def _run(args: argparse.Namespace, bar) -> int:
     if chords:
         print(f"pitch lines: up to {bow:.1f} px from straight in the distorted frame, "
               f"{residual:.1f} px after correction ({size[0]}x{size[1]} pixels)")
-    figure = compose_figure(frame, corrected, chords, straight, labels)
-    write_image(out / "distorted.png", frame)
-    write_image(out / "corrected.png", corrected)
-    write_image(out / "demo.png", figure)
+    write_outputs(out, frame, corrected, chords, straight, labels, log)
     bar.update()
-    log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
     return 0
 
 

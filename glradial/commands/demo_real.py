@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import time
 from importlib import resources
 from pathlib import Path
 
@@ -65,15 +64,10 @@ def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, i
 def run_real(args: argparse.Namespace) -> int:
     """``glradial demo --source real``: see the module docstring."""
     from ..lens import Lens
-    from ..image_io import write_image
     from ..remap import correct, distort
-    from .demo import _distance_to_chord, compose_figure, estimate_and_report
+    from .demo import _distance_to_chord, estimate_and_report, timed_log, write_outputs
 
-    start = time.monotonic()
-
-    def log(text: str) -> None:
-        print(f"[{time.monotonic() - start:5.1f}s] {text}", flush=True)
-
+    log = timed_log()
     original, lines, own = bundled_frame()
     size = (original.shape[1], original.shape[0])
     true_lens = Lens(args.k1, args.k2)
@@ -107,9 +101,5 @@ def run_real(args: argparse.Namespace) -> int:
         "distorted: enlarged close-ups where the reference lines run",
         "corrected: the same close-ups",
     )
-    figure = compose_figure(frame, corrected, chords, straight, labels)
-    write_image(out / "distorted.png", frame)
-    write_image(out / "corrected.png", corrected)
-    write_image(out / "demo.png", figure)
-    log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
+    write_outputs(out, frame, corrected, chords, straight, labels, log)
     return 0
