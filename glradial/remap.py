@@ -310,7 +310,6 @@ class Remapper:
             raise TypeError(f"source must be a moderngl.Texture, got {type(source).__name__} {source!r}")
         if not isinstance(target, moderngl.Framebuffer):
             raise TypeError(f"target must be a moderngl.Framebuffer, got {type(target).__name__} {target!r}")
-        self._make_current()
         lens = _lens(lens, k2)
         direction = _choice("direction", direction, DIRECTIONS)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
@@ -366,15 +365,13 @@ class Remapper:
 
     # -- internals -------------------------------------------------------------------------------
     def _check_alive(self) -> None:
+        """``RuntimeError`` once released or off the owning thread; then make this Remapper's
+        context the thread's current one (:meth:`egl.GLOwner.enter`): creating another context on
+        the thread (e.g. a second ``Remapper()``) switches EGL's current context, and drawing with a
+        non-current context reads back garbage with GL_INVALID_OPERATION."""
         if self._released:
             raise RuntimeError("this Remapper has been released")
         self._owner.enter()
-
-    def _make_current(self) -> None:
-        """Make this Remapper's context the thread's current one before drawing: creating another
-        context on the thread (e.g. a second ``Remapper()``) switches EGL's current context, and
-        drawing with a non-current context reads back garbage with GL_INVALID_OPERATION."""
-        self.ctx.__enter__()
 
     def _program(self, direction: str, interpolation: str, inverse: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
         key = (direction, interpolation, inverse)
@@ -455,7 +452,6 @@ class Remapper:
         out: np.ndarray | None,
     ) -> np.ndarray:
         self._check_alive()
-        self._make_current()
         height, width, channels = _check_frame(frame)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
         inverse = _choice("inverse", inverse, INVERSES)
