@@ -559,15 +559,18 @@ def auto_backend() -> str:
 
 
 def _run_one(frame, lens, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
-    if backend == "auto":
+    auto = backend == "auto"
+    if auto:
         backend = auto_backend()
-        if backend == "gl":
-            height, width, _ = _check_frame(frame)
-            if max(width, height) > _thread_remapper().max_texture_size:
-                backend = "cpu"
-    if backend == "cpu":
-        return _remap_cpu(frame, lens, direction, fit, interpolation, fill, inverse)
-    return _thread_remapper()._remap(frame, lens, direction, fit, interpolation, fill, inverse, None)
+    if backend == "gl":
+        remapper = _thread_remapper()
+        # "auto" sends a frame beyond the GL texture limit to the CPU; the frame itself is validated
+        # once, by whichever backend draws it (_check_frame: for float frames a pass over every pixel)
+        oversized = (auto and isinstance(frame, np.ndarray) and frame.ndim in (2, 3)
+                     and max(frame.shape[:2]) > remapper.max_texture_size)
+        if not oversized:
+            return remapper._remap(frame, lens, direction, fit, interpolation, fill, inverse, None)
+    return _remap_cpu(frame, lens, direction, fit, interpolation, fill, inverse)
 
 
 def _as_float32(frame: np.ndarray) -> np.ndarray:
