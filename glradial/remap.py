@@ -198,6 +198,16 @@ def _check_numbers(lens: Lens, corner: float, size: tuple[int, int], direction: 
         )
 
 
+def _checked_scale(lens: Lens, size: tuple[int, int], direction: str, fit: Fit, scale: float | None = None) -> float:
+    """The scale a remap of a ``size`` frame uses (``lens.fit_scale`` of ``fit``, or ``scale`` when
+    given), after the checks every backend makes: :func:`check_numeric_policy` and the fold-over
+    (:meth:`Lens.check_frame`)."""
+    s = lens.fit_scale(size, fit, direction) if scale is None else _positive("scale", scale)
+    check_numeric_policy(lens, size, direction, s, "fit" if scale is None else "scale")
+    lens.check_frame(size, s)
+    return s
+
+
 def fit_scale(
     lens: Lens | tuple[float, float],
     size: tuple[int, int],
@@ -330,9 +340,7 @@ class Remapper:
                 raise TypeError(f"viewport {name} must be an integer, got {value!r}")
         size = frame_size((width, height))
         x0, y0, width, height = int(x0), int(y0), size[0], size[1]
-        s = lens.fit_scale(size, fit, direction) if scale is None else _positive("scale", scale)
-        check_numeric_policy(lens, size, direction, s, "fit" if scale is None else "scale")
-        lens.check_frame(size, s)
+        s = _checked_scale(lens, size, direction, fit, scale)
         rgba = _check_fill(fill, 4, np.dtype(np.float32))
         self._draw(source, target, (x0, y0, width, height), lens, direction, s, interpolation, inverse, rgba, texture_unit)
 
@@ -461,9 +469,7 @@ class Remapper:
                 f"frame {width}×{height} exceeds this GL driver's texture limit of {self.max_texture_size} "
                 f"pixels per side (GL_MAX_TEXTURE_SIZE); use backend='cpu' for it"
             )
-        scale = lens.fit_scale((width, height), fit, direction)
-        check_numeric_policy(lens, (width, height), direction, scale)
-        lens.check_frame((width, height), scale)
+        scale = _checked_scale(lens, (width, height), direction, fit)
         if out is None:
             out = np.empty(frame.shape, frame.dtype)
         elif not (isinstance(out, np.ndarray) and out.shape == frame.shape and out.dtype == frame.dtype and out.flags.c_contiguous):
@@ -515,9 +521,7 @@ def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpol
     fill_values = _check_fill(fill, channels, frame.dtype)
     if max(width, height) > CPU_MAX_SIDE:
         raise ValueError(f"frame {width}×{height} exceeds cv2.remap's limit of {CPU_MAX_SIDE} pixels per side")
-    scale = lens.fit_scale((width, height), fit, direction)
-    check_numeric_policy(lens, (width, height), direction, scale)
-    lens.check_frame((width, height), scale)
+    scale = _checked_scale(lens, (width, height), direction, fit)
     map1, map2, outside = cpu_maps(lens, (width, height), direction, scale, inverse, interpolation == "nearest")
     result = cv2.remap(frame, map1, map2, _CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
     result = result.reshape(frame.shape)
