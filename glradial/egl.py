@@ -196,7 +196,7 @@ R = TypeVar("R")
 #: creating and destroying an EGL context leaks ~40 kB inside Mesa 22.3 (measured over 400 cycles on
 #: one thread), reusing one leaks nothing and saves the set-up
 THREAD_CONTEXT_POOL = 4
-_pool: list[tuple[int, moderngl.Context, dict[str, object]]] = []
+_pool: list[tuple[moderngl.Context, dict[str, object]]] = []
 _pool_lock = threading.Lock()
 
 
@@ -220,7 +220,7 @@ class _ThreadGL:
         with _pool_lock:
             if len(_pool) < THREAD_CONTEXT_POOL:
                 ctx.__exit__(None, None, None)  # current nowhere now: another thread may take it
-                _pool.append((self.pid, ctx, resources))
+                _pool.append((ctx, resources))
                 return
         for resource in reversed(list(resources.values())):
             resource.release()  # type: ignore[attr-defined]
@@ -237,17 +237,13 @@ _local = threading.local()
 
 
 def _adopt_pooled() -> _ThreadGL | None:
-    """A pooled context of this process, made current on the calling thread with its resources'
-    owners moved here; None if the pool has none."""
-    pid = os.getpid()
+    """A pooled context (all of this process's: a forked child moves the parent's aside,
+    :func:`_after_fork_in_child`), made current on the calling thread with its resources' owners
+    moved here; None if the pool is empty."""
     with _pool_lock:
-        while _pool:
-            owner_pid, ctx, resources = _pool.pop()
-            if owner_pid == pid:
-                break
-            _inherited.append((ctx, resources))  # a parent's (copied by fork): never used here
-        else:
+        if not _pool:
             return None
+        ctx, resources = _pool.pop()
     make_current(ctx)
     for resource in resources.values():
         owner = getattr(resource, "_owner", None)
@@ -257,11 +253,10 @@ def _adopt_pooled() -> _ThreadGL | None:
 
 
 def _thread_gl() -> _ThreadGL:
+    """The calling thread's holder, adopted from the pool or made on first use (a forked child's
+    inherited holder was already moved aside by :func:`_after_fork_in_child`)."""
     holder = getattr(_local, "holder", None)
-    if holder is None or holder.pid != os.getpid():
-        if holder is not None:
-            _inherited.append(holder)  # the parent's: kept alive, never released in this process
-        _local.holder = None
+    if holder is None:
         _local.holder = holder = _adopt_pooled() or _ThreadGL()
     return holder
 

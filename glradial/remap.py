@@ -198,6 +198,29 @@ def _check_numbers(lens: Lens, corner: float, size: tuple[int, int], direction: 
         )
 
 
+def _checked_scale(lens: Lens, size: tuple[int, int], direction: str, fit: Fit, scale: float | None = None) -> float:
+    """The scale a remap of a ``size`` frame uses (``lens.fit_scale`` of ``fit``, or ``scale`` when
+    given), after the checks every backend makes: :func:`check_numeric_policy` and the fold-over
+    (:meth:`Lens.check_frame`)."""
+    if scale is not None:
+        s = _positive("scale", scale)
+    elif isinstance(fit, str):  # "crop"/"full" solve for the lens's inverse: cached like the policy
+        s = _fit_scale(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, size, fit, direction)
+    else:
+        s = lens.fit_scale(size, fit, direction)
+    check_numeric_policy(lens, size, direction, s, "fit" if scale is None else "scale")
+    lens.check_frame(size, s)
+    return s
+
+
+@functools.lru_cache(maxsize=64)
+def _fit_scale(k1: float, k2: float, cx: float, cy: float, pixel_aspect: float, size: tuple[int, int], fit: str,
+               direction: str) -> float:
+    """:meth:`Lens.fit_scale` of a named fit, cached by the lens's numbers: a video or a batch asks
+    for the same scale every frame, and ``"crop"``/``"full"`` cost a Newton inverse (~0.1 ms)."""
+    return Lens(k1, k2, cx, cy, pixel_aspect).fit_scale(size, fit, direction)
+
+
 def fit_scale(
     lens: Lens | tuple[float, float],
     size: tuple[int, int],
@@ -310,7 +333,6 @@ class Remapper:
             raise TypeError(f"source must be a moderngl.Texture, got {type(source).__name__} {source!r}")
         if not isinstance(target, moderngl.Framebuffer):
             raise TypeError(f"target must be a moderngl.Framebuffer, got {type(target).__name__} {target!r}")
-        self._make_current()
         lens = _lens(lens, k2)
         direction = _choice("direction", direction, DIRECTIONS)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
@@ -331,9 +353,7 @@ class Remapper:
                 raise TypeError(f"viewport {name} must be an integer, got {value!r}")
         size = frame_size((width, height))
         x0, y0, width, height = int(x0), int(y0), size[0], size[1]
-        s = lens.fit_scale(size, fit, direction) if scale is None else _positive("scale", scale)
-        check_numeric_policy(lens, size, direction, s, "fit" if scale is None else "scale")
-        lens.check_frame(size, s)
+        s = _checked_scale(lens, size, direction, fit, scale)
         rgba = _check_fill(fill, 4, np.dtype(np.float32))
         self._draw(source, target, (x0, y0, width, height), lens, direction, s, interpolation, inverse, rgba, texture_unit)
 
@@ -366,15 +386,13 @@ class Remapper:
 
     # -- internals -------------------------------------------------------------------------------
     def _check_alive(self) -> None:
+        """``RuntimeError`` once released or off the owning thread; then make this Remapper's
+        context the thread's current one (:meth:`egl.GLOwner.enter`): creating another context on
+        the thread (e.g. a second ``Remapper()``) switches EGL's current context, and drawing with a
+        non-current context reads back garbage with GL_INVALID_OPERATION."""
         if self._released:
             raise RuntimeError("this Remapper has been released")
         self._owner.enter()
-
-    def _make_current(self) -> None:
-        """Make this Remapper's context the thread's current one before drawing: creating another
-        context on the thread (e.g. a second ``Remapper()``) switches EGL's current context, and
-        drawing with a non-current context reads back garbage with GL_INVALID_OPERATION."""
-        self.ctx.__enter__()
 
     def _program(self, direction: str, interpolation: str, inverse: str) -> tuple[moderngl.Program, moderngl.VertexArray]:
         key = (direction, interpolation, inverse)
@@ -455,7 +473,6 @@ class Remapper:
         out: np.ndarray | None,
     ) -> np.ndarray:
         self._check_alive()
-        self._make_current()
         height, width, channels = _check_frame(frame)
         interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
         inverse = _choice("inverse", inverse, INVERSES)
@@ -465,9 +482,7 @@ class Remapper:
                 f"frame {width}×{height} exceeds this GL driver's texture limit of {self.max_texture_size} "
                 f"pixels per side (GL_MAX_TEXTURE_SIZE); use backend='cpu' for it"
             )
-        scale = lens.fit_scale((width, height), fit, direction)
-        check_numeric_policy(lens, (width, height), direction, scale)
-        lens.check_frame((width, height), scale)
+        scale = _checked_scale(lens, (width, height), direction, fit)
         if out is None:
             out = np.empty(frame.shape, frame.dtype)
         elif not (isinstance(out, np.ndarray) and out.shape == frame.shape and out.dtype == frame.dtype and out.flags.c_contiguous):
@@ -519,9 +534,7 @@ def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpol
     fill_values = _check_fill(fill, channels, frame.dtype)
     if max(width, height) > CPU_MAX_SIDE:
         raise ValueError(f"frame {width}×{height} exceeds cv2.remap's limit of {CPU_MAX_SIDE} pixels per side")
-    scale = lens.fit_scale((width, height), fit, direction)
-    check_numeric_policy(lens, (width, height), direction, scale)
-    lens.check_frame((width, height), scale)
+    scale = _checked_scale(lens, (width, height), direction, fit)
     map1, map2, outside = cpu_maps(lens, (width, height), direction, scale, inverse, interpolation == "nearest")
     result = cv2.remap(frame, map1, map2, _CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
     result = result.reshape(frame.shape)
@@ -563,15 +576,18 @@ def auto_backend() -> str:
 
 
 def _run_one(frame, lens, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
-    if backend == "auto":
+    auto = backend == "auto"
+    if auto:
         backend = auto_backend()
-        if backend == "gl":
-            height, width, _ = _check_frame(frame)
-            if max(width, height) > _thread_remapper().max_texture_size:
-                backend = "cpu"
-    if backend == "cpu":
-        return _remap_cpu(frame, lens, direction, fit, interpolation, fill, inverse)
-    return _thread_remapper()._remap(frame, lens, direction, fit, interpolation, fill, inverse, None)
+    if backend == "gl":
+        remapper = _thread_remapper()
+        # "auto" sends a frame beyond the GL texture limit to the CPU; the frame itself is validated
+        # once, by whichever backend draws it (_check_frame: for float frames a pass over every pixel)
+        oversized = (auto and isinstance(frame, np.ndarray) and frame.ndim in (2, 3)
+                     and max(frame.shape[:2]) > remapper.max_texture_size)
+        if not oversized:
+            return remapper._remap(frame, lens, direction, fit, interpolation, fill, inverse, None)
+    return _remap_cpu(frame, lens, direction, fit, interpolation, fill, inverse)
 
 
 def _as_float32(frame: np.ndarray) -> np.ndarray:

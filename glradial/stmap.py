@@ -106,20 +106,16 @@ def write_stmap(path: str | os.PathLike, stmap: np.ndarray) -> Path:
     stmap = np.asarray(stmap, dtype=np.float32)
     if stmap.ndim != 3 or stmap.shape[2] != 3:
         raise ValueError(f"an STMap must be H×W×3, got shape {stmap.shape}")
+    if ext in (".tif", ".tiff"):
+        from .image_io import write_image
+
+        return write_image(target, stmap)  # float32 RGB TIFF, written atomically
     with atomic_path(target) as tmp:
         if ext == ".npy":
             with open(tmp, "wb") as handle:
                 np.save(handle, stmap)
-        elif ext == ".exr":
-            _write_exr(tmp, stmap)
         else:
-            import cv2
-
-            ok, encoded = cv2.imencode(".tiff", np.ascontiguousarray(stmap[..., ::-1]))  # OpenCV writes BGR
-            if not ok:
-                raise OSError(f"OpenCV could not encode a float TIFF for {str(target)!r}")
-            with open(tmp, "wb") as handle:  # not ndarray.tofile: a short write keeps its errno
-                handle.write(encoded.tobytes())
+            _write_exr(tmp, stmap)
     return target
 
 
