@@ -43,7 +43,7 @@ import tempfile
 import time
 import traceback
 import weakref
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator, Mapping, NamedTuple, Sequence
 
@@ -90,10 +90,11 @@ class _Config:
     cache: int
     supersample: int | tuple[int, int] | str
     paired: bool = False
-    newton_steps: int = field(init=False)
 
-    def __post_init__(self) -> None:
-        self.newton_steps = PAPER_NEWTON_STEPS if not self.ranges and not self.paired else LENS_NEWTON_STEPS
+    @property
+    def newton_steps(self) -> int:
+        """Newton steps of the exact inverse: :data:`PAPER_NEWTON_STEPS` for unpaired crops of the paper's distribution."""
+        return PAPER_NEWTON_STEPS if not self.ranges and not self.paired else LENS_NEWTON_STEPS
 
 
 def plan_batch(config: _Config, index: int) -> tuple[list[CropParams], np.ndarray]:

@@ -16,9 +16,9 @@ point); the radial map is ``P(r, k) = r (1 + k1 r^2 + k2 r^4)``.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
+
+from .lens import corner_radius
 
 __all__ = [
     "PAPER_SIZE",
@@ -41,7 +41,7 @@ PAPER_SIZE: tuple[int, int] = (1280, 720)
 #: Width (pixels) at which displacement errors are reported.
 REPORT_WIDTH = 1920
 #: Lens-unit radius of the corner of a 16:9 frame (0.5737...).
-CORNER_RADIUS_16_9 = 0.5 * math.hypot(1.0, 9.0 / 16.0)
+CORNER_RADIUS_16_9 = corner_radius(PAPER_SIZE)
 #: Outer radius (lens units) of the distortion loss's samples: beyond the 16:9 corner, as in the paper.
 LOSS_R_MAX = 0.7
 #: Number of radii at which the distortion loss compares radial maps.

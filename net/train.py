@@ -301,7 +301,7 @@ def main(argv: list[str] | None = None) -> int:
 
     t0 = time.monotonic()
     if is_main:
-        source.load()  # render + cache once before the producers start (they then read the cache)
+        source.inputs()  # stadiums rendered into the cache once, before the producers start (they read the cache)
     if distributed:
         dist.barrier()
     log(f"{len(source)} training panoramas ready ({time.monotonic() - t0:.1f} s)")
