@@ -3,20 +3,23 @@
 Convention:
     Input frames: NumPy arrays ``H x W x 3`` RGB (``H x W`` grayscale and ``H x W x 4`` RGBA are
     accepted: gray is repeated, alpha dropped), dtype uint8 (0..255) or float32/float64 in [0, 1].
-    Any size: the whole frame is resized with area interpolation (``cv2.INTER_AREA``) to the network
-    input (``Estimator.input_size``, ``(W, H)``, e.g. 384 x 216) and is treated as the 16:9 frame
-    geometry the lens refers to, as in training (crops rendered as 1280 x 720 frames). A frame of
-    another aspect ratio is squashed to 16:9 and the result describes that squashed geometry
-    (a warning says so). Crop letterboxes before estimating.
+    Any size and aspect ratio: the network sees the frame's centred 16:9 view (:func:`view_box`: the
+    full width of a taller frame, the full height of a wider one; never squashed), resized with area
+    interpolation (``cv2.INTER_AREA``) to its input (``Estimator.input_size``, ``(W, H)``, e.g.
+    384 x 216), as in training (crops rendered as 1280 x 720 frames). Its answer refers to that view
+    and is converted to the frame's own width-normalised lens (:func:`view_to_frame`): the same
+    ``(k1, k2)`` for a view as wide as the frame, ``Lens.rescale(W_view / W)`` for a narrower one.
+    The line fit works in the frame's own geometry. Crop letterboxes before estimating.
     Output: :class:`glradial.LensEstimate`, a :class:`glradial.Lens` ``(k1, k2)`` in width-normalised
     lens units (image width = 1, origin at the frame centre): forward model
     ``p_d = p_u (1 + k1 r^2 + k2 r^4)``, with ``method`` ("net" or "lines"), ``uncertainty_px``
-    (a ~90 % bound on the maximum displacement error, px at 1920) and ``chains``.
+    (a 90 % bound on the maximum displacement error, px at 1920), ``chains``, ``doubtful`` and
+    ``reason`` (:mod:`glradial.trust`).
 
 Methods: ``"net"`` is the CNN alone; ``"lines"`` fits the lens that straightens the frame's pitch
 lines and straight edges (:mod:`glradial.lines`, :mod:`glradial.line_fit`; the CNN is its prior);
 ``"auto"`` (default) takes the line fit when its bound beats the CNN's. Frames without usable lines
-get the CNN's answer, labelled ``method="net"`` (docs/LINES.md).
+get the CNN's answer, labelled ``method="net"`` and doubtful (docs/LINES.md).
 
 The ONNX graph takes uint8 ``N x H x W x 3`` RGB and does the rest of the preprocessing itself
 (``/ 255``, mean/std normalisation, NHWC -> NCHW; see the model's metadata and docs/MODEL.md).
@@ -32,22 +35,50 @@ from __future__ import annotations
 import json
 import os
 import threading
-import warnings
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
 from .frames import to_rgb8
-from .lens_estimate import LensEstimate, Method, check_method, estimate_with_lines, net_estimate
+from .lens import Lens
+from .lens_estimate import LensEstimate, Method, check_method, frame_evidence, judge
+from .trust import FrameEvidence, view_features
 from .model_check import ModelLoadError, check_checksum, check_model
 
 #: File name of the bundled model inside the ``glradial.models`` package.
 DEFAULT_MODEL_NAME = "glradial_k1k2.onnx"
 #: Aspect ratio (W / H) of the frames the model was trained on.
 TRAINED_ASPECT = 16.0 / 9.0
-#: Relative aspect deviation beyond which a warning is issued.
-ASPECT_TOLERANCE = 0.02
+#: Relative aspect deviation within which a frame is taken whole as the 16:9 view.
+ASPECT_TOLERANCE = 0.01
+
+
+def view_box(size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """``(x0, y0, w, h)`` of the centred 16:9 view of a ``(W, H)`` frame that the network sees: the
+    whole frame when within :data:`ASPECT_TOLERANCE` of 16:9, the full width of a taller frame, the
+    full height of a wider one, with equal margins (so its centre is the frame's; 16:9 within a
+    pixel)."""
+    width, height = size
+    if abs(width / height / TRAINED_ASPECT - 1.0) <= ASPECT_TOLERANCE:
+        return 0, 0, width, height
+    if width / height > TRAINED_ASPECT:  # equal margins: the view's centre is the frame's centre
+        margin = int(round((width - height * TRAINED_ASPECT) / 2))
+        return margin, 0, width - 2 * margin, height
+    margin = int(round((height - width / TRAINED_ASPECT) / 2))
+    return 0, margin, width, height - 2 * margin
+
+
+def view_to_frame(k: tuple[float, float], size: tuple[int, int]) -> tuple[float, float]:
+    """The network's ``(k1, k2)`` of the 16:9 view (:func:`view_box`) -> the width-normalised lens
+    of the ``(W, H)`` frame. A radial lens about the centre is the same map in pixels; lens units
+    are pixels / width, so a view of width ``w`` has ``r_frame = (w / W) r_view`` and
+    ``k_frame = Lens(k).rescale(w / W)`` (``k1 (W / w)²``, ``k2 (W / w)⁴``); same width, same k."""
+    w = view_box(size)[2]
+    if w == size[0]:
+        return float(k[0]), float(k[1])
+    lens = Lens(float(k[0]), float(k[1])).rescale(w / size[0])
+    return lens.k1, lens.k2
 
 
 def default_model_path() -> Path:
@@ -117,22 +148,16 @@ class Estimator:
         return json.loads(text) if text else {}
 
     def preprocess(self, frame: np.ndarray) -> np.ndarray:
-        """A frame -> uint8 ``H x W x 3`` RGB at :attr:`input_size` (area interpolation)."""
+        """A frame -> its centred 16:9 view (:func:`view_box`) as uint8 ``H x W x 3`` RGB at
+        :attr:`input_size` (area interpolation)."""
         import cv2
 
         frame = _as_frame(frame)
-        height, width = frame.shape[:2]
-        aspect = width / height
-        if abs(aspect / TRAINED_ASPECT - 1.0) > ASPECT_TOLERANCE:
-            warnings.warn(
-                f"frame {width}×{height} is not 16:9; it is squashed to 16:9 and the estimate refers to that "
-                "geometry (crop letterboxes first)",
-                RuntimeWarning,
-                stacklevel=3,
-            )
-        if (width, height) == self.input_size:
-            return np.ascontiguousarray(frame)
-        return cv2.resize(frame, self.input_size, interpolation=cv2.INTER_AREA)
+        x0, y0, w, h = view_box((frame.shape[1], frame.shape[0]))
+        view = frame[y0:y0 + h, x0:x0 + w]
+        if (w, h) == self.input_size:
+            return np.ascontiguousarray(view)
+        return cv2.resize(view, self.input_size, interpolation=cv2.INTER_AREA)
 
     def run(self, images: np.ndarray) -> np.ndarray:
         """Preprocessed uint8 ``N x H x W x 3`` batch -> float64 ``N x 2`` (k1, k2).
@@ -157,19 +182,25 @@ class Estimator:
         session call. ``method``: ``"net"`` (the CNN), ``"lines"`` (the line fit, the CNN as its
         prior; the CNN's answer when a frame has no usable lines) or ``"auto"`` (the line fit when
         its calibrated bound beats the CNN's); each :class:`~glradial.lens_estimate.LensEstimate`
-        says which method produced it and how sure it is (``uncertainty_px``, px at 1920)."""
+        says which method produced it, how sure it is (``uncertainty_px``, px at 1920) and whether
+        it is doubtful (``doubtful``, ``reason``)."""
         method = check_method(method)
         if isinstance(frames, np.ndarray) and frames.ndim == 4:
             frames = list(frames)
         if isinstance(frames, (str, bytes, np.ndarray)) or not hasattr(frames, "__iter__"):
             raise TypeError(f"frames must be a sequence of NumPy arrays (or an N×H×W×C array), got {type(frames).__name__}")
         frames = [_as_frame(f, i) for i, f in enumerate(frames)]
+        return [judge(e, method) for e in self.evidence_batch(frames, lines=method != "net")]
+
+    def evidence_batch(self, frames: Sequence[np.ndarray], lines: bool = True) -> list[FrameEvidence]:
+        """The :class:`glradial.trust.FrameEvidence` of each uint8 RGB frame: the CNN (one session
+        call, answers in each frame's geometry), its view's features and, with ``lines``, the line fit."""
         if not frames:
             return []
-        net = self.run(np.stack([self.preprocess(f) for f in frames]))
-        if method == "net":
-            return [net_estimate(k1, k2, frame) for frame, (k1, k2) in zip(frames, net)]
-        return [estimate_with_lines(frame, (float(k1), float(k2)), method) for frame, (k1, k2) in zip(frames, net)]
+        views = [self.preprocess(f) for f in frames]
+        net = self.run(np.stack(views))
+        return [frame_evidence(f, view_to_frame(k, (f.shape[1], f.shape[0])), view_features(v), lines)
+                for f, v, k in zip(frames, views, net)]
 
     def estimate(self, frame: np.ndarray, method: Method = "auto") -> LensEstimate:
         """Estimate one frame's lens (``method`` as in :meth:`estimate_batch`)."""

@@ -1,18 +1,17 @@
-"""A lens estimate that says how sure it is, and the choice between the CNN and the line fit.
+"""A lens estimate that says how sure it is and whether to trust it, and the choice between the
+CNN and the line fit.
 
 Convention:
     :class:`LensEstimate` is a :class:`glradial.Lens` (width-normalised ``(k1, k2)``, forward model
     ``p_d = p_u (1 + k1 r^2 + k2 r^4)``) that also carries
-    ``uncertainty_px``: a bound on the maximum radial displacement error over the 16:9 frame
-    (:func:`glradial.metrics.max_displacement_px`, px of a 1920-wide frame) meant to hold for about
-    90 % of frames; ``method``: ``"net"`` (the CNN) or ``"lines"`` (the line fit); ``chains``: the
-    line chains the fit used (0 for the CNN).
+    ``uncertainty_px``: a 90 % bound on the maximum radial displacement error over the 16:9 frame
+    (:func:`glradial.metrics.max_displacement_px`, px of a 1920-wide frame); ``method``: ``"net"``
+    (the CNN) or ``"lines"`` (the line fit); ``chains``: the line chains the fit used (0 for the
+    CNN); ``doubtful`` and ``reason``: whether the estimate should not be applied, and why (one of
+    :data:`glradial.trust.REASONS`; ``"ok"`` when not doubtful).
 
-Calibration: the constants below were measured on procedural stadium crops of the **validation**
-split rendered with known lenses (never on real photographs) by :func:`glradial.real_eval.calibrate`
-(docs/LINES.md, "Confidence"): ``NET_UNCERTAINTY_PX`` is the 90th percentile of the CNN's error
-there; a line fit's bound is ``LINES_UNCERTAINTY_SCALE * sigma_px + LINES_UNCERTAINTY_FLOOR_PX``
-where ``sigma_px`` is the fit's own 1-sigma (:class:`glradial.line_fit.LineFit`).
+The bound and the doubt come from :mod:`glradial.trust` (split-conformal calibration on real
+validation frames, shipped in ``glradial/data/trust.json``; docs/LINES.md, "Confidence").
 """
 
 from __future__ import annotations
@@ -25,24 +24,15 @@ from typing import Literal
 import numpy as np
 
 from .lens import Lens, real_number
+from .trust import REASONS, FrameEvidence, TrustModel, shipped_trust
 
 Method = Literal["auto", "net", "lines"]
 #: Values of the ``method`` argument of the estimators.
 METHODS = ("auto", "net", "lines")
 #: Values of :attr:`LensEstimate.method` (which method produced the numbers).
 SOURCES = ("net", "lines")
-
-#: 90th percentile of the CNN's maximum displacement error (px at 1920) on validation crops.
-NET_UNCERTAINTY_PX = 16.0
-#: A line fit's 90 % bound: scale on its 1-sigma displacement plus a floor (px at 1920).
-LINES_UNCERTAINTY_SCALE = 0.27
-LINES_UNCERTAINTY_FLOOR_PX = 0.5
-#: Stated for a frame with no usable structure (blank, noise): half the displacement between the
-#: ends of the real-lens range k1 in [-1.0, 0.4] on the manifold (px at 1920).
+#: The default ``uncertainty_px`` of a bare LensEstimate: no evidence of the bound (px at 1920).
 NO_EVIDENCE_UNCERTAINTY_PX = 60.0
-#: A frame is blank below this gray standard deviation (levels of 255), or noise when more than
-#: this share of its pixels are edges yet no chain was found.
-BLANK_STD, NOISE_EDGE_DENSITY = 2.0, 0.12
 
 
 @dataclass(frozen=True)
@@ -57,6 +47,8 @@ class LensEstimate(Lens):
     uncertainty_px: float = NO_EVIDENCE_UNCERTAINTY_PX
     method: str = "net"
     chains: int = 0
+    doubtful: bool = False
+    reason: str = "ok"
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -69,6 +61,12 @@ class LensEstimate(Lens):
         if isinstance(self.chains, bool) or not isinstance(self.chains, (numbers.Integral, np.integer)) or self.chains < 0:
             raise ValueError(f"chains must be a non-negative integer, got {self.chains!r}")
         object.__setattr__(self, "chains", int(self.chains))
+        if not isinstance(self.doubtful, (bool, np.bool_)):
+            raise TypeError(f"doubtful must be a bool, got {self.doubtful!r}")
+        object.__setattr__(self, "doubtful", bool(self.doubtful))
+        if self.reason not in REASONS or (self.reason == "ok") == self.doubtful:
+            raise ValueError(f"reason must be one of {REASONS} ('ok' exactly when not doubtful), got {self.reason!r} "
+                             f"with doubtful={self.doubtful}")
 
     @property
     def lens(self) -> Lens:
@@ -76,9 +74,9 @@ class LensEstimate(Lens):
         return Lens(self.k1, self.k2)
 
     def as_dict(self) -> dict:
-        """``{"k1", "k2", "method", "uncertainty_px", "chains"}`` (JSON-ready)."""
-        return {"k1": self.k1, "k2": self.k2, "method": self.method,
-                "uncertainty_px": self.uncertainty_px, "chains": self.chains}
+        """``{"k1", "k2", "method", "uncertainty_px", "chains", "doubtful", "reason"}`` (JSON-ready)."""
+        return {"k1": self.k1, "k2": self.k2, "method": self.method, "uncertainty_px": self.uncertainty_px,
+                "chains": self.chains, "doubtful": self.doubtful, "reason": self.reason}
 
 
 def check_method(method: object) -> str:
@@ -88,58 +86,32 @@ def check_method(method: object) -> str:
     return method
 
 
-def lines_uncertainty(sigma_px: float) -> float:
-    """Calibrated 90 % bound (px at 1920) of a line fit with raw 1-sigma ``sigma_px``."""
-    return LINES_UNCERTAINTY_SCALE * sigma_px + LINES_UNCERTAINTY_FLOOR_PX
-
-
-def net_estimate(k1: float, k2: float, frame: np.ndarray | None = None, edge_density: float | None = None) -> LensEstimate:
-    """The CNN's answer with its calibrated bound, or :data:`NO_EVIDENCE_UNCERTAINTY_PX` when the
-    uint8 ``frame`` is blank, or is noise: ``edge_density`` (of its
-    :class:`glradial.lines.LineEvidence`, when the frame gave no line fit) above
-    :data:`NOISE_EDGE_DENSITY`."""
-    uncertainty = NET_UNCERTAINTY_PX
-    if frame is not None:
-        from .lines import gray_copy
-
-        blank = float(gray_copy(frame, 320).std()) < BLANK_STD
-        if blank or (edge_density is not None and edge_density > NOISE_EDGE_DENSITY):
-            uncertainty = NO_EVIDENCE_UNCERTAINTY_PX
-    return LensEstimate(float(k1), float(k2), uncertainty_px=uncertainty, method="net", chains=0)
-
-
-def fit_frame(frame: np.ndarray, net: tuple[float, float]):
-    """The line evidence of the uint8 RGB ``frame`` (pieces linked with the CNN's ``net`` lens as the
-    hint) and its :class:`glradial.line_fit.LineFit` (the CNN's k1 as the prior)."""
+def frame_evidence(frame: np.ndarray, net: tuple[float, float], view_features: tuple[float, float],
+                   lines: bool = True) -> FrameEvidence:
+    """The :class:`glradial.trust.FrameEvidence` of the uint8 RGB ``frame``: the CNN's ``net``
+    ``(k1, k2)`` (frame geometry), the ``(green, gray_std)`` of its 16:9 view
+    (:func:`glradial.trust.view_features`) and, with ``lines``, its line fit (pieces linked with the
+    CNN's lens as the hint, the CNN's k1 as the prior)."""
+    green, gray_std = view_features
+    net = (float(net[0]), float(net[1]))
+    if not lines:
+        return FrameEvidence(net, green=green, gray_std=gray_std)
     from .line_fit import fit_lines
     from .lines import detect_chains
 
     evidence = detect_chains(frame, lens_hint=net)
-    return evidence, fit_lines(evidence, prior=net)
+    fit = fit_lines(evidence, prior=net)
+    usable = fit.ok and math.isfinite(fit.k1) and math.isfinite(fit.k2) and math.isfinite(fit.sigma_px)
+    return FrameEvidence(net, (float(fit.k1), float(fit.k2)) if usable else None,
+                         float(fit.sigma_px) if usable else math.inf, int(fit.chains) if usable else 0,
+                         int(fit.candidates), green, gray_std, float(evidence.edge_density))
 
 
-def line_candidates(frame: np.ndarray, net: tuple[float, float]) -> tuple[LensEstimate, LensEstimate | None]:
-    """The CNN's estimate of the uint8 RGB ``frame`` (``net`` = its ``(k1, k2)``) and the line fit's
-    (``None`` when the frame has no usable lines or the fit fails), each with its bound."""
-    evidence, fit = fit_frame(frame, net)
-    if not fit.ok or not (math.isfinite(fit.k1) and math.isfinite(fit.k2) and math.isfinite(fit.sigma_px)):
-        return net_estimate(net[0], net[1], frame, evidence.edge_density), None
-    fallback = net_estimate(net[0], net[1], frame)
-    return fallback, LensEstimate(fit.k1, fit.k2, uncertainty_px=lines_uncertainty(fit.sigma_px), method="lines", chains=fit.chains)
-
-
-def choose(net: LensEstimate, lines: LensEstimate | None, method: str) -> LensEstimate:
-    """``method="lines"``: the line fit whenever there is one; ``"auto"``: the line fit when its
-    bound is below the CNN's; ``"net"``: the CNN. Without a line fit, the CNN's answer (labelled
-    ``method="net"``: an estimate never claims lines it does not have)."""
-    if method == "net" or lines is None:
-        return net
-    if method == "auto" and lines.uncertainty_px >= net.uncertainty_px:
-        return net
-    return lines
-
-
-def estimate_with_lines(frame: np.ndarray, net: tuple[float, float], method: str) -> LensEstimate:
-    """Combine the CNN's ``net`` ``(k1, k2)`` with the line fit of the uint8 RGB ``frame``
-    (:func:`line_candidates`, then :func:`choose`)."""
-    return choose(*line_candidates(frame, net), method)
+def judge(evidence: FrameEvidence, method: str, trust: TrustModel | None = None) -> LensEstimate:
+    """The :class:`LensEstimate` ``method`` gives on ``evidence``: the line fit or the CNN (``auto``:
+    the line fit when its bound is below the CNN's), its calibrated bound and doubt
+    (:meth:`glradial.trust.TrustModel.judge`; ``trust`` defaults to the shipped calibration)."""
+    trust = trust if trust is not None else shipped_trust()
+    (k1, k2), source, bound, doubtful, reason = trust.judge(evidence, check_method(method))
+    chains = evidence.chains if source == "lines" else 0
+    return LensEstimate(k1, k2, uncertainty_px=bound, method=source, chains=chains, doubtful=doubtful, reason=reason)

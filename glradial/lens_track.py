@@ -14,12 +14,14 @@ column                  meaning
 ``uncertainty_px``      stated uncertainty of that lens (~p90 of the maximum displacement error,
                         px at 1920 wide); empty when the estimator states none
 ``doubtful``            1 when the frame's shot is doubtful (median uncertainty above the
-                        threshold of the run), else 0
+                        threshold of the run, or most of its raw estimates doubtful), else 0
 ``method``              how the frame's raw estimate was made (``net``, ``lines``); empty when
                         the frame was not estimated
 ``k1_raw``, ``k2_raw``  the raw estimate on this frame (empty when not estimated)
 ``raw_uncertainty_px``  the uncertainty the estimator stated for it
 ``weight``              robustness weight of the raw estimate in the smoothing (0 = rejected)
+``reason``              the raw estimate's doubt reason (``ok``, ``too_few_lines``, ...; see
+                        :mod:`glradial.trust`); empty when not estimated or not stated
 ======================  ====================================================================
 
 Reading (:func:`load_lens_track`) needs only ``frame``, ``k1`` and ``k2``: edit those and feed
@@ -53,7 +55,9 @@ __all__ = ["DOUBTFUL_PX", "LensTrack", "load_lens_track"]
 DOUBTFUL_PX = 10.0
 
 COLUMNS = ["frame", "time_s", "shot", "k1", "k2", "uncertainty_px", "doubtful", "method",
-           "k1_raw", "k2_raw", "raw_uncertainty_px", "weight"]
+           "k1_raw", "k2_raw", "raw_uncertainty_px", "weight", "reason"]
+#: A shot is doubtful when more than this share of its raw estimates say they are doubtful.
+DOUBTFUL_SHARE = 0.5
 
 
 @dataclass
@@ -62,7 +66,8 @@ class LensTrack:
 
     ``rate`` frames per second (exact), ``size`` (W, H); ``uncertainty_px`` and
     ``raw_uncertainty_px`` are NaN where unknown; ``raw`` and ``weight`` NaN on frames that were not
-    estimated; ``method`` "" there. ``doubtful_px`` is the threshold that marks a shot doubtful.
+    estimated; ``method`` "" there; ``reason`` the raw estimate's doubt reason ("" where not
+    estimated or not stated). ``doubtful_px`` is the threshold that marks a shot doubtful.
     """
 
     rate: Fraction
@@ -76,6 +81,7 @@ class LensTrack:
     raw_uncertainty_px: np.ndarray | None = None
     method: list[str] = field(default_factory=list)
     doubtful_px: float = DOUBTFUL_PX
+    reason: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         n = len(self.shot)
@@ -87,6 +93,8 @@ class LensTrack:
             self.raw_uncertainty_px = np.full(n, np.nan)
         if not self.method:
             self.method = [""] * n
+        if not self.reason:
+            self.reason = [""] * n
 
     @property
     def fps(self) -> float:
@@ -108,9 +116,20 @@ class LensTrack:
         values = values[np.isfinite(values)]
         return float(np.median(values)) if len(values) else math.nan
 
+    def shot_reasons(self, shot: int) -> list[str]:
+        """The doubt reasons its raw estimates stated (one per estimated frame; empty if none stated)."""
+        return [self.reason[i] for i in np.flatnonzero(self.shot == shot) if self.reason[i]]
+
+    def shot_doubtful(self, shot: int) -> bool:
+        """Median uncertainty above :attr:`doubtful_px` (unknown = not), or more than
+        :data:`DOUBTFUL_SHARE` of its raw estimates doubtful."""
+        reasons = self.shot_reasons(shot)
+        share = sum(r != "ok" for r in reasons) / len(reasons) if reasons else 0.0
+        return self.shot_uncertainty(shot) > self.doubtful_px or share > DOUBTFUL_SHARE
+
     def doubtful_shots(self) -> list[int]:
-        """Shots whose median uncertainty exceeds :attr:`doubtful_px` (unknown = not doubtful)."""
-        return [int(s) for s in np.unique(self.shot) if self.shot_uncertainty(int(s)) > self.doubtful_px]
+        """Shots that are doubtful (:meth:`shot_doubtful`)."""
+        return [int(s) for s in np.unique(self.shot) if self.shot_doubtful(int(s))]
 
     def rows(self) -> list[dict]:
         doubtful = set(self.doubtful_shots())
@@ -131,6 +150,7 @@ class LensTrack:
                     "k2_raw": float(self.raw[i, 1]) if estimated else None,
                     "raw_uncertainty_px": _number(self.raw_uncertainty_px[i]) if estimated else None,
                     "weight": float(self.weight[i]) if estimated else None,
+                    "reason": self.reason[i],
                 }
             )
         return out
@@ -144,10 +164,12 @@ class LensTrack:
             k = np.median(self.lens[frames], axis=0)
             sure = self.shot_uncertainty(int(shot))
             methods = sorted({self.method[i] for i in frames if self.method[i]})
+            reasons = self.shot_reasons(int(shot))
             shots.append({
                 "shot": int(shot), "first_frame": int(frames[0]), "last_frame": int(frames[-1]),
                 "k1": float(k[0]), "k2": float(k[1]), "uncertainty_px": _number(sure),
-                "doubtful": bool(sure > self.doubtful_px), "methods": methods,
+                "doubtful": self.shot_doubtful(int(shot)), "methods": methods,
+                "reason": max(set(reasons), key=reasons.count) if reasons else "",
             })
         return shots
 

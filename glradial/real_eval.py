@@ -36,8 +36,9 @@ import numpy as np
 
 from .evaluation import a_beats_b
 from .lens import Lens
-from .lens_estimate import NET_UNCERTAINTY_PX, LensEstimate, choose, line_candidates
-from .metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from .lens_estimate import LensEstimate, judge
+from .metrics import CORNER_RADIUS_16_9, PAPER_SIZE, manifold_k2, max_displacement_px
+from .trust import FrameEvidence
 
 METHOD_NAMES = ("net", "lines", "auto")
 #: Extended range of real lenses: k1 bounds, and the spread of k2 above the manifold.
@@ -49,9 +50,12 @@ EXTENDED_K2_SPREAD = 0.05
 PANORAMA_TILT = (-10.0, 10.0)
 PANORAMA_HFOV = (45.0, 60.0)
 #: A frame carries its own lens when the line fit reads its unmodified frame farther from no lens
-#: than this (px at 1920; the CNN's 90 % bound) and than the fit's own bound. The CNN's reading is
-#: not used for this: its pincushion on close-ups is a known failure (issue 17).
-OWN_LENS_PX = NET_UNCERTAINTY_PX
+#: than this (px at 1920; the CNN's 90 % error on procedural validation crops, docs/LINES.md) and
+#: than the fit's own bound. The CNN's reading is not used for this: its pincushion on close-ups is
+#: a known failure (issue 17).
+OWN_LENS_PX = 16.0
+#: Size the squashed 640×640 broadcast frames are restored to (their README: they were 16:9).
+BROADCAST_SIZE = (1280, 720)
 
 
 def agreed_own_lens(estimates: dict[str, LensEstimate]) -> Lens | None:
@@ -70,11 +74,42 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 
 @dataclass
 class Sample:
-    """One evaluated frame: its source, true lens and the three methods' estimates."""
+    """One evaluated frame: its source, true lens and the three methods' estimates; for a
+    self-consistent source (a frame whose own lens is unknown) ``truth`` is the applied lens and
+    ``truths`` the applied lens composed with each method's reading of the unmodified frame
+    (:func:`self_consistent_truth`), which the errors are measured against."""
 
     source: str
     truth: tuple[float, float]
     estimates: dict = field(default_factory=dict)
+    truths: dict | None = None
+
+    def truth_for(self, method: str) -> tuple[float, float]:
+        """The lens ``method``'s answer is scored against."""
+        return self.truths[method] if self.truths else self.truth
+
+
+def self_consistent_truth(applied: tuple[float, float], own: tuple[float, float], scale: float) -> tuple[float, float]:
+    """The lens of a frame whose own lens ``own`` (as read by a method) was followed by
+    ``distort(frame, applied, fit=scale)``: output point ``q = P_A(s P_own(u / s) ...)``, i.e.
+    ``P_A ∘ P_own'`` with ``own' = Lens(own).rescale(s)`` (the fit zooms the source); the composed
+    radial map refitted to ``(k1, k2)`` by least squares of the displacement over the 16:9 radius."""
+    from .metrics import radial_map
+
+    inner = Lens(*own).rescale(scale)
+    r = np.linspace(0.0, CORNER_RADIUS_16_9, 128)[1:]
+    composed = radial_map(radial_map(r, np.array([inner.k1, inner.k2])), np.array(applied, np.float64))
+    basis = np.stack([r**3, r**5], axis=1)
+    k, *_ = np.linalg.lstsq(basis, composed - r, rcond=None)
+    return float(k[0]), float(k[1])
+
+
+def read_broadcast(path: str | Path) -> np.ndarray:
+    """A squashed square broadcast frame file -> uint8 RGB restored to :data:`BROADCAST_SIZE`
+    (bicubic, as its README says)."""
+    import cv2
+
+    return np.ascontiguousarray(cv2.resize(read_rgb(path), BROADCAST_SIZE, interpolation=cv2.INTER_CUBIC))
 
 
 def centre_16_9(frame: np.ndarray) -> np.ndarray:
@@ -175,10 +210,13 @@ class Evaluator:
 
         self.estimator = Estimator(model, threads=threads)
 
+    def evidence(self, frame: np.ndarray) -> FrameEvidence:
+        """The frame's :class:`glradial.trust.FrameEvidence` (CNN and line fit)."""
+        return self.estimator.evidence_batch([frame])[0]
+
     def __call__(self, frame: np.ndarray) -> dict:
-        k1, k2 = self.estimator.run(self.estimator.preprocess(frame)[None])[0]
-        net, lines = line_candidates(frame, (float(k1), float(k2)))
-        return {"net": net, "lines": choose(net, lines, "lines"), "auto": choose(net, lines, "auto")}
+        evidence = self.evidence(frame)
+        return {method: judge(evidence, method) for method in METHOD_NAMES}
 
 
 def _distorted(frame: np.ndarray, lenses: Iterable[tuple[float, float]]):
@@ -216,6 +254,54 @@ def procedural_frames(n: int, panoramas: int = 4, split: str = "test", seed: int
             yield (p.k1, p.k2), np.ascontiguousarray(frame)
 
 
+def broadcast_frames(folder: str | Path) -> dict[str, list[tuple[str, np.ndarray]]]:
+    """The broadcast frames of ``folder`` (files ``CLIP_SEGMENT_FRAME.jpg``, squashed) by clip id,
+    each restored to :data:`BROADCAST_SIZE` (:func:`read_broadcast`)."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise ValueError(f"broadcast folder not found: {folder}")
+    clips: dict[str, list[tuple[str, np.ndarray]]] = {}
+    for path in sorted(folder.iterdir()):
+        if path.suffix.lower() in IMAGE_SUFFIXES:
+            clips.setdefault(path.stem.split("_")[0], []).append((path.stem, read_broadcast(path)))
+    if not clips:
+        raise ValueError(f"no images ({', '.join(IMAGE_SUFFIXES)}) in {folder}")
+    return clips
+
+
+def applied_lenses(n: int, seed: int) -> list[tuple[float, float]]:
+    """``n`` known lenses to apply to a frame: alternately the paper's distribution and the
+    extended range (:func:`paper_lenses`, :func:`extended_lenses`)."""
+    paper, extended = paper_lenses(n, seed), extended_lenses(n, seed + 1)
+    return [paper[i] if i % 2 == 0 else extended[i] for i in range(n)]
+
+
+def self_consistent_items(frame: np.ndarray, own: dict, lenses: Iterable[tuple[float, float]]):
+    """``(applied, truths, distorted frame)`` for each applied lens: ``truths`` per method is the
+    applied lens composed with that method's reading ``own[method]`` of the unmodified frame."""
+    size = (frame.shape[1], frame.shape[0])
+    for applied, distorted in _distorted(frame, lenses):
+        scale = Lens(*applied).fit_scale(size, "crop", "distort")
+        truths = {m: self_consistent_truth(applied, (e.k1, e.k2), scale) for m, e in own.items()}
+        yield applied, truths, distorted
+
+
+def broadcast_samples(evaluator: "Evaluator", folder: str | Path, lenses: int = 3, seed: int = 0,
+                      progress: Callable[[str], None] | None = None) -> list[Sample]:
+    """Self-consistent samples (source ``broadcast/CLIP``) of the broadcast frames of ``folder``:
+    ``lenses`` known lenses (:func:`applied_lenses`) per frame, each scored against the applied lens
+    composed with the same method's reading of the unmodified frame."""
+    samples: list[Sample] = []
+    for clip, frames in broadcast_frames(folder).items():
+        for i, (_name, frame) in enumerate(frames):
+            own = evaluator(frame)
+            for applied, truths, distorted in self_consistent_items(frame, own, applied_lenses(lenses, seed * 1000 + i)):
+                samples.append(Sample(f"broadcast/{clip}", applied, evaluator(distorted), truths))
+        if progress is not None:
+            progress(f"broadcast/{clip}: {len(frames)} frames × {lenses} lenses")
+    return samples
+
+
 def run_sources(evaluator: Callable[[np.ndarray], dict], sources: dict[str, Iterable], progress: Callable[[str], None] | None = None) -> list[Sample]:
     """Evaluate every ``(lens, frame)`` of each named source."""
     samples: list[Sample] = []
@@ -244,9 +330,9 @@ def summarise(samples: list[Sample], own_lens: set[str] = frozenset()) -> dict:
             groups["all real without own-lens frames"] = [s for s in real if s.source.split("/")[0] not in own_lens]
     out: dict = {}
     for name, group in groups.items():
-        truth = np.array([s.truth for s in group])
         out[name] = {}
         for method in METHOD_NAMES:
+            truth = np.array([s.truth_for(method) for s in group])
             est = [s.estimates[method] for s in group]
             pred = np.array([(e.k1, e.k2) for e in est])
             err = max_displacement_px(pred, truth)
@@ -258,6 +344,7 @@ def summarise(samples: list[Sample], own_lens: set[str] = frozenset()) -> dict:
                 "a_beats_b": a_beats_b(pred, truth),
                 "inside_bound": float(np.mean(err <= bound)),
                 "lines_share": float(np.mean([e.method == "lines" for e in est])),
+                "doubtful": float(np.mean([e.doubtful for e in est])),
             }
     return out
 
@@ -265,12 +352,13 @@ def summarise(samples: list[Sample], own_lens: set[str] = frozenset()) -> dict:
 def markdown(summary: dict, title: str, notes: str = "") -> str:
     """The summary as a Markdown table (one row per source and method)."""
     lines = [f"# {title}", "", notes, "",
-             "| source | method | n | median px | p90 px | A beats B | inside bound | lines |",
-             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+             "| source | method | n | median px | p90 px | A beats B | inside bound | lines | doubtful |",
+             "| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for name, methods in summary.items():
         for method, m in methods.items():
             lines.append(f"| {name} | {method} | {m['n']} | {m['median_px']:.2f} | {m['p90_px']:.2f} | "
-                         f"{100 * m['a_beats_b']:.1f} % | {100 * m['inside_bound']:.1f} % | {100 * m['lines_share']:.0f} % |")
+                         f"{100 * m['a_beats_b']:.1f} % | {100 * m['inside_bound']:.1f} % | {100 * m['lines_share']:.0f} % | "
+                         f"{100 * m.get('doubtful', 0.0):.0f} % |")
     return "\n".join(lines) + "\n"
 
 
@@ -293,8 +381,8 @@ def plot(samples: list[Sample], out: Path, stem: str) -> list[str]:
         ax.set_visible(False)
     for ax, source in zip(axes.ravel(), sources):
         group = [s for s in samples if s.source == source]
-        truth = np.array([s.truth for s in group])
         for method in METHOD_NAMES:
+            truth = np.array([s.truth_for(method) for s in group])
             pred = np.array([(s.estimates[method].k1, s.estimates[method].k2) for s in group])
             err = np.sort(max_displacement_px(pred, truth))
             ax.plot(err, np.arange(1, len(err) + 1) / len(err), label=method)

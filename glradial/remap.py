@@ -640,6 +640,7 @@ def correct(
     interpolation: Interpolation = "linear",
     fill: float | Sequence[float] = 0,
     backend: Backend = "auto",
+    apply_doubtful: bool = False,
 ) -> np.ndarray:
     """Remove a lens from ``frame`` (or a batch of frames); a new array of the same shape and dtype.
 
@@ -650,7 +651,15 @@ def correct(
     ``K, dist = lens.to_opencv((W, H))``. Raises ``ValueError`` when the lens folds over inside the
     (fitted) frame, for bad shapes and unknown option values, ``TypeError`` for non-array frames,
     unsupported dtypes, non-real coefficients and a Lens given together with ``k2``.
+
+    Doubt policy: a lens that says it is doubtful (a :class:`glradial.LensEstimate` with
+    ``doubtful=True``, see its ``reason``) is not applied: the result is the frame unchanged (a
+    checked copy, as with no lens at ``fit="same"``), unless ``apply_doubtful=True``.
     """
+    if not isinstance(apply_doubtful, (bool, np.bool_)):
+        raise TypeError(f"apply_doubtful must be a bool, got {apply_doubtful!r}")
+    if getattr(lens, "doubtful", False) is True and not apply_doubtful:
+        lens, fit = Lens(0.0, 0.0), "same"
     return _run(frame, lens, k2, "undistort", fit, interpolation, fill, "exact", backend)
 
 

@@ -211,6 +211,7 @@ def track_video(
     estimates: list[tuple[float, float]] = []
     stated: list[float] = []
     methods: list[str] = []
+    reasons: list[str] = []
     with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
         info = reader.info
         shot, since_start = -1, 0
@@ -227,6 +228,7 @@ def track_video(
                     sure, method = _confidence(value)
                     stated.append(sure)
                     methods.append(method)
+                    reasons.append(str(getattr(value, "reason", "") or ""))
                 shots.append(shot)
                 since_start += 1
                 bar.update()
@@ -256,12 +258,12 @@ def track_video(
     weight[time_array] = weights
     raw_sure = np.full(n, np.nan)
     raw_sure[time_array] = stated_array
-    method = [""] * n
-    for t, m in zip(times, methods):
-        method[t] = m
+    method, reason = [""] * n, [""] * n
+    for t, m, why in zip(times, methods, reasons):
+        method[t], reason[t] = m, why
     return LensTrack(info.rate, info.size, shot_array, smoothed, raw, weight, time_s=np.asarray(stamps),
                      uncertainty_px=sure * REPORT_WIDTH, raw_uncertainty_px=raw_sure, method=method,
-                     doubtful_px=doubtful_px)
+                     doubtful_px=doubtful_px, reason=reason)
 
 
 class _FrameCorrector:
@@ -406,14 +408,29 @@ def _confidence_text(uncertainty_px: float | None, methods: list[str]) -> str:
     return text + (f" method={'+'.join(methods)}" if methods else "")
 
 
-def doubtful_warnings(track: LensTrack, source: str) -> list[str]:
-    """One warning line per doubtful shot of ``track`` (for ``correct --auto``)."""
+def _px(value: float | None) -> str:
+    return "unknown" if value is None else f"{value:.1f}"
+
+
+def doubt_policy(track: LensTrack, apply_doubtful: bool = False) -> Callable[[int], tuple[float, float]]:
+    """Frame index -> the lens ``correct --auto`` applies: the track's, or no lens ``(0, 0)`` on the
+    frames of a doubtful shot unless ``apply_doubtful`` (the default leaves them uncorrected)."""
+    if apply_doubtful:
+        return track.lens_at
+    doubtful = set(track.doubtful_shots())
+    return lambda i: (0.0, 0.0) if 0 <= i < track.n_frames and int(track.shot[i]) in doubtful else track.lens_at(i)
+
+
+def doubtful_warnings(track: LensTrack, source: str, left_uncorrected: bool = False) -> list[str]:
+    """One warning line per doubtful shot of ``track`` (for ``correct --auto``); with
+    ``left_uncorrected`` each line says the shot was left uncorrected."""
     lines = []
     for shot in track.per_shot():
         if shot["doubtful"]:
             lines.append(
                 f"glradial: warning: {source}: shot {shot['shot']} (frames {shot['first_frame']}-{shot['last_frame']}) "
-                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful: uncertainty {shot['uncertainty_px']:.1f} px "
-                f"> {track.doubtful_px:g} px at 1920 wide; check the shot or give its lens in a --lens-track file"
+                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful ({shot['reason'] or 'uncertain'}, uncertainty "
+                f"{_px(shot['uncertainty_px'])} px at 1920, threshold {track.doubtful_px:g}); check the shot or give its lens "
+                "in a --lens-track file" + ("; left uncorrected (--apply-doubtful applies it)" if left_uncorrected else "")
             )
     return lines

@@ -12,7 +12,8 @@ import pytest
 
 import glradial
 from glradial.estimator import Estimator, default_model_path
-from glradial.lens_estimate import NET_UNCERTAINTY_PX, NO_EVIDENCE_UNCERTAINTY_PX, LensEstimate
+from glradial.lens_estimate import LensEstimate
+from glradial.trust import anything_bound, shipped_trust
 from glradial.line_fit import fit_lines
 from glradial.lines import detect_chains
 from glradial.metrics import manifold_k2, max_displacement_px
@@ -116,7 +117,7 @@ def test_estimator_methods_and_fallback():
     assert isinstance(lines, LensEstimate) and isinstance(lines, glradial.Lens)
     assert lines.method == "lines" and lines.chains >= 3 and error_px(lines, k1, k2) < 0.5
     assert auto.method == "lines" and auto == lines  # surer than the CNN here
-    assert net.method == "net" and net.chains == 0 and net.uncertainty_px == NET_UNCERTAINTY_PX
+    assert net.method == "net" and net.chains == 0 and net.uncertainty_px == shipped_trust().q_net
     assert lines.uncertainty_px < net.uncertainty_px
     # a frame with only circles and arcs: no line evidence, the CNN's answer, saying so
     circles = distorted(pitch(3, lines=False), k1, k2)
@@ -124,6 +125,7 @@ def test_estimator_methods_and_fallback():
         result = est.estimate(circles, method=method)
         assert result.method == "net" and result.chains == 0
         assert result.lens == est.estimate(circles, method="net").lens
+        assert result.doubtful  # no line fit: the CNN alone is not trusted
     batch = est.estimate_batch([frame, circles], method="auto")
     assert [b.method for b in batch] == ["lines", "net"]
     # a LensEstimate goes wherever a Lens goes
@@ -138,7 +140,9 @@ def test_blank_and_noise_frames_get_a_low_confidence_finite_answer(kind):
     result = glradial.estimate(frame)
     assert math.isfinite(result.k1) and math.isfinite(result.k2) and math.isfinite(result.uncertainty_px)
     assert result.method == "net" and result.chains == 0
-    assert result.uncertainty_px == NO_EVIDENCE_UNCERTAINTY_PX
+    assert result.doubtful and result.reason in ("blank_frame", "noise_frame", "not_a_pitch")
+    # no evidence: the bound spans every real lens (k1 -1.0 .. 0.4 on the manifold) from the answer
+    assert result.uncertainty_px == pytest.approx(anything_bound((result.k1, result.k2)))
 
 
 @needs_shipped
@@ -166,6 +170,14 @@ def test_lens_estimate_validates_its_fields():
         LensEstimate(0.0, 0.0, uncertainty_px=-1.0)
     with pytest.raises(ValueError, match="chains"):
         LensEstimate(0.0, 0.0, uncertainty_px=1.0, method="net", chains=-1)
+    with pytest.raises(ValueError, match="reason"):
+        LensEstimate(0.0, 0.0, doubtful=True)  # a doubtful estimate says why
+    with pytest.raises(ValueError, match="reason"):
+        LensEstimate(0.0, 0.0, reason="shrug")
+    with pytest.raises(TypeError, match="doubtful"):
+        LensEstimate(0.0, 0.0, doubtful=1, reason="too_few_lines")
+    sure = LensEstimate(0.0, 0.0, doubtful=True, reason="not_a_pitch")
+    assert sure.as_dict()["doubtful"] is True and sure.as_dict()["reason"] == "not_a_pitch"
 
 
 @pytest.mark.parametrize("seed", [8, 9])

@@ -68,6 +68,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
     lens.add_argument("--method", choices=("auto", "net", "lines"),
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
+    lens.add_argument("--apply-doubtful", action="store_true",
+                      help="with --auto: apply an estimate (or a shot's lens) even when it is doubtful (default: a doubtful "
+                           "frame or shot is left uncorrected and reported)")
     lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)")
     render = parser.add_argument_group("rendering")
     render.add_argument(
@@ -141,6 +144,8 @@ def run(args: argparse.Namespace) -> int:
     for name in ("model", "method", "sidecar", "max_uncertainty", "every", "window"):
         if getattr(args, name) is not None and not args.auto:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
+    if args.apply_doubtful and not args.auto:
+        raise UsageError("--apply-doubtful needs --auto")
     if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
         raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
     if args.crf is not None and args.bitrate is not None:
@@ -161,22 +166,11 @@ def run(args: argparse.Namespace) -> int:
 
         image = read_image(args.input, order="rgb")
         if args.auto:
-            from ..lens_track import DOUBTFUL_PX
-            from ..frames import to_rgb8
-            from ..video_pipeline import _as_pair, default_estimator
-
-            estimate = default_estimator(args.model, args.method)(to_rgb8(image))
-            k1, k2 = _as_pair(estimate)
-            method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
-            stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
-            print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}{stated}")
-            if uncertainty is not None and uncertainty > DOUBTFUL_PX:
-                print(f"glradial: warning: the estimate of {args.input} is doubtful (uncertainty {uncertainty:.1f} px > "
-                      f"{DOUBTFUL_PX:g} px at 1920 wide); check the result or give the lens", file=sys.stderr)
-            lens = Lens(k1, k2)
+            lens = _auto_image_lens(args, image)
         else:
             lens = lens_from_args(args, (image.shape[1], image.shape[0]))
-        write_image(args.output, correct(image, lens, **options), order="rgb", overwrite=args.overwrite)
+        write_image(args.output, correct(image, lens, apply_doubtful=bool(args.apply_doubtful), **options), order="rgb",
+                    overwrite=args.overwrite)
         return 0
 
     from ..video_io import EncodeOptions, VideoReader
@@ -208,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output_folder
     from ..image_io import check_overwrite
     from ..lens_track import DOUBTFUL_PX
-    from ..video_pipeline import default_estimator, doubtful_warnings, track_video
+    from ..video_pipeline import default_estimator, doubt_policy, doubtful_warnings, track_video
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
@@ -224,9 +218,10 @@ def run(args: argparse.Namespace) -> int:
     given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
     track = track_video(args.input, default_estimator(args.model, args.method), progress=progress,  # its defaults: every 5, window 2 s
                         doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
-    for line in doubtful_warnings(track, args.input):
+    for line in doubtful_warnings(track, args.input, left_uncorrected=not args.apply_doubtful):
         sys.stderr.write(line + "\n")
-    written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+    written = correct_video(args.input, args.output, doubt_policy(track, args.apply_doubtful),
+                            frames_expected=track.n_frames, **video)
     try:
         track.save(sidecar)
     except BaseException:
@@ -240,6 +235,21 @@ def run(args: argparse.Namespace) -> int:
         flag = " DOUBTFUL" if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
     return 0
+
+
+def _auto_image_lens(args: argparse.Namespace, image):
+    """The estimate of an image for ``--auto``, reported on stdout; a doubtful one is reported on
+    stderr in one line (left uncorrected unless ``--apply-doubtful``: :func:`glradial.correct`)."""
+    from ..frames import to_rgb8
+    from ..video_pipeline import default_estimator
+
+    estimate = default_estimator(args.model, args.method)(to_rgb8(image))
+    print(f"{args.input}: estimated k1={estimate.k1:.6f} k2={estimate.k2:.6f} ({estimate.method}, uncertainty "
+          f"{estimate.uncertainty_px:.1f} px at 1920, {estimate.reason})")
+    if estimate.doubtful:
+        action = "applied anyway (--apply-doubtful)" if args.apply_doubtful else "left uncorrected (--apply-doubtful applies it)"
+        print(f"glradial: warning: the estimate of {args.input} is doubtful ({estimate.reason}): {action}", file=sys.stderr)
+    return estimate
 
 
 def _summary(output: str, written: int, header: int) -> None:
