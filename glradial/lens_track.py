@@ -37,7 +37,7 @@ import io
 import json
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from pathlib import Path
 
@@ -130,6 +130,15 @@ class LensTrack:
     def doubtful_shots(self) -> list[int]:
         """Shots that are doubtful (:meth:`shot_doubtful`)."""
         return [int(s) for s in np.unique(self.shot) if self.shot_doubtful(int(s))]
+
+    def uncorrected_where_doubtful(self) -> "LensTrack":
+        """A copy whose doubtful shots get no lens (``k1 = k2 = 0``: left uncorrected, the default of
+        ``correct --auto``); their raw estimates, uncertainties and reasons are kept, so they stay
+        doubtful and the file replays the same frames through ``--lens-track``."""
+        doubtful = np.isin(self.shot, self.doubtful_shots())
+        lens = self.lens.copy()
+        lens[doubtful] = 0.0
+        return replace(self, lens=lens, method=list(self.method), reason=list(self.reason))
 
     def rows(self) -> list[dict]:
         doubtful = set(self.doubtful_shots())

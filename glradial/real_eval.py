@@ -408,11 +408,13 @@ def _from_no_lens(estimate: LensEstimate) -> float:
 
 def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrated: list[str] = (), lenses: int = 12,
                     procedural: int = 0, model: str | None = None, threads: int | None = None, seed: int = 0,
-                    progress: Callable[[str], None] | None = print, remove_own_lens: bool = False) -> dict:
+                    progress: Callable[[str], None] | None = print, remove_own_lens: bool = False,
+                    broadcast: str | Path | None = None) -> dict:
     """Build the sources (see the module docstring), evaluate, and write ``real.md``,
     ``real_metrics.json`` and ``real_errors.png`` into ``out``. Returns the summary.
     ``remove_own_lens``: a frame whose own lens the line fit and the CNN agree on
-    (:func:`agreed_own_lens`) is first corrected with it (``fit="crop"``)."""
+    (:func:`agreed_own_lens`) is first corrected with it (``fit="crop"``). ``broadcast``: a folder of
+    squashed broadcast frames scored self-consistently per clip (:func:`broadcast_samples`)."""
     from .atomic import atomic_write_text
     from .remap import correct
 
@@ -444,9 +446,12 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
         sources[f"calibrated/{name}"] = (((lens.k1, lens.k2), f) for f in cam_frames)
     if procedural:
         sources["procedural/test"] = procedural_frames(procedural, seed=seed)
-    if not sources:
-        raise ValueError("nothing to evaluate: give a frames folder, a calibrated camera or procedural > 0")
-    samples = run_sources(evaluator or Evaluator(model, threads), sources, progress)
+    if not sources and broadcast is None:
+        raise ValueError("nothing to evaluate: give a frames folder, a broadcast folder, a calibrated camera or procedural > 0")
+    evaluator = evaluator or Evaluator(model, threads)
+    samples = run_sources(evaluator, sources, progress)
+    if broadcast is not None:
+        samples += broadcast_samples(evaluator, broadcast, seed=seed, progress=progress)
     own_lens = {name for name, est in own.items() if name not in removed
                 and est["lines"].method == "lines" and _from_no_lens(est["lines"]) > max(OWN_LENS_PX, est["lines"].uncertainty_px)}
     summary = summarise(samples, own_lens)
@@ -455,7 +460,9 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     figures = plot(samples, out, "real")
     notes = (f"Frames: {frames_dir}; {lenses} paper and {lenses} extended lenses per frame (fit='crop'), "
              f"{4 * lenses} + {4 * lenses} crops per panorama; calibrated: {', '.join(c[0] for c in cams) or 'none'}; "
-             f"procedural test crops: {procedural}. Errors: max displacement over the 16:9 frame, px at 1920.")
+             f"procedural test crops: {procedural}; broadcast clips: {broadcast or 'none'} (self-consistent: each "
+             "method scored against the applied lens composed with its own reading of the unmodified frame). Errors: "
+             "max displacement over the 16:9 frame, px at 1920.")
     text = markdown(summary, "Lens estimation on real frames: net, lines, auto", notes)
     if own:
         text += ("\n## Each frame's own distortion (the floor of its figures)\n\nWhat each method reads on the "

@@ -408,17 +408,12 @@ def _confidence_text(uncertainty_px: float | None, methods: list[str]) -> str:
     return text + (f" method={'+'.join(methods)}" if methods else "")
 
 
-def _px(value: float | None) -> str:
-    return "unknown" if value is None else f"{value:.1f}"
-
-
-def doubt_policy(track: LensTrack, apply_doubtful: bool = False) -> Callable[[int], tuple[float, float]]:
-    """Frame index -> the lens ``correct --auto`` applies: the track's, or no lens ``(0, 0)`` on the
-    frames of a doubtful shot unless ``apply_doubtful`` (the default leaves them uncorrected)."""
-    if apply_doubtful:
-        return track.lens_at
-    doubtful = set(track.doubtful_shots())
-    return lambda i: (0.0, 0.0) if 0 <= i < track.n_frames and int(track.shot[i]) in doubtful else track.lens_at(i)
+def _why(shot: dict, threshold: float) -> str:
+    """Why a shot of :meth:`LensTrack.per_shot` is doubtful: its uncertainty, or its estimates' reason."""
+    sure = shot["uncertainty_px"]
+    if sure is not None and sure > threshold:
+        return f"uncertainty {sure:.1f} px > {threshold:g} px at 1920 wide"
+    return f"most of its estimates say {shot['reason'] or 'doubtful'}"
 
 
 def doubtful_warnings(track: LensTrack, source: str, left_uncorrected: bool = False) -> list[str]:
@@ -429,8 +424,7 @@ def doubtful_warnings(track: LensTrack, source: str, left_uncorrected: bool = Fa
         if shot["doubtful"]:
             lines.append(
                 f"glradial: warning: {source}: shot {shot['shot']} (frames {shot['first_frame']}-{shot['last_frame']}) "
-                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful ({shot['reason'] or 'uncertain'}, uncertainty "
-                f"{_px(shot['uncertainty_px'])} px at 1920, threshold {track.doubtful_px:g}); check the shot or give its lens "
-                "in a --lens-track file" + ("; left uncorrected (--apply-doubtful applies it)" if left_uncorrected else "")
+                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful: {_why(shot, track.doubtful_px)}; check the shot "
+                "or give its lens in a --lens-track file" + ("; left uncorrected (--apply-doubtful applies it)" if left_uncorrected else "")
             )
     return lines

@@ -397,8 +397,10 @@ def test_correct_auto_with_an_onnx_model(tmp_path, capsys):
     model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
     source, out = tmp_path / "in.png", tmp_path / "out.png"
     write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (128, 72)))
-    assert main(["correct", str(source), str(out), "--auto", "--model", str(model), "--backend", "cpu"]) == 0
-    assert "k1=-0.210000 k2=0.040000" in capsys.readouterr().out
+    # a small road photo is no pitch (doubtful): applied only when asked
+    assert main(["correct", str(source), str(out), "--auto", "--model", str(model), "--backend", "cpu", "--apply-doubtful"]) == 0
+    captured = capsys.readouterr()
+    assert "k1=-0.210000 k2=0.040000" in captured.out and "is doubtful (" in captured.err and "applied anyway" in captured.err
     expected = glradial.correct(read_image(source), np.float32(-0.21), np.float32(0.04), backend="cpu")
     np.testing.assert_array_equal(read_image(out), expected)
     # a model file that is not a model: one clear line, no output

@@ -53,8 +53,10 @@ def test_correct_takes_an_estimate(photo):
     """glradial.correct(img, glradial.estimate(img)): the issue's first failing line."""
     estimate = glradial.estimate(photo)
     assert isinstance(estimate, Lens)
-    out = correct(photo, estimate, backend="cpu")
+    out = correct(photo, estimate, backend="cpu", apply_doubtful=True)
     assert np.array_equal(out, correct(photo, estimate.k1, estimate.k2, backend="cpu"))
+    if estimate.doubtful:  # the default doubt policy leaves the frame as it is
+        assert np.array_equal(correct(photo, estimate, backend="cpu"), photo)
 
 
 @pytest.mark.parametrize("backend", ["gl", "cpu"])

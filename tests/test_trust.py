@@ -26,7 +26,6 @@ from glradial.lens_track import LensTrack
 from glradial.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
 from glradial.real_eval import self_consistent_truth
 from glradial.trust import REASONS, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
-from glradial.video_pipeline import doubt_policy
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 needs_ffmpeg = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="no ffmpeg CLI")
@@ -204,9 +203,9 @@ def test_a_doubtful_shot_is_left_uncorrected_and_recorded():
     track = LensTrack(glradial_fraction(), (64, 36), shot, lens, raw, np.where(np.isnan(raw[:, 0]), np.nan, 1.0),
                       uncertainty_px=np.full(n, 5.0), reason=reason)
     assert track.doubtful_shots() == [1]
-    policy = doubt_policy(track)
-    assert [policy(i) for i in (0, 3)] == [(-0.2, 0.03), (0.0, 0.0)]
-    assert doubt_policy(track, apply_doubtful=True)(3) == (-0.2, 0.03)
+    left = track.uncorrected_where_doubtful()
+    assert [left.lens_at(i) for i in (0, 3)] == [(-0.2, 0.03), (0.0, 0.0)] and track.lens_at(3) == (-0.2, 0.03)
+    assert left.doubtful_shots() == [1] and left.rows()[3]["k1_raw"] == -0.2
     rows = track.rows()
     assert [r["reason"] for r in rows] == reason and [r["doubtful"] for r in rows] == [0, 0, 0, 1, 1, 1]
     assert track.per_shot()[1]["reason"] == "too_few_lines"

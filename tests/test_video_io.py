@@ -212,12 +212,15 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
     assert "DOUBTFUL" in captured.out
     sidecar = tmp_path / "auto.mkv.lens.csv"
     lines = sidecar.read_text().splitlines()
-    assert lines[0] == "frame,time_s,shot,k1,k2,uncertainty_px,doubtful,method,k1_raw,k2_raw,raw_uncertainty_px,weight"
+    assert lines[0] == "frame,time_s,shot,k1,k2,uncertainty_px,doubtful,method,k1_raw,k2_raw,raw_uncertainty_px,weight,reason"
     rows = [dict(zip(lines[0].split(","), line.split(","))) for line in lines[1:]]
     assert len(rows) == 24 and rows[12]["shot"] == "1" and rows[12]["doubtful"] == "1" and rows[0]["doubtful"] == "0"
     assert rows[0]["method"] == "lines" and rows[12]["method"] == "net" and rows[1]["method"] == ""
     assert float(rows[3]["time_s"]) == pytest.approx(3 / 25)
     assert float(rows[0]["uncertainty_px"]) <= 2.0 and float(rows[20]["uncertainty_px"]) >= 20.0
+    # the doubtful shot is left uncorrected (its lens column says so; its raw estimates are kept)
+    assert float(rows[12]["k1"]) == 0.0 and float(rows[12]["k1_raw"]) == pytest.approx(-0.1)
+    np.testing.assert_array_equal(_frames(auto)[15], _frames(source)[15])
     # back in: the same frames
     again = tmp_path / "again.mkv"
     assert main(["correct", str(source), str(again), "--lens-track", str(sidecar), "--backend", "cpu", "-q"]) == 0

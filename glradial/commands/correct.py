@@ -202,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
     from ..atomic import check_output_folder
     from ..image_io import check_overwrite
     from ..lens_track import DOUBTFUL_PX
-    from ..video_pipeline import default_estimator, doubt_policy, doubtful_warnings, track_video
+    from ..video_pipeline import default_estimator, doubtful_warnings, track_video
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
@@ -220,8 +220,9 @@ def run(args: argparse.Namespace) -> int:
                         doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input, left_uncorrected=not args.apply_doubtful):
         sys.stderr.write(line + "\n")
-    written = correct_video(args.input, args.output, doubt_policy(track, args.apply_doubtful),
-                            frames_expected=track.n_frames, **video)
+    if not args.apply_doubtful:
+        track = track.uncorrected_where_doubtful()
+    written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
     try:
         track.save(sidecar)
     except BaseException:
@@ -232,7 +233,8 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.input}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
         sure = f" uncertainty {shot['uncertainty_px']:.1f} px" if shot["uncertainty_px"] is not None else ""
-        flag = " DOUBTFUL" if shot["doubtful"] else ""
+        flag = (" DOUBTFUL" + (f" ({shot['reason']})" if shot["reason"] not in ("", "ok") else "")
+                + ("" if args.apply_doubtful else ", left uncorrected")) if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
     return 0
 
@@ -241,15 +243,20 @@ def _auto_image_lens(args: argparse.Namespace, image):
     """The estimate of an image for ``--auto``, reported on stdout; a doubtful one is reported on
     stderr in one line (left uncorrected unless ``--apply-doubtful``: :func:`glradial.correct`)."""
     from ..frames import to_rgb8
-    from ..video_pipeline import default_estimator
+    from ..lens import Lens
+    from ..video_pipeline import _as_pair, default_estimator
 
     estimate = default_estimator(args.model, args.method)(to_rgb8(image))
-    print(f"{args.input}: estimated k1={estimate.k1:.6f} k2={estimate.k2:.6f} ({estimate.method}, uncertainty "
-          f"{estimate.uncertainty_px:.1f} px at 1920, {estimate.reason})")
-    if estimate.doubtful:
+    k1, k2 = _as_pair(estimate)
+    method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
+    reason = getattr(estimate, "reason", None)
+    stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920, {reason})" if method and uncertainty is not None else ""
+    print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}{stated}")
+    if getattr(estimate, "doubtful", False):
         action = "applied anyway (--apply-doubtful)" if args.apply_doubtful else "left uncorrected (--apply-doubtful applies it)"
-        print(f"glradial: warning: the estimate of {args.input} is doubtful ({estimate.reason}): {action}", file=sys.stderr)
-    return estimate
+        print(f"glradial: warning: the estimate of {args.input} is doubtful ({reason}): {action}", file=sys.stderr)
+        return estimate
+    return Lens(k1, k2)
 
 
 def _summary(output: str, written: int, header: int) -> None:

@@ -49,6 +49,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                       "real frames of DIR with known lenses applied (writes real.md to --out)")
     real.add_argument("--calibrated", metavar="JSON", action="append", default=[],
                       help="with --frames: also a calibrated camera (frames + known lens; see glradial.real_eval)")
+    real.add_argument("--broadcast", metavar="DIR",
+                      help="also (or instead): the broadcast frames of DIR (CLIP_SEGMENT_FRAME.jpg, stored squashed, restored "
+                           "to 1280x720), 3 known lenses each, scored self-consistently per clip (e.g. "
+                           "../shared/data/broadcast_bundesliga)")
     real.add_argument("--procedural", type=non_negative_int, default=0, metavar="N",
                       help="with --frames: also N held-out procedural stadium crops (default 0)")
     real.add_argument("--remove-own-lens", action="store_true",
@@ -71,11 +75,12 @@ def run(args: argparse.Namespace) -> int:
     from ..estimator import default_model_path
     from ..evaluation import OnnxPredictor, evaluate
 
-    if args.frames or args.calibrated:
+    if args.frames or args.calibrated or args.broadcast:
         from ..real_eval import evaluate_folder
 
         evaluate_folder(args.frames, args.out, calibrated=args.calibrated, procedural=args.procedural,
-                        model=args.model, threads=args.threads, remove_own_lens=args.remove_own_lens)
+                        model=args.model, threads=args.threads, remove_own_lens=args.remove_own_lens,
+                        broadcast=args.broadcast)
         print(f"wrote {args.out}/real.md", flush=True)
         return 0
 
