@@ -1,9 +1,9 @@
 """Calibrate and check the trust model (:mod:`glradial.trust`) on real validation frames: split
 conformal, calibrated on some clips and checked on the others.
 
-Usage (in a checkout with ../shared beside it; ~5 min on one core)::
+Usage (in a checkout with ../shared beside it; collecting takes ~8 min on one core, fitting seconds)::
 
-    python -m glradial.calibrate [--data ../shared/data] [--records calib_records.json] [--write]
+    python -m glradial.calibrate [--data ../shared/data] [--records docs/eval/trust_records.json] [--recollect] [--write]
         [--report docs/eval/trust.md]
 
 Steps:
@@ -19,7 +19,8 @@ Steps:
     2. **Fit** per fold: the scale's ``floor_px``, ``sigma_weight`` and ``disagree_weight`` (a small
        grid: the triple that makes the calibration fold's median bound on line-rich frames smallest), then
        ``q_lines`` = the conformal 90 % quantile (``ceil((n + 1) 0.9)``-th smallest) of
-       ``|error| / scale`` over the fold's line-fit answers and ``q_net`` the same of the CNN's errors.
+       ``|error| / scale`` over the fold's line-fit answers, ``q_net`` the same of the CNN's errors and
+       ``q_no_lines`` of the CNN's errors on the frames without a line fit.
        ``disagree_max_px`` is the conformal 95 % quantile of the line/CNN disagreement on the fold's
        line-rich frames.
     3. **Check**: each frame is judged with the model fitted on the *other* fold; coverage (share of
@@ -181,6 +182,8 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
     no-evidence rules and ``doubt_px`` are kept from ``base``."""
     net_err, _, _ = _errors(records, base, "net")
     q_net = conformal_quantile(net_err)
+    no_fit = np.array([r.evidence.lines is None for r in records])
+    q_no_lines = conformal_quantile(net_err[no_fit]) if no_fit.any() else q_net
     lined = [r for r in records if r.evidence.lines is not None]
     err, _, _ = _errors(lined, base, "lines")  # the line fit's answer does not depend on the scale
     sigma = np.array([r.evidence.sigma_px for r in lined])
@@ -195,7 +198,7 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
                 median = float(np.median(q * scale[rich] if rich.any() else q * scale))
                 if best is None or median < best[0]:
                     best = (median, replace(base, floor_px=floor, sigma_weight=a, disagree_weight=weight, q_lines=q,
-                                            q_net=q_net))
+                                            q_net=q_net, q_no_lines=q_no_lines))
     trust = best[1]
     rich = [r for r in lined if r.line_rich]
     disagree = np.array([r.evidence.disagreement_px for r in (rich or lined)])
@@ -241,13 +244,16 @@ def coverage_table(rows: list[dict]) -> list[tuple[str, int, float, float, float
     rich = [r for r in rows if r["line_rich"]]
     if rich:
         out.append(stats(f"line-rich (>= {LINE_RICH_CHAINS} chains)", rich))
+    sure = [r for r in rows if not r["doubtful"]]
+    if sure:
+        out.append(stats("not doubtful", sure))
     return out
 
 
 def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel, n_records: int) -> str:
     """Markdown of the cross-fitted check (docs/eval/trust.md)."""
     lines = ["# Trust: coverage of the stated 90 % bound on real validation frames", "",
-             "Command: `python -m glradial.calibrate --write --report docs/eval/trust.md` (module docstring of "
+             "Command: `python -m glradial.calibrate --records docs/eval/trust_records.json --write --report docs/eval/trust.md` (add `--recollect` to measure the evidence again, ~8 min) (module docstring of "
              "`glradial/calibrate.py`). Split conformal, cross-fitted: every frame is judged with the bound "
              "calibrated on the other fold (other clips, other real frames, other poses, other stadiums). "
              "Method `auto`. Errors: max displacement over the 16:9 frame, px at 1920; broadcast and real "
@@ -263,10 +269,10 @@ def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel,
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
     lines += ["", "Reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())), "",
               "Models (fold = the fold they were checked on; fitted on the other):", "",
-              "| fitted | q_lines | q_net px | floor px | sigma weight | disagree weight | disagree max px |",
-              "| --- | ---: | ---: | ---: | ---: | ---: | ---: |"]
+              "| fitted | q_lines | q_net px | q_no_lines px | floor px | sigma weight | disagree weight | disagree max px |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for name, m in [*((f"for fold {f}", m) for f, m in models.items()), ("shipped (all folds)", shipped)]:
-        lines.append(f"| {name} | {m.q_lines:.3f} | {m.q_net:.1f} | {m.floor_px:g} | {m.sigma_weight:g} | {m.disagree_weight:g} | "
+        lines.append(f"| {name} | {m.q_lines:.3f} | {m.q_net:.1f} | {m.q_no_lines:.1f} | {m.floor_px:g} | {m.sigma_weight:g} | {m.disagree_weight:g} | "
                      f"{m.disagree_max_px:.1f} |")
     return "\n".join(lines) + "\n"
 
@@ -275,7 +281,8 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m glradial.calibrate", description=__doc__.split("\n")[0])
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"),
                         help="folder with broadcast_bundesliga/ and real_football/ (default ../shared/data)")
-    parser.add_argument("--records", default="calib_records.json", help="evidence cache (default ./calib_records.json)")
+    parser.add_argument("--records", default="docs/eval/trust_records.json",
+                        help="evidence cache (default docs/eval/trust_records.json, the shipped collection)")
     parser.add_argument("--recollect", action="store_true", help="collect again even if --records exists")
     parser.add_argument("--write", action="store_true", help=f"write the model fitted on all folds to {TRUST_FILE}")
     parser.add_argument("--report", help="write the Markdown check here (e.g. docs/eval/trust.md)")

@@ -490,30 +490,3 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     atomic_write_text(out / "real_metrics.json",
                       json.dumps({"summary": summary, "own_lens": own_json, "own_lens_removed": removed_json}, indent=1))
     return summary
-
-
-def calibrate(n: int = 200, panoramas: int = 4, model: str | None = None, threads: int | None = None) -> dict:
-    """Measure the constants of :mod:`glradial.lens_estimate` on ``n`` procedural crops of the
-    **validation** split: the CNN's 90th-percentile error, and the scale that puts 90 % of the line
-    fits' errors inside ``scale * sigma_px + LINES_UNCERTAINTY_FLOOR_PX``."""
-    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, fit_frame
-
-    evaluator = Evaluator(model, threads)
-    net_err, ratios, line_err = [], [], []
-    for (k1, k2), frame in procedural_frames(n, panoramas, split="val", seed=101):
-        est = evaluator.estimator
-        nk = est.run(est.preprocess(frame)[None])[0]
-        net_err.append(float(max_displacement_px(np.array(nk), np.array([k1, k2]))))
-        _, fit = fit_frame(frame, (float(nk[0]), float(nk[1])))
-        if fit.ok and math.isfinite(fit.sigma_px):
-            e = float(max_displacement_px(np.array([fit.k1, fit.k2]), np.array([k1, k2])))
-            line_err.append(e)
-            ratios.append(max(e - LINES_UNCERTAINTY_FLOOR_PX, 0.0) / max(fit.sigma_px, 1e-9))
-    return {
-        "n": n,
-        "net_p90_px": float(np.percentile(net_err, 90)),
-        "net_median_px": float(np.median(net_err)),
-        "lines_fits": len(line_err),
-        "lines_median_px": float(np.median(line_err)) if line_err else None,
-        "lines_scale_p90": float(np.percentile(ratios, 90)) if ratios else None,
-    }

@@ -11,10 +11,11 @@ Bound (split conformal):
     * a line fit: ``scale = sqrt(floor² + (a · sigma)² + (w · disagreement)²)`` where ``sigma`` is the
       fit's own 1-sigma (:attr:`glradial.line_fit.LineFit.sigma_px`) and ``disagreement`` the displacement
       between the line fit and the CNN; bound ``= q_lines · scale``;
-    * the CNN alone: bound ``= q_net`` (no per-frame scale yet);
+    * the CNN alone: bound ``= q_net`` (no per-frame scale yet), or ``q_no_lines`` when a line fit was
+      sought and none was found (such frames are harder: close-ups, blurred grass, curved stands);
     * a frame with no pitch evidence (blank, noise, not a pitch): the largest displacement between the
       answer and any lens of the real range (k1 in [-1.0, 0.4], k2 on the manifold): "anything".
-    ``floor``, ``a``, ``w``, ``q_lines`` and ``q_net`` are calibrated on validation frames of some clips and
+    ``floor``, ``a``, ``w``, ``q_lines``, ``q_net`` and ``q_no_lines`` are calibrated on validation frames of some clips and
     checked on the others by :mod:`glradial.calibrate` (``python -m glradial.calibrate``), which writes
     them to ``glradial/data/trust.json`` (loaded here; docs/LINES.md, "Confidence").
 
@@ -140,6 +141,7 @@ class TrustModel:
 
     q_lines: float
     q_net: float
+    q_no_lines: float
     floor_px: float
     sigma_weight: float
     disagree_weight: float
@@ -172,7 +174,8 @@ class TrustModel:
         """``(lens, source, uncertainty_px, doubtful, reason)`` for ``method`` ("auto", "net",
         "lines"): which answer, its bound and the doubt verdict."""
         use_lines = evidence.lines is not None and method != "net"
-        bound = self.lines_bound(evidence) if use_lines else self.q_net
+        fallback = self.q_no_lines if method != "net" and evidence.lines is None else self.q_net
+        bound = self.lines_bound(evidence) if use_lines else fallback
         if use_lines and method == "auto" and bound >= self.q_net:
             use_lines, bound = False, self.q_net
         lens, source = (evidence.lines, "lines") if use_lines else (evidence.net, "net")

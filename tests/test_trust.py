@@ -138,7 +138,7 @@ def test_off_domain_and_degenerate_frames_are_doubtful_or_covered_never_nan(meth
 
 
 def test_reasons_follow_the_rules():
-    trust = TrustModel(q_lines=1.0, q_net=30.0, floor_px=2.0, sigma_weight=1.0, disagree_weight=0.0,
+    trust = TrustModel(q_lines=1.0, q_net=30.0, q_no_lines=50.0, floor_px=2.0, sigma_weight=1.0, disagree_weight=0.0,
                        disagree_max_px=20.0, doubt_px=25.0, green_min=0.25, blank_std=2.0, noise_edge_density=0.12)
     pitch = dict(green=0.6, gray_std=40.0, edge_density=0.05)
     near = (-0.20, float(manifold_k2(-0.20)))
@@ -154,6 +154,8 @@ def test_reasons_follow_the_rules():
     for evidence, reason in cases:
         e = judge(evidence, "auto", trust)
         assert e.reason == reason and e.doubtful == (reason != "ok"), (reason, e)
+    assert judge(cases[3][0], "auto", trust).uncertainty_px == 50.0  # a line fit sought, none found
+    assert judge(cases[3][0], "net", trust).uncertainty_px == 30.0 and not judge(cases[3][0], "net", trust).doubtful
     ok = judge(cases[-1][0], "auto", trust)
     assert ok.method == "lines" and ok.uncertainty_px == pytest.approx(math.hypot(2.0, 3.0))
     # no evidence of a pitch: the bound spans every real lens from the answer
@@ -235,6 +237,8 @@ def test_cli_correct_auto_leaves_a_test_pattern_alone_and_says_why(tmp_path):
     estimate = glradial.estimate(cv2.imread(str(src))[:, :, ::-1].copy())
     expected = glradial.correct(cv2.imread(str(src)), glradial.Lens(estimate.k1, estimate.k2), backend="cpu")
     assert np.abs(cv2.imread(str(forced)).astype(int) - expected.astype(int)).max() <= 1
+    line = subprocess.run([sys.executable, "-m", "glradial", "estimate", str(src), "--json"], capture_output=True, text=True)
+    assert line.returncode == 0 and json.loads(line.stdout)["doubtful"] is True and json.loads(line.stdout)["reason"] == "not_a_pitch"
     bad = subprocess.run([sys.executable, "-m", "glradial", "correct", str(src), str(out), "--k1", "0.1",
                           "--apply-doubtful", "--overwrite"], capture_output=True, text=True)
     assert bad.returncode != 0 and "--apply-doubtful needs --auto" in bad.stderr

@@ -110,7 +110,7 @@ LENS_FILE_HELP = (
 #: keys of each lens-file format (any other key is an error: a misspelt "k_2" must not become k2 = 0)
 LENS_KEYS = {"k1", "k2", "cx", "cy", "pixel_aspect"}
 #: what a line of 'glradial estimate --json' adds to the lens (ignored)
-ESTIMATE_KEYS = {"path", "method", "uncertainty_px", "chains", "source"}
+ESTIMATE_KEYS = {"path", "method", "uncertainty_px", "chains", "doubtful", "reason", "source"}
 #: 'glradial convert --json' (its "glradial" pair is the lens; the rest describes the conversion)
 CONVERT_KEYS = {"from", "to", "size", "glradial", "k1", "k2", "camera_matrix", "dist_coeffs"}
 #: an OpenCV calibration

@@ -11,14 +11,15 @@ from . import positive_int, show_progress
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT image with the bundled CNN (ONNX, onnxruntime). Each image
-is read as RGB, treated as a whole 16:9 broadcast frame and resized with area interpolation to the
-network input; with --method auto (default) or lines, the lens that straightens the frame's pitch
+is read as RGB; the network sees its centred 16:9 view (the whole frame when it is 16:9), resized
+with area interpolation, and its answer is converted to the image's own width-normalised lens; with --method auto (default) or lines, the lens that straightens the frame's pitch
 lines and straight edges is fitted too (docs/LINES.md). Prints one line per image: the path, k1 and
 k2 (width-normalised: image width = 1, origin at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4);
 negative k1 = barrel), the method that produced them (net or lines), the uncertainty (a ~90 % bound
-on the maximum displacement error, px of a 1920-wide frame) and the line chains used, or with
---json one JSON object per line {"path", "k1", "k2", "method", "uncertainty_px", "chains"}. Images of another aspect ratio are squashed to 16:9
-(a warning says so). Videos (anything FFmpeg reads that is not a still image; image sequences as
+on the maximum displacement error, px of a 1920-wide frame), the line chains used and the doubt
+verdict (doubtful=0/1 and its reason: ok, blank_frame, noise_frame, not_a_pitch, too_few_lines,
+evidence_disagrees, weak_geometry; docs/LINES.md), or with --json one JSON object per line {"path",
+"k1", "k2", "method", "uncertainty_px", "chains", "doubtful", "reason"}. Videos (anything FFmpeg reads that is not a still image; image sequences as
 frame_%04d.png): shot cuts are detected, every --every-th frame of each
 shot is estimated and the estimates are smoothed within the shot (weighted by the confidence each
 estimate states) as 'glradial correct --auto' does; prints one line per shot (first and last frame,
@@ -63,5 +64,6 @@ def run(args: argparse.Namespace) -> int:
             print(json.dumps({"path": path, **lens.as_dict()}), flush=True)
         else:
             print(f"{path}\tk1={lens.k1:.6f}\tk2={lens.k2:.6f}\tmethod={lens.method}\t"
-                  f"uncertainty={lens.uncertainty_px:.1f}px\tchains={lens.chains}", flush=True)
+                  f"uncertainty={lens.uncertainty_px:.1f}px\tchains={lens.chains}\tdoubtful={int(lens.doubtful)}\t"
+                  f"reason={lens.reason}", flush=True)
     return 0
