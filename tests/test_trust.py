@@ -155,7 +155,8 @@ def test_reasons_follow_the_rules():
         e = judge(evidence, "auto", trust)
         assert e.reason == reason and e.doubtful == (reason != "ok"), (reason, e)
     assert judge(cases[3][0], "auto", trust).uncertainty_px == 50.0  # a line fit sought, none found
-    assert judge(cases[3][0], "net", trust).uncertainty_px == 30.0 and not judge(cases[3][0], "net", trust).doubtful
+    net = judge(cases[3][0], "net", trust)  # the CNN alone: q_net, and here q_net (30) > doubt_px (25)
+    assert net.uncertainty_px == 30.0 and net.reason == "weak_geometry"
     ok = judge(cases[-1][0], "auto", trust)
     assert ok.method == "lines" and ok.uncertainty_px == pytest.approx(math.hypot(2.0, 3.0))
     # no evidence of a pitch: the bound spans every real lens from the answer
