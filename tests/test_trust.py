@@ -96,6 +96,54 @@ def test_a_non_16_9_frame_is_estimated_in_its_own_geometry_without_python_warnin
     assert est.method == "lines" and error_px(est, k) < 2.0  # clean lines: the fit reads the frame's own lens
 
 
+# -- pitch templates with too little geometry --------------------------------------------------------
+def _pitch_view(lines_m: list[np.ndarray], size=(1280, 720)) -> np.ndarray:
+    """Pitch markings (polylines of (X, Y) metres on the ground plane) seen by a pinhole broadcast
+    camera 18 m up and 45 m back, tilted down 20° (cv2.projectPoints), drawn on grass."""
+    w, h = size
+    img = np.full((h, w, 3), GRASS, np.uint8)
+    K = np.array([[0.9 * w, 0, (w - 1) / 2], [0, 0.9 * w, (h - 1) / 2], [0, 0, 1]], np.float64)
+    tilt = np.deg2rad(90 + 20)  # camera looks along +Y and down
+    R = cv2.Rodrigues(np.array([tilt, 0.0, 0.0]))[0]
+    t = -R @ np.array([0.0, -45.0, 18.0])
+    for pts in lines_m:
+        ground = np.column_stack([pts, np.zeros(len(pts))])
+        px, _ = cv2.projectPoints(ground, cv2.Rodrigues(R)[0], t, K, None)
+        cv2.polylines(img, [np.round(px.reshape(-1, 2) * 16).astype(np.int32)], False, WHITE, 3, cv2.LINE_AA, shift=4)
+    return img
+
+
+def _segment(a, b, n=200):
+    return np.linspace(a, b, n)
+
+
+def _arc(centre, radius, start, stop, n=200):
+    t = np.deg2rad(np.linspace(start, stop, n))
+    return np.column_stack([centre[0] + radius * np.cos(t), centre[1] + radius * np.sin(t)])
+
+
+TEMPLATES = {
+    "short touchline and an arc": [_segment((-12, 0), (8, 0)), _arc((0, 11), 9.15, 200, 340)],
+    "two parallel lines": [_segment((-40, 0), (40, 0)), _segment((-40, 16.5), (40, 16.5))],
+    "a circle, no lines": [_arc((0, 10), 9.15, 0, 360, 400)],
+}
+
+
+@needs_shipped
+@pytest.mark.parametrize("name", list(TEMPLATES))
+def test_pitch_templates_with_little_geometry_are_read_within_their_bound_or_doubtful(name):
+    k = (-0.3, float(manifold_k2(-0.3)))
+    frame = apply_lens(_pitch_view(TEMPLATES[name]), *k)
+    for method in ("auto", "lines"):
+        est = glradial.estimate(frame, method=method)
+        assert all(math.isfinite(v) for v in (est.k1, est.k2, est.uncertainty_px))
+        assert est.doubtful or error_px(est, k) <= est.uncertainty_px, (name, method, est, error_px(est, k))
+        if name == "a circle, no lines":  # no straight line: the CNN alone on a bare pitch, doubtful
+            assert est.doubtful and est.reason == "too_few_lines"
+        if name == "two parallel lines":  # two long lines near the frame edge pin k1 (measured 0.3 px)
+            assert est.method == "lines" and error_px(est, k) < 2.0
+
+
 # -- doubt -------------------------------------------------------------------------------------------
 def _off_domain_frames() -> dict[str, np.ndarray]:
     rng = np.random.default_rng(0)
