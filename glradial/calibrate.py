@@ -17,7 +17,8 @@ Steps:
        independence group (a clip, a real frame, a pose seed, a stadium) and each group to one of two
        folds.
     2. **Fit** per fold: the scale's ``floor_px``, ``sigma_weight`` and ``disagree_weight`` (a small
-       grid: the triple that makes the calibration fold's median bound on line-rich frames smallest), then
+       grid: the triple that makes the median bound on line-rich frames smallest, each half of the
+       fold's independence groups bounded by the quantile of the other half), then
        ``q_lines`` = the conformal 90 % quantile (``ceil((n + 1) 0.9)``-th smallest) of
        ``|error| / scale`` over the fold's line-fit answers, ``q_net`` the same of the CNN's errors and
        ``q_no_lines`` of the CNN's errors on the frames without a line fit.
@@ -189,21 +190,33 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
     sigma = np.array([r.evidence.sigma_px for r in lined])
     disagree = np.array([r.evidence.disagreement_px for r in lined])
     rich = np.array([r.line_rich for r in lined])
+    halves = _halves(lined)
     best = None
     for floor in FLOOR_GRID:
         for a in SIGMA_GRID:
             for weight in WEIGHT_GRID:
                 scale = np.sqrt(floor**2 + (a * sigma) ** 2 + (weight * disagree) ** 2)
-                q = conformal_quantile(err / scale)
-                median = float(np.median(q * scale[rich] if rich.any() else q * scale))
+                bound = np.empty(len(lined))
+                for half in (0, 1):  # the shape is judged on groups its quantile did not see
+                    bound[halves == half] = conformal_quantile((err / scale)[halves != half]) * scale[halves == half]
+                median = float(np.median(bound[rich] if rich.any() else bound))
                 if best is None or median < best[0]:
-                    best = (median, replace(base, floor_px=floor, sigma_weight=a, disagree_weight=weight, q_lines=q,
-                                            q_net=q_net, q_no_lines=q_no_lines))
+                    best = (median, replace(base, floor_px=floor, sigma_weight=a, disagree_weight=weight,
+                                            q_lines=conformal_quantile(err / scale), q_net=q_net, q_no_lines=q_no_lines))
     trust = best[1]
     rich = [r for r in lined if r.line_rich]
     disagree = np.array([r.evidence.disagreement_px for r in (rich or lined)])
     return replace(trust, disagree_max_px=conformal_quantile(disagree, DISAGREE_QUANTILE),
                    note=f"python -m glradial.calibrate on {len(records)} validation frames")
+
+
+def _halves(records: list[Record]) -> np.ndarray:
+    """0/1 per record: its independence group's half (groups alternate in sorted order), so that a
+    choice made on one half is judged on groups it did not see; all 0 with a single group."""
+    groups = sorted({r.group for r in records})
+    half = {g: i % 2 for i, g in enumerate(groups)}
+    out = np.array([half[r.group] for r in records])
+    return out if len(groups) > 1 else np.zeros(len(records), int)
 
 
 def cross_check(records: list[Record], base: TrustModel) -> tuple[list[dict], dict[int, TrustModel]]:
