@@ -62,6 +62,8 @@ BROADCAST_LENSES, REAL_LENSES, PANORAMA_CROPS, PROCEDURAL_CROPS = 3, 12, 24, 64
 #: Real frames (stems in real_football) and their fold; other frames of the folder are ignored.
 REAL_FRAME_FOLDS = {"usl_broadcast_0195": 0, "usl_broadcast_0460": 1, "football360_cam_0000000": 0,
                     "football360_cam_0012000": 1, "football360_cam_0019000": 0}
+#: Sources of real pitch frames (the doubt-rate limit is stated on their line-rich frames).
+REAL_PITCH_SOURCES = ("broadcast", "real_frames")
 #: Broadcast clips and their fold.
 BROADCAST_FOLDS = {"42ba34": 0, "2e57b9": 1}
 
@@ -257,6 +259,9 @@ def coverage_table(rows: list[dict]) -> list[tuple[str, int, float, float, float
     rich = [r for r in rows if r["line_rich"]]
     if rich:
         out.append(stats(f"line-rich (>= {LINE_RICH_CHAINS} chains)", rich))
+    real_rich = [r for r in rich if r["source"] in REAL_PITCH_SOURCES]
+    if real_rich:
+        out.append(stats("line-rich real pitch frames", real_rich))
     sure = [r for r in rows if not r["doubtful"]]
     if sure:
         out.append(stats("not doubtful", sure))

@@ -35,6 +35,7 @@ from __future__ import annotations
 import json
 import os
 import threading
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -79,6 +80,18 @@ def view_to_frame(k: tuple[float, float], size: tuple[int, int]) -> tuple[float,
         return float(k[0]), float(k[1])
     lens = Lens(float(k[0]), float(k[1])).rescale(w / size[0])
     return lens.k1, lens.k2
+
+
+def square_pixels(frame: np.ndarray, pixel_aspect: float) -> np.ndarray:
+    """A frame stored with pixels of aspect ``pixel_aspect = fy / fx`` resized to square pixels at
+    the same width (height ``H / pixel_aspect``; bicubic). Its width-normalised lens is the stored
+    frame's ``(k1, k2)`` with ``pixel_aspect = 1``: lens units are widths, and the width is kept."""
+    import cv2
+
+    height = max(2, int(round(frame.shape[0] / pixel_aspect)))
+    if height == frame.shape[0]:
+        return frame
+    return np.ascontiguousarray(cv2.resize(frame, (frame.shape[1], height), interpolation=cv2.INTER_CUBIC))
 
 
 def default_model_path() -> Path:
@@ -177,19 +190,27 @@ class Estimator:
             raise ModelLoadError(f"{self.model_path}: output of shape {out.shape} for a batch of {len(batch)}, not {len(batch)}×2")
         return 0.5 * (out[:n] + out[n:]) if self.mirror_average else out
 
-    def estimate_batch(self, frames: Sequence[np.ndarray], method: Method = "auto") -> list[LensEstimate]:
+    def estimate_batch(self, frames: Sequence[np.ndarray], method: Method = "auto",
+                       pixel_aspect: float = 1.0) -> list[LensEstimate]:
         """Estimate each frame of a sequence (or an ``N x H x W x C`` array); the CNN runs in one
         session call. ``method``: ``"net"`` (the CNN), ``"lines"`` (the line fit, the CNN as its
         prior; the CNN's answer when a frame has no usable lines) or ``"auto"`` (the line fit when
         its calibrated bound beats the CNN's); each :class:`~glradial.lens_estimate.LensEstimate`
         says which method produced it, how sure it is (``uncertainty_px``, px at 1920) and whether
-        it is doubtful (``doubtful``, ``reason``)."""
+        it is doubtful (``doubtful``, ``reason``). ``pixel_aspect`` (``fy / fx``, default 1): for
+        frames stored with non-square pixels (e.g. a 16:9 picture squashed into 640×640: 16/9); each
+        is restored to square pixels (:func:`square_pixels`) before estimating, and the estimate
+        carries ``pixel_aspect``, so :func:`glradial.correct` applies it to the stored frame."""
         method = check_method(method)
         if isinstance(frames, np.ndarray) and frames.ndim == 4:
             frames = list(frames)
         if isinstance(frames, (str, bytes, np.ndarray)) or not hasattr(frames, "__iter__"):
             raise TypeError(f"frames must be a sequence of NumPy arrays (or an N×H×W×C array), got {type(frames).__name__}")
         frames = [_as_frame(f, i) for i, f in enumerate(frames)]
+        if pixel_aspect != 1.0:
+            aspect = Lens(pixel_aspect=pixel_aspect).pixel_aspect  # checked: positive, finite
+            frames = [square_pixels(f, aspect) for f in frames]
+            return [replace(judge(e, method), pixel_aspect=aspect) for e in self.evidence_batch(frames, lines=method != "net")]
         return [judge(e, method) for e in self.evidence_batch(frames, lines=method != "net")]
 
     def evidence_batch(self, frames: Sequence[np.ndarray], lines: bool = True) -> list[FrameEvidence]:
@@ -202,9 +223,9 @@ class Estimator:
         return [frame_evidence(f, view_to_frame(k, (f.shape[1], f.shape[0])), view_features(v), lines)
                 for f, v, k in zip(frames, views, net)]
 
-    def estimate(self, frame: np.ndarray, method: Method = "auto") -> LensEstimate:
-        """Estimate one frame's lens (``method`` as in :meth:`estimate_batch`)."""
-        return self.estimate_batch([_as_frame(frame)], method)[0]
+    def estimate(self, frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0) -> LensEstimate:
+        """Estimate one frame's lens (``method``, ``pixel_aspect`` as in :meth:`estimate_batch`)."""
+        return self.estimate_batch([_as_frame(frame)], method, pixel_aspect)[0]
 
     __call__ = estimate
 
@@ -222,8 +243,9 @@ def default_estimator() -> Estimator:
         return _default
 
 
-def estimate(frame: np.ndarray, method: Method = "auto") -> LensEstimate:
+def estimate(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0) -> LensEstimate:
     """Estimate the radial lens of one RGB frame with the bundled model and the frame's lines
-    (``method``: ``"auto"``, ``"net"`` or ``"lines"``; see :meth:`Estimator.estimate_batch`)."""
+    (``method``: ``"auto"``, ``"net"`` or ``"lines"``; ``pixel_aspect`` for frames stored with
+    non-square pixels; see :meth:`Estimator.estimate_batch`)."""
     check_method(method)
-    return default_estimator().estimate(frame, method)
+    return default_estimator().estimate(frame, method, pixel_aspect)

@@ -96,6 +96,38 @@ def test_a_non_16_9_frame_is_estimated_in_its_own_geometry_without_python_warnin
     assert est.method == "lines" and error_px(est, k) < 2.0  # clean lines: the fit reads the frame's own lens
 
 
+def test_a_squash_is_the_same_lens_with_a_pixel_aspect():
+    """A 16:9 frame (W0×H0) squashed to W×H: its width-normalised lens is the same (k1, k2) with
+    pixel_aspect = (H W0) / (H0 W) (fy / fx). Oracle: distort_points in both pixel grids."""
+    (w0, h0), (w, h) = (1280, 720), (640, 640)
+    p = h * w0 / (h0 * w)
+    k = (-0.4, float(manifold_k2(-0.4)))
+    rng = np.random.default_rng(5)
+    pts = rng.uniform([0, 0], [w0 - 1, h0 - 1], (40, 2))
+    squash = np.array([w / w0, h / h0])
+    moved = glradial.Lens(*k).distort_points(pts, (w0, h0))
+    in_squashed = glradial.Lens(*k, pixel_aspect=p).distort_points((pts + 0.5) * squash - 0.5, (w, h))
+    np.testing.assert_allclose(in_squashed, (moved + 0.5) * squash - 0.5, atol=1e-9)
+
+
+@needs_shipped
+def test_a_squashed_frame_is_estimated_with_its_pixel_aspect():
+    """A synthetic pitch with a known lens, stored squashed to 640×640: given its pixel aspect, the
+    estimate recovers the lens and carries the aspect, so correct() undoes it on the stored frame."""
+    rng = np.random.default_rng(4)
+    img = np.full((720, 1280, 3), GRASS, np.uint8)
+    for y in np.linspace(0.05, 0.95, 7) * 720:
+        a = rng.uniform(-0.15, 0.15)
+        cv2.line(img, (-100, int(y - a * 640)), (1380, int(y + a * 640)), WHITE, 3, cv2.LINE_AA)
+    k = (-0.3, float(manifold_k2(-0.3)))
+    squashed = cv2.resize(apply_lens(img, *k), (640, 640), interpolation=cv2.INTER_AREA)
+    est = glradial.estimate(squashed, pixel_aspect=16 / 9)
+    assert est.pixel_aspect == pytest.approx(16 / 9) and est.method == "lines"
+    assert error_px(est, k) < 2.0
+    with pytest.raises(ValueError, match="pixel_aspect"):
+        glradial.estimate(squashed, pixel_aspect=-1.0)
+
+
 # -- pitch templates with too little geometry --------------------------------------------------------
 def _pitch_view(lines_m: list[np.ndarray], size=(1280, 720)) -> np.ndarray:
     """Pitch markings (polylines of (X, Y) metres on the ground plane) seen by a pinhole broadcast
