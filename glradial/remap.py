@@ -57,6 +57,7 @@ import moderngl
 import numpy as np
 
 from . import egl, lensfuncs
+from .alpha import Alpha, remap_with_alpha
 from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
 from .shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES, build_program
 
@@ -278,11 +279,13 @@ class Remapper:
         interpolation: Interpolation = "linear",
         fill: float | Sequence[float] = 0,
         out: np.ndarray | None = None,
+        alpha: Alpha = "straight",
     ) -> np.ndarray:
         """Undistort one ``frame`` (uint8, uint16 or float32) on the GPU with a :class:`Lens` or
         ``k1, k2``; see the module docstring. ``out``: an array of the frame's shape and dtype to read
-        the result into (returned). Batches and float64: :func:`correct`."""
-        return self._remap(frame, _lens(lens, k2), "undistort", fit, interpolation, fill, "exact", out)
+        the result into (returned). ``alpha``: the convention of a 4-channel frame
+        (:mod:`glradial.alpha`). Batches and float64: :func:`correct`."""
+        return self._remap_alpha(frame, _lens(lens, k2), "undistort", fit, interpolation, fill, "exact", out, alpha)
 
     def distort(
         self,
@@ -295,10 +298,11 @@ class Remapper:
         fill: float | Sequence[float] = 0,
         inverse: InverseMethod = "exact",
         out: np.ndarray | None = None,
+        alpha: Alpha = "straight",
     ) -> np.ndarray:
         """Apply the lens (a :class:`Lens` or ``k1, k2``) to one undistorted ``frame`` on the GPU;
-        see the module docstring."""
-        return self._remap(frame, _lens(lens, k2), "distort", fit, interpolation, fill, inverse, out)
+        see the module docstring (``alpha``: :mod:`glradial.alpha`)."""
+        return self._remap_alpha(frame, _lens(lens, k2), "distort", fit, interpolation, fill, inverse, out, alpha)
 
     def render_texture(
         self,
@@ -385,6 +389,17 @@ class Remapper:
         return self._source.glo, self._target.glo
 
     # -- internals -------------------------------------------------------------------------------
+    def _remap_alpha(self, frame, lens, direction, fit, interpolation, fill, inverse, out, alpha) -> np.ndarray:
+        """:meth:`_remap` in ``alpha``'s convention (:func:`glradial.alpha.remap_with_alpha`)."""
+        result = remap_with_alpha(frame, fill, alpha, lambda work, fill_values: self._remap(
+            work, lens, direction, fit, interpolation, fill_values, inverse, out if work is frame else None))
+        if out is not None and result is not out:
+            if not (isinstance(out, np.ndarray) and out.shape == result.shape and out.dtype == result.dtype):
+                raise ValueError(f"out must be a C-contiguous {result.dtype} array of shape {result.shape}")
+            out[...] = result
+            return out
+        return result
+
     def _check_alive(self) -> None:
         """``RuntimeError`` once released or off the owning thread; then make this Remapper's
         context the thread's current one (:meth:`egl.GLOwner.enter`): creating another context on
@@ -640,6 +655,7 @@ def correct(
     interpolation: Interpolation = "linear",
     fill: float | Sequence[float] = 0,
     backend: Backend = "auto",
+    alpha: Alpha = "straight",
 ) -> np.ndarray:
     """Remove a lens from ``frame`` (or a batch of frames); a new array of the same shape and dtype.
 
@@ -650,8 +666,14 @@ def correct(
     ``K, dist = lens.to_opencv((W, H))``. Raises ``ValueError`` when the lens folds over inside the
     (fitted) frame, for bad shapes and unknown option values, ``TypeError`` for non-array frames,
     unsupported dtypes, non-real coefficients and a Lens given together with ``k2``.
+
+    ``alpha``: the convention of a 4-channel (RGBA) frame, ``"straight"`` (default; PNG, ProRes 4444)
+    or ``"premultiplied"`` (OpenEXR; also for 4 channels that are not colour and alpha). Either way
+    the frame is interpolated premultiplied, so a key's edge has no fringe, and returned in the
+    convention it came in (:mod:`glradial.alpha`).
     """
-    return _run(frame, lens, k2, "undistort", fit, interpolation, fill, "exact", backend)
+    return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
+        work, lens, k2, "undistort", fit, interpolation, fill_values, "exact", backend))
 
 
 def distort(
@@ -664,6 +686,7 @@ def distort(
     fill: float | Sequence[float] = 0,
     inverse: InverseMethod = "exact",
     backend: Backend = "auto",
+    alpha: Alpha = "straight",
 ) -> np.ndarray:
     """Apply a lens (a :class:`glradial.Lens`, or ``k1, k2``) to an undistorted ``frame`` (or a
     batch); a new array, same shape and dtype.
@@ -672,6 +695,7 @@ def distort(
     Newton, pixels the lens never reaches get ``fill``; ``"drap"``: the paper's four-term
     polynomial, up to ~0.002 lens units off at the extremes of its k1 range). Same conventions and
     errors as :func:`correct`; ``correct(distort(x, lens), lens) ≈ x`` for the same scale
-    (``fit="same"``, the same number, or "crop" here with "full" there).
+    (``fit="same"``, the same number, or "crop" here with "full" there). ``alpha``: as in :func:`correct`.
     """
-    return _run(frame, lens, k2, "distort", fit, interpolation, fill, inverse, backend)
+    return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
+        work, lens, k2, "distort", fit, interpolation, fill_values, inverse, backend))
