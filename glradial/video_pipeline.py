@@ -269,18 +269,22 @@ class _FrameCorrector:
     :class:`~glradial.remap.Remapper` with its own context on first use there (falling back to the
     CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
 
-    def __init__(self, backend: str, fit: str, interpolation: str) -> None:
+    def __init__(self, backend: str, fit: str, interpolation: str, direction: str = "undistort", **extra: object) -> None:
+        from .lens import DIRECTIONS
         from .remap import BACKENDS, auto_backend
 
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        if direction not in DIRECTIONS:
+            raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
         self.backend = auto_backend() if backend == "auto" else backend
-        self.fit, self.interpolation = fit, interpolation
+        self.fit, self.interpolation, self.direction = fit, interpolation, direction
+        self.extra = extra  # inverse= (distort), alpha=
         self._remapper = None
         self._last: Lens | None = None
 
     def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
-        from .remap import Remapper, correct
+        from .remap import Remapper, correct, distort
 
         height, width = image.shape[:2]
         last = self._last
@@ -290,12 +294,14 @@ class _FrameCorrector:
             lens = last  # the same maps (cached) for a change no point of the frame can show
         else:
             self._last = lens
+        options = dict(fit=self.fit, interpolation=self.interpolation, **self.extra)
         if self.backend == "gl":
             if self._remapper is None:
                 self._remapper = Remapper()
             if max(image.shape[:2]) <= self._remapper.max_texture_size:
-                return self._remapper.correct(image, lens, fit=self.fit, interpolation=self.interpolation)
-        return correct(image, lens, fit=self.fit, interpolation=self.interpolation, backend="cpu")
+                method = self._remapper.correct if self.direction == "undistort" else self._remapper.distort
+                return method(image, lens, **options)
+        return (correct if self.direction == "undistort" else distort)(image, lens, backend="cpu", **options)
 
     def release(self) -> None:
         if self._remapper is not None:
@@ -317,15 +323,18 @@ def correct_video(
     overwrite: bool = False,
     frames_expected: int | None = None,
     rate: Fraction | None = None,
+    direction: str = "undistort",
+    **remap_options: object,
 ) -> int:
-    """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` (a :class:`Lens` or
-    ``(k1, k2)``) into ``target``
+    """Pass 2: correct (``direction="distort"``: distort) every frame of ``source`` with
+    ``lenses(frame_index)`` (a :class:`Lens` or ``(k1, k2)``) into ``target``
     (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.video_io`;
     encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
     track's length): a video with another frame count is an error and leaves no output. A header
     frame count that differs from the frames decoded gives a warning on stderr with both counts.
-    ``rate``: frame rate of an image-sequence input (default 25)."""
-    corrector = _FrameCorrector(backend, fit, interpolation)
+    ``rate``: frame rate of an image-sequence input (default 25). ``remap_options``: ``inverse``
+    (distort) and ``alpha`` of :func:`glradial.distort`."""
+    corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
     with VideoReader(source, order="rgb", copy_streams=True, rate=rate) as reader:
         info = reader.info
         writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)

@@ -1,0 +1,72 @@
+"""``glradial distort``: put a lens into an undistorted image, folder of images or video, the exact
+inverse of ``glradial correct`` (graphics rendered for a straight camera, made to sit in its lens)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from . import UsageError, add_lens_options, lens_from_args, lens_given, show_progress
+from .remapping import (VIDEO_OPTIONS, add_encode_options, add_io_arguments, add_render_options, check_encode_options,
+                        check_paths, image_transform, reject_for, remap_folder, remap_image_file, remap_video,
+                        video_alpha)
+
+DESCRIPTION = """\
+Apply a lens to INPUT (undistorted: graphics, a virtual set, a clean plate) and write OUTPUT as the
+camera would see it; 'glradial correct' with the same lens and framing undoes it (the round trip
+keeps a picture within interpolation error, docs/CLI.md). INPUT: an image (PNG, JPEG, TIFF, OpenEXR;
+8/16-bit and float kept, EXR HALF/FLOAT and every channel kept, values beyond 1 kept), a folder of
+images (each written into the folder OUTPUT under its own name), a video or an image sequence (as
+'glradial correct': streams, timing, colour tags, depth kept; alpha kept where the codec stores it,
+e.g. ProRes 4444). The lens is given (--k1/--k2, width-normalised: image width = 1, origin at the
+image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel; --cx/--cy/--pixel-aspect; or
+--lens FILE) or, for a video, read per frame from a lens track (--lens-track, e.g. the sidecar of
+'glradial correct --auto'). An RGBA picture is interpolated premultiplied (no fringe on a key's edge)
+and written in the convention it came in (--alpha). Outputs appear only when complete; an existing
+OUTPUT is replaced only with -y."""
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "distort",
+        help="apply a lens to an image, folder or video (the inverse of correct: graphics into a camera's lens)",
+        description=DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_io_arguments(parser, "distort")
+    lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --lens-track)")
+    add_lens_options(lens)
+    lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (the sidecar of 'correct --auto'; .csv or .json)")
+    render = add_render_options(
+        parser, "output scale, the same numbers as 'correct': same = centre scale kept, crop = zoom in until every "
+        "output pixel has a source (undone by 'correct --fit full'), full = the whole input stays visible "
+        "(undone by 'correct --fit crop') (default: same)",
+    )
+    render.add_argument("--inverse", choices=("exact", "drap"), default="exact",
+                        help="inverse of the lens: exact (bounded Newton, to float precision) or drap (the Drap-Lefevre "
+                        "polynomial, up to ~0.002 lens units off at the extremes of its k1 range) (default: exact)")
+    add_encode_options(parser)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    given = lens_given(args)
+    if given and args.lens_track:
+        raise UsageError("--k1/--k2/--cx/--cy/--pixel-aspect/--lens and --lens-track cannot be combined: give the lens one way")
+    if not (given or args.lens_track):
+        raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect), --lens FILE or --lens-track")
+    check_encode_options(args)
+    kind = check_paths(args)
+    progress = show_progress(args)
+    lens_for = lambda size: lens_from_args(args, size)  # noqa: E731
+    if kind in ("image", "folder"):
+        reject_for(args, VIDEO_OPTIONS, "videos")
+        transform = image_transform(args, "distort", inverse=args.inverse)
+        if kind == "folder":
+            remap_folder(args, lens_for, transform, progress, "distort")
+        else:
+            remap_image_file(Path(args.input), Path(args.output), lens_for, transform, alpha=args.alpha,
+                             overwrite=args.overwrite)
+        return 0
+    remap_video(args, "distort", lens_for, progress, inverse=args.inverse, alpha=video_alpha(args))
+    return 0
