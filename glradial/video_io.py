@@ -51,6 +51,7 @@ __all__ = [
     "VideoReader",
     "VideoWriter",
     "check_video_overwrite",
+    "has_alpha",
     "is_sequence",
     "probe_video",
     "sequence_files",
@@ -179,8 +180,18 @@ def _bit_depth(pix_fmt: str) -> int:
         return 8
 
 
-def _rgb_format(depth: int, order: str) -> str:
+def _rgb_format(depth: int, order: str, alpha: bool = False) -> str:
+    if alpha:
+        return f"{order}a" if depth <= 8 else f"{order}a64le"
     return f"{order}24" if depth <= 8 else f"{order}48le"
+
+
+def has_alpha(pix_fmt: str) -> bool:
+    """Whether FFmpeg's pixel format ``pix_fmt`` stores an alpha plane (yuva444p12le, rgba, gbrap ...)."""
+    try:
+        return any(component.is_alpha for component in av.VideoFormat(pix_fmt).components)
+    except (ValueError, av.FFmpegError):
+        return False
 
 
 def _matrix(colorspace: int, height: int) -> int:
@@ -205,7 +216,9 @@ class VideoReader:
     wider than it in the conversion (area filter), e.g. for an estimator; ``keep_decoded`` hands
     each decoded frame along too, for :meth:`convert` at another size. ``info`` describes the
     stream. A file that cannot be opened or has no video raises ``ValueError`` naming it; a decoding
-    error midway raises ``ValueError`` with the number of frames decoded before it.
+    error midway raises ``ValueError`` with the number of frames decoded before it. ``alpha=True``:
+    frames of a source with alpha (ProRes 4444, PNG or QuickTime RLE with alpha, FFV1 yuva ...) are
+    ``H x W x 4``, alpha last, straight (as FFmpeg decodes them); other sources stay 3 channels.
     """
 
     def __init__(
@@ -217,6 +230,7 @@ class VideoReader:
         max_width: int | None = None,
         rate: Fraction | None = None,
         keep_decoded: bool = False,
+        alpha: bool = False,
     ) -> None:
         if order not in ("rgb", "bgr"):
             raise ValueError(f"order must be 'rgb' or 'bgr', got {order!r}")
@@ -264,7 +278,9 @@ class VideoReader:
         self.keep_decoded = keep_decoded
         self.frames_read = 0
         self._last_pts: int | None = None
-        self._format = _rgb_format(self.info.bit_depth, order)
+        #: frames carry the source's alpha as a 4th channel (``alpha=True`` and a pix_fmt with alpha)
+        self.alpha = bool(alpha) and has_alpha(self.info.pix_fmt)
+        self._format = _rgb_format(self.info.bit_depth, order, self.alpha)
 
     # -- frames --------------------------------------------------------------------------------
     def convert(self, frame: av.VideoFrame, max_width: int | None = None) -> np.ndarray:
@@ -423,13 +439,16 @@ def _pick_pix_fmt(codec: av.Codec, wanted: str | None, source: str) -> str:
 
     def layout(name: str) -> tuple:
         fmt = av.VideoFormat(name, 64, 64)  # a size, so that the chroma planes have one
-        return (fmt.is_rgb, tuple(c.width for c in fmt.components[:3]), tuple(c.height for c in fmt.components[:3]))
+        return (fmt.is_rgb, tuple(c.width for c in fmt.components[:3]), tuple(c.height for c in fmt.components[:3]),
+                has_alpha(name))
 
     wanted_layout = layout(source)
 
     def distance(name: str) -> tuple[int, int, int]:
         bits = _bit_depth(name)
-        return (abs(bits - depth) + (100 if bits < depth else 0), 0 if layout(name) == wanted_layout else 1, formats.index(name))
+        alpha_lost = 1000 if has_alpha(source) and not has_alpha(name) else 0  # a key is never dropped by default
+        return (abs(bits - depth) + (100 if bits < depth else 0) + alpha_lost, 0 if layout(name) == wanted_layout else 1,
+                formats.index(name))
 
     return min(formats, key=distance)
 
@@ -578,10 +597,13 @@ class VideoWriter:
         worker thread can convert while the caller encodes."""
         image = np.asarray(image)
         width, height = self.info.size
-        if image.shape != (height, width, 3) or image.dtype not in (np.uint8, np.uint16):
-            raise ValueError(f"video frames must be {height}×{width}×3 uint8 or uint16, got shape {image.shape} {image.dtype}")
+        if image.shape not in ((height, width, 3), (height, width, 4)) or image.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"video frames must be {height}×{width}×3 (or ×4 with alpha) uint8 or uint16, got shape "
+                             f"{image.shape} {image.dtype}")
+        if image.shape[2] == 4 and not has_alpha(self._pix_fmt):
+            image = image[:, :, :3]  # an output format without alpha, chosen with pix_fmt (check_alpha_kept)
         depth = 8 if image.dtype == np.uint8 else 16
-        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order))
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order, image.shape[2] == 4))
         frame = frame.reformat(format=self._pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
                                dst_color_range=self._range, interpolation="BILINEAR")
         # the source's tags, not those of the conversion (which names its matrix even when untagged)
@@ -590,6 +612,16 @@ class VideoWriter:
         frame.pts = pts
         frame.time_base = self.info.time_base  # the muxer may give the stream another time base
         return frame
+
+    def check_alpha_kept(self) -> None:
+        """``ValueError`` when the source has alpha (``info.pix_fmt``) and the output format has none,
+        unless that format was chosen (``options.pix_fmt``): a key is never dropped silently."""
+        if has_alpha(self.info.pix_fmt) and not has_alpha(self._pix_fmt) and self.options.pix_fmt is None:
+            raise ValueError(
+                f"the input has alpha ({self.info.pix_fmt}) but {str(self.path)!r} would be written as {self._pix_fmt} "
+                f"({self._codec_name}), which stores none: write ProRes 4444 (.mov, --codec prores), FFV1 (.mkv), VP9 in "
+                f".webm or a PNG sequence to keep it, or give --pix-fmt (e.g. {self._pix_fmt}) to drop it"
+            )
 
     def write(self, image: np.ndarray | av.VideoFrame, pts: int | None = None) -> None:
         frame = image if isinstance(image, av.VideoFrame) else self.frame(image, pts)

@@ -335,10 +335,11 @@ def correct_video(
     ``rate``: frame rate of an image-sequence input (default 25). ``remap_options``: ``inverse``
     (distort) and ``alpha`` of :func:`glradial.distort`."""
     corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
-    with VideoReader(source, order="rgb", copy_streams=True, rate=rate) as reader:
+    with VideoReader(source, order="rgb", copy_streams=True, rate=rate, alpha=True) as reader:
         info = reader.info
         writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
         try:
+            writer.check_alpha_kept()
             def work(item):
                 if isinstance(item, VideoFrame):
                     lens = lenses(item.index)
