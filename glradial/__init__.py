@@ -17,6 +17,8 @@ _EXPORTS = {
     "Lens": "lens",
     "GLUnavailableError": "egl",
     "ShaderCompileError": "shaderlib",
+    "shader_dir": "shaderlib",
+    "shader_path": "shaderlib",
     "correct": "remap",
     "distort": "remap",
     "fit_scale": "remap",
