@@ -32,6 +32,7 @@ import glob
 import os
 import re
 import shutil
+import threading
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -130,6 +131,18 @@ class VideoInfo:
     color_range: int = 0
     field_order: int = 0
     bit_rate: int = 0
+    interlaced: bool = False
+
+    @property
+    def fields(self) -> str:
+        """``"tff"``, ``"bff"`` or ``"progressive"``: the stream's field order (FFmpeg's
+        AVFieldOrder: TT/TB = top field first, BB/BT = bottom first); a stream that states none but
+        whose first frame is flagged interlaced is taken as TFF (the HD broadcast order)."""
+        if self.field_order in (FIELD_TT, FIELD_TB):
+            return "tff"
+        if self.field_order in (FIELD_BB, FIELD_BT):
+            return "bff"
+        return "tff" if self.interlaced and self.field_order != FIELD_PROGRESSIVE else "progressive"
 
     @property
     def fps(self) -> float:
@@ -178,6 +191,12 @@ def _bit_depth(pix_fmt: str) -> int:
         return max(c.bits for c in av.VideoFormat(pix_fmt).components)
     except Exception:  # hardware or unknown formats: assume 8 bits
         return 8
+
+
+#: FFmpeg's AVFieldOrder values
+FIELD_UNKNOWN, FIELD_PROGRESSIVE, FIELD_TT, FIELD_BB, FIELD_TB, FIELD_BT = range(6)
+#: ``VideoInfo.fields`` name -> the AVFieldOrder written
+FIELD_ORDER_CODES = {"progressive": FIELD_PROGRESSIVE, "tff": FIELD_TT, "bff": FIELD_BB}
 
 
 def _rgb_format(depth: int, order: str, alpha: bool = False) -> str:
@@ -267,6 +286,7 @@ class VideoReader:
             color_trc=tags[1],
             colorspace=tags[2],
             color_range=tags[3],
+            interlaced=tags[4],
             field_order=int(getattr(context, "field_order", 0) or 0),
             bit_rate=int(context.bit_rate or stream.bit_rate or 0) if hasattr(stream, "bit_rate") else int(context.bit_rate or 0),
         )
@@ -354,15 +374,16 @@ class VideoReader:
         self.close()
 
 
-def _first_frame_tags(path: Path, options: dict) -> tuple[int, int, int, int]:
-    """Colour tags (primaries, transfer, matrix, range) of the first decoded frame: what the
-    bitstream says (the decoder context before decoding may report defaults instead)."""
+def _first_frame_tags(path: Path, options: dict) -> tuple[int, int, int, int, bool]:
+    """Colour tags (primaries, transfer, matrix, range) and the interlaced flag of the first decoded
+    frame: what the bitstream says (the decoder context before decoding may report defaults instead)."""
     try:
         with av.open(str(path), "r", options=options) as container:
             frame = next(container.decode(video=0))
-            return int(frame.color_primaries), int(frame.color_trc), int(frame.colorspace), int(frame.color_range)
+            return (int(frame.color_primaries), int(frame.color_trc), int(frame.colorspace), int(frame.color_range),
+                    bool(frame.interlaced_frame))
     except (av.FFmpegError, StopIteration, UnicodeDecodeError):
-        return _UNSPECIFIED, _UNSPECIFIED, _UNSPECIFIED, 0
+        return _UNSPECIFIED, _UNSPECIFIED, _UNSPECIFIED, 0, False
 
 
 def _copyable(stream: av.stream.Stream) -> bool:
@@ -370,6 +391,41 @@ def _copyable(stream: av.stream.Stream) -> bool:
         return False
     tag = getattr(stream.codec_context, "codec_tag", "") if stream.codec_context else ""
     return not (stream.type == "data" and (tag == "tmcd" or "timecode" in stream.metadata))
+
+
+class _FieldFlags:
+    """Marks frames interlaced with a field order (FFmpeg's ``setfield`` filter: PyAV cannot set a
+    frame's flags), which the encoders (libx264, prores_ks, mpeg2video ...) follow."""
+
+    def __init__(self, fields: str) -> None:
+        self.fields = fields
+        self._graph: av.filter.Graph | None = None
+        self._lock = threading.Lock()
+
+    def __call__(self, frame: av.VideoFrame) -> av.VideoFrame:
+        with self._lock:
+            if self._graph is None:
+                graph = av.filter.Graph()
+                source = graph.add_buffer(width=frame.width, height=frame.height, format=frame.format.name,
+                                          time_base=frame.time_base)
+                mark, sink = graph.add("setfield", self.fields), graph.add("buffersink")
+                source.link_to(mark)
+                mark.link_to(sink)
+                graph.configure()
+                self._graph = graph
+            self._graph.push(frame)
+            marked = self._graph.pull()
+        marked.pts, marked.time_base = frame.pts, frame.time_base
+        return marked
+
+
+def _interlace_encoder(context: av.codec.context.CodecContext, info: VideoInfo) -> "_FieldFlags | None":
+    """For an interlaced ``info`` (:attr:`VideoInfo.fields`), ask the encoder for interlaced coding
+    (field DCT and motion estimation) and return the frame marker; None for progressive."""
+    if info.fields == "progressive":
+        return None
+    context.flags |= av.codec.context.Flags.interlaced_dct | av.codec.context.Flags.interlaced_me
+    return _FieldFlags(info.fields)
 
 
 def probe_video(path: str | os.PathLike) -> VideoInfo:
@@ -541,6 +597,7 @@ class VideoWriter:
                 context.field_order = info.field_order
             except (AttributeError, TypeError, ValueError):
                 pass
+        self._fields = _interlace_encoder(context, info)
         codec_options: dict[str, str] = {}
         if options.crf is not None:
             if codec.name not in CRF_ENCODERS:
@@ -611,7 +668,7 @@ class VideoWriter:
         frame.color_primaries, frame.color_trc = self.info.color_primaries, self.info.color_trc
         frame.pts = pts
         frame.time_base = self.info.time_base  # the muxer may give the stream another time base
-        return frame
+        return self._fields(frame) if self._fields is not None else frame
 
     def check_alpha_kept(self) -> None:
         """``ValueError`` when the source has alpha (``info.pix_fmt``) and the output format has none,

@@ -27,6 +27,7 @@ corrector; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import queue
@@ -43,7 +44,7 @@ from .lens_track import DOUBTFUL_PX, LensTrack
 from .metrics import REPORT_WIDTH, max_displacement
 from .progress import Progress
 from .smoothing import ShotDetector, smooth_track
-from .video_io import CopiedPacket, EncodeOptions, VideoFrame, VideoReader, VideoWriter
+from .video_io import FIELD_ORDER_CODES, CopiedPacket, EncodeOptions, VideoFrame, VideoInfo, VideoReader, VideoWriter
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
@@ -280,12 +281,11 @@ class _FrameCorrector:
         self.backend = auto_backend() if backend == "auto" else backend
         self.fit, self.interpolation, self.direction = fit, interpolation, direction
         self.extra = extra  # inverse= (distort), alpha=
+        self.interlaced = False  # True: each field on its own geometry (glradial.fields)
         self._remapper = None
         self._last: Lens | None = None
 
     def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
-        from .remap import Remapper, correct, distort
-
         height, width = image.shape[:2]
         last = self._last
         if (last is not None and (last.cx, last.cy, last.pixel_aspect) == (lens.cx, lens.cy, lens.pixel_aspect)
@@ -294,7 +294,16 @@ class _FrameCorrector:
             lens = last  # the same maps (cached) for a change no point of the frame can show
         else:
             self._last = lens
-        options = dict(fit=self.fit, interpolation=self.interpolation, **self.extra)
+        if not self.interlaced:
+            return self._remap(image, lens, self.fit)
+        from .fields import remap_fields
+
+        return remap_fields(image, lens, lens.fit_scale((width, height), self.fit, self.direction), self._remap)
+
+    def _remap(self, image: np.ndarray, lens: Lens, fit: object) -> np.ndarray:
+        from .remap import Remapper, correct, distort
+
+        options = dict(fit=fit, interpolation=self.interpolation, **self.extra)
         if self.backend == "gl":
             if self._remapper is None:
                 self._remapper = Remapper()
@@ -307,6 +316,17 @@ class _FrameCorrector:
         if self._remapper is not None:
             self._remapper.release()
             self._remapper = None
+
+
+def _with_fields(info: VideoInfo, field_order: str) -> VideoInfo:
+    """``info`` with ``field_order`` forced (``"auto"``: unchanged)."""
+    from .fields import FIELD_ORDERS
+
+    if field_order not in FIELD_ORDERS:
+        raise ValueError(f"field_order must be one of {', '.join(FIELD_ORDERS)}, got {field_order!r}")
+    if field_order == "auto":
+        return info
+    return dataclasses.replace(info, field_order=FIELD_ORDER_CODES[field_order], interlaced=field_order != "progressive")
 
 
 def correct_video(
@@ -324,6 +344,7 @@ def correct_video(
     frames_expected: int | None = None,
     rate: Fraction | None = None,
     direction: str = "undistort",
+    field_order: str = "auto",
     **remap_options: object,
 ) -> int:
     """Pass 2: correct (``direction="distort"``: distort) every frame of ``source`` with
@@ -333,10 +354,13 @@ def correct_video(
     track's length): a video with another frame count is an error and leaves no output. A header
     frame count that differs from the frames decoded gives a warning on stderr with both counts.
     ``rate``: frame rate of an image-sequence input (default 25). ``remap_options``: ``inverse``
-    (distort) and ``alpha`` of :func:`glradial.distort`."""
+    (distort) and ``alpha`` of :func:`glradial.distort`. ``field_order``: ``"auto"`` (the stream's,
+    :attr:`VideoInfo.fields`), or ``"progressive"``, ``"tff"``, ``"bff"`` to force one; interlaced
+    frames are remapped field by field (:mod:`glradial.fields`) and written with that field order."""
     corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
     with VideoReader(source, order="rgb", copy_streams=True, rate=rate, alpha=True) as reader:
-        info = reader.info
+        info = _with_fields(reader.info, field_order)
+        corrector.interlaced = info.fields != "progressive"
         writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
         try:
             writer.check_alpha_kept()

@@ -113,7 +113,8 @@ def run(args: argparse.Namespace) -> int:
 
     encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
     video = dict(progress=progress, options=encode, overwrite=args.overwrite, rate=args.rate, fit=args.fit,
-                 interpolation=args.interpolation, backend=args.backend, alpha=video_alpha(args))
+                 interpolation=args.interpolation, backend=args.backend, alpha=video_alpha(args),
+                 field_order=args.field_order or "auto")
     with VideoReader(args.input, rate=args.rate, copy_streams=True) as reader:
         info = reader.info
         # the encoder, its options and the container are checked before the estimation pass: open and drop

@@ -31,7 +31,7 @@ DIRECTIONS = {"correct": "undistort", "distort": "distort"}
 #: ``--alpha``: auto = premultiplied for OpenEXR (its convention), straight for everything else
 ALPHA_CHOICES = ("auto", "straight", "premultiplied")
 #: options that only a video (or image sequence) takes
-VIDEO_OPTIONS = ("lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate")
+VIDEO_OPTIONS = ("lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "field_order")
 
 Transform = Callable[[np.ndarray, object, str], np.ndarray]
 
@@ -94,6 +94,11 @@ def add_encode_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGro
     encode.add_argument("--rate", type=frame_rate, metavar="FPS",
                         help="frame rate of an image-sequence INPUT, e.g. 25 or 30000/1001 (default 25; videos keep theirs)")
     encode.add_argument("--pix-fmt", metavar="FMT", help="output pixel format, e.g. yuv420p, yuv422p10le (default: the input's where the encoder takes it)")
+    encode.add_argument("--field-order", choices=("auto", "progressive", "tff", "bff"), default=None,
+                        help="interlaced video: auto = the stream's (its field order, else a frame flagged interlaced "
+                        "is taken as top field first); tff/bff = interlaced, that field first; progressive = whole "
+                        "frames. Interlaced frames are remapped field by field (each field on its own half-height "
+                        "geometry) and written with the same field order and flags (default: auto)")
     return encode
 
 
@@ -250,7 +255,8 @@ def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bo
     with VideoReader(args.input, rate=args.rate) as reader:
         info = reader.info
     video = dict(fit=args.fit, interpolation=args.interpolation, backend=args.backend, progress=progress,
-                 options=encode, overwrite=args.overwrite, rate=args.rate, direction=direction, **extra)
+                 options=encode, overwrite=args.overwrite, rate=args.rate, direction=direction,
+                 field_order=args.field_order or "auto", **extra)
     if getattr(args, "lens_track", None):
         from ..lens_track import load_lens_track
 
