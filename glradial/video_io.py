@@ -298,6 +298,9 @@ class VideoReader:
         self.keep_decoded = keep_decoded
         self.frames_read = 0
         self._last_pts: int | None = None
+        self._decoder = _alpha_decoder(stream) if alpha else None
+        if self._decoder is not None:  # VP8/VP9 with an alpha plane: libvpx decodes it (yuva420p)
+            self.info = VideoInfo(**{**self.info.__dict__, "pix_fmt": self._decoder.pix_fmt or "yuva420p"})
         #: frames carry the source's alpha as a 4th channel (``alpha=True`` and a pix_fmt with alpha)
         self.alpha = bool(alpha) and has_alpha(self.info.pix_fmt)
         self._format = _rgb_format(self.info.bit_depth, order, self.alpha)
@@ -325,7 +328,7 @@ class VideoReader:
                     if packet.dts is not None:
                         yield CopiedPacket(packet)
                     continue
-                for frame in packet.decode():
+                for frame in (self._decoder.decode(packet) if self._decoder is not None else packet.decode()):
                     image = self.convert(frame, self.max_width)
                     self.frames_read += 1
                     if frame.pts is not None:
@@ -417,6 +420,26 @@ class _FieldFlags:
             marked = self._graph.pull()
         marked.pts, marked.time_base = frame.pts, frame.time_base
         return marked
+
+
+#: FFmpeg's native VP8/VP9 decoders drop the alpha a WebM file stores beside the picture
+#: (Matroska AlphaMode, BlockAdditional); libvpx's decoders return it
+_ALPHA_DECODERS = {"vp8": "libvpx", "vp9": "libvpx-vp9"}
+
+
+def _alpha_decoder(stream: av.video.stream.VideoStream) -> "av.codec.context.CodecContext | None":
+    """A libvpx decoder for a VP8/VP9 stream that states an alpha plane (``alpha_mode`` = 1); None
+    otherwise (or when this FFmpeg has no libvpx decoder)."""
+    name = _ALPHA_DECODERS.get(stream.codec_context.name)
+    if name is None or stream.metadata.get("alpha_mode") != "1":
+        return None
+    try:
+        decoder = av.CodecContext.create(name, "r")
+    except (av.FFmpegError, ValueError):
+        return None
+    decoder.extradata = stream.codec_context.extradata
+    decoder.pix_fmt = "yuva420p"
+    return decoder
 
 
 def _interlace_encoder(context: av.codec.context.CodecContext, info: VideoInfo) -> "_FieldFlags | None":
