@@ -13,8 +13,10 @@ from .remapping import (VIDEO_OPTIONS, add_encode_options, add_io_arguments, add
                         video_alpha)
 
 DESCRIPTION = """\
-Undistort INPUT into OUTPUT. Images: PNG, JPEG, TIFF (8- and 16-bit and float32 TIFF kept, alpha
-kept). Videos: anything FFmpeg reads (MP4, MOV, MXF, TS, MKV, WebM ...; image sequences as
+Undistort INPUT into OUTPUT ('glradial distort' is the inverse). Images: PNG, JPEG, TIFF, OpenEXR
+(8- and 16-bit and float kept; EXR: every channel, HALF/FLOAT, values beyond 1 kept); a folder of
+images into a folder. Alpha (RGBA images, ProRes 4444, VP9, FFV1) kept and interpolated
+premultiplied (--alpha); interlaced video corrected field by field (--field-order). Videos: anything FFmpeg reads (MP4, MOV, MXF, TS, MKV, WebM ...; image sequences as
 frame_%04d.png), written through FFmpeg (PyAV): audio, subtitle and data streams are copied
 untouched; frame rate, timestamps, timecode, colour tags and field order are kept; 10- and 12-bit
 sources are processed at 16 bits and written back at their depth. The output codec is the input's
@@ -33,7 +35,7 @@ OUTPUT is replaced only with -y."""
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
         "correct",
-        help="undistort an image or a video (given lens, lens track or --auto)",
+        help="undistort an image, folder or video (given lens, lens track or --auto)",
         description=DESCRIPTION,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
