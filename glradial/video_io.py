@@ -298,12 +298,17 @@ class VideoReader:
         self.keep_decoded = keep_decoded
         self.frames_read = 0
         self._last_pts: int | None = None
-        self._decoder = _alpha_decoder(stream) if alpha else None
-        if self._decoder is not None:  # VP8/VP9 with an alpha plane: libvpx decodes it (yuva420p)
+        self._take_alpha(alpha)
+
+    def _take_alpha(self, wanted: bool) -> None:
+        """Set :attr:`alpha` (frames carry the source's alpha as a 4th channel: ``alpha=True`` and a
+        pix_fmt with alpha) and the conversion format; VP8/VP9 with an alpha plane get libvpx's
+        decoder, which returns it (yuva420p)."""
+        self._decoder = _alpha_decoder(self.stream) if wanted else None
+        if self._decoder is not None:
             self.info = VideoInfo(**{**self.info.__dict__, "pix_fmt": self._decoder.pix_fmt or "yuva420p"})
-        #: frames carry the source's alpha as a 4th channel (``alpha=True`` and a pix_fmt with alpha)
-        self.alpha = bool(alpha) and has_alpha(self.info.pix_fmt)
-        self._format = _rgb_format(self.info.bit_depth, order, self.alpha)
+        self.alpha = bool(wanted) and has_alpha(self.info.pix_fmt)
+        self._format = _rgb_format(self.info.bit_depth, self.order, self.alpha)
 
     # -- frames --------------------------------------------------------------------------------
     def convert(self, frame: av.VideoFrame, max_width: int | None = None) -> np.ndarray:

@@ -7,8 +7,8 @@ import os
 import sys
 from pathlib import Path
 
-from . import UsageError, add_lens_options, lens_from_args, lens_given, positive_float, positive_int, show_progress
-from .remapping import (VIDEO_OPTIONS, add_encode_options, add_io_arguments, add_render_options, check_encode_options,
+from . import UsageError, lens_from_args, lens_given, positive_float, positive_int, show_progress
+from .remapping import (VIDEO_OPTIONS, add_encode_options, add_remap_parser, add_render_options, check_encode_options,
                         check_paths, image_transform, reject_for, remap_folder, remap_image_file, remap_video, same_file, summary,
                         video_alpha)
 
@@ -33,20 +33,15 @@ OUTPUT is replaced only with -y."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "correct",
-        help="undistort an image, folder or video (given lens, lens track or --auto)",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    parser, lens = add_remap_parser(
+        subparsers, "correct", "undistort an image, folder or video (given lens, lens track or --auto)", DESCRIPTION,
+        "lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE, --lens-track or --auto)",
+        "videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)",
     )
-    add_io_arguments(parser, "correct")
-    lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE, --lens-track or --auto)")
-    add_lens_options(lens)
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
     lens.add_argument("--method", choices=("auto", "net", "lines"),
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
-    lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)")
     add_render_options(
         parser, "output scale: same = centre scale kept (as cv2.undistort), crop = zoom in until every "
         "output pixel has a source, full = zoom out until the whole input is visible (default: same)",
@@ -64,8 +59,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def run(args: argparse.Namespace) -> int:
-    given = lens_given(args)
+def _check_lens_options(args: argparse.Namespace, given: bool) -> None:
+    """The lens given one way, and the options that need ``--auto`` only with it."""
     sources = [name for name, used in (("--k1/--k2/--cx/--cy/--pixel-aspect/--lens", given), ("--auto", args.auto),
                                        ("--lens-track", args.lens_track)) if used]
     if len(sources) > 1:
@@ -78,6 +73,11 @@ def run(args: argparse.Namespace) -> int:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
     if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
         raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
+
+
+def run(args: argparse.Namespace) -> int:
+    given = lens_given(args)
+    _check_lens_options(args, given)
     check_encode_options(args)
     kind = check_paths(args)
     progress = show_progress(args)

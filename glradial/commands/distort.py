@@ -6,8 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from . import UsageError, add_lens_options, lens_from_args, lens_given, show_progress
-from .remapping import (VIDEO_OPTIONS, add_encode_options, add_io_arguments, add_render_options, check_encode_options,
+from . import UsageError, lens_from_args, lens_given, show_progress
+from .remapping import (VIDEO_OPTIONS, add_encode_options, add_remap_parser, add_render_options, check_encode_options,
                         check_paths, image_transform, reject_for, remap_folder, remap_image_file, remap_video,
                         video_alpha)
 
@@ -27,16 +27,12 @@ OUTPUT is replaced only with -y."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser = subparsers.add_parser(
-        "distort",
-        help="apply a lens to an image, folder or video (the inverse of correct: graphics into a camera's lens)",
-        description=DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    parser, _lens = add_remap_parser(
+        subparsers, "distort",
+        "apply a lens to an image, folder or video (the inverse of correct: graphics into a camera's lens)", DESCRIPTION,
+        "lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --lens-track)",
+        "videos: per-frame lens file (the sidecar of 'correct --auto'; .csv or .json)",
     )
-    add_io_arguments(parser, "distort")
-    lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --lens-track)")
-    add_lens_options(lens)
-    lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (the sidecar of 'correct --auto'; .csv or .json)")
     render = add_render_options(
         parser, "output scale, the same numbers as 'correct': same = centre scale kept, crop = zoom in until every "
         "output pixel has a source (undone by 'correct --fit full'), full = the whole input stays visible "

@@ -17,10 +17,10 @@ from typing import Callable
 
 import numpy as np
 
-from . import UsageError, finite_float, positive_int  # noqa: F401  (positive_int: re-exported for commands)
+from . import UsageError, finite_float
 
 __all__ = [
-    "bitrate", "frame_rate", "add_io_arguments", "add_render_options", "add_encode_options", "check_paths",
+    "bitrate", "frame_rate", "add_remap_parser", "add_io_arguments", "add_render_options", "add_encode_options", "check_paths",
     "reject_for", "check_encode_options", "image_transform", "remap_image_file", "remap_folder",
     "remap_video", "same_file", "summary", "video_alpha", "folder_images", "ALPHA_CHOICES", "DIRECTIONS",
     "VIDEO_OPTIONS",
@@ -61,6 +61,21 @@ def frame_rate(text: str) -> Fraction:
 
 
 # -- options ----------------------------------------------------------------------------------------
+def add_remap_parser(subparsers: argparse._SubParsersAction, name: str, summary_help: str, description: str,
+                     lens_title: str, track_help: str) -> tuple[argparse.ArgumentParser, argparse._ArgumentGroup]:
+    """The subparser of ``correct``/``distort`` (``name``) with INPUT, OUTPUT, ``-y`` and the lens
+    group (``--k1 --k2 --cx --cy --pixel-aspect --lens --lens-track``), returned with that group."""
+    from . import add_lens_options
+
+    parser = subparsers.add_parser(name, help=summary_help, description=description,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    add_io_arguments(parser, name)
+    lens = parser.add_argument_group(lens_title)
+    add_lens_options(lens)
+    lens.add_argument("--lens-track", metavar="CSV", help=track_help)
+    return parser, lens
+
+
 def add_io_arguments(parser: argparse.ArgumentParser, verb: str) -> None:
     """INPUT, OUTPUT and ``-y``; ``verb`` ("correct", "distort") words the help."""
     parser.add_argument("input", metavar="INPUT", help=f"image, folder of images, video or image sequence (frame_%%04d.png) to {verb}")
