@@ -50,22 +50,51 @@ def remap_with_alpha(
 ) -> np.ndarray:
     """``remap(frame, fill)`` (any resampling that treats channels alike and keeps shape and dtype)
     with a straight-alpha RGBA ``frame`` (or batch, alpha last) premultiplied before and divided
-    after; anything else is passed through. ``fill`` is in the frame's convention and units."""
+    after; anything else is passed through. ``fill`` is in the frame's convention and units.
+
+    uint8 frames are premultiplied exactly in 16-bit fixed point (``c a``, ``a 255``) and resampled
+    as uint16; other dtypes in float32. Both use OpenCV's vectorised arithmetic."""
     if not _needs_premultiply(frame, check_alpha(alpha)):
         return remap(frame, fill)
     unit = 1.0 if frame.dtype.kind == "f" else float(np.iinfo(frame.dtype).max)
-    work = frame.astype(np.float32)
-    work[..., :3] *= work[..., 3:4] / np.float32(unit)
-    fill_values = np.broadcast_to(np.asarray(fill, dtype=np.float64).ravel(), (4,)) if np.size(fill) in (1, 4) else None
-    if fill_values is None:
+    if np.size(fill) not in (1, 4):
         return remap(frame, fill)  # the remap's own error for a fill of the wrong length
+    fill_values = np.broadcast_to(np.asarray(fill, dtype=np.float64).ravel(), (4,))
     if unit != 1.0 and not all(0 <= v <= unit for v in fill_values):
         raise ValueError(f"fill {fill!r} is outside the range of {frame.dtype} (0..{unit:g})")
-    premultiplied_fill = [*(fill_values[:3] * fill_values[3] / unit), fill_values[3]]
-    result = remap(work, premultiplied_fill)
-    coverage = result[..., 3:4] / np.float32(unit)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        result[..., :3] = np.where(coverage > 0, result[..., :3] / coverage, 0.0)
+    one = _premultiplied_u8 if frame.dtype == np.uint8 else _premultiplied_float
+    if frame.ndim == 4:
+        return np.stack([one(image, fill_values, unit, remap) for image in frame])
+    return one(frame, fill_values, unit, remap)
+
+
+def _premultiplied_u8(frame: np.ndarray, fill: np.ndarray, unit: float, remap) -> np.ndarray:
+    """uint8: ``(c a, a 255)`` as uint16 (exact), resampled, then one division by ``(a', a', a',
+    65025)`` scaled by 255 gives colour and alpha back as rounded, saturated uint8 (0 where
+    ``a' = 0``: OpenCV's integer division by zero)."""
+    import cv2
+
+    alpha = np.ascontiguousarray(frame[..., 3])
+    work = cv2.multiply(frame, cv2.merge([alpha, alpha, alpha, np.full_like(alpha, 255)]), dtype=cv2.CV_16U)
+    result = remap(work, [*(fill[:3] * fill[3]), fill[3] * 255])
+    coverage = np.ascontiguousarray(result[..., 3])
+    divisor = cv2.merge([coverage, coverage, coverage, np.full_like(coverage, 65025)])
+    return cv2.divide(result, divisor, scale=255, dtype=cv2.CV_8U)
+
+
+def _premultiplied_float(frame: np.ndarray, fill: np.ndarray, unit: float, remap) -> np.ndarray:
+    """uint16 and float frames: premultiplied in float32, resampled, divided by the resampled alpha
+    (colour 0 where it is 0), rounded and clipped back for uint16."""
+    import cv2
+
+    work = frame.astype(np.float32)
+    alpha = work[..., 3] * np.float32(1 / unit)
+    work = cv2.multiply(work, cv2.merge([alpha, alpha, alpha, np.ones_like(alpha)]))
+    result = remap(work, [*(fill[:3] * fill[3] / unit), fill[3]])
+    coverage = result[..., 3] * np.float32(1 / unit)
+    inverse = np.divide(1.0, coverage, out=np.zeros_like(coverage), where=coverage > 0)
+    result = cv2.multiply(result, cv2.merge([inverse, inverse, inverse, np.ones_like(inverse)]))
     if frame.dtype.kind == "u":
-        return np.clip(np.rint(result), 0, unit).astype(frame.dtype)
+        np.rint(result, out=result)
+        np.clip(result, 0, unit, out=result)
     return result.astype(frame.dtype, copy=False)
