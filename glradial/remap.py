@@ -33,6 +33,12 @@ frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k
   Such pixels get ``fill`` exactly; every other pixel is interpolated with taps beyond the edge
   repeating the edge pixel (``BORDER_REPLICATE``), so the fill never bleeds into valid pixels
   (OpenCV's ``cv2.undistort`` instead blends the outermost ring with black).
+* ``alpha``: a 4-channel frame is RGBA with alpha last; ``"straight"`` (default) frames are
+  interpolated premultiplied and returned straight, ``"premultiplied"`` frames (and 4 channels that
+  are not colour and alpha) are resampled channel by channel (:mod:`glradial.alpha`). Textures given
+  to :meth:`Remapper.render_texture` are resampled as stored: give it premultiplied ones.
+* A lens and fit that would leave most of the output empty (under :data:`MIN_COVERAGE` of its pixels
+  with a source) is a ``ValueError`` naming the lens, on every backend (:func:`check_coverage`).
 * ``interpolation``: ``"nearest"``, ``"linear"`` (bilinear) or ``"cubic"`` (Keys, a = -0.75, the
   kernel of OpenCV's ``INTER_CUBIC``).
 * ``backend``: ``"gl"`` (the shaders, through :class:`Remapper` on the thread's EGL context),
@@ -364,7 +370,8 @@ class Remapper:
         (``gl_FragCoord.y = 0.5``), no flip; a window's default framebuffer shows row 0 at the
         bottom. ``viewport = (x, y, width, height)`` in ``target`` pixels (default: all of it) is
         the output frame; its size sets the fit and the fold-over check. ``fill`` is RGBA in
-        texture units (0..1 for normalized textures). ``scale`` overrides ``fit``. The caller's
+        texture units (0..1 for normalized textures). Texels are interpolated as stored: a key and
+        fill must be premultiplied to keep their edges free of fringes. ``scale`` overrides ``fit``. The caller's
         blend, scissor and other state apply; the sampler state of ``source`` is ignored (taps
         are texelFetch).
         """
