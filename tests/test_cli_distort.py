@@ -180,6 +180,7 @@ def test_the_threshold_accepts_every_real_lens():
         (["{image}", "{tmp}/o.png", "--k1", "0.1", "--lens-track", "x.csv"], "cannot be combined", 2),
         (["{image}", "{tmp}/o.png", "--k1", "0.1", "--codec", "h264"], "--codec is for videos", 2),
         (["{image}", "{tmp}/o.jpg", "--k1", "0.1", "--alpha", "sideways"], "invalid choice", 2),
+        (["{tmp}/f_%04d.exr", "{tmp}/o_%04d.exr", "--k1", "0.1"], "put the frames in a folder", 2),
     ],
 )
 def test_distort_bad_input_is_one_line(tmp_path, photo, capsys, argv, message, status):
@@ -188,6 +189,7 @@ def test_distort_bad_input_is_one_line(tmp_path, photo, capsys, argv, message, s
     image = tmp_path / "in.png"
     write_image(image, photo)
     write_image(folder / "x.png", photo)
+    write_image(tmp_path / "f_0001.exr", photo.astype(np.float32) / 255)
     filled = [a.format(folder=folder, tmp=tmp_path, image=image) for a in argv]
     assert main(["distort", *filled]) == status
     err = capsys.readouterr().err

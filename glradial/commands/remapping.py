@@ -157,6 +157,10 @@ def check_paths(args: argparse.Namespace) -> str:
         raise UsageError("OUTPUT must differ from INPUT (glradial never writes over its input)")
     if source.is_dir():
         return _check_folder_output(source, target)
+    for path in (source, target):
+        if is_sequence(path) and path.suffix.lower() == ".exr":
+            raise UsageError(f"{str(path)!r}: an EXR image sequence would go through FFmpeg, which clips values beyond 1; "
+                             "put the frames in a folder and give the folder (each EXR is then read as an image)")
     kind_in, kind_out = media_kind(source), media_kind(target)
     if target.is_dir():
         raise UsageError(f"INPUT is {_article(kind_in)} {kind_in} but OUTPUT {str(target)!r} is a folder")
