@@ -453,6 +453,8 @@ def _interlace_encoder(context: av.codec.context.CodecContext, info: VideoInfo) 
     if info.fields == "progressive":
         return None
     context.flags |= av.codec.context.Flags.interlaced_dct | av.codec.context.Flags.interlaced_me
+    if info.field_order in (FIELD_UNKNOWN, FIELD_PROGRESSIVE):  # frames flagged interlaced, stream silent
+        context.field_order = FIELD_ORDER_CODES[info.fields]
     return _FieldFlags(info.fields)
 
 

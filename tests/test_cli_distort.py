@@ -181,6 +181,7 @@ def test_the_threshold_accepts_every_real_lens():
         (["{image}", "{tmp}/o.png", "--k1", "0.1", "--codec", "h264"], "--codec is for videos", 2),
         (["{image}", "{tmp}/o.jpg", "--k1", "0.1", "--alpha", "sideways"], "invalid choice", 2),
         (["{tmp}/f_%04d.exr", "{tmp}/o_%04d.exr", "--k1", "0.1"], "put the frames in a folder", 2),
+        (["{tmp}/t_%04d.tif", "{tmp}/o_%04d.tif", "--k1", "0.1"], "put the frames in a folder", 2),
     ],
 )
 def test_distort_bad_input_is_one_line(tmp_path, photo, capsys, argv, message, status):
@@ -190,6 +191,7 @@ def test_distort_bad_input_is_one_line(tmp_path, photo, capsys, argv, message, s
     write_image(image, photo)
     write_image(folder / "x.png", photo)
     write_image(tmp_path / "f_0001.exr", photo.astype(np.float32) / 255)
+    write_image(tmp_path / "t_0001.tif", photo.astype(np.float32) * 4)
     filled = [a.format(folder=folder, tmp=tmp_path, image=image) for a in argv]
     assert main(["distort", *filled]) == status
     err = capsys.readouterr().err

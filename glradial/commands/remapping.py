@@ -158,9 +158,7 @@ def check_paths(args: argparse.Namespace) -> str:
     if source.is_dir():
         return _check_folder_output(source, target)
     for path in (source, target):
-        if is_sequence(path) and path.suffix.lower() == ".exr":
-            raise UsageError(f"{str(path)!r}: an EXR image sequence would go through FFmpeg, which clips values beyond 1; "
-                             "put the frames in a folder and give the folder (each EXR is then read as an image)")
+        _refuse_float_sequence(path)
     kind_in, kind_out = media_kind(source), media_kind(target)
     if target.is_dir():
         raise UsageError(f"INPUT is {_article(kind_in)} {kind_in} but OUTPUT {str(target)!r} is a folder")
@@ -170,6 +168,25 @@ def check_paths(args: argparse.Namespace) -> str:
     check_output_folder(target)
     check_video_overwrite(target, args.overwrite)
     return kind_in
+
+
+def _refuse_float_sequence(path: Path) -> None:
+    """A float image sequence (EXR, float TIFF) would go through FFmpeg, which clips values beyond 1:
+    ``UsageError`` pointing to folders, where each frame is read as an image."""
+    from ..video_io import is_sequence, sequence_files
+
+    if not is_sequence(path):
+        return
+    suffix = path.suffix.lower()
+    floating = suffix == ".exr"
+    if suffix in (".tif", ".tiff"):
+        from ..image_io import read_image
+
+        first = sequence_files(path)[:1]
+        floating = bool(first) and read_image(first[0]).dtype.kind == "f"
+    if floating:
+        raise UsageError(f"{str(path)!r}: a float image sequence would go through FFmpeg, which clips values beyond 1; "
+                         "put the frames in a folder and give the folder (each frame is then read as an image)")
 
 
 def _check_folder_output(source: Path, target: Path) -> str:
