@@ -28,8 +28,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from glradial.atomic import atomic_write_text
-from glradial.metrics import PAPER_SIZE, manifold_k2
+from glradial.media.atomic import atomic_write_text
+from glradial.lens.metrics import PAPER_SIZE, manifold_k2
 
 #: ITU-R BT.601 luma weights (R, G, B) used by the grayscale variant.
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)

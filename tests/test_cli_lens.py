@@ -13,9 +13,9 @@ import pytest
 import glradial
 from glradial import Lens
 from glradial.cli import main
-from glradial.image_io import read_image, write_image
-from glradial.video_io import VideoInfo, VideoReader, VideoWriter
-from glradial.stmap import lens_stmap, read_stmap
+from glradial.media.image_io import read_image, write_image
+from glradial.media.video_io import VideoInfo, VideoReader, VideoWriter
+from glradial.export.stmap import lens_stmap, read_stmap
 
 from conftest import DATA
 

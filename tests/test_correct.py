@@ -221,7 +221,8 @@ def test_identity_lens_is_exact(ctx):
 
 
 def test_auto_backend_decision(ctx):
-    from glradial import egl, remap
+    from glradial.gl import egl
+    from glradial.remapping import remap
 
     expected = "cpu" if egl.is_software_renderer(ctx) else "gl"
     assert remap.auto_backend() == expected
@@ -233,7 +234,7 @@ def test_render_texture_embeds_in_a_callers_pipeline(ctx, photos):
     """A caller's texture drawn into a caller's framebuffer (no CPU round trip) gives what
     correct() returns; a viewport draws into part of a larger framebuffer."""
     from glradial import Remapper
-    from glradial.egl import release_objects
+    from glradial.gl.egl import release_objects
 
     image = photos["road"]
     h, w = image.shape[:2]

@@ -138,7 +138,7 @@ def lens_given(args: argparse.Namespace) -> bool:
 def lens_from_args(args: argparse.Namespace, size: tuple[int, int] | None = None):
     """The :class:`glradial.Lens` of ``--lens FILE`` or ``--k1 --k2 --cx --cy --pixel-aspect``
     (``size``: the frame's, for an OpenCV calibration file without its own size)."""
-    from ..lens import Lens
+    from ..lens.lens import Lens
 
     numbers = {"k1": args.k1, "k2": args.k2, "cx": args.cx, "cy": args.cy, "pixel_aspect": args.pixel_aspect}
     if args.lens is not None:
@@ -153,7 +153,7 @@ def lens_from_args(args: argparse.Namespace, size: tuple[int, int] | None = None
 
 def read_lens_file(path: str, size: tuple[int, int] | None = None):
     """A :class:`glradial.Lens` from a JSON file (formats: :data:`LENS_FILE_HELP`)."""
-    from ..lens import Lens
+    from ..lens.lens import Lens
 
     source = Path(path)
     if not source.is_file():

@@ -112,9 +112,9 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def _check_paths(args: argparse.Namespace) -> str:
-    from ..atomic import check_output_folder
-    from ..image_io import media_kind
-    from ..video_io import check_video_overwrite, is_sequence
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import media_kind
+    from ..media.video_io import check_video_overwrite, is_sequence
 
     source, target = Path(args.input), Path(args.output)
     if not is_sequence(source) and not source.exists():
@@ -150,20 +150,20 @@ def run(args: argparse.Namespace) -> int:
     options = dict(fit=args.fit, interpolation=args.interpolation, backend=args.backend)
 
     if kind == "image":
-        from ..remap import correct
-        from ..image_io import read_image, write_image
+        from ..remapping.remap import correct
+        from ..media.image_io import read_image, write_image
 
         for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "every", "window",
                      "max_uncertainty"):
             if getattr(args, name) is not None:
                 raise UsageError(f"--{name.replace('_', '-')} is for videos")
-        from ..lens import Lens
+        from ..lens.lens import Lens
 
         image = read_image(args.input, order="rgb")
         if args.auto:
-            from ..lens_track import DOUBTFUL_PX
-            from ..frames import to_rgb8
-            from ..video_pipeline import _as_pair, default_estimator
+            from ..video.lens_track import DOUBTFUL_PX
+            from ..media.frames import to_rgb8
+            from ..video.video_pipeline import _as_pair, default_estimator
 
             estimate = default_estimator(args.model, args.method)(to_rgb8(image))
             k1, k2 = _as_pair(estimate)
@@ -179,11 +179,11 @@ def run(args: argparse.Namespace) -> int:
         write_image(args.output, correct(image, lens, **options), order="rgb", overwrite=args.overwrite)
         return 0
 
-    from ..video_io import EncodeOptions, VideoReader
-    from ..video_pipeline import correct_video
+    from ..media.video_io import EncodeOptions, VideoReader
+    from ..video.video_pipeline import correct_video
 
     encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
-    from ..video_io import is_sequence
+    from ..media.video_io import is_sequence
 
     if args.rate is not None and not is_sequence(args.input):
         raise UsageError("--rate is for image-sequence inputs (videos keep their own frame rate)")
@@ -196,7 +196,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
 
     if args.lens_track:
-        from ..lens_track import load_lens_track
+        from ..video.lens_track import load_lens_track
 
         with VideoReader(args.input, rate=args.rate) as reader:
             info = reader.info
@@ -205,17 +205,17 @@ def run(args: argparse.Namespace) -> int:
         _summary(args.output, written, info.frame_count)
         return 0
 
-    from ..atomic import check_output_folder
-    from ..image_io import check_overwrite
-    from ..lens_track import DOUBTFUL_PX
-    from ..video_pipeline import default_estimator, doubtful_warnings, track_video
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import check_overwrite
+    from ..video.lens_track import DOUBTFUL_PX
+    from ..video.video_pipeline import default_estimator, doubtful_warnings, track_video
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
     check_overwrite(sidecar, args.overwrite)
     if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
-    from ..video_io import VideoWriter
+    from ..media.video_io import VideoWriter
 
     with VideoReader(args.input, rate=args.rate, copy_streams=True) as reader:
         info = reader.info

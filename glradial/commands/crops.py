@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..metrics import PAPER_SIZE
+from ..lens.metrics import PAPER_SIZE
 from . import non_negative_int, parse_size, positive_int, show_progress
 
 DESCRIPTION = """\
@@ -23,7 +23,7 @@ atomically; rerunning the same command resumes an interrupted run, skipping fini
 def _supersample(text: str) -> int | str:
     if text == "auto":
         return text
-    from ..crops import MAX_SUPERSAMPLE
+    from ..synthesis.crops import MAX_SUPERSAMPLE
 
     value = positive_int(text)
     if value > MAX_SUPERSAMPLE:
@@ -66,8 +66,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..dataset import write_crops_dataset
-    from ..progress import Progress
+    from ..synthesis.dataset import write_crops_dataset
+    from ..media.progress import Progress
 
     bar = Progress(args.count, "crops", unit="crops", enabled=show_progress(args))
     try:

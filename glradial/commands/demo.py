@@ -20,7 +20,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from ..lens.metrics import PAPER_SIZE, manifold_k2, max_displacement_px
 from . import finite_float, parse_size, positive_float, positive_int
 
 DESCRIPTION = __doc__.split("\n\n", 1)[1]
@@ -59,7 +59,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 # -- geometry -----------------------------------------------------------------------------------
 def pitch_lines() -> list[tuple[str, np.ndarray, np.ndarray]]:
     """The straight pitch markings as (name, start, end) scene points in metres (z = 0)."""
-    from ..stadium_style import HALF_LENGTH as L, HALF_WIDTH as W
+    from ..synthesis.stadium_style import HALF_LENGTH as L, HALF_WIDTH as W
 
     box_x, box_y = L - 16.5, 20.16
     area_x, area_y = L - 5.5, 9.16
@@ -221,7 +221,7 @@ def write_outputs(out: Path, frame: np.ndarray, corrected: np.ndarray, chords: l
                   straight: list[np.ndarray], labels: tuple[str, str, str, str], log: Callable[[str], None]) -> None:
     """Compose the figure (:func:`compose_figure`) and write ``demo.png``, ``distorted.png`` and
     ``corrected.png`` to ``out`` (both demo sources)."""
-    from ..image_io import write_image
+    from ..media.image_io import write_image
 
     figure = compose_figure(frame, corrected, chords, straight, labels)
     write_image(out / "distorted.png", frame)
@@ -234,14 +234,14 @@ def estimate_and_report(frame: np.ndarray, true_lens, args: argparse.Namespace, 
     """The lens the demo corrects with: the estimate of ``frame`` by ``args.method`` with the
     bundled model (or ``args.model``), printed beside the true lens with its maximum displacement
     error (px at 1920) and the uncertainty it states; the true lens when no model is shipped."""
-    from ..lens import corner_radius
+    from ..lens.lens import corner_radius
 
     model = _find_model(args.model)
     if model is None:
         print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
               "correcting with the true lens", flush=True)
         return true_lens
-    from ..estimator import Estimator
+    from ..estimation.estimator import Estimator
 
     estimate = Estimator(model).estimate(frame, method=args.method)
     size = (frame.shape[1], frame.shape[0])
@@ -260,14 +260,14 @@ def _find_model(explicit: str | None) -> Path | None:
         if not path.is_file():
             raise FileNotFoundError(f"model file {explicit!r} does not exist")
         return path
-    from ..estimator import default_model_path
+    from ..estimation.estimator import default_model_path
 
     path = default_model_path()
     return path if path.is_file() else None
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..progress import Progress
+    from ..media.progress import Progress
     from . import show_progress
 
     if args.source == "real":
@@ -283,11 +283,11 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, bar) -> int:
     """The demo's five steps (panorama, frame, estimate, correct, figure), one bar step each."""
-    from ..crops import CropParams, render_crops
-    from ..lens import Lens, lens_to_pixels
-    from ..remap import correct
-    from ..stadium import stadium_panorama
-    from ..stadium_style import sample_style
+    from ..synthesis.crops import CropParams, render_crops
+    from ..lens.lens import Lens, lens_to_pixels
+    from ..remapping.remap import correct
+    from ..synthesis.stadium import stadium_panorama
+    from ..synthesis.stadium_style import sample_style
 
     log = timed_log()
     size = args.size

@@ -59,7 +59,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def settings(args: argparse.Namespace, command: str):
     """The :class:`~glradial.evaluation.EvaluationSettings` of parsed options."""
-    from ..evaluation import EvaluationSettings
+    from ..evaluation.evaluation import EvaluationSettings
 
     return EvaluationSettings(
         n=args.n, panoramas=args.test_panoramas, split=args.split, panorama_size=tuple(args.panorama_size),
@@ -68,11 +68,11 @@ def settings(args: argparse.Namespace, command: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimator import default_model_path
-    from ..evaluation import OnnxPredictor, evaluate
+    from ..estimation.estimator import default_model_path
+    from ..evaluation.evaluation import OnnxPredictor, evaluate
 
     if args.frames or args.calibrated:
-        from ..real_eval import evaluate_folder
+        from ..evaluation.real_eval import evaluate_folder
 
         evaluate_folder(args.frames, args.out, calibrated=args.calibrated, procedural=args.procedural,
                         model=args.model, threads=args.threads, remove_own_lens=args.remove_own_lens)

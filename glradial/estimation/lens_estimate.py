@@ -24,7 +24,7 @@ from typing import Literal
 
 import numpy as np
 
-from .lens import Lens, real_number
+from ..lens.lens import Lens, real_number
 
 Method = Literal["auto", "net", "lines"]
 #: Values of the ``method`` argument of the estimators.

@@ -49,11 +49,11 @@ from typing import Any, Iterator, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from .atomic import atomic_path
+from ..media.atomic import atomic_path
 from .crops import CropParams, PanoramaRenderers, crop_labels, load_panorama, sample_crop_params
-from .lens import frame_size
-from .lensfuncs import LENS_NEWTON_STEPS
-from .metrics import PAPER_SIZE
+from ..lens.lens import frame_size
+from ..lens.lensfuncs import LENS_NEWTON_STEPS
+from ..lens.metrics import PAPER_SIZE
 
 #: Newton steps of the exact inverse when crops come from the paper's distribution: 3 steps from the
 #: Drap-Lefevre seed reach 1e-9 lens units on every such lens (see tests/test_crop_producer.py); any

@@ -35,9 +35,9 @@ from typing import Callable, Iterable
 import numpy as np
 
 from .evaluation import a_beats_b
-from .lens import Lens
-from .lens_estimate import NET_UNCERTAINTY_PX, LensEstimate, choose, line_candidates
-from .metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from ..lens.lens import Lens
+from ..estimation.lens_estimate import NET_UNCERTAINTY_PX, LensEstimate, choose, line_candidates
+from ..lens.metrics import PAPER_SIZE, manifold_k2, max_displacement_px
 
 METHOD_NAMES = ("net", "lines", "auto")
 #: Extended range of real lenses: k1 bounds, and the spread of k2 above the manifold.
@@ -93,7 +93,7 @@ def centre_16_9(frame: np.ndarray) -> np.ndarray:
 
 def extended_lenses(n: int, seed: int, size: tuple[int, int] = PAPER_SIZE) -> list[tuple[float, float]]:
     """``n`` lenses with k1 ~ U(EXTENDED_K1), k2 = manifold + |N(0, EXTENDED_K2_SPREAD)|, valid on ``size``."""
-    from .crops import lens_covers_frame
+    from ..synthesis.crops import lens_covers_frame
 
     rng = np.random.default_rng(seed)
     out: list[tuple[float, float]] = []
@@ -107,7 +107,7 @@ def extended_lenses(n: int, seed: int, size: tuple[int, int] = PAPER_SIZE) -> li
 
 def paper_lenses(n: int, seed: int) -> list[tuple[float, float]]:
     """``n`` lenses of the paper's distribution (:func:`glradial.crops.sample_crop_params`)."""
-    from .crops import sample_crop_params
+    from ..synthesis.crops import sample_crop_params
 
     return [(p.k1, p.k2) for p in sample_crop_params(n, seed)]
 
@@ -171,7 +171,7 @@ class Evaluator:
     """Runs the three methods on frames; one CNN session (``threads`` as :class:`glradial.Estimator`)."""
 
     def __init__(self, model: str | None = None, threads: int | None = None) -> None:
-        from .estimator import Estimator
+        from ..estimation.estimator import Estimator
 
         self.estimator = Estimator(model, threads=threads)
 
@@ -182,14 +182,14 @@ class Evaluator:
 
 
 def _distorted(frame: np.ndarray, lenses: Iterable[tuple[float, float]]):
-    from .remap import distort
+    from ..remapping.remap import distort
 
     for k1, k2 in lenses:
         yield (k1, k2), distort(frame, k1, k2, fit="crop", backend="cpu")
 
 
 def _panorama_crops(panorama: np.ndarray, lenses: list[tuple[float, float]], seed: int):
-    from .crops import CropParams, CropRenderer, sample_crop_params
+    from ..synthesis.crops import CropParams, CropRenderer, sample_crop_params
 
     poses = sample_crop_params(len(lenses), seed, hfov=PANORAMA_HFOV, tilt=PANORAMA_TILT)
     params = [CropParams(p.pan, p.tilt, p.roll, p.hfov, k1, k2) for p, (k1, k2) in zip(poses, lenses)]
@@ -201,9 +201,9 @@ def _panorama_crops(panorama: np.ndarray, lenses: list[tuple[float, float]], see
 
 def procedural_frames(n: int, panoramas: int = 4, split: str = "test", seed: int = 0, size: tuple[int, int] = (4096, 2048)):
     """``n`` crops (paper distribution) of ``panoramas`` held-out procedural stadiums -> ``(lens, frame)``."""
-    from .crops import CropRenderer, sample_crop_params
-    from .stadium import stadium_panorama
-    from .stadium_style import split_seeds
+    from ..synthesis.crops import CropRenderer, sample_crop_params
+    from ..synthesis.stadium import stadium_panorama
+    from ..synthesis.stadium_style import split_seeds
 
     per = [n // panoramas + (i < n % panoramas) for i in range(panoramas)]
     for j, (stadium, count) in enumerate(zip(split_seeds(split, panoramas), per)):
@@ -283,7 +283,7 @@ def plot(samples: list[Sample], out: Path, stem: str) -> list[str]:
         import matplotlib.pyplot as plt
     except ImportError:
         return []
-    from .atomic import atomic_path
+    from ..media.atomic import atomic_path
 
     sources = sorted({s.source for s in samples})
     cols = min(4, len(sources))
@@ -325,8 +325,8 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     ``real_metrics.json`` and ``real_errors.png`` into ``out``. Returns the summary.
     ``remove_own_lens``: a frame whose own lens the line fit and the CNN agree on
     (:func:`agreed_own_lens`) is first corrected with it (``fit="crop"``)."""
-    from .atomic import atomic_write_text
-    from .remap import correct
+    from ..media.atomic import atomic_write_text
+    from ..remapping.remap import correct
 
     if isinstance(lenses, bool) or not isinstance(lenses, int) or lenses < 1:
         raise ValueError(f"lenses must be a positive integer, got {lenses!r}")
@@ -401,7 +401,7 @@ def calibrate(n: int = 200, panoramas: int = 4, model: str | None = None, thread
     """Measure the constants of :mod:`glradial.lens_estimate` on ``n`` procedural crops of the
     **validation** split: the CNN's 90th-percentile error, and the scale that puts 90 % of the line
     fits' errors inside ``scale * sigma_px + LINES_UNCERTAINTY_FLOOR_PX``."""
-    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, fit_frame
+    from ..estimation.lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, fit_frame
 
     evaluator = Evaluator(model, threads)
     net_err, ratios, line_err = [], [], []

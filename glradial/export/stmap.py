@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_path, check_output_folder
-from .lens import NO_SOURCE, Lens
-from .native_stderr import silenced
+from ..media.atomic import atomic_path, check_output_folder
+from ..lens.lens import NO_SOURCE, Lens
+from ..media.native_stderr import silenced
 
 __all__ = ["STMAP_EXTENSIONS", "STMAP_NO_SOURCE", "check_stmap_path", "stmap_from_maps", "maps_from_stmap", "lens_stmap", "write_stmap", "read_stmap"]
 
@@ -107,7 +107,7 @@ def write_stmap(path: str | os.PathLike, stmap: np.ndarray) -> Path:
     if stmap.ndim != 3 or stmap.shape[2] != 3:
         raise ValueError(f"an STMap must be H×W×3, got shape {stmap.shape}")
     if ext in (".tif", ".tiff"):
-        from .image_io import write_image
+        from ..media.image_io import write_image
 
         return write_image(target, stmap)  # float32 RGB TIFF, written atomically
     with atomic_path(target) as tmp:

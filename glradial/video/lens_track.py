@@ -41,8 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_write_text
-from .lens import Lens
+from ..media.atomic import atomic_write_text
+from ..lens.lens import Lens
 
 __all__ = ["DOUBTFUL_PX", "LensTrack", "load_lens_track"]
 

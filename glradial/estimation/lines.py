@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .lens import lens_to_pixels, pixels_to_lens
+from ..lens.lens import lens_to_pixels, pixels_to_lens
 
 #: Largest width (pixels) of the gray copy lines are detected on (800: as accurate as 960 on validation
 #: crops, 2/3 of the pixels; docs/LINES.md).
@@ -309,7 +309,7 @@ def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
 def _undistorted(x: np.ndarray, y: np.ndarray, size: tuple[int, int], lens: tuple[float, float]):
     """Detection-copy pixels undistorted with ``lens`` (exact inverse); pixels with no undistorted
     point (beyond the lens's reach) are kept as they are."""
-    from .lensfuncs import undistort_point_exact
+    from ..lens.lensfuncs import undistort_point_exact
 
     p_d = pixels_to_lens(np.stack([x, y], axis=1), size)
     p_u, valid = undistort_point_exact(p_d, float(lens[0]), float(lens[1]))

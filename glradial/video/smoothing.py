@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from .frames import to_rgb8
-from .metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, max_displacement
+from ..media.frames import to_rgb8
+from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, max_displacement
 
 __all__ = ["ShotDetector", "detect_cuts", "hold_static", "smooth_shot", "smooth_track", "shot_ids"]
 

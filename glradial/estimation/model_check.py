@@ -56,7 +56,7 @@ def file_sha256(path: Path) -> str:
 
 def write_checksum(path: Path) -> Path:
     """Record ``path``'s SHA-256 in its checksum file (atomically); returns the checksum file."""
-    from .atomic import atomic_write_text
+    from ..media.atomic import atomic_write_text
 
     path = Path(path)
     return atomic_write_text(checksum_path(path), f"{file_sha256(path)}  {path.name}\n")

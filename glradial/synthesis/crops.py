@@ -29,11 +29,11 @@ from typing import Literal, Mapping, Sequence
 import moderngl
 import numpy as np
 
-from . import lensfuncs
-from .inverse_series import SERIES_DEGREE, fit_inverse_series
-from .lens import InverseMethod, Lens, corner_radius, frame_size, real_number
-from .metrics import PAPER_SIZE, manifold_k2
-from .shaderlib import TEXTURE_FORMATS
+from ..lens import lensfuncs
+from ..lens.inverse_series import SERIES_DEGREE, fit_inverse_series
+from ..lens.lens import InverseMethod, Lens, corner_radius, frame_size, real_number
+from ..lens.metrics import PAPER_SIZE, manifold_k2
+from ..gl.shaderlib import TEXTURE_FORMATS
 
 #: The paper's sampling distribution (degrees; k1 in lens units). k2 = manifold(k1) + N(0, K2_NOISE).
 PAPER_RANGES: Mapping[str, tuple[float, float]] = {
@@ -357,7 +357,7 @@ class CropRenderer:
     ) -> None:
         import moderngl
 
-        from .egl import GLOwner, max_texture_size, thread_context
+        from ..gl.egl import GLOwner, max_texture_size, thread_context
 
         self.size = frame_size(size)
         self.out_size = frame_size(out_size) if out_size is not None else self.size
@@ -415,7 +415,7 @@ class CropRenderer:
             raise
 
     def _build(self, array: np.ndarray) -> None:
-        from .shaderlib import build_program
+        from ..gl.shaderlib import build_program
 
         ctx = self.ctx
         tex_dtype = TEXTURE_FORMATS[self.dtype][0]
@@ -548,7 +548,7 @@ class CropRenderer:
 
     def release(self) -> None:
         """Free the GL objects (idempotent)."""
-        from .egl import release_objects
+        from ..gl.egl import release_objects
 
         objects = getattr(self, "_objects", [])
         if objects:
@@ -583,7 +583,7 @@ def load_panorama(item: object) -> np.ndarray:
     """A panorama as H×W×3 uint8 RGB: arrays through :func:`glradial.frames.to_rgb8` (grey repeated,
     alpha dropped, 16-bit and float scaled); paths read (image files through OpenCV, ``.npy``
     arrays such as the stadium cache, or a crop producer's panoramas, mapped by NumPy)."""
-    from .frames import to_rgb8
+    from ..media.frames import to_rgb8
 
     if isinstance(item, (str, os.PathLike)):
         if not str(item).endswith(".npy"):
@@ -625,7 +625,7 @@ def panorama_file_size(path: str | os.PathLike) -> tuple[int, int]:
         except Exception:  # noqa: BLE001 - a format Pillow does not know, or not an image: ask OpenCV
             import cv2
 
-            from .native_stderr import silenced
+            from ..media.native_stderr import silenced
 
             with silenced():
                 decoded = cv2.imread(name, cv2.IMREAD_UNCHANGED)

@@ -33,10 +33,10 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .atomic import atomic_write_text
+from ..media.atomic import atomic_write_text
 from .crops import CropParams, PanoramaRenderers, panorama_file_size, sample_crop_params, supersample_grid
-from .lens import InverseMethod, frame_size
-from .metrics import PAPER_SIZE
+from ..lens.lens import InverseMethod, frame_size
+from ..lens.metrics import PAPER_SIZE
 
 SPLITS = ("train", "val", "test")
 FORMATS = ("png", "jpg")
@@ -258,7 +258,7 @@ def _write_crops(
 
 def _write_image(path: Path, image: np.ndarray) -> None:
     """Write the RGB crop atomically; a failed write names ``path`` and the errno (e.g. ENOSPC)."""
-    from .image_io import write_image
+    from ..media.image_io import write_image
 
     write_image(path, image)
 

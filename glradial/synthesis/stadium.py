@@ -24,8 +24,8 @@ from typing import Any
 import moderngl
 import numpy as np
 
-from .egl import GLOwner, check_gl_error, max_texture_size, release_objects, thread_context, thread_resource
-from .shaderlib import build_program
+from ..gl.egl import GLOwner, check_gl_error, max_texture_size, release_objects, thread_context, thread_resource
+from ..gl.shaderlib import build_program
 from .stadium_style import (
     HALF_LENGTH,
     HALF_WIDTH,
@@ -357,7 +357,7 @@ def stadium_panorama_cached(seed: int, size: tuple[int, int], cache_dir: str | o
         raise RuntimeError(f"stadium_panorama({seed}) returned {pano.dtype} {pano.shape}, expected {height}x{width}x3 uint8")
     pano = np.ascontiguousarray(pano[:, :, :3])
     if path is not None:
-        from .atomic import atomic_path
+        from ..media.atomic import atomic_path
 
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:

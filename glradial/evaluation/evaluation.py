@@ -42,8 +42,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .crops import PAPER_RANGES
-from .metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px, median_interval
+from ..synthesis.crops import PAPER_RANGES
+from ..lens.metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px, median_interval
 
 __all__ = [
     "TRAINING_MEAN",
@@ -150,7 +150,7 @@ class OnnxPredictor:
     mirror averaging included; ``mirror_average=False`` runs the network once per crop)."""
 
     def __init__(self, path: str | os.PathLike, threads: int | None = None, mirror_average: bool = True):
-        from .estimator import Estimator
+        from ..estimation.estimator import Estimator
 
         self.estimator = Estimator(path, threads=threads, mirror_average=mirror_average)
         self.input_size = self.estimator.input_size
@@ -202,10 +202,10 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
     """Render the test set, predict, write ``metrics.json``, ``results.md`` and the plots to ``out``
     (all atomically); returns the metrics dict. ``input_size`` (W, H) is the network input:
     crops are rendered at twice it. Progress goes to stderr."""
-    from .crops import crop_labels, render_crop_set
-    from .crops import load_panorama
-    from .stadium import stadium_panorama_cached
-    from .stadium_style import split_seeds
+    from ..synthesis.crops import crop_labels, render_crop_set
+    from ..synthesis.crops import load_panorama
+    from ..synthesis.stadium import stadium_panorama_cached
+    from ..synthesis.stadium_style import split_seeds
 
     field = None
     if settings.field_panorama is not None and settings.ood_n > 0:  # checked before the long work
@@ -253,7 +253,7 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
         result["out_of_domain"] = {"panorama": Path(settings.field_panorama).name, "size": [field.shape[1], field.shape[0]],
                                    "crops": len(ood_labels), **metrics(*ood)}
     result["seconds"] = {"render": round(t_render, 1), "predict": round(t_pred, 1), "total": round(time.monotonic() - t0, 1)}
-    from .atomic import atomic_write_text
+    from ..media.atomic import atomic_write_text
 
     atomic_write_text(out / "metrics.json", json.dumps(result, indent=2) + "\n")
     names = plots(out, pred, labels, ood)
@@ -330,7 +330,7 @@ def plots(out: Path, pred: np.ndarray, labels: np.ndarray, ood: tuple[np.ndarray
     except ImportError:
         _say("matplotlib is not installed: no plots (pip install matplotlib)")
         return []
-    from .atomic import atomic_path
+    from ..media.atomic import atomic_path
 
     def save(name: str) -> str:
         fig.tight_layout()

@@ -38,7 +38,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .frames import to_rgb8
+from ..media.frames import to_rgb8
 from .lens_estimate import LensEstimate, Method, check_method, estimate_with_lines, net_estimate
 from .model_check import ModelLoadError, check_checksum, check_model
 

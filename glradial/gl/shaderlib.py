@@ -35,7 +35,7 @@ class ShaderCompileError(RuntimeError):
 
 def shader_dir() -> Path:
     """Folder holding the GLSL files: package data in a wheel, ``shaders/`` in a checkout."""
-    here = Path(__file__).resolve().parent
+    here = Path(__file__).resolve().parents[1]  # the glradial package
     for candidate in (here / "shaders", here.parent / "shaders"):
         if (candidate / "common.glsl").is_file():
             return candidate

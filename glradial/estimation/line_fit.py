@@ -42,9 +42,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import lensfuncs
+from ..lens import lensfuncs
 from .lines import LineEvidence
-from .metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
+from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
 
 #: Range of k1 searched (lens units): real broadcast and pitch cameras reach -0.72.
 K1_RANGE = (-1.0, 0.4)

@@ -56,9 +56,10 @@ import cv2
 import moderngl
 import numpy as np
 
-from . import egl, lensfuncs
-from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
-from .shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES, build_program
+from ..gl import egl
+from ..lens import lensfuncs
+from ..lens.lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
+from ..gl.shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES, build_program
 
 Interpolation = Literal["nearest", "linear", "cubic"]
 Backend = Literal["auto", "gl", "cpu"]

@@ -37,13 +37,13 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from .frames import to_rgb8
-from .lens import Lens, corner_radius
+from ..media.frames import to_rgb8
+from ..lens.lens import Lens, corner_radius
 from .lens_track import DOUBTFUL_PX, LensTrack
-from .metrics import REPORT_WIDTH, max_displacement
-from .progress import Progress
+from ..lens.metrics import REPORT_WIDTH, max_displacement
+from ..media.progress import Progress
 from .smoothing import ShotDetector, smooth_track
-from .video_io import CopiedPacket, EncodeOptions, VideoFrame, VideoReader, VideoWriter
+from ..media.video_io import CopiedPacket, EncodeOptions, VideoFrame, VideoReader, VideoWriter
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
@@ -154,7 +154,7 @@ class Pipelined:
 def default_estimator(model: str | os.PathLike | None = None, method: str | None = None) -> EstimatorFn:
     """The bundled estimator (:class:`glradial.Estimator`), as a frame -> lens function; ``method``
     (e.g. "auto", "net", "lines") is handed to ``Estimator.estimate`` when given."""
-    from .estimator import Estimator
+    from ..estimation.estimator import Estimator
 
     estimator = Estimator(model) if model is not None else Estimator()
     if method is None:
@@ -270,7 +270,7 @@ class _FrameCorrector:
     CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
 
     def __init__(self, backend: str, fit: str, interpolation: str) -> None:
-        from .remap import BACKENDS, auto_backend
+        from ..remapping.remap import BACKENDS, auto_backend
 
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
@@ -280,7 +280,7 @@ class _FrameCorrector:
         self._last: Lens | None = None
 
     def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
-        from .remap import Remapper, correct
+        from ..remapping.remap import Remapper, correct
 
         height, width = image.shape[:2]
         last = self._last

@@ -1,0 +1,16 @@
+"""The lens model and its conventions: `Lens` (width-normalised k1, k2, principal point, pixel
+aspect), the NumPy twins of the GLSL lens functions, the inverse series, the paper's metrics."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from .._lazy import attach
+
+if TYPE_CHECKING:
+    from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, NO_SOURCE, corner_radius, frame_size, lens_to_pixels, pixels_to_lens, real_number
+    from .inverse_series import SERIES_DEGREE, fit_inverse_series
+    from .metrics import CORNER_RADIUS_16_9, PAPER_SIZE, REPORT_WIDTH, distortion_loss, manifold_k2, max_displacement, max_displacement_px, median_interval
+    from . import lensfuncs
+
+__getattr__, __dir__, __all__ = attach(__name__, __file__)
