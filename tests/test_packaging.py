@@ -93,6 +93,7 @@ def test_wheel_layout(wheel):
     assert repo_modules == shipped_modules
     sub_packages = {p.parent.relative_to(ROOT).as_posix() for p in (ROOT / "glradial").glob("*/__init__.py")}
     shipped_packages = {Path(n).parent.as_posix() for n in names if n.endswith("/__init__.py")}
+    assert "glradial/py.typed" in names, "py.typed must ship: type checkers read the exports"
     assert sub_packages and sub_packages <= shipped_packages, f"sub-packages missing from the wheel: {sorted(sub_packages - shipped_packages)}"
 
 

@@ -24,6 +24,8 @@ import json
 import re
 from pathlib import Path
 
+from ..errors import Error
+
 __all__ = [
     "CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress",
     "add_lens_options", "lens_from_args", "read_lens_file",
@@ -32,7 +34,7 @@ __all__ = [
 _SIZE = re.compile(r"^\s*(\d+)\s*[xX×,]\s*(\d+)\s*$")
 
 
-class CliError(Exception):
+class CliError(Error):
     """A user-facing error: the CLI prints its message on one line and exits with status 1."""
 
 

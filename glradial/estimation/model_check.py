@@ -20,16 +20,13 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import ModelLoadError
+
 #: input and output names of a model exported by net/export.py (``glradial_format`` metadata)
 INPUT_NAME = "image"
 OUTPUT_NAME = "k"
 #: value of a probe frame's pixels (mid-grey)
 PROBE_LEVEL = 128
-
-
-class ModelLoadError(RuntimeError, ValueError):
-    """The model file exists but is not a usable glradial ONNX model (corrupt, wrong graph,
-    checksum mismatch). Also a ``ValueError``: a bad model is bad input to the caller."""
 
 
 @dataclass(frozen=True)

@@ -31,20 +31,12 @@ from typing import Callable, TypeVar
 
 import moderngl
 
+from ..errors import GLUnavailableError
+
 #: The Debian packages that provide headless EGL with Mesa's software rasteriser.
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
 
 _SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "lavapipe")
-
-
-class GLUnavailableError(RuntimeError, ValueError):
-    """No OpenGL 3.3 context could be created (EGL library or driver missing, or a forked child
-    with no fresh EGL display left).
-
-    A ``RuntimeError`` (the environment is at fault) that is also a ``ValueError``, so callers that
-    catch bad-input errors at the API boundary catch it too; the message names the library and the
-    packages that provide it.
-    """
 
 
 def _unavailable(wanted: str, reason: object) -> GLUnavailableError:

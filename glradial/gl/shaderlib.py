@@ -17,6 +17,8 @@ from typing import Mapping
 import moderngl
 import numpy as np
 
+from ..errors import ShaderCompileError
+
 GLSL_VERSION = "330 core"
 #: NumPy dtype of an image -> (moderngl texture dtype, the sample value a shader reads as 1.0), for
 #: the textures the programs sample and the framebuffers they write (uint8/uint16 normalised).
@@ -27,10 +29,6 @@ TEXTURE_FORMATS = {
 }
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$')
 _ERROR_LOCATION = re.compile(r"\b(\d+):(\d+)(\(\d+\))?")
-
-
-class ShaderCompileError(RuntimeError):
-    """A GLSL program failed to compile or link; the message names file and line."""
 
 
 def shader_dir() -> Path:

@@ -41,8 +41,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..media.atomic import atomic_write_text
+from ..errors import LensTrackError
 from ..lens.lens import Lens
+from ..media.atomic import atomic_write_text
 
 __all__ = ["DOUBTFUL_PX", "LensTrack", "load_lens_track"]
 
@@ -188,13 +189,13 @@ def _rows(path: Path) -> list[tuple[int, dict]]:
             if not isinstance(frames, list):
                 raise TypeError
         except (ValueError, KeyError, TypeError):
-            raise ValueError(f"lens track {str(path)!r}: not a JSON document with a 'frames' list") from None
+            raise LensTrackError(f"lens track {str(path)!r}: not a JSON document with a 'frames' list") from None
         return [(i + 1, row if isinstance(row, dict) else {}) for i, row in enumerate(frames)]
     with open(path, newline="") as handle:
         reader = csv.DictReader(handle)
         missing = {"frame", "k1", "k2"} - set(reader.fieldnames or [])
         if missing:
-            raise ValueError(f"lens track {str(path)!r} line 1: the header lacks the column(s) {', '.join(sorted(missing))}")
+            raise LensTrackError(f"lens track {str(path)!r} line 1: the header lacks the column(s) {', '.join(sorted(missing))}")
         return [(reader.line_num, row) for row in reader]
 
 
@@ -206,7 +207,7 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
         raise FileNotFoundError(f"lens track {str(path)!r} does not exist")
     rows = _rows(path)
     if not rows:
-        raise ValueError(f"lens track {str(path)!r} has no rows")
+        raise LensTrackError(f"lens track {str(path)!r} has no rows")
     n = len(rows)
     lens, shot, sure = np.empty((n, 2)), np.zeros(n, dtype=np.int64), np.full(n, np.nan)
     method = [""] * n
@@ -218,34 +219,34 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
             text = "" if text is None else str(text).strip()
             if text == "":
                 if required:
-                    raise ValueError(f"{where}: {name} is missing")
+                    raise LensTrackError(f"{where}: {name} is missing")
                 return None
             try:
                 number = float(text)
             except ValueError:
-                raise ValueError(f"{where}: {name} {text!r} is not a number") from None
+                raise LensTrackError(f"{where}: {name} {text!r} is not a number") from None
             if not math.isfinite(number):
-                raise ValueError(f"{where}: {name} must be finite, got {text!r}")
+                raise LensTrackError(f"{where}: {name} must be finite, got {text!r}")
             return number
 
         frame = value("frame")
         if frame != index:
-            raise ValueError(f"{where}: frame {row.get('frame')!r}, expected {index} (one row per frame, in order from 0)")
+            raise LensTrackError(f"{where}: frame {row.get('frame')!r}, expected {index} (one row per frame, in order from 0)")
         k1, k2 = value("k1"), value("k2")
         try:
             Lens(k1, k2).check_frame(size)
         except ValueError as err:
-            raise ValueError(f"{where}: {err}") from None
+            raise LensTrackError(f"{where}: {err}") from None
         lens[index] = (k1, k2)
         shot_value = value("shot", required=False)
         if shot_value is not None:
             if shot_value != int(shot_value) or shot_value < 0:
-                raise ValueError(f"{where}: shot must be a non-negative integer, got {row.get('shot')!r}")
+                raise LensTrackError(f"{where}: shot must be a non-negative integer, got {row.get('shot')!r}")
             shot[index] = int(shot_value)
         uncertainty = value("uncertainty_px", required=False)
         if uncertainty is not None:
             if uncertainty < 0:
-                raise ValueError(f"{where}: uncertainty_px must be >= 0, got {uncertainty}")
+                raise LensTrackError(f"{where}: uncertainty_px must be >= 0, got {uncertainty}")
             sure[index] = uncertainty
         method[index] = str(row.get("method") or "")
     return LensTrack(rate, size, shot, lens, np.full((n, 2), np.nan), np.full(n, np.nan),
