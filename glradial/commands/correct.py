@@ -8,6 +8,7 @@ import sys
 from fractions import Fraction
 from pathlib import Path
 
+from ..lens.options import BACKENDS, FITS, INTERPOLATIONS, METHODS
 from . import UsageError, add_lens_options, finite_float, lens_from_args, lens_given, positive_float, positive_int, show_progress
 
 DESCRIPTION = """\
@@ -66,21 +67,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_lens_options(lens)
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
-    lens.add_argument("--method", choices=("auto", "net", "lines"),
+    lens.add_argument("--method", choices=METHODS,
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
     lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)")
     render = parser.add_argument_group("rendering")
     render.add_argument(
-        "--fit", choices=("same", "crop", "full"), default="same",
+        "--fit", choices=FITS, default="same",
         help="output scale: same = centre scale kept (as cv2.undistort), crop = zoom in until every "
         "output pixel has a source, full = zoom out until the whole input is visible (default: same)",
     )
     render.add_argument(
-        "--interpolation", choices=("nearest", "linear", "cubic"), default="linear",
+        "--interpolation", choices=INTERPOLATIONS, default="linear",
         help="resampling filter (default: linear)",
     )
     render.add_argument(
-        "--backend", choices=("auto", "gl", "cpu"), default="auto",
+        "--backend", choices=BACKENDS, default="auto",
         help="gl = GLSL shaders through EGL, cpu = the same maps through cv2.remap, auto = the faster "
         "one on this machine (default: auto)",
     )

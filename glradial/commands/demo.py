@@ -21,6 +21,7 @@ from typing import Callable
 import numpy as np
 
 from ..lens.metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from ..lens.options import METHODS
 from . import finite_float, parse_size, positive_float, positive_int
 
 DESCRIPTION = __doc__.split("\n\n", 1)[1]
@@ -51,7 +52,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--target", type=finite_float, nargs=2, default=(-18.0, 6.0), metavar=("X", "Y"),
                         help="pitch point the camera aims at, metres from the centre spot along / across the pitch (default -18 6)")
     parser.add_argument("--model", metavar="ONNX", help="ONNX model to use instead of the bundled one")
-    parser.add_argument("--method", choices=("auto", "net", "lines"), default="auto",
+    parser.add_argument("--method", choices=METHODS, default="auto",
                         help="estimation method (default auto: the pitch-line fit when it is surer than the CNN)")
     return parser
 

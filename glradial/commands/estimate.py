@@ -6,7 +6,7 @@ import argparse
 import json
 
 from ..media.image_io import media_kind, read_image
-from ..estimation.lens_estimate import METHODS
+from ..lens.options import METHODS
 from . import positive_int, show_progress
 
 DESCRIPTION = """\

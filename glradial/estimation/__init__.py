@@ -9,7 +9,7 @@ from .._lazy import attach
 
 if TYPE_CHECKING:
     from .estimator import Estimator, default_model_path, estimate
-    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, LensEstimate, METHODS, NET_UNCERTAINTY_PX, choose, fit_frame, line_candidates
+    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, LensEstimate, NET_UNCERTAINTY_PX, choose, fit_frame, line_candidates
     from .model_check import ModelLoadError
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

@@ -25,12 +25,8 @@ from typing import Literal
 import numpy as np
 
 from ..lens.lens import Lens, real_number
+from ..lens.options import METHODS, SOURCES, Method
 
-Method = Literal["auto", "net", "lines"]
-#: Values of the ``method`` argument of the estimators.
-METHODS = ("auto", "net", "lines")
-#: Values of :attr:`LensEstimate.method` (which method produced the numbers).
-SOURCES = ("net", "lines")
 
 #: 90th percentile of the CNN's maximum displacement error (px at 1920) on validation crops.
 NET_UNCERTAINTY_PX = 16.0

@@ -8,7 +8,11 @@ from typing import TYPE_CHECKING
 from .._lazy import attach
 
 if TYPE_CHECKING:
-    from .lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, NO_SOURCE, corner_radius, frame_size, lens_to_pixels, pixels_to_lens, real_number
+    from .lens import NO_SOURCE, Lens, corner_radius, frame_size, lens_to_pixels, pixels_to_lens
+    from .options import (
+        BACKENDS, DIRECTIONS, FITS, INTERPOLATIONS, INVERSES, METHODS, SOURCES, Backend, Direction, Fit, Interpolation,
+        InverseMethod, Method, check_choice, check_positive, real_number,
+    )
     from .inverse_series import SERIES_DEGREE, fit_inverse_series
     from .metrics import CORNER_RADIUS_16_9, PAPER_SIZE, REPORT_WIDTH, distortion_loss, manifold_k2, max_displacement, max_displacement_px, median_interval
     from . import lensfuncs

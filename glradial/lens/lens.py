@@ -20,24 +20,15 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import dataclass
-from typing import Literal, Union
+
 
 import numpy as np
 
 from . import lensfuncs
+from .options import (  # noqa: F401  (re-exported: the lens's option types)
+    DIRECTIONS, FITS, INVERSES, Direction, Fit, InverseMethod, check_choice, check_positive, real_number,
+)
 
-InverseMethod = Literal["exact", "drap"]
-
-
-def real_number(name: str, value: object) -> float:
-    """Validate a finite real scalar (``bool`` refused) and return it as ``float``; the error names
-    ``name`` and the received value."""
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Real, np.floating, np.integer)):
-        raise TypeError(f"{name} must be a real number, got {type(value).__name__} {value!r}")
-    number = float(value)
-    if not math.isfinite(number):
-        raise ValueError(f"{name} must be finite, got {number}")
-    return number
 
 
 def frame_size(size: object) -> tuple[int, int]:
@@ -123,7 +114,7 @@ class Lens:
         object.__setattr__(self, "k2", real_number("k2", self.k2))
         object.__setattr__(self, "cx", real_number("cx", self.cx))
         object.__setattr__(self, "cy", real_number("cy", self.cy))
-        object.__setattr__(self, "pixel_aspect", _positive("pixel_aspect", self.pixel_aspect))
+        object.__setattr__(self, "pixel_aspect", check_positive("pixel_aspect", self.pixel_aspect))
 
     @property
     def centre(self) -> tuple[float, float]:
@@ -272,10 +263,10 @@ class Lens:
         the frame (crop/full), or for an unknown ``fit``/``direction``.
         """
         width, height = frame_size(size)
-        direction = _choice("direction", direction, DIRECTIONS)
+        direction = check_choice("direction", direction, DIRECTIONS)
         if isinstance(fit, (numbers.Real, np.floating, np.integer)) and not isinstance(fit, (bool, np.bool_)):
-            return _positive("fit scale", fit)
-        fit = _choice("fit", fit, FITS)
+            return check_positive("fit scale", fit)
+        fit = check_choice("fit", fit, FITS)
         if fit == "same":
             return 1.0
         rho = np.array([self.edge_radius((width, height)), self.frame_radius((width, height))])
@@ -319,11 +310,11 @@ class Lens:
         Raises ``ValueError`` if the lens folds over on the frame (:meth:`check_frame`).
         """
         width, height = frame_size(size)
-        direction = _choice("direction", direction, DIRECTIONS)
-        inverse = _choice("inverse", inverse, ("exact", "drap"))
+        direction = check_choice("direction", direction, DIRECTIONS)
+        inverse = check_choice("inverse", inverse, INVERSES)
         if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
             raise TypeError(f"maps dtype must be float32 or float64, got {np.dtype(dtype)}")
-        s = self.fit_scale((width, height), fit, direction) if scale is None else _positive("scale", scale)
+        s = self.fit_scale((width, height), fit, direction) if scale is None else check_positive("scale", scale)
         self.check_frame((width, height), s)
         if direction == "undistort" and np.dtype(dtype) == np.dtype(np.float32):
             return self._undistort_maps_opencv((width, height), s)
@@ -367,7 +358,7 @@ class Lens:
 
         Example: a centred crop of width ``W'`` out of a ``W``-wide frame has ``s = W / W'``.
         """
-        s = _positive("s", s)
+        s = check_positive("s", s)
         s2 = s * s
         if (s2 == 0.0 and self.k1) or (s2 * s2 == 0.0 and self.k2):
             raise ValueError(f"s={s:g} rescales lens k1={self.k1:g}, k2={self.k2:g} beyond the float range")
@@ -389,7 +380,7 @@ class Lens:
 
     def _normalised(self, radius: float) -> tuple[float, float]:
         """``(k1, k2)`` for radii divided by ``radius`` lens units (no check of the centre)."""
-        radius = _positive("radius", radius)
+        radius = check_positive("radius", radius)
         return self.k1 * radius**2, self.k2 * radius**4
 
     def to_normalised(self, radius: float) -> tuple[float, float]:
@@ -402,7 +393,7 @@ class Lens:
     @classmethod
     def from_normalised(cls, k1: float, k2: float, radius: float) -> "Lens":
         """Inverse of :meth:`to_normalised` (a centred lens)."""
-        return cls(k1, k2).rescale(_positive("radius", radius))
+        return cls(k1, k2).rescale(check_positive("radius", radius))
 
     def to_pixel(self, size: tuple[int, int]) -> tuple[float, float]:
         """Pixel-unit ("apparent") coefficients: ``k̂1 = k1 / W²``, ``k̂2 = k2 / W⁴``
@@ -500,7 +491,7 @@ class Lens:
         ``fx = focal`` defaults to ``W`` (then the numbers are equal). Exact for every lens:
         ``cv2.undistort(img, K, dist)`` then equals ``correct(img, lens)``."""
         width, height = frame_size(size)
-        f = float(width) if focal is None else _positive("focal", focal)
+        f = float(width) if focal is None else check_positive("focal", focal)
         k1, k2 = self._normalised(f / width)
         px, py = self.principal_point((width, height))
         camera = np.array([[f, 0.0, px], [0.0, f * self.pixel_aspect, py], [0.0, 0.0, 1.0]])
@@ -557,27 +548,10 @@ class Lens:
         return cls(k1, k2, offset_x / width, offset_y / width, fy / fx)
 
 
-Fit = Union[Literal["same", "crop", "full"], float]
-Direction = Literal["undistort", "distort"]
-FITS = ("same", "crop", "full")
-DIRECTIONS = ("undistort", "distort")
 
 #: Map value (pixels) that :meth:`Lens.maps` writes where an output pixel has no source: far outside
 #: any frame, so ``cv2.remap`` with a constant border fills it (any interpolation kernel).
 NO_SOURCE = -1.0e4
-
-
-def _choice(name: str, value: object, allowed: tuple[str, ...]) -> str:
-    if not isinstance(value, str) or value not in allowed:
-        raise ValueError(f"{name} must be one of {', '.join(repr(a) for a in allowed)}, got {value!r}")
-    return value
-
-
-def _positive(name: str, value: object) -> float:
-    number = real_number(name, value)
-    if number <= 0.0:
-        raise ValueError(f"{name} must be positive, got {number:g}")
-    return number
 
 
 def _real_array(name: str, value: object) -> np.ndarray:

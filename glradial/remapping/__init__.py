@@ -8,6 +8,6 @@ from typing import TYPE_CHECKING
 from .._lazy import attach
 
 if TYPE_CHECKING:
-    from .remap import BACKENDS, Remapper, auto_backend, correct, distort, fit_scale
+    from .remap import Remapper, auto_backend, correct, distort, fit_scale
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

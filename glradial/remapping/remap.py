@@ -58,14 +58,13 @@ import numpy as np
 
 from ..gl import egl
 from ..lens import lensfuncs
-from ..lens.lens import DIRECTIONS, Direction, Fit, InverseMethod, Lens, _choice, _positive, frame_size
+from ..lens.lens import Lens, frame_size
+from ..lens.options import (
+    BACKENDS, DIRECTIONS, INTERPOLATIONS, INVERSES, Backend, Direction, Fit, Interpolation, InverseMethod, check_choice,
+    check_positive,
+)
 from ..gl.shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES, build_program
 
-Interpolation = Literal["nearest", "linear", "cubic"]
-Backend = Literal["auto", "gl", "cpu"]
-INTERPOLATIONS = ("nearest", "linear", "cubic")
-BACKENDS = ("auto", "gl", "cpu")
-INVERSES = ("exact", "drap")
 
 _CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
 _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}
@@ -204,7 +203,7 @@ def _checked_scale(lens: Lens, size: tuple[int, int], direction: str, fit: Fit, 
     given), after the checks every backend makes: :func:`check_numeric_policy` and the fold-over
     (:meth:`Lens.check_frame`)."""
     if scale is not None:
-        s = _positive("scale", scale)
+        s = check_positive("scale", scale)
     elif isinstance(fit, str):  # "crop"/"full" solve for the lens's inverse: cached like the policy
         s = _fit_scale(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, size, fit, direction)
     else:
@@ -335,9 +334,9 @@ class Remapper:
         if not isinstance(target, moderngl.Framebuffer):
             raise TypeError(f"target must be a moderngl.Framebuffer, got {type(target).__name__} {target!r}")
         lens = _lens(lens, k2)
-        direction = _choice("direction", direction, DIRECTIONS)
-        interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
-        inverse = _choice("inverse", inverse, INVERSES)
+        direction = check_choice("direction", direction, DIRECTIONS)
+        interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
+        inverse = check_choice("inverse", inverse, INVERSES)
         units = int(self.ctx.info["GL_MAX_COMBINED_TEXTURE_IMAGE_UNITS"])
         if isinstance(texture_unit, (bool, np.bool_)) or not isinstance(texture_unit, (numbers.Integral, np.integer)):
             raise TypeError(f"texture_unit must be an integer, got {type(texture_unit).__name__} {texture_unit!r}")
@@ -475,8 +474,8 @@ class Remapper:
     ) -> np.ndarray:
         self._check_alive()
         height, width, channels = _check_frame(frame)
-        interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
-        inverse = _choice("inverse", inverse, INVERSES)
+        interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
+        inverse = check_choice("inverse", inverse, INVERSES)
         fill_values = _check_fill(fill, channels, frame.dtype)
         if max(width, height) > self.max_texture_size:
             raise ValueError(
@@ -530,8 +529,8 @@ def cpu_maps(
 
 def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpolation: str, fill: object, inverse: str) -> np.ndarray:
     height, width, channels = _check_frame(frame)
-    interpolation = _choice("interpolation", interpolation, INTERPOLATIONS)
-    inverse = _choice("inverse", inverse, INVERSES)
+    interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
+    inverse = check_choice("inverse", inverse, INVERSES)
     fill_values = _check_fill(fill, channels, frame.dtype)
     if max(width, height) > CPU_MAX_SIDE:
         raise ValueError(f"frame {width}×{height} exceeds cv2.remap's limit of {CPU_MAX_SIDE} pixels per side")
@@ -607,7 +606,7 @@ def _as_float32(frame: np.ndarray) -> np.ndarray:
 
 def _run(frame, lens_or_k1, k2, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
     lens = _lens(lens_or_k1, k2)
-    backend = _choice("backend", backend, BACKENDS)
+    backend = check_choice("backend", backend, BACKENDS)
     if not isinstance(frame, np.ndarray):
         return _run_one(frame, lens, direction, fit, interpolation, fill, inverse, backend)  # its TypeError
     if frame.ndim > 4:

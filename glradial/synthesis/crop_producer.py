@@ -53,6 +53,7 @@ from ..media.atomic import atomic_path
 from .crops import CropParams, PanoramaRenderers, crop_labels, load_panorama, sample_crop_params
 from ..lens.lens import frame_size
 from ..lens.lensfuncs import LENS_NEWTON_STEPS
+from ..lens.options import INVERSES
 from ..lens.metrics import PAPER_SIZE
 
 #: Newton steps of the exact inverse when crops come from the paper's distribution: 3 steps from the
@@ -382,7 +383,7 @@ def crop_batches(
             raise ValueError(f"{name} must be an integer >= {low}, got {value!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    if inverse not in ("exact", "drap"):
+    if inverse not in INVERSES:
         raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
     if lp_num_threads is not None and (not isinstance(lp_num_threads, int) or lp_num_threads < 0):
         raise ValueError(f"lp_num_threads must be a non-negative integer, got {lp_num_threads!r}")

@@ -31,7 +31,8 @@ import numpy as np
 
 from ..lens import lensfuncs
 from ..lens.inverse_series import SERIES_DEGREE, fit_inverse_series
-from ..lens.lens import InverseMethod, Lens, corner_radius, frame_size, real_number
+from ..lens.lens import Lens, corner_radius, frame_size
+from ..lens.options import INVERSES, InverseMethod, real_number
 from ..lens.metrics import PAPER_SIZE, manifold_k2
 from ..gl.shaderlib import TEXTURE_FORMATS
 
@@ -361,7 +362,7 @@ class CropRenderer:
 
         self.size = frame_size(size)
         self.out_size = frame_size(out_size) if out_size is not None else self.size
-        if inverse not in ("exact", "drap"):
+        if inverse not in INVERSES:
             raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
         self.inverse: InverseMethod = inverse
         self.supersample = supersample_grid(supersample, self.size, self.out_size)

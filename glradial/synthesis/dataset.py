@@ -35,7 +35,8 @@ import numpy as np
 
 from ..media.atomic import atomic_write_text
 from .crops import CropParams, PanoramaRenderers, panorama_file_size, sample_crop_params, supersample_grid
-from ..lens.lens import InverseMethod, frame_size
+from ..lens.lens import frame_size
+from ..lens.options import INVERSES, InverseMethod
 from ..lens.metrics import PAPER_SIZE
 
 SPLITS = ("train", "val", "test")
@@ -130,7 +131,7 @@ def write_crops_dataset(
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     if image_format not in FORMATS:
         raise ValueError(f"image_format must be one of {FORMATS}, got {image_format!r}")
-    if inverse not in ("exact", "drap"):
+    if inverse not in INVERSES:
         raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
     size = frame_size(size)
     out_size = frame_size(out_size) if out_size is not None else size

@@ -270,7 +270,8 @@ class _FrameCorrector:
     CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
 
     def __init__(self, backend: str, fit: str, interpolation: str) -> None:
-        from ..remapping.remap import BACKENDS, auto_backend
+        from ..lens.options import BACKENDS
+        from ..remapping.remap import auto_backend
 
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
