@@ -164,10 +164,11 @@ def run(args: argparse.Namespace) -> int:
         if args.auto:
             from ..video.lens_track import DOUBTFUL_PX
             from ..media.frames import to_rgb8
-            from ..video.video_pipeline import _as_pair, default_estimator
+            from ..lens.lens import as_lens
+            from ..video.video_pipeline import default_estimator
 
             estimate = default_estimator(args.model, args.method)(to_rgb8(image))
-            k1, k2 = _as_pair(estimate)
+            k1, k2 = as_lens(estimate).k1, as_lens(estimate).k2
             method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
             stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
             print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}{stated}")

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 from .._lazy import attach
 
 if TYPE_CHECKING:
-    from .lens import NO_SOURCE, Lens, corner_radius, frame_size, lens_to_pixels, pixels_to_lens
+    from .lens import NO_SOURCE, Lens, as_lens, corner_radius, frame_size, lens_to_pixels, pixels_to_lens
     from .options import (
         BACKENDS, DIRECTIONS, FITS, INTERPOLATIONS, INVERSES, METHODS, SOURCES, Backend, Direction, Fit, Interpolation,
         InverseMethod, Method, check_choice, check_positive, real_number,

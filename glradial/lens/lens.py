@@ -565,3 +565,15 @@ def _real_array(name: str, value: object) -> np.ndarray:
     if not np.all(np.isfinite(array)):
         raise ValueError(f"{name} must be finite, got {array.tolist()}")
     return array
+
+
+def as_lens(value: object) -> Lens:
+    """The one adapter to a :class:`Lens`: a ``Lens`` (or a ``LensEstimate``) as it is, a
+    ``(k1, k2)`` pair as the centred lens; what a frame -> lens callback may return."""
+    if isinstance(value, Lens):
+        return value
+    try:
+        k1, k2 = value  # type: ignore[misc]
+    except (TypeError, ValueError):
+        raise TypeError(f"a lens must be a glradial.Lens or a (k1, k2) pair, got {type(value).__name__} {value!r}") from None
+    return Lens(float(k1), float(k2))

@@ -38,7 +38,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from ..media.frames import to_rgb8
-from ..lens.lens import Lens, corner_radius
+from ..lens.lens import Lens, as_lens, corner_radius
 from .lens_track import DOUBTFUL_PX, LensTrack
 from ..lens.metrics import REPORT_WIDTH, max_displacement
 from ..media.progress import Progress
@@ -162,13 +162,6 @@ def default_estimator(model: str | os.PathLike | None = None, method: str | None
     return lambda frame: estimator.estimate(frame, method=method)
 
 
-def _as_pair(value: object) -> tuple[float, float]:
-    if isinstance(value, Lens):
-        return value.k1, value.k2
-    k1, k2 = value  # type: ignore[misc]
-    return float(k1), float(k2)
-
-
 def _confidence(value: object) -> tuple[float, str]:
     """``(uncertainty_px, method)`` an estimate states (a LensEstimate), NaN and "" for a plain
     Lens or a pair."""
@@ -223,7 +216,8 @@ def track_video(
                 if since_start % every == 0:
                     times.append(index)
                     value = estimator(to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
-                    estimates.append(_as_pair(value))
+                    lens = as_lens(value)
+                    estimates.append((lens.k1, lens.k2))
                     sure, method = _confidence(value)
                     stated.append(sure)
                     methods.append(method)
@@ -333,8 +327,7 @@ def correct_video(
         try:
             def work(item):
                 if isinstance(item, VideoFrame):
-                    lens = lenses(item.index)
-                    lens = lens if isinstance(lens, Lens) else Lens(*lens)
+                    lens = as_lens(lenses(item.index))
                     return writer.frame(corrector(item.image, lens), item.pts)
                 return item
 
