@@ -24,8 +24,8 @@ import numpy as np
 
 from glradial import correct
 from glradial.gl import egl
-from glradial.remapping import remap
 from glradial.lens.lens import Lens
+from glradial.remapping import remap
 
 K1, K2 = -0.3, 0.06
 

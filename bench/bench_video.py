@@ -55,7 +55,6 @@ def make_clip(path: Path, size: tuple[int, int], frames: int, kind: str, source:
     """Render the clip's frames (crop of the real frame, resized, distorted) into H.264, then mux
     a 440 Hz AAC tone with the ffmpeg command."""
     import cv2
-    import numpy as np
 
     import glradial
     from glradial.media.image_io import read_image

@@ -3,14 +3,14 @@
 Coefficients are width-normalised (image width = 1, origin at the image centre); see
 :class:`glradial.Lens` and docs/DESIGN.md. Public names are imported lazily so that
 ``import glradial`` stays light (no GL context is made, torch is never imported); the imports under
-``TYPE_CHECKING`` below are the list of them (``glradial._lazy`` reads it), and what type checkers see.
+``TYPE_CHECKING`` below are the list of them (``glradial.lazy`` reads it), and what type checkers see.
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from ._lazy import attach
+from .lazy import attach
 
 __version__ = "0.1.0"
 

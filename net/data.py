@@ -27,9 +27,9 @@ from typing import Sequence
 
 import numpy as np
 
+from glradial.lens.metrics import PAPER_SIZE
 from glradial.synthesis.crop_producer import crop_batches
 from glradial.synthesis.crops import load_panorama
-from glradial.lens.metrics import PAPER_SIZE
 from glradial.synthesis.stadium import stadium_cache_path, stadium_panorama_cached
 from glradial.synthesis.stadium_style import split_seeds
 

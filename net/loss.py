@@ -1,4 +1,4 @@
-"""The paper's distortion loss (DESIGN.md).
+"""The paper's distortion loss (docs/DESIGN.md).
 
 Convention: a lens is ``(k1, k2)`` in width-normalised lens units; the radial map is
 ``P(r, (k1, k2)) = r (1 + k1 r^2 + k2 r^4)``. Radii are ``samples`` points evenly spaced on

@@ -44,13 +44,14 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from glradial.media.atomic import atomic_path, atomic_write_text
 from glradial.evaluation.evaluation import metrics
+from glradial.media.atomic import atomic_path, atomic_write_text
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
 from .loss import training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
+
 
 @dataclass
 class TrainConfig:
@@ -213,7 +214,7 @@ def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, 
     return CropProducers(producers, [len(part) for _, part in shards], cfg.producer_chunk)
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI's option handling; complexity 33)
     parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
     parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig; \"base\" names the config it extends)")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")

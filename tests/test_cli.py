@@ -13,14 +13,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA
 
 import glradial
 from glradial import Lens
 from glradial.cli import build_parser, main
 from glradial.media.image_io import read_image, write_image
 from glradial.media.video_io import EncodeOptions, VideoInfo, VideoReader, VideoWriter, probe_video
-
-from conftest import DATA
 
 K1, K2 = -0.25, 0.05
 
@@ -46,7 +45,7 @@ def test_correct_real_jpeg_matches_library_and_opencv(tmp_path):
     image = read_image(DATA / "road_straight_lines1.jpg")
     result = read_image(out)
     np.testing.assert_array_equal(result, glradial.correct(image, K1, K2, backend="cpu"))
-    # independent oracle (DESIGN.md): cv2.undistort with f = W; equal up to fixed-point rounding
+    # independent oracle (docs/DESIGN.md): cv2.undistort with f = W; equal up to fixed-point rounding
     h, w = image.shape[:2]
     camera = np.array([[w, 0, (w - 1) / 2], [0, w, (h - 1) / 2], [0, 0, 1]], np.float64)
     expected = cv2.undistort(image, camera, np.array([K1, K2, 0, 0], np.float64))
@@ -295,7 +294,7 @@ def _convert(capsys, *argv: str) -> tuple[float, float]:
 
 def test_convert_known_answers(capsys):
     w, h = 1920, 1080
-    # OpenCV with f = W: the same numbers (DESIGN.md); with f = W/2: k1 (W/f)^2 = 4 k1, k2 (W/f)^4 = 16 k2
+    # OpenCV with f = W: the same numbers (docs/DESIGN.md); with f = W/2: k1 (W/f)^2 = 4 k1, k2 (W/f)^4 = 16 k2
     assert _convert(capsys, "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "1920", "-0.1", "0.01") == pytest.approx((-0.1, 0.01))
     assert _convert(capsys, "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "960", "-0.1", "0.01") == pytest.approx((-0.4, 0.16))
     # pixel units: k1 / W^2, k2 / W^4

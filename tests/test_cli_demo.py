@@ -9,8 +9,8 @@ import numpy as np
 from glradial.cli import main
 from glradial.commands import demo
 from glradial.lens.lens import corner_radius, lens_to_pixels
-from glradial.media.image_io import read_image
 from glradial.lens.metrics import max_displacement_px
+from glradial.media.image_io import read_image
 
 
 def test_demo_small_end_to_end(tmp_path, capsys):

@@ -1,7 +1,7 @@
 """glradial.correct against OpenCV on real photographs, every dtype, channel count and backend.
 
 Oracle: ``cv2.undistort(img, K, (k1, k2, 0, 0))`` with ``K = [[W, 0, (W-1)/2], [0, W, (H-1)/2],
-[0, 0, 1]]`` (DESIGN.md: with f = W OpenCV's coefficients equal ours), and for nearest / cubic
+[0, 0, 1]]`` (docs/DESIGN.md: with f = W OpenCV's coefficients equal ours), and for nearest / cubic
 ``cv2.remap`` on the maps of ``cv2.initUndistortRectifyMap`` with the same K. Photos are downscaled
 to 320×180 (coefficients are resolution independent) to keep llvmpipe fast.
 

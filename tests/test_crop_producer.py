@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -183,7 +184,6 @@ print("images", batch.images.shape, int(batch.images.sum()))
 def _run_script(tmp_path: Path, text: str) -> "subprocess.CompletedProcess[str]":
     """Run ``text`` as ``python script.py`` with its own TMPDIR (``tmp_path / "tmp"``)."""
     import os
-    import subprocess
     import sys
 
     script = tmp_path / "train_script.py"

@@ -223,7 +223,7 @@ def test_distortion_geometry_matches_opencv(ctx) -> None:
     pinhole = CropParams(0.0, 0.0, 0.0, 60.0, 0.0, 0.0)
     crops = render_crops(pano, [pinhole, params], size=size)
     x_u, y_u = _centroid(crops[0], 2)
-    # cv2.projectPoints with K = [[W, 0, cx], [0, W, cy]] and dist (k1, k2, 0, 0) is DESIGN.md's
+    # cv2.projectPoints with K = [[W, 0, cx], [0, W, cy]] and dist (k1, k2, 0, 0) is docs/DESIGN.md's
     # forward model in width units; project the undistorted pixel position through it.
     w = size[0]
     cxy = np.array([w / 2 - 0.5, size[1] / 2 - 0.5])

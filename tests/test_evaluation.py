@@ -110,8 +110,8 @@ def test_evaluate_out_of_domain_panorama_is_an_argument(tmp_path, capsys):
 def test_training_mean_is_the_mean_of_the_paper_distribution():
     # Monte Carlo over the sampler itself: 20 000 draws give the mean k2 to ~3 standard errors of
     # 0.08 / sqrt(20000) = 6e-4 (lenses rejected near fold-over shift it by less than that)
-    from glradial.synthesis.crops import sample_crop_params
     from glradial.evaluation.evaluation import TRAINING_MEAN
+    from glradial.synthesis.crops import sample_crop_params
 
     k = np.array([(p.k1, p.k2) for p in sample_crop_params(20000, 7)])
     assert k.mean(axis=0) == pytest.approx(TRAINING_MEAN, abs=2e-3)
@@ -123,8 +123,8 @@ def test_training_mean_is_the_mean_of_the_paper_distribution():
 @pytest.mark.parametrize("k1_range", [(-0.5, -0.1), (-0.3, 0.3), (0.0, 0.2)])
 def test_lens_mean_follows_the_sampling_range(k1_range):
     # Same Monte Carlo bound as above (k2's spread is smaller on these narrower ranges).
-    from glradial.synthesis.crops import sample_crop_params
     from glradial.evaluation.evaluation import lens_mean
+    from glradial.synthesis.crops import sample_crop_params
 
     a, b = k1_range
     k = np.array([(p.k1, p.k2) for p in sample_crop_params(20000, 3, k1=k1_range)])

@@ -17,14 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from glradial import Lens, Remapper, correct, distort, fit_scale
-from glradial import cli
-from glradial.synthesis.crops import CropParams, CropRenderer, render_crops, sample_crop_params
+from glradial import Lens, Remapper, cli, correct, distort, fit_scale
 from glradial.estimation.estimator import Estimator, ModelLoadError, default_model_path
+from glradial.export.stmap import lens_stmap, read_stmap
 from glradial.lens.lens import corner_radius, frame_size, lens_to_pixels, pixels_to_lens
+from glradial.synthesis.crops import CropParams, CropRenderer, render_crops, sample_crop_params
 from glradial.synthesis.stadium import StadiumRenderer, stadium_panorama
 from glradial.synthesis.stadium_style import sample_style
-from glradial.export.stmap import lens_stmap, read_stmap
 
 U8 = np.zeros((18, 32, 3), np.uint8)
 F32 = np.zeros((18, 32, 3), np.float32)
@@ -455,7 +454,6 @@ def _graph(tmp: Path, name: str, *, out_channels=2, hw=(216, 384), meta=None, in
         helper.make_node("Constant", [], ["axes"], value=helper.make_tensor("axes", TensorProto.INT64, [1], [1])),
         helper.make_node("Slice", ["ms", "starts", "ends", "axes"], ["sliced"]),
     ]
-    outputs = [out_name]
     if output_rank == 3:
         nodes.append(helper.make_node("Unsqueeze", ["sliced", "axes"], [out_name]))
         out_dims = ["N", 1, out_channels]
@@ -610,9 +608,9 @@ def test_native_stderr_is_silenced_only_inside_the_block(capfd):
 
 
 def test_fork_inside_a_silenced_block_gives_the_child_its_stderr(capfd):
-    from glradial.media.native_stderr import silenced
-
     from test_gl_threads_fork import in_child
+
+    from glradial.media.native_stderr import silenced
 
     def child() -> int:
         os.write(2, b"child speaks\n")

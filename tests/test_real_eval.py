@@ -14,9 +14,8 @@ import pytest
 
 from glradial.estimation.estimator import default_model_path
 from glradial.estimation.lens_estimate import LensEstimate
+from glradial.evaluation.real_eval import Sample, centre_16_9, extended_lenses, frames_in, load_calibrated, markdown, summarise
 from glradial.lens.metrics import manifold_k2, max_displacement_px
-from glradial.evaluation.real_eval import (Sample, centre_16_9, extended_lenses, frames_in, load_calibrated, markdown,
-                                summarise)
 
 ROOT = Path(__file__).resolve().parents[1]
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
@@ -74,7 +73,7 @@ def test_calibrated_camera_from_opencv_numbers(tmp_path):
     (tmp_path / "cam.json").write_text(json.dumps(spec))
     name, frames, lens = load_calibrated(tmp_path / "cam.json")
     assert name == "cam" and len(frames) == 1
-    assert (lens.k1, lens.k2) == pytest.approx((-0.2, 0.05))  # f = W: the numbers are ours (DESIGN.md)
+    assert (lens.k1, lens.k2) == pytest.approx((-0.2, 0.05))  # f = W: the numbers are ours (docs/DESIGN.md)
 
 
 def _pitch_png(path: Path) -> None:

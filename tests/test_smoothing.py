@@ -6,11 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.lens.metrics import manifold_k2
-from glradial.lens.metrics import max_displacement
+from glradial.lens.metrics import manifold_k2, max_displacement
 from glradial.video.smoothing import ShotDetector, detect_cuts, shot_ids, smooth_shot, smooth_track
 
-WIDTH_PX = 1920  # errors are reported in pixels of a 1920-wide frame, as in DESIGN.md
+WIDTH_PX = 1920  # errors are reported in pixels of a 1920-wide frame, as in docs/DESIGN.md
 
 
 def synthetic_track(seed: int = 0, n: int = 240, cut: int = 140, every: int = 3):
@@ -150,9 +149,9 @@ def test_real_model_on_a_zooming_video_with_a_cut(ctx, tmp_path):
     if not default_model_path().is_file():
         pytest.skip("no bundled model (glradial/models/glradial_k1k2.onnx) yet")
     import glradial
-    from glradial.video.video_pipeline import default_estimator, track_video
-    from glradial.synthesis.crops import CropParams, render_crops
     from glradial.media.video_io import VideoInfo, VideoWriter
+    from glradial.synthesis.crops import CropParams, render_crops
+    from glradial.video.video_pipeline import default_estimator, track_video
 
     n, cut = 36, 24
     k1 = np.where(np.arange(n) < cut, np.linspace(-0.35, -0.25, n), -0.05)

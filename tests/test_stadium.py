@@ -10,6 +10,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import check_existing_out_needs_y
 
 from glradial.lens import lensfuncs
 from glradial.synthesis.stadium import StadiumRenderer, project_point, stadium_panorama
@@ -20,8 +21,6 @@ from glradial.synthesis.stadium_style import (
     split_seeds,
     stadium_split,
 )
-
-from conftest import check_existing_out_needs_y
 
 # A main-camera stadium (camera on the halfway line, ~120 m from the far touchline), chosen by its
 # style so that the test survives changes of the style sampler.

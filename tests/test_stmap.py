@@ -9,11 +9,11 @@ import subprocess
 import cv2
 import numpy as np
 import pytest
+from conftest import check_existing_out_needs_y
 
 from glradial import Lens
 from glradial.cli import main
 from glradial.export.stmap import STMAP_NO_SOURCE, lens_stmap, maps_from_stmap, read_stmap, write_stmap
-from conftest import check_existing_out_needs_y
 
 SIZE = (96, 54)
 
@@ -57,7 +57,7 @@ def test_stmap_file_matches_lens_maps(tmp_path, direction, fit, ext):
 
 
 def test_undistort_stmap_applied_like_nuke_equals_cv2_undistort(road):
-    """Independent oracle: cv2.undistort with K(f = W) and dist = (k1, k2, 0, 0) (DESIGN.md)."""
+    """Independent oracle: cv2.undistort with K(f = W) and dist = (k1, k2, 0, 0) (docs/DESIGN.md)."""
     k1, k2 = -0.25, 0.04
     image = cv2.resize(road, SIZE, interpolation=cv2.INTER_AREA)
     stmap = lens_stmap(Lens(k1, k2), SIZE)

@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from glradial.lens import lensfuncs
 from glradial.gl.egl import release_objects
 from glradial.gl.shaderlib import preprocess
+from glradial.lens import lensfuncs
 
 PROBE_MAIN = """
 uniform sampler2D u_input;

@@ -10,7 +10,7 @@ Modules import heavy libraries (moderngl, onnxruntime, torch) inside ``run``, ne
 so that ``glradial --help`` stays fast. ``run`` reports bad input by raising :class:`UsageError`
 (wrong combination of options: exit 2), :class:`CliError`, ``ValueError``, ``TypeError`` or ``OSError``
 (exit 1); the CLI prints one line ``glradial: error: <message>`` and no traceback. Outputs are written
-atomically (:mod:`glradial.atomic`, :mod:`glradial.image_io`, :mod:`glradial.video_io`).
+atomically (:mod:`glradial.media.atomic`, :mod:`glradial.media.image_io`, :mod:`glradial.media.video_io`).
 
 Shared helpers for command modules live here: :func:`parse_size`, :func:`positive_int`,
 :func:`show_progress`, :func:`add_lens_options` / :func:`lens_from_args` (the lens given on the

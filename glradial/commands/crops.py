@@ -67,8 +67,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..synthesis.dataset import write_crops_dataset
     from ..media.progress import Progress
+    from ..synthesis.dataset import write_crops_dataset
 
     bar = Progress(args.count, "crops", unit="crops", enabled=show_progress(args))
     try:

@@ -8,7 +8,7 @@ pitch lines and recorded beside it, ``own_lens``) is removed with :func:`glradia
 looks like a real camera's frame), the lens is estimated from the distorted frame alone, and the
 frame is corrected with the estimate (``fit="same"``).
 
-Geometry of the reference lines (lens coordinates, DESIGN.md): a point ``p`` of the original frame
+Geometry of the reference lines (lens coordinates, docs/DESIGN.md): a point ``p`` of the original frame
 appears in the distorted frame at ``P(s p)`` (``s`` the distortion's crop scale) and, after a
 correction with the true lens, at ``s p`` in the corrected frame: a straight line of the original
 stays straight there. So the figure draws, on the distorted frame, the chord between the ends of
@@ -25,17 +25,19 @@ from pathlib import Path
 
 import numpy as np
 
+from ..lens.lens import Lens
+
 #: the bundled real frame and its reference lines (package ``glradial.data``)
 FRAME_NAME = "usl_broadcast_0195.jpg"
 LINES_NAME = "usl_broadcast_0195.json"
 
 
-def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray], "Lens"]:
+def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray], Lens]:
     """The shipped real frame made undistorted (H x W x 3 uint8 RGB: its own lens removed with
     ``correct(fit="crop")``), its reference lines ``{name: 2 x 2 end points in pixels of that
     undistorted frame}``, and the frame's own lens (both measured; see ``glradial/data/README.md``)."""
-    from ..media.image_io import read_image
     from ..lens.lens import Lens
+    from ..media.image_io import read_image
     from ..remapping.remap import correct
 
     data = resources.files("glradial.data")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..media.image_io import media_kind, read_image
 from ..lens.options import METHODS
+from ..media.image_io import media_kind, read_image
 from . import positive_int, show_progress
 
 DESCRIPTION = """\
@@ -45,8 +45,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..media.frames import to_rgb8
     from ..estimation.estimator import Estimator
+    from ..media.frames import to_rgb8
 
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:

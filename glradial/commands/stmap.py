@@ -38,9 +38,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..export.stmap import check_stmap_path, lens_stmap, write_stmap
     from ..media.atomic import check_output_folder
     from ..media.image_io import check_overwrite
-    from ..export.stmap import check_stmap_path, lens_stmap, write_stmap
 
     check_overwrite(check_output_folder(check_stmap_path(args.out)), args.overwrite)  # before any work
     lens = lens_from_args(args, args.size)

@@ -5,11 +5,11 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .._lazy import attach
+from ..lazy import attach
 
 if TYPE_CHECKING:
     from .estimator import Estimator, default_model_path, estimate
-    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, LensEstimate, NET_UNCERTAINTY_PX, choose, fit_frame, line_candidates
+    from .lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, NET_UNCERTAINTY_PX, LensEstimate, choose, fit_frame, line_candidates
     from .model_check import ModelLoadError
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

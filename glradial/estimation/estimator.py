@@ -14,7 +14,7 @@ Convention:
     (a ~90 % bound on the maximum displacement error, px at 1920) and ``chains``.
 
 Methods: ``"net"`` is the CNN alone; ``"lines"`` fits the lens that straightens the frame's pitch
-lines and straight edges (:mod:`glradial.lines`, :mod:`glradial.line_fit`; the CNN is its prior);
+lines and straight edges (:mod:`glradial.estimation.lines`, :mod:`glradial.estimation.line_fit`; the CNN is its prior);
 ``"auto"`` (default) takes the line fit when its bound beats the CNN's. Frames without usable lines
 get the CNN's answer, labelled ``method="net"`` (docs/LINES.md).
 
@@ -38,8 +38,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..lens.options import Method
 from ..media.frames import to_rgb8
-from .lens_estimate import LensEstimate, Method, check_method, estimate_with_lines, net_estimate
+from .lens_estimate import LensEstimate, check_method, estimate_with_lines, net_estimate
 from .model_check import ModelLoadError, check_checksum, check_model
 
 #: File name of the bundled model inside the ``glradial.models`` package.
@@ -58,7 +59,7 @@ def default_model_path() -> Path:
 
 
 def _as_frame(frame: Any, index: int | None = None) -> np.ndarray:
-    """A frame for the estimator (:func:`glradial.frames.to_rgb8`; floats outside [0, 1] refused,
+    """A frame for the estimator (:func:`glradial.media.frames.to_rgb8`; floats outside [0, 1] refused,
     at least 2×2 pixels)."""
     where = "frame" if index is None else f"frames[{index}]"
     rgb = to_rgb8(frame, where, clip=False)
@@ -75,7 +76,7 @@ class Estimator:
     ``mirror_average``: average the outputs for each frame and its left-right mirror (default; see
     the module docstring); ``False`` runs the network once per frame.
     Raises ``FileNotFoundError`` for a missing file and :class:`ModelLoadError` for a file that is
-    not a usable glradial model (see :mod:`glradial.model_check`: structure, checksum, probe). Thread-safe: onnxruntime sessions may be run concurrently.
+    not a usable glradial model (see :mod:`glradial.estimation.model_check`: structure, checksum, probe). Thread-safe: onnxruntime sessions may be run concurrently.
     """
 
     def __init__(
@@ -156,7 +157,7 @@ class Estimator:
         """Estimate each frame of a sequence (or an ``N x H x W x C`` array); the CNN runs in one
         session call. ``method``: ``"net"`` (the CNN), ``"lines"`` (the line fit, the CNN as its
         prior; the CNN's answer when a frame has no usable lines) or ``"auto"`` (the line fit when
-        its calibrated bound beats the CNN's); each :class:`~glradial.lens_estimate.LensEstimate`
+        its calibrated bound beats the CNN's); each :class:`~glradial.estimation.lens_estimate.LensEstimate`
         says which method produced it and how sure it is (``uncertainty_px``, px at 1920)."""
         method = check_method(method)
         if isinstance(frames, np.ndarray) and frames.ndim == 4:

@@ -4,15 +4,15 @@ Convention:
     :class:`LensEstimate` is a :class:`glradial.Lens` (width-normalised ``(k1, k2)``, forward model
     ``p_d = p_u (1 + k1 r^2 + k2 r^4)``) that also carries
     ``uncertainty_px``: a bound on the maximum radial displacement error over the 16:9 frame
-    (:func:`glradial.metrics.max_displacement_px`, px of a 1920-wide frame) meant to hold for about
+    (:func:`glradial.lens.metrics.max_displacement_px`, px of a 1920-wide frame) meant to hold for about
     90 % of frames; ``method``: ``"net"`` (the CNN) or ``"lines"`` (the line fit); ``chains``: the
     line chains the fit used (0 for the CNN).
 
 Calibration: the constants below were measured on procedural stadium crops of the **validation**
-split rendered with known lenses (never on real photographs) by :func:`glradial.real_eval.calibrate`
+split rendered with known lenses (never on real photographs) by :func:`glradial.evaluation.real_eval.calibrate`
 (docs/LINES.md, "Confidence"): ``NET_UNCERTAINTY_PX`` is the 90th percentile of the CNN's error
 there; a line fit's bound is ``LINES_UNCERTAINTY_SCALE * sigma_px + LINES_UNCERTAINTY_FLOOR_PX``
-where ``sigma_px`` is the fit's own 1-sigma (:class:`glradial.line_fit.LineFit`).
+where ``sigma_px`` is the fit's own 1-sigma (:class:`glradial.estimation.line_fit.LineFit`).
 """
 
 from __future__ import annotations
@@ -20,13 +20,11 @@ from __future__ import annotations
 import math
 import numbers
 from dataclasses import KW_ONLY, dataclass
-from typing import Literal
 
 import numpy as np
 
 from ..lens.lens import Lens, real_number
-from ..lens.options import METHODS, SOURCES, Method
-
+from ..lens.options import METHODS, SOURCES
 
 #: 90th percentile of the CNN's maximum displacement error (px at 1920) on validation crops.
 NET_UNCERTAINTY_PX = 16.0
@@ -92,7 +90,7 @@ def lines_uncertainty(sigma_px: float) -> float:
 def net_estimate(k1: float, k2: float, frame: np.ndarray | None = None, edge_density: float | None = None) -> LensEstimate:
     """The CNN's answer with its calibrated bound, or :data:`NO_EVIDENCE_UNCERTAINTY_PX` when the
     uint8 ``frame`` is blank, or is noise: ``edge_density`` (of its
-    :class:`glradial.lines.LineEvidence`, when the frame gave no line fit) above
+    :class:`glradial.estimation.lines.LineEvidence`, when the frame gave no line fit) above
     :data:`NOISE_EDGE_DENSITY`."""
     uncertainty = NET_UNCERTAINTY_PX
     if frame is not None:
@@ -106,7 +104,7 @@ def net_estimate(k1: float, k2: float, frame: np.ndarray | None = None, edge_den
 
 def fit_frame(frame: np.ndarray, net: tuple[float, float]):
     """The line evidence of the uint8 RGB ``frame`` (pieces linked with the CNN's ``net`` lens as the
-    hint) and its :class:`glradial.line_fit.LineFit` (the CNN's k1 as the prior)."""
+    hint) and its :class:`glradial.estimation.line_fit.LineFit` (the CNN's k1 as the prior)."""
     from .line_fit import fit_lines
     from .lines import detect_chains
 

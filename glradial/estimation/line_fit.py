@@ -1,7 +1,7 @@
 """Robust ``(k1, k2)`` from line chains: the lens that makes the chains straight.
 
 Convention:
-    Chains come from :func:`glradial.lines.detect_chains`: points in lens units of the frame (image
+    Chains come from :func:`glradial.estimation.lines.detect_chains`: points in lens units of the frame (image
     width = 1, origin at the centre). Residuals are stated in pixels of the **distorted** frame at
     the detection width ``evidence.width`` (``w`` below): for a lens ``k`` a chain's points are
     undistorted with the exact inverse, a total-least-squares line is fitted to them, and the mean
@@ -18,7 +18,7 @@ Cost (minimised over ``k1`` in :data:`K1_RANGE`):
       frame edge, whose residual does.
     * ``rho(x) = T log(1 + x / T)``: a chain that no lens straightens (an arc, a curved stand, a
       mis-linked chain) costs at most logarithmically.
-    * ``m`` is :func:`glradial.metrics.manifold_k2`: k2 is held loosely to the manifold unless the
+    * ``m`` is :func:`glradial.lens.metrics.manifold_k2`: k2 is held loosely to the manifold unless the
       lines pin it; ``k1_prior`` is the CNN's estimate (a weak prior; the fallback when lines are
       missing is the estimator's job).
 
@@ -31,7 +31,7 @@ second and are not counted.
 Uncertainty: the cost's curvature at the minimum (a quadratic fitted to a 3 x 3 stencil) gives a
 covariance of ``(k1, k2)``, scaled by the reduced chi² when above 1; :attr:`LineFit.sigma_px` is the
 largest standard deviation of the radial displacement over the 16:9 frame, in px at 1920 wide
-(:data:`glradial.metrics.REPORT_WIDTH`). It is a raw 1-sigma figure; :mod:`glradial.estimator`
+(:data:`glradial.lens.metrics.REPORT_WIDTH`). It is a raw 1-sigma figure; :mod:`glradial.estimation.estimator`
 turns it into a calibrated 90 % bound.
 """
 
@@ -43,8 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..lens import lensfuncs
-from .lines import LineEvidence
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
+from .lines import LineEvidence
 
 #: Range of k1 searched (lens units): real broadcast and pitch cameras reach -0.72.
 K1_RANGE = (-1.0, 0.4)

@@ -1,10 +1,10 @@
 """Line evidence for lens estimation: sub-pixel points on image structures that should be straight.
 
 Convention:
-    Input: an RGB (or gray) ``H x W (x C)`` uint8 frame, as :func:`glradial.frames.to_rgb8`
+    Input: an RGB (or gray) ``H x W (x C)`` uint8 frame, as :func:`glradial.media.frames.to_rgb8`
     accepts. Detection runs on a gray copy at most :data:`DETECT_WIDTH` pixels wide (area
     interpolation). Output points are in **lens units of the frame** (image width = 1, origin at the
-    frame centre, y down; :func:`glradial.lens.pixels_to_lens`), so they do not depend on the
+    frame centre, y down; :func:`glradial.lens.lens.pixels_to_lens`), so they do not depend on the
     detection scale; :attr:`LineEvidence.width` is the detection width, the pixel unit that
     residuals and tolerances are stated in (1 px there = ``1 / width`` lens units).
 
@@ -23,7 +23,7 @@ pixel-straight and exactly horizontal or vertical away from the frame centre are
 graphics (score bugs, clocks, tickers, watermarks) and dropped: a real straight line off the centre
 is curved by any lens with ``|k1|`` above a few hundredths, and such overlays would pull the fit to
 ``k = 0``. Whether a chain is a straight line seen through a lens (and not a circle, an arc or a
-curved stand) is decided by :mod:`glradial.line_fit`, which owns the lens model.
+curved stand) is decided by :mod:`glradial.estimation.line_fit`, which owns the lens model.
 """
 
 from __future__ import annotations

@@ -1,26 +1,26 @@
 """Evaluation of a distortion estimator on held-out crops: metrics, breakdowns, report (no torch).
 
-Used by ``glradial evaluate`` (an ONNX model through :class:`glradial.estimator.Estimator`) and by
+Used by ``glradial evaluate`` (an ONNX model through :class:`glradial.estimation.estimator.Estimator`) and by
 ``python -m net.evaluate`` in a checkout (which adds ``.pt`` checkpoints through torch). Needs
 NumPy, OpenCV, onnxruntime and a GL context; plots need matplotlib and are skipped, with a message,
 without it.
 
 Test set: ``n`` crops drawn from the paper's distribution over the held-out **test** split of the
-procedural stadiums (:func:`glradial.stadium_style.split_seeds`: never used in training; ``val``
+procedural stadiums (:func:`glradial.synthesis.stadium_style.split_seeds`: never used in training; ``val``
 for choosing between checkpoints), rendered like the training crops (no augmentation) at twice
-the network input and area-resized by the predictor (:func:`glradial.crops.render_crop_set`).
+the network input and area-resized by the predictor (:func:`glradial.synthesis.crops.render_crop_set`).
 Optionally, as an out-of-domain figure, crops of a real panorama given by the caller (the
 repository's ``tests/data/panorama_field_2048x1024.jpg`` in ``make evaluate``).
 
-Metrics (DESIGN.md; definitions in :mod:`glradial.metrics`), for predictions ``y_hat = (k1_hat,
+Metrics (docs/DESIGN.md; definitions in :mod:`glradial.lens.metrics`), for predictions ``y_hat = (k1_hat,
 k2_hat)`` against labels ``y``:
 
 * ``mean_dl``: mean distortion loss ``DL(y, y_hat)`` (sum over 64 radii on [0, 0.7]);
 * ``k1_mae``, ``k2_mae``: mean absolute coefficient errors;
 * ``median_max_px`` / ``p90_max_px``: median / 90th percentile of the maximum displacement error
-  (:func:`glradial.metrics.max_displacement_px`: pixels of a 1920-wide frame, up to the 16:9
+  (:func:`glradial.lens.metrics.max_displacement_px`: pixels of a 1920-wide frame, up to the 16:9
   corner); ``median_max_px_ci95``: the median's 95 % bootstrap interval
-  (:func:`glradial.metrics.median_interval`): how far two models' medians on the same set must
+  (:func:`glradial.lens.metrics.median_interval`): how far two models' medians on the same set must
   differ to mean anything;
 * ``k2_deviation_corr``: Pearson correlation between the predicted and the true deviation of k2 from
   the manifold, ``k2_hat - m(k1_hat)`` against ``k2 - m(k1)``: whether the k2 output carries any
@@ -42,8 +42,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from ..synthesis.crops import PAPER_RANGES
 from ..lens.metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px, median_interval
+from ..synthesis.crops import PAPER_RANGES
 
 __all__ = [
     "TRAINING_MEAN",
@@ -64,15 +64,15 @@ __all__ = [
 
 def lens_mean(k1_range: tuple[float, float] = PAPER_RANGES["k1"]) -> tuple[float, float]:
     """Mean ``(k1, k2)`` of the crops' lens distribution: ``k1 ~ U[k1_range]`` and ``k2 =``
-    :func:`~glradial.metrics.manifold_k2` ``(k1)`` + zero-mean noise (the rare lenses that
-    :func:`~glradial.crops.sample_crop_params` redraws because they fold over are ignored). The
+    :func:`~glradial.lens.metrics.manifold_k2` ``(k1)`` + zero-mean noise (the rare lenses that
+    :func:`~glradial.synthesis.crops.sample_crop_params` redraws because they fold over are ignored). The
     manifold is a quadratic, so Simpson's rule over ``k1_range`` is its exact mean."""
     low, high = (float(v) for v in k1_range)
     mid = (low + high) / 2
     return mid, float((manifold_k2(low) + 4 * manifold_k2(mid) + manifold_k2(high)) / 6)
 
 
-#: Mean (k1, k2) of the paper's training distribution (:data:`glradial.crops.PAPER_RANGES`).
+#: Mean (k1, k2) of the paper's training distribution (:data:`glradial.synthesis.crops.PAPER_RANGES`).
 TRAINING_MEAN = lens_mean()
 #: Bins of the breakdown tables.
 K1_BINS = [(-0.7, -0.5), (-0.5, -0.3), (-0.3, -0.1), (-0.1, 0.1), (0.1, 0.3)]
@@ -146,7 +146,7 @@ def breakdown(pred: np.ndarray, labels: np.ndarray, values: np.ndarray, bins: li
 
 
 class OnnxPredictor:
-    """Predicts through :class:`glradial.estimator.Estimator` (the shipped path, area resize and
+    """Predicts through :class:`glradial.estimation.estimator.Estimator` (the shipped path, area resize and
     mirror averaging included; ``mirror_average=False`` runs the network once per crop)."""
 
     def __init__(self, path: str | os.PathLike, threads: int | None = None, mirror_average: bool = True):
@@ -202,8 +202,7 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
     """Render the test set, predict, write ``metrics.json``, ``results.md`` and the plots to ``out``
     (all atomically); returns the metrics dict. ``input_size`` (W, H) is the network input:
     crops are rendered at twice it. Progress goes to stderr."""
-    from ..synthesis.crops import crop_labels, render_crop_set
-    from ..synthesis.crops import load_panorama
+    from ..synthesis.crops import crop_labels, load_panorama, render_crop_set
     from ..synthesis.stadium import stadium_panorama_cached
     from ..synthesis.stadium_style import split_seeds
 

@@ -6,7 +6,7 @@ Sources (each reported separately):
       :func:`glradial.distort` (exact inverse) at ``fit="crop"``: the output is still a full 16:9
       frame (no empty corners, which would add a curved border that no real frame has) and the lens
       refers to it, since a fit only zooms the undistorted source (:meth:`glradial.Lens.fit_scale`).
-      Lenses come from the paper's distribution (:func:`glradial.crops.sample_crop_params`, source
+      Lenses come from the paper's distribution (:func:`glradial.synthesis.crops.sample_crop_params`, source
       ``NAME/paper``) and from the extended range (``NAME/extended``: k1 in [-1.0, 0.4], k2 on or
       above the manifold by ``|N(0, 0.05)|``, as real wide pitch cameras are).
     * **Real panoramas** (2:1 images in the folder): crops rendered by :class:`glradial.CropRenderer`
@@ -18,7 +18,7 @@ Sources (each reported separately):
       :meth:`glradial.Lens.from_opencv`, ``approximate=True``); paths relative to the JSON file.
     * **Procedural** (``procedural=N``): crops of held-out stadiums (``split_seeds("test")``).
 
-Metrics (:mod:`glradial.metrics`): median and 90th percentile of the maximum displacement error
+Metrics (:mod:`glradial.lens.metrics`): median and 90th percentile of the maximum displacement error
 over the 16:9 frame (px at 1920), A-beats-B (the method's own k2 against the manifold k2 for its
 k1, compared by distortion loss; ties count as not beating), the share of errors inside the stated
 ``uncertainty_px`` and, for auto, the share of frames where it chose the lines.
@@ -34,10 +34,10 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from .evaluation import a_beats_b
-from ..lens.lens import Lens
 from ..estimation.lens_estimate import NET_UNCERTAINTY_PX, LensEstimate, choose, line_candidates
+from ..lens.lens import Lens
 from ..lens.metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from .evaluation import a_beats_b
 
 METHOD_NAMES = ("net", "lines", "auto")
 #: Extended range of real lenses: k1 bounds, and the spread of k2 above the manifold.
@@ -106,7 +106,7 @@ def extended_lenses(n: int, seed: int, size: tuple[int, int] = PAPER_SIZE) -> li
 
 
 def paper_lenses(n: int, seed: int) -> list[tuple[float, float]]:
-    """``n`` lenses of the paper's distribution (:func:`glradial.crops.sample_crop_params`)."""
+    """``n`` lenses of the paper's distribution (:func:`glradial.synthesis.crops.sample_crop_params`)."""
     from ..synthesis.crops import sample_crop_params
 
     return [(p.k1, p.k2) for p in sample_crop_params(n, seed)]
@@ -398,7 +398,7 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
 
 
 def calibrate(n: int = 200, panoramas: int = 4, model: str | None = None, threads: int | None = None) -> dict:
-    """Measure the constants of :mod:`glradial.lens_estimate` on ``n`` procedural crops of the
+    """Measure the constants of :mod:`glradial.estimation.lens_estimate` on ``n`` procedural crops of the
     **validation** split: the CNN's 90th-percentile error, and the scale that puts 90 % of the line
     fits' errors inside ``scale * sigma_px + LINES_UNCERTAINTY_FLOOR_PX``."""
     from ..estimation.lens_estimate import LINES_UNCERTAINTY_FLOOR_PX, fit_frame

@@ -31,8 +31,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..media.atomic import atomic_path, check_output_folder
 from ..lens.lens import NO_SOURCE, Lens
+from ..media.atomic import atomic_path, check_output_folder
 from ..media.native_stderr import silenced
 
 __all__ = ["STMAP_EXTENSIONS", "STMAP_NO_SOURCE", "check_stmap_path", "stmap_from_maps", "maps_from_stmap", "lens_stmap", "write_stmap", "read_stmap"]
@@ -47,7 +47,7 @@ STMAP_EXTENSIONS = (".exr", ".tif", ".tiff", ".npy")
 def stmap_from_maps(map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
     """``cv2.remap`` maps (pixels of a source of the same ``W x H``) -> STMap ``H x W x 3`` float32.
 
-    Map entries at or beyond :data:`glradial.lens.NO_SOURCE` become :data:`STMAP_NO_SOURCE`."""
+    Map entries at or beyond :data:`glradial.lens.lens.NO_SOURCE` become :data:`STMAP_NO_SOURCE`."""
     map_x = np.asarray(map_x, dtype=np.float64)
     map_y = np.asarray(map_y, dtype=np.float64)
     if map_x.shape != map_y.shape or map_x.ndim != 2:
@@ -63,7 +63,7 @@ def stmap_from_maps(map_x: np.ndarray, map_y: np.ndarray) -> np.ndarray:
 
 def maps_from_stmap(stmap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Inverse of :func:`stmap_from_maps` (``cv2.remap``-ready float32 maps); pixels without a
-    source map to :data:`glradial.lens.NO_SOURCE`."""
+    source map to :data:`glradial.lens.lens.NO_SOURCE`."""
     stmap = np.asarray(stmap)
     if stmap.ndim != 3 or stmap.shape[2] < 2:
         raise ValueError(f"an STMap must be H×W×C with C >= 2, got shape {stmap.shape}")

@@ -4,7 +4,7 @@ Used by the crop renderer (``shaders/crop.frag``, ``CROP_INVERSE_SERIES``): a cr
 inverts the same lens, and a per-pixel Newton solve is a third of its shader time on a software
 rasteriser. Instead, per lens and on the CPU (float64, all lenses of a batch at once):
 
-* The exact inverse (:func:`glradial.lensfuncs.undistort_radius_exact`, bounded Newton) is written
+* The exact inverse (:func:`glradial.lens.lensfuncs.undistort_radius_exact`, bounded Newton) is written
   ``r_u = r_d · s(t)`` with ``t = r_d²`` (lens units, image width = 1), and ``s`` is fitted on
   ``t ∈ [0, r_c²]`` (``r_c`` = the frame's corner radius) by a Chebyshev series of degree
   :data:`SERIES_DEGREE` in ``x = 2 t / r_c² − 1``: least squares on :data:`FIT_NODES` Chebyshev nodes.

@@ -1,6 +1,6 @@
 """The two-coefficient radial lens as an immutable, validated value.
 
-Convention (DESIGN.md): lens coordinates have image width = 1 and their origin at the principal
+Convention (docs/DESIGN.md): lens coordinates have image width = 1 and their origin at the principal
 point, by default the image centre, i.e. pixel ``((W - 1) / 2, (H - 1) / 2)`` with pixel centres at
 integer coordinates. A pixel ``(x, y)`` of a ``W x H`` frame is the lens point
 ``p = ((x + 0.5 - W / 2) / W, (y + 0.5 - H / 2) / W)``. Frame sizes are ``(W, H)`` as in OpenCV.
@@ -21,14 +21,20 @@ import math
 import numbers
 from dataclasses import dataclass
 
-
 import numpy as np
 
 from . import lensfuncs
 from .options import (  # noqa: F401  (re-exported: the lens's option types)
-    DIRECTIONS, FITS, INVERSES, Direction, Fit, InverseMethod, check_choice, check_positive, real_number,
+    DIRECTIONS,
+    FITS,
+    INVERSES,
+    Direction,
+    Fit,
+    InverseMethod,
+    check_choice,
+    check_positive,
+    real_number,
 )
-
 
 
 def frame_size(size: object) -> tuple[int, int]:

@@ -3,7 +3,7 @@
 Every function here has a GLSL function of the same name in ``common.glsl``; ``tests/test_twins.py``
 renders each GLSL function into a float texture and holds the two together. Change both or neither.
 
-Convention (DESIGN.md, written once here and in the GLSL header):
+Convention (docs/DESIGN.md, written once here and in the GLSL header):
 
 * Lens coordinates ``p = (u - 0.5, (v - 0.5) * H / W)``: image width = 1, origin at the image centre
   (the principal point), x right, y down.  ``aspect_hw = H / W``.
@@ -94,7 +94,7 @@ def distort_point(p_u: np.ndarray, k1: float, k2: float) -> np.ndarray:
 
 
 def drap_coefficients(k1: float, k2: float) -> tuple[float, float, float, float]:
-    """Drap-Lefevre inverse coefficients (b1, b2, b3, b4) for k3 = k4 = 0 (DESIGN.md)."""
+    """Drap-Lefevre inverse coefficients (b1, b2, b3, b4) for k3 = k4 = 0 (docs/DESIGN.md)."""
     return (
         -k1,
         3.0 * k1**2 - k2,

@@ -1,6 +1,6 @@
 """Lens-estimation metrics and the reference numbers they use, defined once (NumPy; no torch).
 
-Conventions (DESIGN.md): coefficients are width-normalised (image width = 1, origin at the principal
+Conventions (docs/DESIGN.md): coefficients are width-normalised (image width = 1, origin at the principal
 point); the radial map is ``P(r, k) = r (1 + k1 r^2 + k2 r^4)``.
 
 * :data:`PAPER_SIZE` -- the 1280 x 720 frame geometry of the paper's crops, which labels refer to.

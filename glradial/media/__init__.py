@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .._lazy import attach
+from ..lazy import attach
 
 if TYPE_CHECKING:
     from .atomic import atomic_path, atomic_write_bytes, atomic_write_text, check_output_folder, temporary_folder

@@ -1,5 +1,5 @@
 """Reading and writing still images with OpenCV, atomically, with explicit channel order (videos and
-image sequences: :mod:`glradial.video_io`).
+image sequences: :mod:`glradial.media.video_io`).
 
 Convention:
 
@@ -9,7 +9,7 @@ Convention:
 * Bit depth is kept: 8-bit (uint8), 16-bit (uint16, PNG and TIFF) and 32-bit float (float32, TIFF)
   are read and written unchanged. JPEG stores uint8 only; writing anything else to a JPEG raises.
 * Every output is written to a temporary file in the target's folder and renamed into place when it
-  is complete (:mod:`glradial.atomic`): an error or Ctrl-C leaves no partial file.
+  is complete (:mod:`glradial.media.atomic`): an error or Ctrl-C leaves no partial file.
 * Errors name the path: ``FileNotFoundError`` for a missing input, ``ValueError`` for an unknown
   extension or a file that cannot be decoded, ``OSError`` when the encoder fails.
 * An existing output is replaced only with ``overwrite=True`` (``FileExistsError`` otherwise), as
@@ -54,7 +54,7 @@ def _extension(path: str | os.PathLike) -> str:
 
 def is_image_path(path: str | os.PathLike) -> bool:
     """True for a single still image (a :data:`IMAGE_EXTENSIONS` name without a ``%d`` frame-number
-    pattern); everything else is a video or an image sequence for FFmpeg (:mod:`glradial.video_io`)."""
+    pattern); everything else is a video or an image sequence for FFmpeg (:mod:`glradial.media.video_io`)."""
     return _extension(path) in IMAGE_EXTENSIONS and "%" not in Path(path).name
 
 
@@ -100,7 +100,7 @@ def read_image(path: str | os.PathLike, order: ChannelOrder = "rgb") -> np.ndarr
     source = _check_input(path)
     if not is_image_path(source):
         known = ", ".join(sorted(IMAGE_EXTENSIONS))
-        raise ValueError(f"{str(source)!r} is not a still image ({known}); videos: glradial.video_io")
+        raise ValueError(f"{str(source)!r} is not a still image ({known}); videos: glradial.media.video_io")
     data = np.fromfile(source, dtype=np.uint8)
     with silenced():  # libpng/libjpeg chatter on a corrupt file: the ValueError below says it
         image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
@@ -122,7 +122,7 @@ def write_image(
     target = check_output_folder(path)
     if not is_image_path(target):
         known = ", ".join(sorted(IMAGE_EXTENSIONS))
-        raise ValueError(f"{str(target)!r} is not a still-image name ({known}); videos: glradial.video_io")
+        raise ValueError(f"{str(target)!r} is not a still-image name ({known}); videos: glradial.media.video_io")
     check_overwrite(target, overwrite)
     image = np.asarray(image)
     if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)) or image.size == 0:

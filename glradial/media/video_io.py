@@ -20,7 +20,7 @@ Conventions:
 * Audio, subtitle and data streams are copied packet by packet (no re-encoding). A QuickTime
   timecode track (``tmcd``) is not copied: the muxer rebuilds it from the video's timecode tag.
 * Outputs are written to a temporary name next to the target and renamed into place when complete
-  (:mod:`glradial.atomic`); an image sequence (``frame_%04d.png``) is written into a hidden
+  (:mod:`glradial.media.atomic`); an image sequence (``frame_%04d.png``) is written into a hidden
   temporary folder and its files moved into place at the end. An existing output is replaced only
   with ``overwrite=True``. Any FFmpeg error (full disk, encoder failure, unsupported codec) raises
   ``OSError`` naming the path and the cause, and leaves nothing behind.
@@ -41,7 +41,8 @@ import av
 import numpy as np
 
 from .atomic import atomic_path, check_output_folder, temporary_folder
-from .image_io import _check_input as _check_file, check_overwrite
+from .image_io import _check_input as _check_file
+from .image_io import check_overwrite
 from .native_stderr import silenced
 
 __all__ = [
@@ -95,7 +96,7 @@ def sequence_files(pattern: str | os.PathLike) -> list[Path]:
 
 
 def check_video_overwrite(path: str | os.PathLike, overwrite: bool) -> None:
-    """:func:`~glradial.image_io.check_overwrite` for an output file or an image-sequence pattern
+    """:func:`~glradial.media.image_io.check_overwrite` for an output file or an image-sequence pattern
     (``FileExistsError`` when any file of the sequence exists and ``overwrite`` is false)."""
     if not is_sequence(path):
         check_overwrite(path, overwrite)
@@ -485,28 +486,54 @@ class VideoWriter:
             raise
 
     def _open(self, tmp: str, streams) -> None:
-        info, options = self.info, self.options
+        info = self.info
         try:
             self._container = av.open(tmp, "w", format="image2" if self.sequence else None)
         except (av.FFmpegError, ValueError) as err:
             raise ValueError(f"FFmpeg cannot write {_error(self.path, err)} (unknown or unsupported output format)") from None
-        name = options.codec
-        if name is None:
-            if self.sequence:
-                name = {".png": "png", ".tif": "tiff", ".tiff": "tiff", ".jpg": "mjpeg", ".jpeg": "mjpeg"}.get(
-                    self.path.suffix.lower(), self._container.default_video_codec)
-            else:
-                # the input's codec where FFmpeg has an encoder for it and the container is not
-                # known to refuse it (avformat's list is authoritative only where it is long)
-                supported = self._container.supported_codecs
-                name = info.codec
-                try:
-                    encoder_ok = bool(name) and av.Codec(name, "w") is not None
-                except Exception:
-                    encoder_ok = False
-                if not encoder_ok or (len(supported) > 20 and name not in supported):
-                    name = self._container.default_video_codec
-        codec = _encoder(name)
+        codec = _encoder(self._codec_choice())
+        stream = self._add_video_stream(codec)
+        self._stream = stream
+        self._codec_name, self._pix_fmt = stream.codec_context.name, stream.pix_fmt
+        self._depth = _bit_depth(stream.pix_fmt)
+        self._matrix = _matrix(info.colorspace, info.size[1])
+        self._range = info.color_range or (2 if stream.pix_fmt.startswith("yuvj") else 1)
+        self._copies = {}
+        for source in streams:
+            try:
+                self._copies[source.index] = self._container.add_stream_from_template(source)
+            except (av.FFmpegError, ValueError) as err:
+                raise ValueError(
+                    f"cannot copy the {source.type} stream #{source.index} ({source.codec_context.name if source.codec_context else '?'}) "
+                    f"into {str(self.path)!r}: {err}; choose a container that holds it (.mkv, .mov)"
+                ) from None
+        self._start_encoding(codec)
+
+    def _codec_choice(self) -> str:
+        """The encoder's name: the one asked for, else by the sequence's extension, else the input's
+        codec where FFmpeg has an encoder for it and the container takes it, else the container's default."""
+        name = self.options.codec
+        if name is not None:
+            return name
+        if self.sequence:
+            return {".png": "png", ".tif": "tiff", ".tiff": "tiff", ".jpg": "mjpeg", ".jpeg": "mjpeg"}.get(
+                self.path.suffix.lower(), self._container.default_video_codec)
+        # the input's codec where FFmpeg has an encoder for it and the container is not
+        # known to refuse it (avformat's list is authoritative only where it is long)
+        supported = self._container.supported_codecs
+        name = self.info.codec
+        try:
+            encoder_ok = bool(name) and av.Codec(name, "w") is not None
+        except Exception:
+            encoder_ok = False
+        if not encoder_ok or (len(supported) > 20 and name not in supported):
+            name = self._container.default_video_codec
+        return name
+
+    def _add_video_stream(self, codec):
+        """The output video stream: size, pixel format, timing, colour tags, field order, encoder
+        options (crf, preset, bitrate) and timecode."""
+        info, options = self.info, self.options
         stream = self._container.add_stream(codec.name, rate=info.rate)
         stream.width, stream.height = info.size
         stream.pix_fmt = _pick_pix_fmt(codec, options.pix_fmt, info.pix_fmt)
@@ -538,32 +565,22 @@ class VideoWriter:
         context.options = codec_options
         if info.timecode and not self.sequence:
             stream.metadata["timecode"] = info.timecode
-        self._stream = stream
-        self._codec_name, self._pix_fmt = stream.codec_context.name, stream.pix_fmt
-        self._depth = _bit_depth(stream.pix_fmt)
-        self._matrix = _matrix(info.colorspace, info.size[1])
-        self._range = info.color_range or (2 if stream.pix_fmt.startswith("yuvj") else 1)
-        self._copies = {}
-        for source in streams:
-            try:
-                self._copies[source.index] = self._container.add_stream_from_template(source)
-            except (av.FFmpegError, ValueError) as err:
-                raise ValueError(
-                    f"cannot copy the {source.type} stream #{source.index} ({source.codec_context.name if source.codec_context else '?'}) "
-                    f"into {str(self.path)!r}: {err}; choose a container that holds it (.mkv, .mov)"
-                ) from None
+        return stream
+
+    def _start_encoding(self, codec) -> None:
+        """Open the encoder and start the container; a refusal is a ``ValueError`` naming the codec."""
         try:
             with silenced():  # the encoder's own log lines on a refusal: the ValueError below says it
                 try:
                     self._stream.codec_context.open()
                 except av.FFmpegError:
                     # some encoders (MPEG-1/2) take only a standard frame-rate time base
-                    self._stream.codec_context.time_base = 1 / info.rate
+                    self._stream.codec_context.time_base = 1 / self.info.rate
                     self._stream.codec_context.open()
                 self._container.start_encoding()
         except av.FFmpegError as err:
-            preset = f", preset {options.preset!r}" if options.preset is not None else ""
-            raise ValueError(f"cannot encode {_error(self.path, err)} (codec {codec.name}, pix_fmt {stream.pix_fmt}{preset})") from None
+            preset = f", preset {self.options.preset!r}" if self.options.preset is not None else ""
+            raise ValueError(f"cannot encode {_error(self.path, err)} (codec {codec.name}, pix_fmt {self._stream.pix_fmt}{preset})") from None
 
     @property
     def codec(self) -> str:

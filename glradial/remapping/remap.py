@@ -1,7 +1,7 @@
 """Lens correction and distortion of whole frames: GLSL shaders (``correct.frag``,
 ``distort.frag``) or the same maps through ``cv2.remap``.
 
-Convention (DESIGN.md): a lens is ``(k1, k2)`` in width-normalised lens units, principal point at the
+Convention (docs/DESIGN.md): a lens is ``(k1, k2)`` in width-normalised lens units, principal point at the
 frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k2 r_u⁴)``; a
 :class:`glradial.Lens` may move the principal point and set a pixel aspect (``cx``, ``cy``,
 ``pixel_aspect``; lens points and the fit scale are then taken about the principal point).
@@ -50,21 +50,30 @@ import numbers
 import os
 import threading
 from collections import OrderedDict
-from typing import Literal, Sequence
+from typing import Sequence
 
 import cv2
 import moderngl
 import numpy as np
 
 from ..gl import egl
+from ..gl.shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES
+from ..gl.shaderlib import build_program
 from ..lens import lensfuncs
 from ..lens.lens import Lens, frame_size
 from ..lens.options import (
-    BACKENDS, DIRECTIONS, INTERPOLATIONS, INVERSES, Backend, Direction, Fit, Interpolation, InverseMethod, check_choice,
+    BACKENDS,
+    DIRECTIONS,
+    INTERPOLATIONS,
+    INVERSES,
+    Backend,
+    Direction,
+    Fit,
+    Interpolation,
+    InverseMethod,
+    check_choice,
     check_positive,
 )
-from ..gl.shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES, build_program
-
 
 _CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
 _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}

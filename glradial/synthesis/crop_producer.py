@@ -7,7 +7,7 @@ Convention:
   :class:`CropBatch` values in order ``index = 0, 1, 2, ...``. Batch ``i`` is a pure function of
   ``(S, i)`` and the arguments (:func:`plan_batch`): its random numbers come from
   ``numpy.random.default_rng([S, i])``, which picks ``panoramas_per_batch`` panoramas, assigns each
-  crop to one of them and draws the crop parameters (:func:`glradial.crops.sample_crop_params`, the
+  crop to one of them and draws the crop parameters (:func:`glradial.synthesis.crops.sample_crop_params`, the
   paper's distribution unless ``ranges`` is given). With ``paired=True`` batch ``i`` is instead
   ``batch_size / 2`` pairs ``(2j, 2j + 1)`` of one panorama that share pan, tilt, roll and field of
   view and differ only in the lens (:func:`plan_pairs`, random numbers from
@@ -15,10 +15,10 @@ Convention:
 * With ``workers = n >= 1``, batch ``i`` is rendered by worker ``i % n`` and the stream reads the
   workers' queues in turn, so the sequence of batches is identical for any number of workers
   (and to ``workers=0``, up to the renderer being the same driver). Rendering goes through
-  :class:`glradial.crops.PanoramaRenderers`.
+  :class:`glradial.synthesis.crops.PanoramaRenderers`.
 * ``images``: uint8 ``N × h × w × 3`` RGB (``out_size = (w, h)``); ``labels``: float32 ``N × 2`` =
   ``(k1, k2)`` of the ``size`` frame (16:9 in the paper); ``params``: the full
-  :class:`~glradial.crops.CropParams` of each crop; ``panorama``: int64 ``N``, the index into
+  :class:`~glradial.synthesis.crops.CropParams` of each crop; ``panorama``: int64 ``N``, the index into
   ``panoramas`` of each crop's source.
 * A worker that fails raises ``RuntimeError`` with its traceback in the reader; one that dies (killed,
   e.g. by the out-of-memory killer, even halfway through sending a batch) raises ``RuntimeError``
@@ -49,12 +49,12 @@ from typing import Any, Iterator, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
-from ..media.atomic import atomic_path
-from .crops import CropParams, PanoramaRenderers, crop_labels, load_panorama, sample_crop_params
 from ..lens.lens import frame_size
 from ..lens.lensfuncs import LENS_NEWTON_STEPS
-from ..lens.options import INVERSES
 from ..lens.metrics import PAPER_SIZE
+from ..lens.options import INVERSES
+from ..media.atomic import atomic_path
+from .crops import CropParams, PanoramaRenderers, crop_labels, load_panorama, sample_crop_params
 
 #: Newton steps of the exact inverse when crops come from the paper's distribution: 3 steps from the
 #: Drap-Lefevre seed reach 1e-9 lens units on every such lens (see tests/test_crop_producer.py); any
@@ -368,8 +368,8 @@ def crop_batches(
     crops per batch, spread over ``panoramas_per_batch`` panoramas picked per batch; the ``cache``
     most recently used panoramas stay uploaded per process. ``paired``: batches of lens pairs (see
     the module docstring; ``batch_size`` even). ``size``/``out_size``/``inverse``/``supersample``
-    as in :class:`~glradial.crops.CropRenderer`; ``ranges`` overrides the paper's distribution
-    (keys of :func:`~glradial.crops.sample_crop_params`). ``workers`` >= 1 renders in that many
+    as in :class:`~glradial.synthesis.crops.CropRenderer`; ``ranges`` overrides the paper's distribution
+    (keys of :func:`~glradial.synthesis.crops.sample_crop_params`). ``workers`` >= 1 renders in that many
     spawned processes (each makes its own EGL context; ``lp_num_threads`` sets their
     ``LP_NUM_THREADS``, llvmpipe's thread count), each keeping up to ``prefetch`` batches ready.
     Determinism: see the module docstring. Close the stream (``close()`` or ``with``) to stop the

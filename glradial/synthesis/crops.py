@@ -1,6 +1,6 @@
 """Distorted perspective crops of equirectangular panoramas (the paper's training data), on the GPU.
 
-Convention (DESIGN.md, issue 3):
+Convention (docs/DESIGN.md, issue 3):
 
 * Panorama: ``H × W × C`` equirectangular, ``W = 2 H``. Longitude runs left -> right with 0 at the
   centre column (+ to the right), latitude +90° at the top row. Pixel ``(x, y)`` of the panorama
@@ -29,12 +29,12 @@ from typing import Literal, Mapping, Sequence
 import moderngl
 import numpy as np
 
+from ..gl.shaderlib import TEXTURE_FORMATS
 from ..lens import lensfuncs
 from ..lens.inverse_series import SERIES_DEGREE, fit_inverse_series
 from ..lens.lens import Lens, corner_radius, frame_size
-from ..lens.options import INVERSES, InverseMethod, real_number
 from ..lens.metrics import PAPER_SIZE, manifold_k2
-from ..gl.shaderlib import TEXTURE_FORMATS
+from ..lens.options import INVERSES, InverseMethod, real_number
 
 #: The paper's sampling distribution (degrees; k1 in lens units). k2 = manifold(k1) + N(0, K2_NOISE).
 PAPER_RANGES: Mapping[str, tuple[float, float]] = {
@@ -333,7 +333,7 @@ class CropRenderer:
     Newton does not converge count as having no solution) or the paper's four-term ``"drap"`` one.
     With ``series_inverse`` (default) the exact inverse of each crop's lens is fitted on the CPU as a
     degree-10 Chebyshev series in ``r_d²`` and used instead of the per-pixel Newton solve wherever it
-    is within 1e-6 lens units of it over the whole frame (:mod:`glradial.inverse_series`; most of the
+    is within 1e-6 lens units of it over the whole frame (:mod:`glradial.lens.inverse_series`; most of the
     paper's lenses, docs/CROPS.md; the others, near fold-over, keep Newton): the same geometry, a faster shader.
 
     Crops are drawn up to ``tiles_per_pass`` at a time into a vertical atlas (one instanced draw per
@@ -581,7 +581,7 @@ def render_crops(
 
 
 def load_panorama(item: object) -> np.ndarray:
-    """A panorama as H×W×3 uint8 RGB: arrays through :func:`glradial.frames.to_rgb8` (grey repeated,
+    """A panorama as H×W×3 uint8 RGB: arrays through :func:`glradial.media.frames.to_rgb8` (grey repeated,
     alpha dropped, 16-bit and float scaled); paths read (image files through OpenCV, ``.npy``
     arrays such as the stadium cache, or a crop producer's panoramas, mapped by NumPy)."""
     from ..media.frames import to_rgb8

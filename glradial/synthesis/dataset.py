@@ -14,7 +14,7 @@ in the order given), so the content of every file is fixed by the settings alone
 assigned to train/val/test as a whole (never one panorama in two splits): they are shuffled with
 ``default_rng(seed)`` and cut by the split fractions (each non-empty split gets at least one
 panorama when there are enough). Every file is written to a temporary name in its folder and
-renamed when complete (``glradial.atomic``), so an interrupted run leaves only complete files, and
+renamed when complete (``glradial.media.atomic``), so an interrupted run leaves only complete files, and
 a rerun skips them. The manifest binds the folder only once it holds a crop: a run that fails (or
 is killed) before its first crop does not stop a later run with other settings.
 """
@@ -33,11 +33,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..lens.lens import frame_size
+from ..lens.metrics import PAPER_SIZE
+from ..lens.options import INVERSES, InverseMethod
 from ..media.atomic import atomic_write_text
 from .crops import CropParams, PanoramaRenderers, panorama_file_size, sample_crop_params, supersample_grid
-from ..lens.lens import frame_size
-from ..lens.options import INVERSES, InverseMethod
-from ..lens.metrics import PAPER_SIZE
 
 SPLITS = ("train", "val", "test")
 FORMATS = ("png", "jpg")
@@ -117,22 +117,15 @@ def write_crops_dataset(
 ) -> DatasetSummary:
     """Write ``count`` crops of ``panoramas`` (image files, 2:1) to ``out_dir`` (see the module docstring).
 
-    Every panorama is checked (:func:`~glradial.crops.panorama_file_size`: readable, 2:1) before
+    Every panorama is checked (:func:`~glradial.synthesis.crops.panorama_file_size`: readable, 2:1) before
     anything is written. Resumes: files already present are complete (atomic writes) and skipped; a
     ``manifest.json`` with other settings or inputs is an error (``ValueError``) once the folder
     holds a crop, and is replaced while it holds none. A first run that fails before its first crop
     removes what it made (manifest, split folders, ``out_dir``). ``progress(n)`` is called with the
     number of crops finished (written or skipped) since the last call. ``size``, ``out_size``,
-    ``inverse`` and ``supersample`` are as in :class:`~glradial.crops.CropRenderer`.
+    ``inverse`` and ``supersample`` are as in :class:`~glradial.synthesis.crops.CropRenderer`.
     """
-    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        raise ValueError(f"count must be a positive integer, got {count!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    if image_format not in FORMATS:
-        raise ValueError(f"image_format must be one of {FORMATS}, got {image_format!r}")
-    if inverse not in INVERSES:
-        raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
+    _check_settings(count, seed, image_format, inverse)
     size = frame_size(size)
     out_size = frame_size(out_size) if out_size is not None else size
     grid = supersample_grid(supersample, size, out_size)  # validated before anything is written
@@ -163,6 +156,40 @@ def write_crops_dataset(
             {"id": pid, "path": str(path), "split": split} for pid, path, split in zip(ids, paths, split_of)
         ],
     }
+    fresh = _claim_manifest(out, manifest)
+
+    params = sample_crop_params(count, seed, size=size)
+    files = [Path(split_of[i % len(paths)]) / f"{i:07d}.{image_format}" for i in range(count)]
+    made_splits = [out / split for split in sorted(set(split_of)) if not (out / split).exists()]
+    try:
+        written, skipped = _write_crops(out, paths, files, params, size, out_size, inverse, grid, split_of, image_format, progress)
+    except BaseException:
+        if fresh and not _holds_crops(out):  # a first run that failed before its first crop leaves nothing
+            _undo_first_run(out, made_out, made_splits, image_format)
+        raise
+    labels = out / "labels.csv"
+    rows = ([i, files[i].as_posix(), split_of[i % len(paths)], ids[i % len(paths)], str(paths[i % len(paths)]), seed]
+            + [repr(v) for v in (p.pan, p.tilt, p.roll, p.hfov, p.k1, p.k2)]
+            + [size[0], size[1], out_size[0], out_size[1], inverse] for i, p in enumerate(params))
+    atomic_write_text(labels, _csv_text(LABEL_COLUMNS, rows))
+    per_split = {s: sum(1 for i in range(count) if split_of[i % len(paths)] == s) for s in SPLITS}
+    return DatasetSummary(out, written, skipped, per_split, labels)
+
+
+def _check_settings(count: object, seed: object, image_format: object, inverse: object) -> None:
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"count must be a positive integer, got {count!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if image_format not in FORMATS:
+        raise ValueError(f"image_format must be one of {FORMATS}, got {image_format!r}")
+    if inverse not in INVERSES:
+        raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
+
+
+def _claim_manifest(out: Path, manifest: dict) -> bool:
+    """Write ``manifest.json`` unless the same one is there; ``ValueError`` when another one binds
+    crops already written. Returns whether this run starts the dataset (a fresh manifest)."""
     manifest_path = out / "manifest.json"
     fresh = not manifest_path.exists()
     if not fresh:
@@ -177,38 +204,27 @@ def write_crops_dataset(
             fresh = True  # left by a run that wrote no crop (killed early): it binds nothing
     if fresh:
         atomic_write_text(manifest_path, json.dumps(manifest, indent=2) + "\n")
+    return fresh
 
-    params = sample_crop_params(count, seed, size=size)
-    files = [Path(split_of[i % len(paths)]) / f"{i:07d}.{image_format}" for i in range(count)]
-    made_splits = [out / split for split in sorted(set(split_of)) if not (out / split).exists()]
-    try:
-        written, skipped = _write_crops(out, paths, files, params, size, out_size, inverse, grid, split_of, image_format, progress)
-    except BaseException:
-        if fresh and not _holds_crops(out):  # a first run that failed before its first crop leaves nothing
-            for folder in made_splits:
-                _remove_stale(folder, image_format)
-                with contextlib.suppress(OSError):
-                    folder.rmdir()
-            manifest_path.unlink(missing_ok=True)
-            if made_out:
-                with contextlib.suppress(OSError):
-                    out.rmdir()
-        raise
 
+def _undo_first_run(out: Path, made_out: bool, made_splits: list[Path], image_format: str) -> None:
+    """Remove what a first run made (split folders, manifest, ``out``) when it wrote no crop."""
+    for folder in made_splits:
+        _remove_stale(folder, image_format)
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+    (out / "manifest.json").unlink(missing_ok=True)
+    if made_out:
+        with contextlib.suppress(OSError):
+            out.rmdir()
+
+
+def _csv_text(header: Sequence[str], rows) -> str:
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(LABEL_COLUMNS)
-    for i, p in enumerate(params):
-        j = i % len(paths)
-        writer.writerow(
-            [i, files[i].as_posix(), split_of[j], ids[j], str(paths[j]), seed]
-            + [repr(v) for v in (p.pan, p.tilt, p.roll, p.hfov, p.k1, p.k2)]
-            + [size[0], size[1], out_size[0], out_size[1], inverse]
-        )
-    labels = out / "labels.csv"
-    atomic_write_text(labels, buffer.getvalue())
-    per_split = {s: sum(1 for i in range(count) if split_of[i % len(paths)] == s) for s in SPLITS}
-    return DatasetSummary(out, written, skipped, per_split, labels)
+    writer.writerow(header)
+    writer.writerows(rows)
+    return buffer.getvalue()
 
 
 def _holds_crops(out: Path) -> bool:

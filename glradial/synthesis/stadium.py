@@ -5,12 +5,12 @@ Convention:
     ``lon = ((x + 0.5) / W - 0.5) * 360°`` (0 at the centre column, positive to the right), row y
     has latitude ``lat = (0.5 - (y + 0.5) / H) * 180°`` (+90° at the top row). Row 0 is the top.
     Scene: metres, pitch centre at the origin, x along the pitch, y across, z up (see
-    :mod:`glradial.stadium_style`). The camera stands at ``style.camera`` and longitude 0 looks
+    :mod:`glradial.synthesis.stadium_style`). The camera stands at ``style.camera`` and longitude 0 looks
     horizontally at the pitch centre (azimuth ``style.yaw``, degrees counter-clockwise from +x);
     a direction is ``cos(lat)·(cos(lon)·f + sin(lon)·r) + sin(lat)·up`` with
     ``f = (cos yaw, sin yaw, 0)`` and ``r = (sin yaw, −cos yaw, 0)``.
 
-Seeds: every seed gives one stadium (:func:`glradial.stadium_style.sample_style`); the split into
+Seeds: every seed gives one stadium (:func:`glradial.synthesis.stadium_style.sample_style`); the split into
 train / val / test is ``seed % 10`` (0-7 / 8 / 9), see :func:`stadium_split` and :func:`split_seeds`.
 """
 
@@ -125,7 +125,16 @@ def _lighting_params(style: StadiumStyle) -> dict[str, Any]:
 
 def _uniforms(style: StadiumStyle) -> dict[str, Any]:
     """Every uniform of stadium.frag for ``style`` (except size, strip row and supersampling)."""
-    u: dict[str, Any] = {
+    u = _surface_uniforms(style)
+    u.update(_lighting_params(style))
+    u.update(_stand_uniforms(style))
+    u.update(_mast_and_player_uniforms(style))
+    return u
+
+
+def _surface_uniforms(style: StadiumStyle) -> dict[str, Any]:
+    """Camera, sky, pitch, boards, seats and colours: the uniforms read straight from ``style``."""
+    return {
         "u_cam": style.camera,
         "u_yaw": math.radians(style.yaw),
         "u_lighting": _LIGHTING_ID[style.lighting],
@@ -162,7 +171,11 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
         "u_team1": style.team_colors[0],
         "u_team2": style.team_colors[1],
     }
-    u.update(_lighting_params(style))
+
+
+def _stand_uniforms(style: StadiumStyle) -> dict[str, Any]:
+    """The four stands: profiles, roof and board lines, profile segments, shadow corners, pillars."""
+    u: dict[str, Any] = {}
     a, b, c, d, seg, mat, nseg = [], [], [], [], [], [], []
     for i, p in enumerate(style.sides):
         a.append((SIDE_LINE[i] + p.margin, p.front_height, p.slope1, p.depth1))
@@ -189,6 +202,12 @@ def _uniforms(style: StadiumStyle) -> dict[str, Any]:
     u["u_pillars"] = [int(v) for v in style.pillars]
     u["u_pillar_spacing"] = style.pillar_spacing
     u.update({"u_side_a": a, "u_side_b": b, "u_side_c": c, "u_side_d": d, "u_seg": seg, "u_segmat": mat})
+    return u
+
+
+def _mast_and_player_uniforms(style: StadiumStyle) -> dict[str, Any]:
+    """Floodlight masts (behind the corners, above the roofs) and the players on the pitch."""
+    u: dict[str, Any] = {}
     x0 = HALF_LENGTH + style.sides[0].margin + 0.5 * style.sides[0].back_d
     y0 = HALF_WIDTH + style.sides[2].margin + 0.5 * style.sides[2].back_d
     roof_top = max(p.roof_height + p.fascia if p.roof else p.top_height for p in style.sides)
@@ -327,7 +346,7 @@ def stadium_panorama(seed: int, size: tuple[int, int] = (8192, 4096), **style: A
     """Procedural football-stadium panorama for ``seed`` as H×W×3 uint8 RGB (equirectangular).
 
     ``size`` is (W, H) in pixels (normally W = 2H). ``style`` overrides fields of the seed's
-    :class:`~glradial.stadium_style.StadiumStyle` (e.g. ``lighting="night"``, ``supersample=1``);
+    :class:`~glradial.synthesis.stadium_style.StadiumStyle` (e.g. ``lighting="night"``, ``supersample=1``);
     the camera position always comes from the seed. Deterministic: the same seed, size and
     overrides give the same pixels on one driver. Uses the calling thread's GL context.
     """

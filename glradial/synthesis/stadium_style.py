@@ -315,6 +315,26 @@ def sample_style(seed: int) -> StadiumStyle:
     """The deterministic style of panorama ``seed`` (a ``StadiumStyle``)."""
     seed = _check_seed(seed)
     rng = np.random.Generator(np.random.PCG64(seed))
+    # the draws happen in one fixed order (the helpers below, in this order): a seed is a stadium
+    sides, track = _sample_sides(rng)
+    kind, cam, sides = _camera(rng, sides)
+    yaw = math.degrees(math.atan2(-cam[1], -cam[0]))
+    look = _sample_pitch_and_stands(rng, track)
+    grey = look.pop("_grey")
+    style = StadiumStyle(seed=seed, camera_kind=kind, camera=cam, yaw=float(yaw), sides=tuple(sides),  # type: ignore[arg-type]
+                         track=track, **look, **_sample_weather_and_dressing(rng, look, grey))
+    # some stadiums (older grounds) have open corners between their stands
+    if rng.random() < 0.3:
+        style = replace(style, open_corners=tuple(bool(rng.random() < 0.8) for _ in range(4)))  # type: ignore[arg-type]
+    # older roofs stand on columns at the front of the stand (never in front of the camera)
+    cam_side = _camera_side(cam)
+    pillars = tuple(bool(p.roof and i != cam_side and rng.random() < 0.3) for i, p in enumerate(style.sides))
+    style = replace(style, pillars=pillars, pillar_spacing=float(rng.uniform(11.0, 22.0)))  # type: ignore[arg-type]
+    return style
+
+
+def _sample_sides(rng: np.random.Generator) -> tuple[list, bool]:
+    """The four stands (symmetric or not) and whether an athletics track surrounds the pitch."""
     scale = rng.uniform(0.55, 1.25)  # stadium size
     sym = rng.random() < 0.5  # symmetric stadium: the ends match, the sides match
     sides = [_side_profile(rng, i, scale, main=(i == 3)) for i in range(4)]
@@ -328,9 +348,12 @@ def sample_style(seed: int) -> StadiumStyle:
             end = i < 2
             sides[i] = replace(p, margin=rng.uniform(38.5, 44.0) if end else rng.uniform(14.5, 18.0),
                                board_offset=(TRACK_END_CLEAR if end else TRACK_SIDE_CLEAR) + rng.uniform(0.3, 1.2))
-    kind, cam, sides = _camera(rng, sides)
-    yaw = math.degrees(math.atan2(-cam[1], -cam[0]))
+    return sides, track
 
+
+def _sample_pitch_and_stands(rng: np.random.Generator, track: bool) -> dict:
+    """Lighting, grass and stripes, team and seat colours, players, the surround (``StadiumStyle``
+    fields) and ``"_grey"`` (the concrete's value, drawn here)."""
     lighting = LIGHTING_MODES[int(rng.choice(3, p=[0.5, 0.2, 0.3]))]
     sun_az = rng.uniform(0.0, 360.0)
     sun_el = rng.uniform(8.0, 62.0) if lighting == "day" else rng.uniform(20.0, 60.0)
@@ -354,23 +377,20 @@ def sample_style(seed: int) -> StadiumStyle:
         for i in range(n_players)
     )
     surround = _hsv(0.03, 0.6, 0.45) if track else (grass if rng.random() < 0.7 else _hsv(0.1, 0.1, 0.5))
-    style = StadiumStyle(
-        seed=seed,
-        camera_kind=kind,
-        camera=cam,
-        yaw=float(yaw),
-        sides=tuple(sides),  # type: ignore[arg-type]
-        lighting=lighting,
-        sun_azimuth=float(sun_az),
-        sun_elevation=float(sun_el),
+    return dict(lighting=lighting, sun_azimuth=float(sun_az), sun_elevation=float(sun_el), grass_color=grass,
+                grass_color2=grass2, stripe_pattern=pattern, stripe_width=float(width), seat_colors=(seat1, seat2),
+                surround=surround, players=players, team_colors=team, _grey=grey)
+
+
+def _sample_weather_and_dressing(rng: np.random.Generator, look: dict, grey: float) -> dict:
+    """Exposure and weather, stripe details, wear and lines, crowd, concrete, roofs, boards and
+    masts (``StadiumStyle`` fields, drawn in this order)."""
+    team = look["team_colors"]
+    return dict(
         exposure=float(rng.uniform(0.85, 1.2)),
         haze=float(rng.uniform(0.0, 0.0015) if rng.random() < 0.75 else rng.uniform(0.0015, 0.004)),  # per metre
         cloudiness=float(rng.uniform(0.0, 1.0)),
-        rain=float(rng.uniform(0.2, 0.8) if (lighting != "day" and rng.random() < 0.2) else 0.0),
-        grass_color=grass,
-        grass_color2=grass2,
-        stripe_pattern=pattern,
-        stripe_width=float(width),
+        rain=float(rng.uniform(0.2, 0.8) if (look["lighting"] != "day" and rng.random() < 0.2) else 0.0),
         stripe_angle=float(rng.uniform(20.0, 60.0) * rng.choice([-1, 1])),
         stripe_contrast=float(rng.uniform(0.05, 0.25)),
         stripe_offset=float(rng.uniform(0.0, 0.08)),
@@ -378,7 +398,6 @@ def sample_style(seed: int) -> StadiumStyle:
         wear=float(rng.uniform(0.0, 1.0) ** 1.5),
         line_width=float(rng.uniform(0.10, 0.13)),
         line_brightness=float(rng.uniform(0.7, 0.95)),
-        seat_colors=(seat1, seat2),
         seat_pattern=int(rng.integers(0, 3)),
         crowd_density=float(rng.uniform(0.0, 1.0) ** 0.5),
         crowd_colors=(team[0], _team_color(rng)),
@@ -390,19 +409,7 @@ def sample_style(seed: int) -> StadiumStyle:
         led_boards=bool(rng.random() < 0.6),
         masts=bool(rng.random() < 0.5),
         mast_height=float(rng.uniform(35.0, 60.0)),
-        surround=surround,
-        track=track,
-        players=players,
-        team_colors=team,
     )
-    # some stadiums (older grounds) have open corners between their stands
-    if rng.random() < 0.3:
-        style = replace(style, open_corners=tuple(bool(rng.random() < 0.8) for _ in range(4)))  # type: ignore[arg-type]
-    # older roofs stand on columns at the front of the stand (never in front of the camera)
-    cam_side = _camera_side(cam)
-    pillars = tuple(bool(p.roof and i != cam_side and rng.random() < 0.3) for i, p in enumerate(style.sides))
-    style = replace(style, pillars=pillars, pillar_spacing=float(rng.uniform(11.0, 22.0)))  # type: ignore[arg-type]
-    return style
 
 
 def _camera_side(cam: tuple[float, float, float]) -> int:

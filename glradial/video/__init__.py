@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .._lazy import attach
+from ..lazy import attach
 
 if TYPE_CHECKING:
     from .lens_track import DOUBTFUL_PX, LensTrack, load_lens_track

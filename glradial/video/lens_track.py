@@ -10,7 +10,7 @@ column                  meaning
 ``frame``               frame index, 0 = first decoded frame (required)
 ``time_s``              presentation time of the frame in seconds from the stream start
 ``shot``                shot id (0, 1, ...), a cut starts a new one
-``k1``, ``k2``          the lens the frame is corrected with (width-normalised, DESIGN.md) (required)
+``k1``, ``k2``          the lens the frame is corrected with (width-normalised, docs/DESIGN.md) (required)
 ``uncertainty_px``      stated uncertainty of that lens (~p90 of the maximum displacement error,
                         px at 1920 wide); empty when the estimator states none
 ``doubtful``            1 when the frame's shot is doubtful (median uncertainty above the

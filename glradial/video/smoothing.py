@@ -1,6 +1,6 @@
 """Per-shot smoothing of per-frame lens estimates, and shot-cut detection.
 
-A broadcast camera's lens changes only with zoom (``k̃ = k (W/f)^2``, DESIGN.md), so within one shot
+A broadcast camera's lens changes only with zoom (``k̃ = k (W/f)^2``, docs/DESIGN.md), so within one shot
 the true ``(k1, k2)`` is a slow function of time, while per-frame CNN estimates are noisy and now and
 then wrong. Two pieces:
 
@@ -13,8 +13,8 @@ then wrong. Two pieces:
   local line follows a zoom; samples whose lens is far from the local fit get weight 0.
 
 Convention: times are frame indices (integers, 0 = first frame); coefficients are width-normalised
-``(k1, k2)`` (DESIGN.md). The distance between two lenses is
-:func:`glradial.metrics.max_displacement`, the maximum radial displacement ``max_r |P(r, a) -
+``(k1, k2)`` (docs/DESIGN.md). The distance between two lenses is
+:func:`glradial.lens.metrics.max_displacement`, the maximum radial displacement ``max_r |P(r, a) -
 P(r, b)|`` in lens units (image widths) over ``r`` in ``[0, radius]``.
 """
 
@@ -26,8 +26,8 @@ from dataclasses import dataclass, field
 import cv2
 import numpy as np
 
-from ..media.frames import to_rgb8
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, max_displacement
+from ..media.frames import to_rgb8
 
 __all__ = ["ShotDetector", "detect_cuts", "hold_static", "smooth_shot", "smooth_track", "shot_ids"]
 
@@ -152,7 +152,7 @@ def smooth_shot(
 
     Each query point fits ``k(t) = a + b (t - q)`` with weights ``tricube((t - q) / h) * w_i * c_i``,
     where ``h`` is ``half_window`` frames (widened so that at least 3 samples count), ``w_i`` are
-    bisquare robustness weights from the samples' residual distance (:func:`glradial.metrics.max_displacement`) over
+    bisquare robustness weights from the samples' residual distance (:func:`glradial.lens.metrics.max_displacement`) over
     ``6 * max(MAD, min_scale)`` (``min_scale`` in lens units: residuals below ~ it are never
     rejected) and ``c_i = 1 / max(u_i, floor)^2`` the confidence of a sample whose estimator stated
     the uncertainty ``u_i`` (lens units; ``uncertainty=None``: all equal). A sure sample thus

@@ -3,26 +3,26 @@
 Pipeline (two passes over the file, so memory does not grow with its length):
 
 1. :func:`track_video` decodes every frame once, feeds each (converted :data:`DETECT_WIDTH` px
-   wide) to a :class:`~glradial.smoothing.ShotDetector` and runs the estimator (on a copy at most
+   wide) to a :class:`~glradial.video.smoothing.ShotDetector` and runs the estimator (on a copy at most
    :data:`ESTIMATE_WIDTH` px wide: what the estimators look at) on the first frame of every shot
-   and then every ``every``-th frame of the shot. The per-shot robust smoother (:func:`~glradial.smoothing.smooth_track`) turns those
+   and then every ``every``-th frame of the shot. The per-shot robust smoother (:func:`~glradial.video.smoothing.smooth_track`) turns those
    samples into a lens for every frame, weighting each sample by the confidence its estimator
    states (``uncertainty_px`` of a :class:`glradial.Lens` subclass; equal weights for a plain lens
    or a pair). A smoothed lens that would fold over on the frame is replaced by the nearest
    accepted raw estimate of the same shot. Shots whose smoothed lens is doubtful (median stated
-   uncertainty above :data:`~glradial.lens_track.DOUBTFUL_PX`) are listed by
+   uncertainty above :data:`~glradial.video.lens_track.DOUBTFUL_PX`) are listed by
    :meth:`LensTrack.doubtful_shots`.
 2. :func:`correct_video` decodes the file again, corrects each frame with its lens and encodes it
-   (:mod:`glradial.video_io`: audio and other streams copied, timing, colour tags and depth kept).
+   (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags and depth kept).
    Decoding, correction and encoding overlap on three threads with at most ``depth`` frames
    queued between two steps; the correction runs on one worker thread, which owns its GL context
    (released when it ends) or uses the CPU path.
 
-The result of pass 1 is a :class:`~glradial.lens_track.LensTrack`, written as a sidecar
-(format: :mod:`glradial.lens_track`).
+The result of pass 1 is a :class:`~glradial.video.lens_track.LensTrack`, written as a sidecar
+(format: :mod:`glradial.video.lens_track`).
 
 Convention: frames are ``H x W x 3`` RGB (uint8, or uint16 for deeper sources) when they reach the
-corrector; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (DESIGN.md).
+corrector; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (docs/DESIGN.md).
 """
 
 from __future__ import annotations
@@ -37,13 +37,13 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from ..media.frames import to_rgb8
 from ..lens.lens import Lens, as_lens, corner_radius
-from .lens_track import DOUBTFUL_PX, LensTrack
 from ..lens.metrics import REPORT_WIDTH, max_displacement
+from ..media.frames import to_rgb8
 from ..media.progress import Progress
-from .smoothing import ShotDetector, smooth_track
 from ..media.video_io import CopiedPacket, EncodeOptions, VideoFrame, VideoReader, VideoWriter
+from .lens_track import DOUBTFUL_PX, LensTrack
+from .smoothing import ShotDetector, smooth_track
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
@@ -260,7 +260,7 @@ def track_video(
 
 class _FrameCorrector:
     """Corrects frames on the pipeline's worker thread: ``backend`` "gl" makes a
-    :class:`~glradial.remap.Remapper` with its own context on first use there (falling back to the
+    :class:`~glradial.remapping.remap.Remapper` with its own context on first use there (falling back to the
     CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
 
     def __init__(self, backend: str, fit: str, interpolation: str) -> None:
@@ -315,7 +315,7 @@ def correct_video(
 ) -> int:
     """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` (a :class:`Lens` or
     ``(k1, k2)``) into ``target``
-    (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.video_io`;
+    (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.media.video_io`;
     encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
     track's length): a video with another frame count is an error and leaves no output. A header
     frame count that differs from the frames decoded gives a warning on stderr with both counts.
