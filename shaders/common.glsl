@@ -2,7 +2,7 @@
 //
 // Include this file in every program (glradial.shaderlib expands the include directive); it needs
 // nothing injected from Python and compiles as GLSL 3.30 core on its own after a `#version` line.
-// Every function below has a NumPy twin of the same name in glradial/lensfuncs.py.
+// Every function below has a NumPy twin of the same name in glradial/lens/lensfuncs.py.
 //
 // Conventions (docs/DESIGN.md):
 //   Pixel (x, y): integer indices are pixel centres, x right, y down; image W x H.

@@ -326,7 +326,6 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     ``remove_own_lens``: a frame whose own lens the line fit and the CNN agree on
     (:func:`agreed_own_lens`) is first corrected with it (``fit="crop"``)."""
     from ..media.atomic import atomic_write_text
-    from ..remapping.remap import correct
 
     if isinstance(lenses, bool) or not isinstance(lenses, int) or lenses < 1:
         raise ValueError(f"lenses must be a positive integer, got {lenses!r}")
@@ -338,20 +337,7 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     removed: dict[str, Lens] = {}
     evaluator = None
     if frames_dir is not None:
-        frames, panoramas = frames_in(frames_dir)
-        evaluator = Evaluator(model, threads)
-        for i, (name, f) in enumerate(frames):
-            own[name] = evaluator(f)
-            found = agreed_own_lens(own[name]) if remove_own_lens else None
-            if found is not None:
-                removed[name] = found
-                f = correct(f, found, fit="crop")
-            sources[f"{name}/paper"] = _distorted(f, paper_lenses(lenses, seed * 1000 + i))
-            sources[f"{name}/extended"] = _distorted(f, extended_lenses(lenses, seed * 1000 + 500 + i))
-        for i, (name, pano) in enumerate(panoramas):
-            count = 4 * lenses
-            sources[f"{name}/paper"] = _panorama_crops(pano, paper_lenses(count, seed * 1000 + 100 + i), seed + 1)
-            sources[f"{name}/extended"] = _panorama_crops(pano, extended_lenses(count, seed * 1000 + 600 + i), seed + 2)
+        evaluator = _folder_sources(frames_dir, model, threads, lenses, seed, remove_own_lens, sources, own, removed)
     for name, cam_frames, lens in cams:
         sources[f"calibrated/{name}"] = (((lens.k1, lens.k2), f) for f in cam_frames)
     if procedural:
@@ -369,6 +355,44 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
              f"{4 * lenses} + {4 * lenses} crops per panorama; calibrated: {', '.join(c[0] for c in cams) or 'none'}; "
              f"procedural test crops: {procedural}. Errors: max displacement over the 16:9 frame, px at 1920.")
     text = markdown(summary, "Lens estimation on real frames: net, lines, auto", notes)
+    text += _own_lens_text(own, removed, own_lens)
+    text += "".join(f"\n![{f}]({f})\n" for f in figures)
+    atomic_write_text(out / "real.md", text)
+    own_json = {name: {m: e.as_dict() for m, e in est.items()} for name, est in own.items()}
+    removed_json = {name: {"k1": lens.k1, "k2": lens.k2} for name, lens in removed.items()}
+    atomic_write_text(out / "real_metrics.json",
+                      json.dumps({"summary": summary, "own_lens": own_json, "own_lens_removed": removed_json}, indent=1))
+    return summary
+
+
+def _folder_sources(frames_dir: str | Path, model: str | None, threads: int | None, lenses: int, seed: int,
+                    remove_own_lens: bool, sources: dict[str, Iterable], own: dict[str, dict],
+                    removed: dict[str, Lens]) -> Evaluator:
+    """The sources of a frames folder (each frame with paper and extended lenses applied, crops of
+    each panorama) into ``sources``; each frame's own estimates into ``own``, the own lenses
+    removed first into ``removed``. Returns the evaluator it loaded."""
+    from ..remapping.remap import correct
+
+    frames, panoramas = frames_in(frames_dir)
+    evaluator = Evaluator(model, threads)
+    for i, (name, f) in enumerate(frames):
+        own[name] = evaluator(f)
+        found = agreed_own_lens(own[name]) if remove_own_lens else None
+        if found is not None:
+            removed[name] = found
+            f = correct(f, found, fit="crop")
+        sources[f"{name}/paper"] = _distorted(f, paper_lenses(lenses, seed * 1000 + i))
+        sources[f"{name}/extended"] = _distorted(f, extended_lenses(lenses, seed * 1000 + 500 + i))
+    for i, (name, pano) in enumerate(panoramas):
+        count = 4 * lenses
+        sources[f"{name}/paper"] = _panorama_crops(pano, paper_lenses(count, seed * 1000 + 100 + i), seed + 1)
+        sources[f"{name}/extended"] = _panorama_crops(pano, extended_lenses(count, seed * 1000 + 600 + i), seed + 2)
+    return evaluator
+
+
+def _own_lens_text(own: dict[str, dict], removed: dict[str, Lens], own_lens: set[str]) -> str:
+    """The report's section on each frame's own distortion ("" without frames)."""
+    text = ""
     if own:
         text += ("\n## Each frame's own distortion (the floor of its figures)\n\nWhat each method reads on the "
                  "unmodified frame, and its maximum displacement from no lens (px at 1920): a frame that is not "
@@ -388,13 +412,7 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
             text += (f"\nRead as carrying their own lens (the line fit reads more than {OWN_LENS_PX:g} px and more than its "
                      "bound from no lens): "
                      f"{', '.join(sorted(own_lens))}; the row 'all real without own-lens frames' leaves them out.\n")
-    text += "".join(f"\n![{f}]({f})\n" for f in figures)
-    atomic_write_text(out / "real.md", text)
-    own_json = {name: {m: e.as_dict() for m, e in est.items()} for name, est in own.items()}
-    removed_json = {name: {"k1": lens.k1, "k2": lens.k2} for name, lens in removed.items()}
-    atomic_write_text(out / "real_metrics.json",
-                      json.dumps({"summary": summary, "own_lens": own_json, "own_lens_removed": removed_json}, indent=1))
-    return summary
+    return text
 
 
 def calibrate(n: int = 200, panoramas: int = 4, model: str | None = None, threads: int | None = None) -> dict:

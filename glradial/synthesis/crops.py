@@ -358,14 +358,36 @@ class CropRenderer:
     ) -> None:
         import moderngl
 
-        from ..gl.egl import GLOwner, max_texture_size, thread_context
+        from ..gl.egl import GLOwner, thread_context
 
         self.size = frame_size(size)
         self.out_size = frame_size(out_size) if out_size is not None else self.size
+        self._set_options(inverse, supersample, anisotropy, newton_steps, series_inverse)
+        array = _panorama_array(panorama)
+        self.dtype = array.dtype
+        self.channels = array.shape[2]
+        self._squeeze = np.asarray(panorama).ndim == 2
+        if ctx is not None and not isinstance(ctx, moderngl.Context):
+            raise TypeError(f"ctx must be a moderngl.Context or None, got {type(ctx).__name__} {ctx!r}")
+        self._objects: list[object] = []
+        self.ctx = ctx if ctx is not None else thread_context()
+        self._owner = GLOwner("CropRenderer", self.ctx)
+        self._owner.enter()
+        array = self._within_limits(array)
+        self.panorama_size = (array.shape[1], array.shape[0])
+        try:
+            self._build(np.ascontiguousarray(array))
+        except BaseException:
+            self.release()
+            raise
+
+    def _set_options(self, inverse: object, supersample: object, anisotropy: object, newton_steps: object,
+                     series_inverse: object) -> None:
+        """Check and keep the rendering options (the sizes are set)."""
         if inverse not in INVERSES:
             raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
-        self.inverse: InverseMethod = inverse
-        self.supersample = supersample_grid(supersample, self.size, self.out_size)
+        self.inverse: InverseMethod = inverse  # type: ignore[assignment]
+        self.supersample = supersample_grid(supersample, self.size, self.out_size)  # type: ignore[arg-type]
         if isinstance(newton_steps, bool) or not isinstance(newton_steps, (numbers.Integral, np.integer)) or not 1 <= newton_steps <= 16:
             raise ValueError(f"newton_steps must be an integer in 1..16, got {newton_steps!r}")
         self.newton_steps = int(newton_steps)
@@ -378,16 +400,12 @@ class CropRenderer:
         self.anisotropy = float(anisotropy)
         if not 1.0 <= self.anisotropy <= 16.0:
             raise ValueError(f"anisotropy must be within [1, 16], got {anisotropy!r}")
-        array = _panorama_array(panorama)
-        self.dtype = array.dtype
-        self.channels = array.shape[2]
-        self._squeeze = np.asarray(panorama).ndim == 2
-        if ctx is not None and not isinstance(ctx, moderngl.Context):
-            raise TypeError(f"ctx must be a moderngl.Context or None, got {type(ctx).__name__} {ctx!r}")
-        self._objects: list[object] = []
-        self.ctx = ctx if ctx is not None else thread_context()
-        self._owner = GLOwner("CropRenderer", self.ctx)
-        self._owner.enter()
+
+    def _within_limits(self, array: np.ndarray) -> np.ndarray:
+        """The panorama as the driver takes it: an output size over the limits is a ``ValueError``;
+        a panorama wider than the texture limit is downscaled with a ``RuntimeWarning``."""
+        from ..gl.egl import max_texture_size
+
         limit = max_texture_size(self.ctx)
         rows = min(int(self.ctx.info["GL_MAX_VIEWPORT_DIMS"][1]), limit)
         if self.out_size[0] > limit or self.out_size[1] > rows:
@@ -403,17 +421,12 @@ class CropRenderer:
                 f"panorama {array.shape[1]}×{array.shape[0]} exceeds GL_MAX_TEXTURE_SIZE {limit}; "
                 f"downscaled to {new_w}×{new_h} (area filter)",
                 RuntimeWarning,
-                stacklevel=2,
+                stacklevel=3,  # the caller of CropRenderer(...)
             )
             array = cv2.resize(array, (new_w, new_h), interpolation=cv2.INTER_AREA)
             if array.ndim == 2:
                 array = array[:, :, None]
-        self.panorama_size = (array.shape[1], array.shape[0])
-        try:
-            self._build(np.ascontiguousarray(array))
-        except BaseException:
-            self.release()
-            raise
+        return array
 
     def _build(self, array: np.ndarray) -> None:
         from ..gl.shaderlib import build_program

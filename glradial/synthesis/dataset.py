@@ -142,20 +142,7 @@ def write_crops_dataset(
     made_out = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
 
-    manifest = {
-        "format": "glradial-crops-1",
-        "seed": int(seed),
-        "count": int(count),
-        "size": list(size),
-        "out_size": list(out_size),
-        "inverse": inverse,
-        "supersample": list(grid),
-        "splits": dict(zip(SPLITS, (float(f) for f in splits))),
-        "image_format": image_format,
-        "panoramas": [
-            {"id": pid, "path": str(path), "split": split} for pid, path, split in zip(ids, paths, split_of)
-        ],
-    }
+    manifest = _manifest(seed, count, size, out_size, inverse, grid, splits, image_format, ids, paths, split_of)
     fresh = _claim_manifest(out, manifest)
 
     params = sample_crop_params(count, seed, size=size)
@@ -174,6 +161,25 @@ def write_crops_dataset(
     atomic_write_text(labels, _csv_text(LABEL_COLUMNS, rows))
     per_split = {s: sum(1 for i in range(count) if split_of[i % len(paths)] == s) for s in SPLITS}
     return DatasetSummary(out, written, skipped, per_split, labels)
+
+
+def _manifest(seed: int, count: int, size: tuple[int, int], out_size: tuple[int, int], inverse: str, grid: tuple[int, int],
+              splits: Sequence[float], image_format: str, ids: list[str], paths: list[Path], split_of: list[str]) -> dict:
+    """What ``manifest.json`` holds: the settings and inputs a resumed run must repeat."""
+    return {
+        "format": "glradial-crops-1",
+        "seed": int(seed),
+        "count": int(count),
+        "size": list(size),
+        "out_size": list(out_size),
+        "inverse": inverse,
+        "supersample": list(grid),
+        "splits": dict(zip(SPLITS, (float(f) for f in splits))),
+        "image_format": image_format,
+        "panoramas": [
+            {"id": pid, "path": str(path), "split": split} for pid, path, split in zip(ids, paths, split_of)
+        ],
+    }
 
 
 def _check_settings(count: object, seed: object, image_format: object, inverse: object) -> None:

@@ -178,27 +178,51 @@ def smooth_shot(
     if half_window <= 0:
         raise ValueError(f"half_window must be positive (frames), got {half_window}")
     given = uncertainty is not None
-    if given:
-        stated = np.asarray(uncertainty, dtype=np.float64).reshape(-1)
-        if len(stated) != n:
-            raise ValueError(f"uncertainty must hold one value per sample ({n}), got {len(stated)}")
-        if not np.all(stated >= 0):  # also refuses NaN
-            raise ValueError(f"uncertainty must be >= 0 (lens units), got {stated[~(stated >= 0)][:3]}")
-        stated = np.maximum(stated, floor)
-    else:
-        stated = np.ones(n)
-    confidence = 1.0 / stated**2
+    stated = _stated(uncertainty, n, floor) if given else np.ones(n)
     if n == 1:
         return np.repeat(lenses, len(query), axis=0), np.ones(1), np.full(len(query), stated[0] if given else np.nan)
     robust = np.ones(n)
+    shot = _Samples(times, lenses, stated if given else None, half_window, radius)
+    for _ in range(iterations):
+        residual = max_displacement(lenses, shot.fit(times, robust)[0], radius)
+        mad = float(np.median(residual))
+        u = residual / (6.0 * max(mad, min_scale))
+        robust = np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0)
+    clamped = np.clip(query, times.min(), times.max())
+    smoothed, sure = shot.fit(clamped, robust, spread=True)
+    return smoothed, robust, sure
 
-    def fit(at: np.ndarray, spread: bool = False) -> tuple[np.ndarray, np.ndarray]:
+
+def _stated(uncertainty: object, n: int, floor: float) -> np.ndarray:
+    """The samples' stated uncertainties (lens units), checked and raised to ``floor``."""
+    stated = np.asarray(uncertainty, dtype=np.float64).reshape(-1)
+    if len(stated) != n:
+        raise ValueError(f"uncertainty must hold one value per sample ({n}), got {len(stated)}")
+    if not np.all(stated >= 0):  # also refuses NaN
+        raise ValueError(f"uncertainty must be >= 0 (lens units), got {stated[~(stated >= 0)][:3]}")
+    return np.maximum(stated, floor)
+
+
+class _Samples:
+    """One shot's lens samples and the local-linear fit :func:`smooth_shot` iterates."""
+
+    def __init__(self, times: np.ndarray, lenses: np.ndarray, stated: np.ndarray | None, half_window: float,
+                 radius: float) -> None:
+        self.times, self.lenses, self.half_window, self.radius = times, lenses, half_window, radius
+        self.given = stated is not None
+        self.stated = stated if stated is not None else np.ones(len(times))
+        self.confidence = 1.0 / self.stated**2
+
+    def fit(self, at: np.ndarray, robust: np.ndarray, spread: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        """The fit at each time of ``at`` with robustness weights ``robust`` -> ``(lenses, uncertainty)``."""
+        times, lenses, stated, confidence = self.times, self.lenses, self.stated, self.confidence
+        n = len(times)
         out = np.empty((len(at), 2))
         sure = np.full(len(at), np.nan)
         for j, q in enumerate(at):
             dt = times - q
             nearest = np.sort(np.abs(dt))
-            h = max(half_window, nearest[min(2, n - 1)] * 1.0001 + 1e-9)
+            h = max(self.half_window, nearest[min(2, n - 1)] * 1.0001 + 1e-9)
             w = _tricube(dt / h) * robust * confidence
             if np.count_nonzero(w > 0) == 0:
                 w = (_tricube(dt / h) + 1e-12) * confidence
@@ -210,22 +234,13 @@ def smooth_shot(
             if var_t > 1e-9 * h * h and np.count_nonzero(w > 1e-6 * w.max()) >= 3:
                 slope = (w[:, None] * (dt - mean_t)[:, None] * (lenses - mean_k)).sum(axis=0) / (sw * var_t)
             out[j] = mean_k - slope * mean_t
-            if spread and given:
+            if spread and self.given:
                 independent = np.sqrt((w * w * stated**2).sum()) / sw
                 combined = max(independent, (w * stated).sum() / sw / np.sqrt(INDEPENDENT_SAMPLES))
-                residual = max_displacement(lenses, out[j] + dt[:, None] * slope, radius)
+                residual = max_displacement(lenses, out[j] + dt[:, None] * slope, self.radius)
                 excess = float(np.sqrt((w * (residual / stated) ** 2).sum() / sw))
                 sure[j] = combined * max(1.0, excess)
         return out, sure
-
-    for _ in range(iterations):
-        residual = max_displacement(lenses, fit(times)[0], radius)
-        mad = float(np.median(residual))
-        u = residual / (6.0 * max(mad, min_scale))
-        robust = np.where(u < 1.0, (1.0 - u**2) ** 2, 0.0)
-    clamped = np.clip(query, times.min(), times.max())
-    smoothed, sure = fit(clamped, spread=True)
-    return smoothed, robust, sure
 
 
 def smooth_track(

@@ -32,8 +32,9 @@ import os
 import queue
 import sys
 import threading
+from dataclasses import dataclass, field
 from fractions import Fraction
-from typing import Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -197,38 +198,12 @@ def track_video(
         raise ValueError(f"every must be >= 1 frame, got {every}")
     if not window_s > 0:
         raise ValueError(f"window must be > 0 seconds, got {window_s}")
-    detector = detector or ShotDetector()
-    shots: list[int] = []
-    times: list[int] = []
-    stamps: list[float] = []
-    estimates: list[tuple[float, float]] = []
-    stated: list[float] = []
-    methods: list[str] = []
-    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
-        info = reader.info
-        shot, since_start = -1, 0
-        with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
-            for item in frames:
-                index = item.index
-                stamps.append(float(item.pts * info.time_base) if item.pts is not None else index / info.fps)
-                if detector.update(item.image):
-                    shot, since_start = shot + 1, 0
-                if since_start % every == 0:
-                    times.append(index)
-                    value = estimator(to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
-                    lens = as_lens(value)
-                    estimates.append((lens.k1, lens.k2))
-                    sure, method = _confidence(value)
-                    stated.append(sure)
-                    methods.append(method)
-                shots.append(shot)
-                since_start += 1
-                bar.update()
-    n = len(shots)
-    shot_array = np.asarray(shots, dtype=np.int64)
-    samples = np.asarray(estimates, dtype=np.float64).reshape(-1, 2)
-    time_array = np.asarray(times, dtype=np.int64)
-    stated_array = np.asarray(stated, dtype=np.float64)
+    seen = _estimate_frames(path, estimator, every, detector or ShotDetector(), progress, rate)
+    info, n = seen.info, len(seen.shots)
+    shot_array = np.asarray(seen.shots, dtype=np.int64)
+    samples = np.asarray(seen.estimates, dtype=np.float64).reshape(-1, 2)
+    time_array = np.asarray(seen.times, dtype=np.int64)
+    stated_array = np.asarray(seen.stated, dtype=np.float64)
     known = bool(len(stated_array)) and bool(np.all(np.isfinite(stated_array)))
     radius = corner_radius(info.size)
     smoothed, weights, sure = smooth_track(
@@ -244,18 +219,55 @@ def track_video(
             nearest = mine[np.argmin(np.abs(time_array[mine] - i))]
             smoothed[i] = samples[nearest]
             sure[i] = stated_array[nearest] / REPORT_WIDTH
-    raw = np.full((n, 2), np.nan)
-    raw[time_array] = samples
-    weight = np.full(n, np.nan)
-    weight[time_array] = weights
-    raw_sure = np.full(n, np.nan)
-    raw_sure[time_array] = stated_array
+    raw, weight, raw_sure = np.full((n, 2), np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    raw[time_array], weight[time_array], raw_sure[time_array] = samples, weights, stated_array
     method = [""] * n
-    for t, m in zip(times, methods):
+    for t, m in zip(seen.times, seen.methods):
         method[t] = m
-    return LensTrack(info.rate, info.size, shot_array, smoothed, raw, weight, time_s=np.asarray(stamps),
+    return LensTrack(info.rate, info.size, shot_array, smoothed, raw, weight, time_s=np.asarray(seen.stamps),
                      uncertainty_px=sure * REPORT_WIDTH, raw_uncertainty_px=raw_sure, method=method,
                      doubtful_px=doubtful_px)
+
+
+@dataclass
+class _Estimates:
+    """What pass 1 saw: per frame its shot and time stamp; per estimated frame its index, lens
+    ``(k1, k2)``, stated uncertainty (px at 1920, NaN if none) and method."""
+
+    info: Any = None
+    shots: list[int] = field(default_factory=list)
+    stamps: list[float] = field(default_factory=list)
+    times: list[int] = field(default_factory=list)
+    estimates: list[tuple[float, float]] = field(default_factory=list)
+    stated: list[float] = field(default_factory=list)
+    methods: list[str] = field(default_factory=list)
+
+
+def _estimate_frames(path: str | os.PathLike, estimator: EstimatorFn, every: int, detector: ShotDetector,
+                     progress: bool | None, rate: Fraction | None) -> _Estimates:
+    """Decode ``path`` once: cuts on every frame, the estimator on each shot's first and every ``every``-th frame."""
+    seen = _Estimates()
+    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
+        info = seen.info = reader.info
+        shot, since_start = -1, 0
+        with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
+            for item in frames:
+                index = item.index
+                seen.stamps.append(float(item.pts * info.time_base) if item.pts is not None else index / info.fps)
+                if detector.update(item.image):
+                    shot, since_start = shot + 1, 0
+                if since_start % every == 0:
+                    seen.times.append(index)
+                    value = estimator(to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
+                    lens = as_lens(value)
+                    seen.estimates.append((lens.k1, lens.k2))
+                    sure, method = _confidence(value)
+                    seen.stated.append(sure)
+                    seen.methods.append(method)
+                seen.shots.append(shot)
+                since_start += 1
+                bar.update()
+    return seen
 
 
 class _FrameCorrector:
