@@ -26,7 +26,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import glradial  # noqa: E402
-from glradial import egl  # noqa: E402
+from glradial.gl import egl  # noqa: E402
 
 LENS = glradial.Lens(-0.25, 0.05)
 

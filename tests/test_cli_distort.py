@@ -18,14 +18,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA
 
 import glradial
 from glradial.cli import main
-from glradial.exr_io import ExrImage, read_exr, write_exr
-from glradial.image_io import read_image, write_image
-from glradial.video_io import EncodeOptions, VideoInfo, VideoReader, VideoWriter
-
-from conftest import DATA
+from glradial.media.exr_io import ExrImage, read_exr, write_exr
+from glradial.media.image_io import read_image, write_image
+from glradial.media.video_io import EncodeOptions, VideoInfo, VideoReader, VideoWriter
 
 K1, K2 = -0.25, 0.05
 SIZE = (320, 180)
@@ -155,7 +154,7 @@ def test_a_lens_that_leaves_the_output_mostly_empty_is_refused(tmp_path, photo, 
 def test_the_threshold_accepts_every_real_lens():
     """Across the estimator's range (k1 in [-0.7, 0.3], k2 up to 0.2) every fit that is defined keeps
     more than the threshold: a real lens is never refused."""
-    from glradial.remap import MIN_COVERAGE, check_coverage
+    from glradial.remapping.remap import MIN_COVERAGE, check_coverage
 
     for k1 in np.linspace(-0.7, 0.3, 11):
         for k2 in (0.0, 0.1, 0.2):

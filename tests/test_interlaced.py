@@ -22,8 +22,8 @@ import pytest
 
 import glradial
 from glradial.cli import main
-from glradial.fields import field_lens
-from glradial.video_io import FIELD_ORDER_CODES, VideoInfo, VideoReader, VideoWriter
+from glradial.media.video_io import FIELD_ORDER_CODES, VideoInfo, VideoReader, VideoWriter
+from glradial.remapping.fields import field_lens
 
 SIZE = (320, 180)
 LENS = (-0.25, 0.05)

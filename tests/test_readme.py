@@ -49,7 +49,9 @@ def test_readme_embedding_example_runs_and_bends_the_graphic(ctx):
     block = re.search(r"```python\n(.*?)```", section, re.S).group(1)
     namespace: dict = {}
     exec(compile(block, str(README), "exec"), namespace)
-    glradial.egl.make_current(ctx)  # the block's context was current on this thread: hand it back
+    from glradial.gl import egl
+
+    egl.make_current(ctx)  # the block's context was current on this thread: hand it back
     pixels, graphic = namespace["pixels"], namespace["graphic"]
     expected = glradial.distort(graphic, glradial.Lens(-0.25, 0.05), backend="cpu", alpha="premultiplied")
     assert np.abs(pixels.astype(float) - expected).mean() < 0.5

@@ -1,4 +1,4 @@
-"""``glradial correct``: undistort an image or a video with a given or estimated lens."""
+"""``glradial correct``: undistort an image, a folder of images or a video with a given or estimated lens."""
 
 from __future__ import annotations
 
@@ -7,10 +7,24 @@ import os
 import sys
 from pathlib import Path
 
+from ..lens.options import METHODS
 from . import UsageError, lens_from_args, lens_given, positive_float, positive_int, show_progress
-from .remapping import (VIDEO_OPTIONS, add_encode_options, add_remap_parser, add_render_options, check_encode_options,
-                        check_paths, image_transform, reject_for, remap_folder, remap_image_file, remap_video, same_file, summary,
-                        video_alpha)
+from .remapping import (
+    VIDEO_OPTIONS,
+    add_encode_options,
+    add_remap_parser,
+    add_render_options,
+    check_encode_options,
+    check_paths,
+    image_transform,
+    reject_for,
+    remap_folder,
+    remap_image_file,
+    remap_video,
+    same_file,
+    summary,
+    video_alpha,
+)
 
 DESCRIPTION = """\
 Undistort INPUT into OUTPUT ('glradial distort' is the inverse). Images: PNG, JPEG, TIFF, OpenEXR
@@ -40,7 +54,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
-    lens.add_argument("--method", choices=("auto", "net", "lines"),
+    lens.add_argument("--method", choices=METHODS,
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
     add_render_options(
         parser, "output scale: same = centre scale kept (as cv2.undistort), crop = zoom in until every "
@@ -59,8 +73,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def _check_lens_options(args: argparse.Namespace, given: bool) -> None:
-    """The lens given one way, and the options that need ``--auto`` only with it."""
+def _check_lens_options(args: argparse.Namespace) -> bool:
+    """The lens is given one way and the options fit it; returns whether it is given by numbers."""
+    given = lens_given(args)
     sources = [name for name, used in (("--k1/--k2/--cx/--cy/--pixel-aspect/--lens", given), ("--auto", args.auto),
                                        ("--lens-track", args.lens_track)) if used]
     if len(sources) > 1:
@@ -73,56 +88,92 @@ def _check_lens_options(args: argparse.Namespace, given: bool) -> None:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
     if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
         raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
+    check_encode_options(args)
+    return given
 
 
 def run(args: argparse.Namespace) -> int:
-    given = lens_given(args)
-    _check_lens_options(args, given)
-    check_encode_options(args)
+    given = _check_lens_options(args)
     kind = check_paths(args)
-    progress = show_progress(args)
-
     if kind in ("image", "folder"):
-        reject_for(args, ("sidecar",) + VIDEO_OPTIONS + ("every", "window", "max_uncertainty"), "videos")
-        transform = image_transform(args, "undistort")
-        if kind == "folder":
-            if args.auto:
-                raise UsageError("--auto on a folder is not supported: estimate each image with 'glradial estimate', or give the lens")
-            remap_folder(args, lambda size: lens_from_args(args, size), transform, progress, "correct")
-            return 0
-        lens_for = (lambda _size: _estimated_lens(args)) if args.auto else (lambda size: lens_from_args(args, size))
-        remap_image_file(Path(args.input), Path(args.output), lens_for, transform, alpha=args.alpha, overwrite=args.overwrite)
-        return 0
+        return _run_image(args, kind)
     if given or args.lens_track:
-        remap_video(args, "undistort", lambda size: lens_from_args(args, size), progress, alpha=video_alpha(args))
+        remap_video(args, "undistort", lambda size: lens_from_args(args, size), show_progress(args), alpha=video_alpha(args))
         return 0
+    from ..media.video_io import EncodeOptions, is_sequence
 
-    from ..atomic import check_output_folder
-    from ..image_io import check_overwrite
-    from ..lens_track import DOUBTFUL_PX
-    from ..video_pipeline import default_estimator, doubtful_warnings, track_video
+    encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
+    if args.rate is not None and not is_sequence(args.input):
+        raise UsageError("--rate is for image-sequence inputs (videos keep their own frame rate)")
+    video = dict(progress=show_progress(args), options=encode, overwrite=args.overwrite, rate=args.rate, fit=args.fit,
+                 interpolation=args.interpolation, backend=args.backend, alpha=video_alpha(args),
+                 field_order=args.field_order or "auto")
+    return _run_video_auto(args, encode, video)
+
+
+def _run_image(args: argparse.Namespace, kind: str) -> int:
+    """One image (the lens given or estimated) or a folder of them (the lens given), corrected and
+    written atomically."""
+    from ..media.image_io import read_image
+
+    reject_for(args, ("sidecar",) + VIDEO_OPTIONS + ("every", "window", "max_uncertainty"), "videos")
+    transform = image_transform(args, "undistort")
+    if kind == "folder":
+        if args.auto:
+            raise UsageError("--auto on a folder is not supported: estimate each image with 'glradial estimate', or give the lens")
+        remap_folder(args, lambda size: lens_from_args(args, size), transform, show_progress(args), "correct")
+        return 0
+    if args.auto:
+        lens_for = lambda _size: _estimate_image(args, read_image(args.input, order="rgb"))  # noqa: E731
+    else:
+        lens_for = lambda size: lens_from_args(args, size)  # noqa: E731
+    remap_image_file(Path(args.input), Path(args.output), lens_for, transform, alpha=args.alpha, overwrite=args.overwrite)
+    return 0
+
+
+def _estimate_image(args: argparse.Namespace, image):
+    """``--auto`` on an image: the estimate, printed with its stated uncertainty, warned if doubtful."""
+    from ..lens.lens import as_lens
+    from ..media.frames import to_rgb8
+    from ..video.lens_track import DOUBTFUL_PX
+    from ..video.video_pipeline import default_estimator
+
+    lens = as_lens(default_estimator(args.model, args.method)(to_rgb8(image)))
+    method, uncertainty = getattr(lens, "method", None), getattr(lens, "uncertainty_px", None)
+    stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
+    print(f"{args.input}: estimated k1={lens.k1:.6f} k2={lens.k2:.6f}{stated}")
+    if uncertainty is not None and uncertainty > DOUBTFUL_PX:
+        print(f"glradial: warning: the estimate of {args.input} is doubtful (uncertainty {uncertainty:.1f} px > "
+              f"{DOUBTFUL_PX:g} px at 1920 wide); check the result or give the lens", file=sys.stderr)
+    return lens
+
+
+def _auto_sidecar(args: argparse.Namespace) -> Path:
+    """The sidecar ``--auto`` writes, checked before anything runs."""
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import check_overwrite
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
     check_overwrite(sidecar, args.overwrite)
     if same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
-    from ..video_io import EncodeOptions, VideoReader, VideoWriter, is_sequence
-    from ..video_pipeline import correct_video
+    return sidecar
 
-    if args.rate is not None and not is_sequence(args.input):
-        raise UsageError("--rate is for image-sequence inputs (videos keep their own frame rate)")
 
-    encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
-    video = dict(progress=progress, options=encode, overwrite=args.overwrite, rate=args.rate, fit=args.fit,
-                 interpolation=args.interpolation, backend=args.backend, alpha=video_alpha(args),
-                 field_order=args.field_order or "auto")
+def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
+    """``--auto`` on a video: pass 1 (track), pass 2 (correct), the sidecar; both outputs or neither."""
+    from ..media.video_io import VideoReader, VideoWriter
+    from ..video.lens_track import DOUBTFUL_PX
+    from ..video.video_pipeline import correct_video, default_estimator, doubtful_warnings, track_video
+
+    sidecar = _auto_sidecar(args)
     with VideoReader(args.input, rate=args.rate, copy_streams=True) as reader:
         info = reader.info
         # the encoder, its options and the container are checked before the estimation pass: open and drop
         VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
     given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
-    track = track_video(args.input, default_estimator(args.model, args.method), progress=progress,  # its defaults: every 5, window 2 s
+    track = track_video(args.input, default_estimator(args.model, args.method), progress=video["progress"],  # its defaults: every 5, window 2 s
                         doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
@@ -133,31 +184,14 @@ def run(args: argparse.Namespace) -> int:
         Path(args.output).unlink(missing_ok=True)  # both outputs or neither
         raise
     summary(args.output, written, info.frame_count)
+    _print_shots(args.input, track, sidecar)
+    return 0
+
+
+def _print_shots(source: str, track, sidecar: Path) -> None:
     shots = track.per_shot()
-    print(f"{args.input}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
+    print(f"{source}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
         sure = f" uncertainty {shot['uncertainty_px']:.1f} px" if shot["uncertainty_px"] is not None else ""
         flag = " DOUBTFUL" if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
-    return 0
-
-
-def _estimated_lens(args: argparse.Namespace):
-    """``--auto`` on an image: the estimator's lens, printed with its method and uncertainty, with
-    a warning on stderr when it is doubtful."""
-    from ..frames import to_rgb8
-    from ..image_io import read_image
-    from ..lens import Lens
-    from ..lens_track import DOUBTFUL_PX
-    from ..video_pipeline import _as_pair, default_estimator
-
-    image = read_image(args.input, order="rgb")
-    estimate = default_estimator(args.model, args.method)(to_rgb8(image))
-    k1, k2 = _as_pair(estimate)
-    method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
-    stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
-    print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}{stated}")
-    if uncertainty is not None and uncertainty > DOUBTFUL_PX:
-        print(f"glradial: warning: the estimate of {args.input} is doubtful (uncertainty {uncertainty:.1f} px > "
-              f"{DOUBTFUL_PX:g} px at 1920 wide); check the result or give the lens", file=sys.stderr)
-    return Lens(k1, k2)

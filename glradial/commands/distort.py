@@ -6,10 +6,22 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from ..lens.options import INVERSES
 from . import UsageError, lens_from_args, lens_given, show_progress
-from .remapping import (VIDEO_OPTIONS, add_encode_options, add_remap_parser, add_render_options, check_encode_options,
-                        check_paths, image_transform, reject_for, remap_folder, remap_image_file, remap_video,
-                        video_alpha)
+from .remapping import (
+    VIDEO_OPTIONS,
+    add_encode_options,
+    add_remap_parser,
+    add_render_options,
+    check_encode_options,
+    check_paths,
+    image_transform,
+    reject_for,
+    remap_folder,
+    remap_image_file,
+    remap_video,
+    video_alpha,
+)
 
 DESCRIPTION = """\
 Apply a lens to INPUT (undistorted: graphics, a virtual set, a clean plate) and write OUTPUT as the
@@ -38,7 +50,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "output pixel has a source (undone by 'correct --fit full'), full = the whole input stays visible "
         "(undone by 'correct --fit crop') (default: same)",
     )
-    render.add_argument("--inverse", choices=("exact", "drap"), default="exact",
+    render.add_argument("--inverse", choices=INVERSES, default="exact",
                         help="inverse of the lens: exact (bounded Newton, to float precision) or drap (the Drap-Lefevre "
                         "polynomial, up to ~0.002 lens units off at the extremes of its k1 range) (default: exact)")
     add_encode_options(parser)

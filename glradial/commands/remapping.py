@@ -4,7 +4,7 @@ known. Not a command itself (``glradial/cli.py`` lists the commands).
 
 A *transform* is ``transform(image, lens, alpha) -> image``: :func:`glradial.correct` or
 :func:`glradial.distort` with the command's fit, interpolation and backend bound. Videos go through
-:func:`glradial.video_pipeline.correct_video` with the command's direction.
+:func:`glradial.video.video_pipeline.correct_video` with the command's direction.
 """
 
 from __future__ import annotations
@@ -17,19 +17,18 @@ from typing import Callable
 
 import numpy as np
 
+from ..lens.options import ALPHAS, BACKENDS, FIELD_ORDERS, FITS, INTERPOLATIONS
 from . import UsageError, finite_float
 
 __all__ = [
     "bitrate", "frame_rate", "add_remap_parser", "add_io_arguments", "add_render_options", "add_encode_options", "check_paths",
     "reject_for", "check_encode_options", "image_transform", "remap_image_file", "remap_folder",
-    "remap_video", "same_file", "summary", "video_alpha", "folder_images", "ALPHA_CHOICES", "DIRECTIONS",
+    "remap_video", "same_file", "summary", "video_alpha", "folder_images", "ALPHA_CHOICES",
     "VIDEO_OPTIONS",
 ]
 
-#: the command -> the direction of :mod:`glradial.remap`
-DIRECTIONS = {"correct": "undistort", "distort": "distort"}
 #: ``--alpha``: auto = premultiplied for OpenEXR (its convention), straight for everything else
-ALPHA_CHOICES = ("auto", "straight", "premultiplied")
+ALPHA_CHOICES = ("auto",) + ALPHAS
 #: options that only a video (or image sequence) takes
 VIDEO_OPTIONS = ("lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "field_order")
 
@@ -86,10 +85,10 @@ def add_io_arguments(parser: argparse.ArgumentParser, verb: str) -> None:
 def add_render_options(parser: argparse.ArgumentParser, fit_help: str) -> argparse._ArgumentGroup:
     """``--fit --interpolation --backend --alpha`` in a "rendering" group (returned)."""
     render = parser.add_argument_group("rendering")
-    render.add_argument("--fit", choices=("same", "crop", "full"), default="same", help=fit_help)
-    render.add_argument("--interpolation", choices=("nearest", "linear", "cubic"), default="linear",
+    render.add_argument("--fit", choices=FITS, default="same", help=fit_help)
+    render.add_argument("--interpolation", choices=INTERPOLATIONS, default="linear",
                         help="resampling filter (default: linear)")
-    render.add_argument("--backend", choices=("auto", "gl", "cpu"), default="auto",
+    render.add_argument("--backend", choices=BACKENDS, default="auto",
                         help="gl = GLSL shaders through EGL, cpu = the same maps through cv2.remap, auto = the faster "
                         "one on this machine (default: auto)")
     render.add_argument("--alpha", choices=ALPHA_CHOICES, default="auto",
@@ -109,7 +108,7 @@ def add_encode_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGro
     encode.add_argument("--rate", type=frame_rate, metavar="FPS",
                         help="frame rate of an image-sequence INPUT, e.g. 25 or 30000/1001 (default 25; videos keep theirs)")
     encode.add_argument("--pix-fmt", metavar="FMT", help="output pixel format, e.g. yuv420p, yuv422p10le (default: the input's where the encoder takes it)")
-    encode.add_argument("--field-order", choices=("auto", "progressive", "tff", "bff"), default=None,
+    encode.add_argument("--field-order", choices=FIELD_ORDERS, default=None,
                         help="interlaced video: auto = the stream's (its field order, else a frame flagged interlaced "
                         "is taken as top field first); tff/bff = interlaced, that field first; progressive = whole "
                         "frames. Interlaced frames are remapped field by field (each field on its own half-height "
@@ -146,9 +145,9 @@ def _article(kind: str) -> str:
 def check_paths(args: argparse.Namespace) -> str:
     """``"image"``, ``"folder"`` or ``"video"``: what INPUT is, after checking that OUTPUT is the
     same kind, differs from INPUT and may be written (``-y``)."""
-    from ..atomic import check_output_folder
-    from ..image_io import media_kind
-    from ..video_io import check_video_overwrite, is_sequence
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import media_kind
+    from ..media.video_io import check_video_overwrite, is_sequence
 
     source, target = Path(args.input), Path(args.output)
     if not is_sequence(source) and not source.exists():
@@ -173,14 +172,14 @@ def check_paths(args: argparse.Namespace) -> str:
 def _refuse_float_sequence(path: Path) -> None:
     """A float image sequence (EXR, float TIFF) would go through FFmpeg, which clips values beyond 1:
     ``UsageError`` pointing to folders, where each frame is read as an image."""
-    from ..video_io import is_sequence, sequence_files
+    from ..media.video_io import is_sequence, sequence_files
 
     if not is_sequence(path):
         return
     suffix = path.suffix.lower()
     floating = suffix == ".exr"
     if suffix in (".tif", ".tiff"):
-        from ..image_io import read_image
+        from ..media.image_io import read_image
 
         first = sequence_files(path)[:1]
         floating = bool(first) and read_image(first[0]).dtype.kind == "f"
@@ -190,7 +189,7 @@ def _refuse_float_sequence(path: Path) -> None:
 
 
 def _check_folder_output(source: Path, target: Path) -> str:
-    from ..image_io import media_kind
+    from ..media.image_io import media_kind
 
     if target.exists() and not target.is_dir():
         raise UsageError(f"INPUT {str(source)!r} is a folder but OUTPUT {str(target)!r} is a file: give a folder")
@@ -207,7 +206,7 @@ def _check_folder_output(source: Path, target: Path) -> str:
 
 def folder_images(folder: Path) -> list[Path]:
     """The still images directly in ``folder`` (not in sub-folders), in name order."""
-    from ..image_io import is_image_path
+    from ..media.image_io import is_image_path
 
     return sorted(p for p in folder.iterdir() if p.is_file() and is_image_path(p) and not p.name.startswith("."))
 
@@ -216,7 +215,7 @@ def folder_images(folder: Path) -> list[Path]:
 def image_transform(args: argparse.Namespace, direction: str, **extra: object) -> Transform:
     """``transform(image, lens, alpha)`` with the command's fit, interpolation and backend (and
     ``extra`` keywords, e.g. ``inverse``), for :func:`remap_image_file`."""
-    from .. import remap
+    from ..remapping import remap
 
     function = remap.correct if direction == "undistort" else remap.distort
     options = dict(fit=args.fit, interpolation=args.interpolation, backend=args.backend, **extra)
@@ -232,9 +231,9 @@ def _alpha_for(choice: str, path: Path) -> str:
 def remap_image_file(source: Path, target: Path, lens_for: Callable[[tuple[int, int]], object], transform: Transform,
                      *, alpha: str = "auto", overwrite: bool = False) -> None:
     """Read ``source``, apply ``transform`` with ``lens_for((W, H))`` and write ``target`` (atomic,
-    depth kept). EXR to EXR goes channel by channel (:func:`glradial.exr_io.channel_groups`), every
+    depth kept). EXR to EXR goes channel by channel (:func:`glradial.media.exr_io.channel_groups`), every
     channel and its HALF/FLOAT type kept."""
-    from ..image_io import check_overwrite, read_image, write_image
+    from ..media.image_io import check_overwrite, read_image, write_image
 
     check_overwrite(target, overwrite)
     convention = _alpha_for(alpha, source)
@@ -247,7 +246,7 @@ def remap_image_file(source: Path, target: Path, lens_for: Callable[[tuple[int, 
 
 
 def _remap_exr(source: Path, target: Path, lens_for, transform: Transform, alpha: str, overwrite: bool) -> None:
-    from ..exr_io import channel_groups, read_exr, write_exr
+    from ..media.exr_io import channel_groups, read_exr, write_exr
 
     exr = read_exr(source)
     lens = lens_for(exr.size)
@@ -262,8 +261,8 @@ def _remap_exr(source: Path, target: Path, lens_for, transform: Transform, alpha
 def remap_folder(args: argparse.Namespace, lens_for, transform: Transform, progress: bool | None, label: str) -> int:
     """Every still image of the folder INPUT into the folder OUTPUT (made if missing), same names;
     existing outputs are refused before any work unless ``-y``. Returns the number written."""
-    from ..image_io import check_overwrite
-    from ..progress import Progress
+    from ..media.image_io import check_overwrite
+    from ..media.progress import Progress
 
     source, target = Path(args.input), Path(args.output)
     images = folder_images(source)
@@ -282,8 +281,8 @@ def remap_folder(args: argparse.Namespace, lens_for, transform: Transform, progr
 def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bool | None, **extra: object) -> int:
     """A video or image sequence with a lens given (``lens_for((W, H))`` -> Lens, checked before any
     frame is decoded) or, with ``--lens-track``, one per frame; ends with :func:`summary`."""
-    from ..video_io import EncodeOptions, VideoReader, is_sequence
-    from ..video_pipeline import correct_video
+    from ..media.video_io import EncodeOptions, VideoReader, is_sequence
+    from ..video.video_pipeline import correct_video
 
     if args.rate is not None and not is_sequence(args.input):
         raise UsageError("--rate is for image-sequence inputs (videos keep their own frame rate)")
@@ -294,7 +293,7 @@ def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bo
                  options=encode, overwrite=args.overwrite, rate=args.rate, direction=direction,
                  field_order=args.field_order or "auto", **extra)
     if getattr(args, "lens_track", None):
-        from ..lens_track import load_lens_track
+        from ..video.lens_track import load_lens_track
 
         track = load_lens_track(args.lens_track, info.rate, info.size)
         written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
