@@ -8,19 +8,14 @@ import sys
 from pathlib import Path
 
 from ..lens.options import METHODS
-from . import UsageError, lens_from_args, lens_given, positive_float, positive_int, show_progress
+from . import UsageError, lens_given, positive_float, positive_int, show_progress
 from .remapping import (
-    VIDEO_OPTIONS,
     add_encode_options,
     add_remap_parser,
     add_render_options,
     check_encode_options,
     check_paths,
-    image_transform,
-    reject_for,
-    remap_folder,
-    remap_image_file,
-    remap_video,
+    run_with_lens,
     same_file,
     summary,
     video_alpha,
@@ -44,6 +39,10 @@ confidence, warns about every shot whose lens is doubtful (uncertainty above --m
 and writes the per-frame lens to a sidecar (OUTPUT.lens.csv by default; format in docs/CLI.md),
 which can be edited and fed back with --lens-track. Outputs appear only when complete; an existing
 OUTPUT is replaced only with -y."""
+
+
+#: options only ``--auto`` on a video takes (an image or folder refuses them as video options)
+AUTO_VIDEO_OPTIONS = ("sidecar", "every", "window", "max_uncertainty")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -95,11 +94,12 @@ def _check_lens_options(args: argparse.Namespace) -> bool:
 def run(args: argparse.Namespace) -> int:
     given = _check_lens_options(args)
     kind = check_paths(args)
-    if kind in ("image", "folder"):
-        return _run_image(args, kind)
-    if given or args.lens_track:
-        remap_video(args, "undistort", lambda size: lens_from_args(args, size), show_progress(args), alpha=video_alpha(args))
-        return 0
+    if kind == "folder" and args.auto:
+        raise UsageError("--auto on a folder is not supported: estimate each image with 'glradial estimate', or give the lens")
+    if kind == "image" and args.auto:
+        return run_with_lens(args, "undistort", kind, _estimated_lens_for(args), video_only=AUTO_VIDEO_OPTIONS)
+    if kind != "video" or given or args.lens_track:
+        return run_with_lens(args, "undistort", kind, video_only=AUTO_VIDEO_OPTIONS)
     from ..media.video_io import EncodeOptions, is_sequence
 
     encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
@@ -111,24 +111,11 @@ def run(args: argparse.Namespace) -> int:
     return _run_video_auto(args, encode, video)
 
 
-def _run_image(args: argparse.Namespace, kind: str) -> int:
-    """One image (the lens given or estimated) or a folder of them (the lens given), corrected and
-    written atomically."""
+def _estimated_lens_for(args: argparse.Namespace):
+    """``lens_for`` of an image with ``--auto``: reads INPUT and estimates its lens."""
     from ..media.image_io import read_image
 
-    reject_for(args, ("sidecar",) + VIDEO_OPTIONS + ("every", "window", "max_uncertainty"), "videos")
-    transform = image_transform(args, "undistort")
-    if kind == "folder":
-        if args.auto:
-            raise UsageError("--auto on a folder is not supported: estimate each image with 'glradial estimate', or give the lens")
-        remap_folder(args, lambda size: lens_from_args(args, size), transform, show_progress(args), "correct")
-        return 0
-    if args.auto:
-        lens_for = lambda _size: _estimate_image(args, read_image(args.input, order="rgb"))  # noqa: E731
-    else:
-        lens_for = lambda size: lens_from_args(args, size)  # noqa: E731
-    remap_image_file(Path(args.input), Path(args.output), lens_for, transform, alpha=args.alpha, overwrite=args.overwrite)
-    return 0
+    return lambda _size: _estimate_image(args, read_image(args.input, order="rgb"))
 
 
 def _estimate_image(args: argparse.Namespace, image):

@@ -4,24 +4,10 @@ inverse of ``glradial correct`` (graphics rendered for a straight camera, made t
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..lens.options import INVERSES
-from . import UsageError, lens_from_args, lens_given, show_progress
-from .remapping import (
-    VIDEO_OPTIONS,
-    add_encode_options,
-    add_remap_parser,
-    add_render_options,
-    check_encode_options,
-    check_paths,
-    image_transform,
-    reject_for,
-    remap_folder,
-    remap_image_file,
-    remap_video,
-    video_alpha,
-)
+from . import UsageError, lens_given
+from . import remapping as shared
 
 DESCRIPTION = """\
 Apply a lens to INPUT (undistorted: graphics, a virtual set, a clean plate) and write OUTPUT as the
@@ -39,13 +25,13 @@ OUTPUT is replaced only with -y."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
-    parser, _lens = add_remap_parser(
+    parser, _lens = shared.add_remap_parser(
         subparsers, "distort",
         "apply a lens to an image, folder or video (the inverse of correct: graphics into a camera's lens)", DESCRIPTION,
         "lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --lens-track)",
         "videos: per-frame lens file (the sidecar of 'correct --auto'; .csv or .json)",
     )
-    render = add_render_options(
+    render = shared.add_render_options(
         parser, "output scale, the same numbers as 'correct': same = centre scale kept, crop = zoom in until every "
         "output pixel has a source (undone by 'correct --fit full'), full = the whole input stays visible "
         "(undone by 'correct --fit crop') (default: same)",
@@ -53,7 +39,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     render.add_argument("--inverse", choices=INVERSES, default="exact",
                         help="inverse of the lens: exact (bounded Newton, to float precision) or drap (the Drap-Lefevre "
                         "polynomial, up to ~0.002 lens units off at the extremes of its k1 range) (default: exact)")
-    add_encode_options(parser)
+    shared.add_encode_options(parser)
     return parser
 
 
@@ -63,18 +49,5 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--k1/--k2/--cx/--cy/--pixel-aspect/--lens and --lens-track cannot be combined: give the lens one way")
     if not (given or args.lens_track):
         raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect), --lens FILE or --lens-track")
-    check_encode_options(args)
-    kind = check_paths(args)
-    progress = show_progress(args)
-    lens_for = lambda size: lens_from_args(args, size)  # noqa: E731
-    if kind in ("image", "folder"):
-        reject_for(args, VIDEO_OPTIONS, "videos")
-        transform = image_transform(args, "distort", inverse=args.inverse)
-        if kind == "folder":
-            remap_folder(args, lens_for, transform, progress, "distort")
-        else:
-            remap_image_file(Path(args.input), Path(args.output), lens_for, transform, alpha=args.alpha,
-                             overwrite=args.overwrite)
-        return 0
-    remap_video(args, "distort", lens_for, progress, inverse=args.inverse, alpha=video_alpha(args))
-    return 0
+    shared.check_encode_options(args)
+    return shared.run_with_lens(args, "distort", shared.check_paths(args), inverse=args.inverse)

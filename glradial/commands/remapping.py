@@ -22,7 +22,7 @@ from . import UsageError, finite_float
 
 __all__ = [
     "bitrate", "frame_rate", "add_remap_parser", "add_io_arguments", "add_render_options", "add_encode_options", "check_paths",
-    "reject_for", "check_encode_options", "image_transform", "remap_image_file", "remap_folder",
+    "reject_for", "check_encode_options", "image_transform", "run_with_lens", "remap_image_file", "remap_folder",
     "remap_video", "same_file", "summary", "video_alpha", "folder_images", "ALPHA_CHOICES",
     "VIDEO_OPTIONS",
 ]
@@ -275,6 +275,29 @@ def remap_folder(args: argparse.Namespace, lens_for, transform: Transform, progr
             bar.update()
     print(f"wrote {len(images)} image(s) into {target}", flush=True)
     return len(images)
+
+
+def run_with_lens(args: argparse.Namespace, direction: str, kind: str, lens_for=None, *,
+                  video_only: tuple[str, ...] = (), **extra: object) -> int:
+    """The work of ``correct``/``distort`` once INPUT's ``kind`` (:func:`check_paths`) and the lens
+    are known: ``lens_for((W, H))`` (default: the command line's, :func:`lens_from_args`) or, for a
+    video, ``--lens-track``. Images and folders refuse the video options (and ``video_only``).
+    ``extra``: keywords of the remap (``inverse=`` for distort)."""
+    from . import lens_from_args, show_progress
+
+    lens_for = lens_for or (lambda size: lens_from_args(args, size))
+    progress = show_progress(args)
+    if kind == "video":
+        remap_video(args, direction, lens_for, progress, alpha=video_alpha(args), **extra)
+        return 0
+    reject_for(args, VIDEO_OPTIONS + video_only, "videos")
+    transform = image_transform(args, direction, **extra)
+    label = "correct" if direction == "undistort" else "distort"
+    if kind == "folder":
+        remap_folder(args, lens_for, transform, progress, label)
+    else:
+        remap_image_file(Path(args.input), Path(args.output), lens_for, transform, alpha=args.alpha, overwrite=args.overwrite)
+    return 0
 
 
 # -- videos ---------------------------------------------------------------------------------------------
