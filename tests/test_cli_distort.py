@@ -91,7 +91,10 @@ def test_distort_crop_is_undone_by_correct_full_on_an_exr_with_values_to_50(tmp_
     result = read_exr(back)
     for name, original in channels.items():
         got, want = result.channels[name].astype(np.float32)[inner], original.astype(np.float32)[inner]
-        assert np.max(np.abs(got - want) / np.abs(want)) <= 1e-3, name
+        # FLOAT: the 1e-3 (measured 9e-5); HALF is rounded on each of the two writes, up to
+        # 2^-11 relative each (measured 9.75e-4), plus the same interpolation error
+        tolerance = 1e-3 if original.dtype == np.float32 else 2 * 2.0**-11 + 1e-4
+        assert np.max(np.abs(got - want) / np.abs(want)) <= tolerance, name
 
 
 def test_distort_folder_writes_each_image_under_its_name(tmp_path, photo, capsys):
