@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.calibrate import Record, conformal_quantile, coverage_table, cross_check
-from glradial.estimator import Estimator, default_model_path, view_box, view_to_frame
-from glradial.lens_estimate import LensEstimate, judge
-from glradial.lens_track import LensTrack
-from glradial.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
-from glradial.real_eval import self_consistent_truth
-from glradial.trust import REASONS, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
+from glradial.estimation.estimator import Estimator, default_model_path, view_box, view_to_frame
+from glradial.estimation.lens_estimate import LensEstimate, judge
+from glradial.estimation.trust import REASONS, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
+from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
+from glradial.evaluation.real_eval import applied_lenses, self_consistent_truth
+from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
+from glradial.video.lens_track import LensTrack
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 needs_ffmpeg = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="no ffmpeg CLI")
@@ -381,8 +381,6 @@ def test_stated_bound_covers_a_real_frame_with_known_lenses():
     meta = json.loads(SHIPPED_FRAME.with_suffix(".json").read_text())
     frame = cv2.imread(str(SHIPPED_FRAME))[:, :, ::-1].copy()
     frame = glradial.correct(frame, glradial.Lens(*(meta["own_lens"][k] for k in ("k1", "k2"))), fit="crop", backend="cpu")
-    from glradial.real_eval import applied_lenses
-
     est = Estimator(threads=1)
     inside = []
     for k in applied_lenses(12, 29):

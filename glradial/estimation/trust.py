@@ -1,0 +1,212 @@
+"""How far to trust a lens estimate: a per-frame scale, a split-conformal 90 % bound, and doubt.
+
+Convention:
+    Every figure is the maximum radial displacement over the 16:9 frame in px of a 1920-wide frame
+    (:func:`glradial.lens.metrics.max_displacement_px`). A frame's :class:`FrameEvidence` holds what the
+    estimator saw (the CNN's and the line fit's lenses, the fit's 1-sigma and chain counts, how much
+    of the frame is pitch green, its grey-level spread, its edge density); :class:`TrustModel` turns it
+    into ``uncertainty_px`` (a 90 % bound) and a doubt verdict.
+
+Bound (split conformal):
+    * a line fit: ``scale = sqrt(floor² + (a · sigma)² + (w · disagreement)²)`` where ``sigma`` is the
+      fit's own 1-sigma (:attr:`glradial.estimation.line_fit.LineFit.sigma_px`) and ``disagreement`` the displacement
+      between the line fit and the CNN; bound ``= q_lines · scale``;
+    * the CNN alone: bound ``= q_net`` (no per-frame scale yet), or ``q_no_lines`` when a line fit was
+      sought and none was found (such frames are harder: close-ups, blurred grass, curved stands);
+    * a frame with no pitch evidence (blank, noise, not a pitch): the largest displacement between the
+      answer and any lens of the real range (k1 in [-1.0, 0.4], k2 on the manifold): "anything".
+    ``floor``, ``a``, ``w``, ``q_lines``, ``q_net`` and ``q_no_lines`` are calibrated on validation frames of some clips and
+    checked on the others by :mod:`glradial.evaluation.calibrate` (``python -m glradial.evaluation.calibrate``), which writes
+    them to ``glradial/data/trust.json`` (loaded here; docs/LINES.md, "Confidence").
+
+Doubt (:attr:`glradial.LensEstimate.reason`, first match wins; :data:`REASONS`):
+    ``blank_frame`` (grey std below ``blank_std``), ``noise_frame`` (no line fit and more than
+    ``noise_edge_density`` of the pixels are edges), ``not_a_pitch`` (less than ``green_min`` of the
+    16:9 view is pitch green), ``too_few_lines`` (no line fit of at least two agreeing chains: the
+    answer is the CNN's alone), ``evidence_disagrees`` (the line fit and the CNN are more than
+    ``disagree_max_px`` apart), ``weak_geometry`` (the bound exceeds ``doubt_px``); else ``ok``.
+    With ``method="net"`` no line fit is run, so only the first, third and ``weak_geometry`` apply.
+
+New diagnostics of the line fit become features by adding a field to :class:`FrameEvidence` and a
+term to :meth:`TrustModel.lines_scale`, then re-running the calibration.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import asdict, dataclass, fields
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from ..lens.metrics import manifold_k2, max_displacement_px
+
+#: Machine-readable reasons of :attr:`glradial.LensEstimate.reason` ("ok" = not doubtful).
+REASONS = ("ok", "blank_frame", "noise_frame", "not_a_pitch", "too_few_lines", "evidence_disagrees", "weak_geometry")
+#: Reasons under which the frame gives no pitch evidence: the bound is the whole lens range.
+NO_EVIDENCE_REASONS = ("blank_frame", "noise_frame", "not_a_pitch")
+#: The range of real lenses "anything" spans (k1, lens units; k2 on the manifold).
+LENS_RANGE_K1 = (-1.0, 0.4)
+#: Pitch green in OpenCV HSV (H 0..180, S and V 0..255): hue band (36..190 degrees: grass under
+#: warm or cold broadcast colour, artificial turf), least saturation and value.
+GREEN_HUE, GREEN_MIN_SATURATION, GREEN_MIN_VALUE = (18, 95), 50, 40
+#: Width of the hue window (OpenCV hue units of 2 degrees) that one pitch's green falls into.
+GREEN_WINDOW = 12
+#: The shipped calibration (written by ``python -m glradial.calibrate``).
+TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "trust.json"
+
+
+@dataclass(frozen=True)
+class FrameEvidence:
+    """What one frame gave the estimator (see the module docstring).
+
+    ``net``: the CNN's ``(k1, k2)`` in the frame's geometry; ``lines``: the line fit's, ``None``
+    without a fit (or when not run); ``sigma_px``: the fit's 1-sigma (inf without a fit);
+    ``chains``/``candidates``: chains that agree with the fit / passed screening; ``green``: share of
+    the 16:9 view in its dominant pitch-green hue window (:func:`view_features`); ``gray_std``: grey-level standard deviation (0..255);
+    ``edge_density``: share of Canny edge pixels (``None`` when lines were not run).
+    """
+
+    net: tuple[float, float]
+    lines: tuple[float, float] | None = None
+    sigma_px: float = math.inf
+    chains: int = 0
+    candidates: int = 0
+    green: float = 1.0
+    gray_std: float = 255.0
+    edge_density: float | None = None
+
+    @property
+    def disagreement_px(self) -> float:
+        """Displacement between the line fit and the CNN (px at 1920); NaN without a fit."""
+        if self.lines is None:
+            return math.nan
+        return float(max_displacement_px(np.array(self.lines, np.float64), np.array(self.net, np.float64)))
+
+    @property
+    def difficulty(self) -> float:
+        """The fit's own difficulty: its 1-sigma (px at 1920; inf without a fit). Larger is harder."""
+        return float(self.sigma_px) if self.lines is not None else math.inf
+
+    def as_dict(self) -> dict:
+        """JSON-ready (inf as None)."""
+        out = asdict(self)
+        out["sigma_px"] = None if not math.isfinite(self.sigma_px) else self.sigma_px
+        return out
+
+    @classmethod
+    def from_dict(cls, data: dict) -> "FrameEvidence":
+        known = {f.name for f in fields(cls)}
+        values = {k: v for k, v in data.items() if k in known}
+        values["net"] = tuple(values["net"])
+        values["lines"] = tuple(values["lines"]) if values.get("lines") is not None else None
+        values["sigma_px"] = math.inf if values.get("sigma_px") is None else values["sigma_px"]
+        return cls(**values)
+
+
+def view_features(view: np.ndarray) -> tuple[float, float]:
+    """``(green, gray_std)`` of a small uint8 RGB view (the network input).
+
+    ``green``: the share of pixels in the most populated :data:`GREEN_WINDOW`-wide hue window of
+    the pitch-green band (saturated, not dark): a pitch is one green, while test patterns and
+    street scenes spread their colours (testsrc2 0.16, mandelbrot 0.06, a road photo 0.10, real
+    pitch frames 0.36 and up); ``gray_std``: the grey-level standard deviation (0..255)."""
+    import cv2
+
+    hsv = cv2.cvtColor(view, cv2.COLOR_RGB2HSV)
+    h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
+    band = (h >= GREEN_HUE[0]) & (h <= GREEN_HUE[1]) & (s >= GREEN_MIN_SATURATION) & (v >= GREEN_MIN_VALUE)
+    hist = np.bincount(h[band], minlength=181).astype(np.float64)
+    green = float(np.convolve(hist, np.ones(GREEN_WINDOW), "valid").max()) / max(h.size, 1)
+    gray = cv2.cvtColor(view, cv2.COLOR_RGB2GRAY)
+    return green, float(gray.std())
+
+
+@lru_cache(maxsize=1)
+def _range_lenses() -> np.ndarray:
+    k1 = np.linspace(LENS_RANGE_K1[0], LENS_RANGE_K1[1], 57)
+    return np.stack([k1, manifold_k2(k1)], axis=1)
+
+
+def anything_bound(k: tuple[float, float]) -> float:
+    """Largest displacement (px at 1920) between lens ``k`` and any lens of the real range."""
+    return float(max_displacement_px(_range_lenses(), np.array(k, np.float64)).max())
+
+
+@dataclass(frozen=True)
+class TrustModel:
+    """Calibrated constants of the bound and the doubt rules (module docstring; ``trust.json``)."""
+
+    q_lines: float
+    q_net: float
+    q_no_lines: float
+    floor_px: float
+    sigma_weight: float
+    disagree_weight: float
+    disagree_max_px: float
+    doubt_px: float
+    green_min: float
+    blank_std: float
+    noise_edge_density: float
+    note: str = ""
+
+    def lines_scale(self, evidence: FrameEvidence) -> float:
+        """The per-frame scale of a line fit (px at 1920): its 1-sigma, disagreement and floor."""
+        d = evidence.disagreement_px
+        return math.sqrt(self.floor_px**2 + (self.sigma_weight * evidence.sigma_px) ** 2 + (self.disagree_weight * d) ** 2)
+
+    def lines_bound(self, evidence: FrameEvidence) -> float:
+        return self.q_lines * self.lines_scale(evidence)
+
+    def no_evidence(self, evidence: FrameEvidence) -> str | None:
+        """``blank_frame``, ``noise_frame``, ``not_a_pitch`` or ``None``."""
+        if evidence.gray_std < self.blank_std:
+            return "blank_frame"
+        if evidence.lines is None and evidence.edge_density is not None and evidence.edge_density > self.noise_edge_density:
+            return "noise_frame"
+        if evidence.green < self.green_min:
+            return "not_a_pitch"
+        return None
+
+    def judge(self, evidence: FrameEvidence, method: str) -> tuple[tuple[float, float], str, float, bool, str]:
+        """``(lens, source, uncertainty_px, doubtful, reason)`` for ``method`` ("auto", "net",
+        "lines"): which answer, its bound and the doubt verdict."""
+        use_lines = evidence.lines is not None and method != "net"
+        fallback = self.q_no_lines if method != "net" and evidence.lines is None else self.q_net
+        bound = self.lines_bound(evidence) if use_lines else fallback
+        if use_lines and method == "auto" and bound >= self.q_net:
+            use_lines, bound = False, self.q_net
+        lens, source = (evidence.lines, "lines") if use_lines else (evidence.net, "net")
+        empty = self.no_evidence(evidence)
+        if empty is not None:
+            return lens, source, max(bound, anything_bound(lens)), True, empty
+        if method != "net" and evidence.lines is None:
+            return lens, source, bound, True, "too_few_lines"
+        if evidence.lines is not None and method != "net" and evidence.disagreement_px > self.disagree_max_px:
+            return lens, source, bound, True, "evidence_disagrees"
+        if bound > self.doubt_px:
+            return lens, source, bound, True, "weak_geometry"
+        return lens, source, bound, False, "ok"
+
+    def save(self, path: str | Path) -> None:
+        from ..media.atomic import atomic_write_text
+
+        atomic_write_text(Path(path), json.dumps(asdict(self), indent=1) + "\n")
+
+
+def load_trust(path: str | Path | None = None) -> TrustModel:
+    """The calibrated :class:`TrustModel` (default: the shipped :data:`TRUST_FILE`)."""
+    path = Path(path) if path is not None else TRUST_FILE
+    try:
+        data = json.loads(path.read_text())
+        return TrustModel(**{f.name: data[f.name] for f in fields(TrustModel) if f.name in data})
+    except (OSError, ValueError, TypeError, KeyError) as err:
+        raise ValueError(f"trust calibration {path} is unreadable or incomplete: {err}") from None
+
+
+@lru_cache(maxsize=1)
+def shipped_trust() -> TrustModel:
+    """The shipped calibration, read once."""
+    return load_trust()
