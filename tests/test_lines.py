@@ -117,7 +117,8 @@ def test_estimator_methods_and_fallback():
     assert isinstance(lines, LensEstimate) and isinstance(lines, glradial.Lens)
     assert lines.method == "lines" and lines.chains >= 3 and error_px(lines, k1, k2) < 0.5
     assert auto.method == "lines" and auto == lines  # surer than the CNN here
-    assert net.method == "net" and net.chains == 0 and net.uncertainty_px == shipped_trust().q_net
+    evidence = est.evidence_batch([frame], lines=False)[0]
+    assert net.method == "net" and net.chains == 0 and net.uncertainty_px == shipped_trust().net_bound(evidence, False)
     assert lines.uncertainty_px < net.uncertainty_px
     # a frame with only circles and arcs: no line evidence, the CNN's answer, saying so
     circles = distorted(pitch(3, lines=False), k1, k2)
@@ -142,7 +143,7 @@ def test_blank_and_noise_frames_get_a_low_confidence_finite_answer(kind):
     assert result.method == "net" and result.chains == 0
     assert result.doubtful and result.reason in ("blank_frame", "noise_frame", "not_a_pitch")
     # no evidence: the bound spans every real lens (k1 -1.0 .. 0.4 on the manifold) from the answer
-    assert result.uncertainty_px == pytest.approx(anything_bound((result.k1, result.k2)))
+    assert result.uncertainty_px >= anything_bound((result.k1, result.k2)) - 1e-9
 
 
 @needs_shipped

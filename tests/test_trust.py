@@ -237,6 +237,13 @@ def test_reasons_follow_the_rules():
     assert judge(cases[3][0], "auto", trust).uncertainty_px == 50.0  # a line fit sought, none found
     net = judge(cases[3][0], "net", trust)  # the CNN alone: q_net, and here q_net (30) > doubt_px (25)
     assert net.uncertainty_px == 30.0 and net.reason == "weak_geometry"
+    # with the error head calibrated, the CNN's bound scales with its own expected error
+    from dataclasses import replace
+
+    scaled = replace(trust, q_net_rel=2.0, q_no_lines_rel=3.0)
+    own = replace(cases[3][0], net_error_px=6.0)
+    assert judge(own, "net", scaled).uncertainty_px == 12.0 and judge(own, "auto", scaled).uncertainty_px == 18.0
+    assert judge(cases[3][0], "net", scaled).uncertainty_px == 30.0  # no error head: the constant
     ok = judge(cases[-1][0], "auto", trust)
     assert ok.method == "lines" and ok.uncertainty_px == pytest.approx(math.hypot(2.0, 3.0))
     # no evidence of a pitch: the bound spans every real lens from the answer

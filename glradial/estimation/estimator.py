@@ -237,9 +237,10 @@ class Estimator:
         if not frames:
             return []
         views = [self.preprocess(f) for f in frames]
-        net = self.run(np.stack(views))
-        return [frame_evidence(f, view_to_frame(k, (f.shape[1], f.shape[0])), view_features(v), lines)
-                for f, v, k in zip(frames, views, net)]
+        net, error = self.run_with_error(np.stack(views))
+        errors = [None] * len(frames) if error is None else [float(e) for e in error]
+        return [frame_evidence(f, view_to_frame(k, (f.shape[1], f.shape[0])), view_features(v), lines, e)
+                for f, v, k, e in zip(frames, views, net, errors)]
 
     def estimate(self, frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0) -> LensEstimate:
         """Estimate one frame's lens (``method``, ``pixel_aspect`` as in :meth:`estimate_batch`)."""

@@ -11,11 +11,13 @@ Bound (split conformal):
     * a line fit: ``scale = sqrt(floor² + (a · sigma)² + (w · disagreement)²)`` where ``sigma`` is the
       fit's own 1-sigma (:attr:`glradial.estimation.line_fit.LineFit.sigma_px`) and ``disagreement`` the displacement
       between the line fit and the CNN; bound ``= q_lines · scale``;
-    * the CNN alone: bound ``= q_net`` (no per-frame scale yet), or ``q_no_lines`` when a line fit was
-      sought and none was found (such frames are harder: close-ups, blurred grass, curved stands);
-    * a frame with no pitch evidence (blank, noise, not a pitch): the largest displacement between the
-      answer and any lens of the real range (k1 in [-1.0, 0.4], k2 on the manifold): "anything".
-    ``floor``, ``a``, ``w``, ``q_lines``, ``q_net`` and ``q_no_lines`` are calibrated on validation frames of some clips and
+    * the CNN alone: bound ``= q_net`` or, when its model has an error head and the calibration
+      measured it, ``q_net_rel · net_error_px`` (the network's own expected error of the frame);
+      ``q_no_lines`` / ``q_no_lines_rel`` instead when a line fit was sought and none was found (such
+      frames are harder: close-ups, blurred grass, curved stands);
+    * a frame with no pitch evidence (blank, noise, not a pitch): at least the largest displacement
+      between the answer and any lens of the real range (k1 in [-1.0, 0.4], k2 on the manifold): "anything".
+    ``floor``, ``a``, ``w``, ``q_lines``, ``q_net``, ``q_no_lines`` and their ``_rel`` forms are calibrated on validation frames of some clips and
     checked on the others by :mod:`glradial.evaluation.calibrate` (``python -m glradial.evaluation.calibrate``), which writes
     them to ``glradial/data/trust.json`` (loaded here; docs/LINES.md, "Confidence").
 
@@ -66,7 +68,9 @@ class FrameEvidence:
     without a fit (or when not run); ``sigma_px``: the fit's 1-sigma (inf without a fit);
     ``chains``/``candidates``: chains that agree with the fit / passed screening; ``green``: share of
     the 16:9 view in its dominant pitch-green hue window (:func:`view_features`); ``gray_std``: grey-level standard deviation (0..255);
-    ``edge_density``: share of Canny edge pixels (``None`` when lines were not run).
+    ``edge_density``: share of Canny edge pixels (``None`` when lines were not run);
+    ``net_error_px``: the network's own expected error (its error head, px at 1920; ``None`` for a
+    model without one).
     """
 
     net: tuple[float, float]
@@ -77,6 +81,7 @@ class FrameEvidence:
     green: float = 1.0
     gray_std: float = 255.0
     edge_density: float | None = None
+    net_error_px: float | None = None
 
     @property
     def disagreement_px(self) -> float:
@@ -150,6 +155,8 @@ class TrustModel:
     green_min: float
     blank_std: float
     noise_edge_density: float
+    q_net_rel: float = 0.0
+    q_no_lines_rel: float = 0.0
     note: str = ""
 
     def lines_scale(self, evidence: FrameEvidence) -> float:
@@ -159,6 +166,14 @@ class TrustModel:
 
     def lines_bound(self, evidence: FrameEvidence) -> float:
         return self.q_lines * self.lines_scale(evidence)
+
+    def net_bound(self, evidence: FrameEvidence, no_lines: bool) -> float:
+        """The CNN's bound (px at 1920): relative to its own expected error when calibrated and
+        given (``q_*_rel > 0``), else the constant; ``no_lines``: a line fit was sought, none found."""
+        rel = self.q_no_lines_rel if no_lines else self.q_net_rel
+        if rel > 0.0 and evidence.net_error_px is not None and evidence.net_error_px > 0.0:
+            return rel * evidence.net_error_px
+        return self.q_no_lines if no_lines else self.q_net
 
     def no_evidence(self, evidence: FrameEvidence) -> str | None:
         """``blank_frame``, ``noise_frame``, ``not_a_pitch`` or ``None``."""
@@ -174,10 +189,10 @@ class TrustModel:
         """``(lens, source, uncertainty_px, doubtful, reason)`` for ``method`` ("auto", "net",
         "lines"): which answer, its bound and the doubt verdict."""
         use_lines = evidence.lines is not None and method != "net"
-        fallback = self.q_no_lines if method != "net" and evidence.lines is None else self.q_net
-        bound = self.lines_bound(evidence) if use_lines else fallback
-        if use_lines and method == "auto" and bound >= self.q_net:
-            use_lines, bound = False, self.q_net
+        net_bound = self.net_bound(evidence, no_lines=method != "net" and evidence.lines is None)
+        bound = self.lines_bound(evidence) if use_lines else net_bound
+        if use_lines and method == "auto" and bound >= net_bound:
+            use_lines, bound = False, net_bound
         lens, source = (evidence.lines, "lines") if use_lines else (evidence.net, "net")
         empty = self.no_evidence(evidence)
         if empty is not None:

@@ -51,6 +51,8 @@ from ..lens.metrics import max_displacement_px
 
 #: The 90 % target of the bound, and the share of disagreements that are not doubtful.
 COVERAGE, DISAGREE_QUANTILE = 0.9, 0.95
+#: Scale the CNN's bound by its error head's expected error (when every record has one).
+USE_ERROR_HEAD = True
 #: A frame is line-rich when its line fit has at least this many agreeing chains.
 LINE_RICH_CHAINS = 4
 #: Grid of the scale's floor (px at 1920), weight of the fit's 1-sigma and of the line/CNN disagreement.
@@ -186,6 +188,11 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
     q_net = conformal_quantile(net_err)
     no_fit = np.array([r.evidence.lines is None for r in records])
     q_no_lines = conformal_quantile(net_err[no_fit]) if no_fit.any() else q_net
+    own = np.array([r.evidence.net_error_px or np.nan for r in records], np.float64)
+    q_net_rel = q_no_lines_rel = 0.0
+    if USE_ERROR_HEAD and np.all(own > 0):  # the network's error head: a per-frame scale for its own answers
+        q_net_rel = conformal_quantile(net_err / own)
+        q_no_lines_rel = conformal_quantile(net_err[no_fit] / own[no_fit]) if no_fit.any() else q_net_rel
     lined = [r for r in records if r.evidence.lines is not None]
     err, _, _ = _errors(lined, base, "lines")  # the line fit's answer does not depend on the scale
     sigma = np.array([r.evidence.sigma_px for r in lined])
@@ -203,7 +210,8 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
                 median = float(np.median(bound[rich] if rich.any() else bound))
                 if best is None or median < best[0]:
                     best = (median, replace(base, floor_px=floor, sigma_weight=a, disagree_weight=weight,
-                                            q_lines=conformal_quantile(err / scale), q_net=q_net, q_no_lines=q_no_lines))
+                                            q_lines=conformal_quantile(err / scale), q_net=q_net, q_no_lines=q_no_lines,
+                                            q_net_rel=q_net_rel, q_no_lines_rel=q_no_lines_rel))
     trust = best[1]
     rich = [r for r in lined if r.line_rich]
     disagree = np.array([r.evidence.disagreement_px for r in (rich or lined)])
@@ -287,10 +295,12 @@ def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel,
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
     lines += ["", "Reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())), "",
               "Models (fold = the fold they were checked on; fitted on the other):", "",
-              "| fitted | q_lines | q_net px | q_no_lines px | floor px | sigma weight | disagree weight | disagree max px |",
-              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+              "| fitted | q_lines | q_net px | q_no_lines px | q_net_rel | q_no_lines_rel | floor px | sigma weight | "
+              "disagree weight | disagree max px |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
     for name, m in [*((f"for fold {f}", m) for f, m in models.items()), ("shipped (all folds)", shipped)]:
-        lines.append(f"| {name} | {m.q_lines:.3f} | {m.q_net:.1f} | {m.q_no_lines:.1f} | {m.floor_px:g} | {m.sigma_weight:g} | {m.disagree_weight:g} | "
+        lines.append(f"| {name} | {m.q_lines:.3f} | {m.q_net:.1f} | {m.q_no_lines:.1f} | {m.q_net_rel:.2f} | "
+                     f"{m.q_no_lines_rel:.2f} | {m.floor_px:g} | {m.sigma_weight:g} | {m.disagree_weight:g} | "
                      f"{m.disagree_max_px:.1f} |")
     return "\n".join(lines) + "\n"
 
