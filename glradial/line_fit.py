@@ -59,7 +59,7 @@ ROBUST_T = 3.0
 #: Loose prior of k2 around the manifold, and of k1 around the CNN (lens units).
 K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.05, 0.3
 #: Screening thresholds (px RMS of the detection copy).
-STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 1.0
+STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 0.5
 #: A fit needs at least this many chains that agree with it: one chain cannot be checked against
 #: anything (an arc that some lens straightens passes screening on its own).
 MIN_CHAINS = 2

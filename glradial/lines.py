@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from .estimation.corners import split_at_corners
 from .lens import lens_to_pixels, pixels_to_lens
 
 #: Largest width (pixels) of the gray copy lines are detected on (800: as accurate as 960 on validation
@@ -357,21 +358,46 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
         if np.ptp(ends @ pieces.axis[longest]) < MIN_CHAIN_LENGTH:
             continue
         idx = np.concatenate([pieces.members[k] for k in group])
-        x, y = xs[idx], ys[idx]
-        pts = np.stack([x, y], axis=1)
-        centre = pts.mean(axis=0)
-        w, v = np.linalg.eigh(np.cov((pts - centre).T))
-        s = (pts - centre) @ v[:, 1]
-        length = float(np.ptp(s))
-        if length < MIN_CHAIN_LENGTH:
-            continue
-        if _is_overlay(x, y, (height, width)):
-            overlays += 1
-            continue
-        order = np.argsort(s)
-        # back to full-frame pixel centres, then lens units
-        scale = width_full / width
-        full = (pts[order] + 0.5) * np.array([scale, height_full / height]) - 0.5
         kind = "edge" if pieces.kind[group[0]] else "ridge"
-        chains.append(Chain(pixels_to_lens(full, (width_full, height_full)), kind, length))
+        for part in _one_line_parts(idx, xs, ys, lx, ly):  # a chain round a corner is cut there
+            found = _chain(part, xs, ys, kind, (height, width), (width_full, height_full))
+            overlays += found is _OVERLAY
+            if isinstance(found, Chain):
+                chains.append(found)
     return LineEvidence(chains, (width_full, height_full), width, overlays, density)
+
+
+#: Returned by :func:`_chain` for a chain taken for broadcast graphics.
+_OVERLAY = object()
+
+
+def _one_line_parts(idx: np.ndarray, xs, ys, lx, ly) -> list[np.ndarray]:
+    """The point indices ``idx`` of one linked chain, ordered along it and cut where it turns a
+    corner (:func:`glradial.estimation.corners.split_at_corners`, on the points undistorted with
+    the hint, ``lx``, ``ly``)."""
+    pts = np.stack([xs[idx], ys[idx]], axis=1)
+    centre = pts.mean(axis=0)
+    _, v = np.linalg.eigh(np.cov((pts - centre).T))
+    ordered = idx[np.argsort((pts - centre) @ v[:, 1])]
+    hinted = np.stack([lx[ordered], ly[ordered]], axis=1)
+    return [ordered[s] for s in split_at_corners(hinted)]
+
+
+def _chain(idx: np.ndarray, xs, ys, kind: str, shape: tuple[int, int], size_full: tuple[int, int]):
+    """A :class:`Chain` of the detection-copy points ``idx`` (ordered along it), ``None`` when
+    shorter than :data:`MIN_CHAIN_LENGTH`, :data:`_OVERLAY` when it is broadcast graphics."""
+    x, y = xs[idx], ys[idx]
+    pts = np.stack([x, y], axis=1)
+    centre = pts.mean(axis=0)
+    _, v = np.linalg.eigh(np.cov((pts - centre).T))
+    s = (pts - centre) @ v[:, 1]
+    length = float(np.ptp(s))
+    if length < MIN_CHAIN_LENGTH:
+        return None
+    if _is_overlay(x, y, shape):
+        return _OVERLAY
+    order = np.argsort(s)
+    # back to full-frame pixel centres, then lens units
+    height, width = shape
+    full = (pts[order] + 0.5) * np.array([size_full[0] / width, size_full[1] / height]) - 0.5
+    return Chain(pixels_to_lens(full, size_full), kind, length)
