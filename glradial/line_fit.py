@@ -43,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import lensfuncs
+from .estimation import pitch_geometry
 from .lines import LineEvidence
 from .metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
 
@@ -59,7 +60,7 @@ ROBUST_T = 3.0
 #: Loose prior of k2 around the manifold, and of k1 around the CNN (lens units).
 K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.05, 0.3
 #: Screening thresholds (px RMS of the detection copy).
-STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 0.5
+STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 0.7
 #: A fit needs at least this many chains that agree with it: one chain cannot be checked against
 #: anything (an arc that some lens straightens passes screening on its own).
 MIN_CHAINS = 2
@@ -69,12 +70,41 @@ USED_CHI = 3.0
 OUTLIER_CHI = 2.0
 #: Points farther than this (px, and 3 robust sigmas) from their chain's line at the coarse lens are dropped.
 TRIM_PX = 1.0
+#: Vanishing-point term: px (detection copy) a line's ends may miss its family's vanishing point
+#: (painted lines are not exactly parallel, the pitch not exactly flat).
+SIGMA_VANISHING = 0.5
+#: Arcs (chains no lens straightens) with fewer points are not tried as conics.
+MIN_ARC_POINTS = 24
 
 
 @dataclass(frozen=True)
 class LineFit:
-    """Result of :func:`fit_lines`: the lens, its raw 1-sigma displacement uncertainty (px at 1920),
-    the chains that agree with it, the chains that passed screening, and whether a fit was made."""
+    """Result of :func:`fit_lines`.
+
+    Fields (units: lens units for ``k1``, ``k2``; px at 1920 wide, :data:`REPORT_WIDTH`, for
+    ``sigma_px`` and ``rms_px``):
+
+    * ``k1``, ``k2``: the lens (the prior, or ``(0, 0)``, when no fit was made);
+    * ``sigma_px``: raw 1-sigma of the maximum radial displacement over the 16:9 frame from
+      ``cov`` (``inf`` without a fit); :mod:`glradial.lens_estimate` turns it into a bound;
+    * ``chains``: line chains that agree with the fit (chi at most :data:`USED_CHI`);
+    * ``candidates``: line chains that passed screening;
+    * ``ok``: a fit was made from at least :data:`MIN_CHAINS` agreeing chains and has a finite,
+      positive-definite covariance; when false, ``reason`` says why;
+    * ``rms_px``: RMS perpendicular residual of the points of the chains used, at the fitted lens
+      (distorted frame, px at 1920; ``inf`` without a fit);
+    * ``cov``: the ``(k1, k2)`` covariance ``((var k1, cov), (cov, var k2))`` (lens units², from the
+      cost's curvature, scaled by the reduced chi² when above 1); ``None`` without a fit;
+    * ``condition``: ratio of the largest to the smallest eigenvalue of the cost's Hessian (large:
+      k1 and k2 trade off along a valley; ``inf`` without a positive-definite Hessian);
+    * ``families``: families of lines that share a vanishing point used in the cost (0, 1 or 2);
+    * ``conics``: groups of arcs fitted as one ellipse used in the cost (centre circle, penalty arcs);
+    * ``reach``: farthest point of the chains used from the principal point, as a share of the 16:9
+      corner radius (a lens read from chains near the centre is extrapolated to the corners);
+    * ``difficulty``: ``sigma_px * (1 + 2 / (chains + families + conics)) / max(reach, 0.25)``,
+      larger is harder (``inf`` without a fit): a per-frame scale for calibrating a bound;
+    * ``reason``: ``""`` when ``ok``; else one of :data:`REASONS` (machine-readable).
+    """
 
     k1: float
     k2: float
@@ -82,6 +112,24 @@ class LineFit:
     chains: int
     candidates: int
     ok: bool
+    rms_px: float = math.inf
+    cov: tuple[tuple[float, float], tuple[float, float]] | None = None
+    condition: float = math.inf
+    families: int = 0
+    conics: int = 0
+    reach: float = 0.0
+    difficulty: float = math.inf
+    reason: str = ""
+
+
+#: Values of :attr:`LineFit.reason` when the fit fails: no chain at all; no chain that some lens
+#: straightens and whose residual depends on the lens; fewer than MIN_CHAINS chains agree with
+#: the fit; the cost's curvature gives no covariance (flat or saddle).
+REASONS = ("no_chains", "no_line_candidates", "too_few_chains", "ill_conditioned")
+
+
+def _failed(fallback: tuple[float, float], reason: str, candidates: int = 0) -> LineFit:
+    return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, candidates, False, reason=reason)
 
 
 def _compact(evidence: LineEvidence) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -120,47 +168,56 @@ def _undistort_radius(r_d: np.ndarray, k1: np.ndarray, k2: np.ndarray) -> np.nda
 
 
 class _Problem:
-    """Chains of one frame in the form the cost needs (lens units; px = lens * width)."""
+    """Chains of one frame in the form the cost needs (lens units; px = lens * width).
 
-    def __init__(self, points: np.ndarray, chain: np.ndarray, counts: np.ndarray, width: int) -> None:
+    ``family``: per chain, the vanishing-point family it belongs to (-1: none; set by
+    :func:`_add_geometry`); ``arcs``: the conic groups (an :class:`_Arcs`) or ``None``."""
+
+    def __init__(self, points: np.ndarray, chain: np.ndarray, counts: np.ndarray, width: int,
+                 family: np.ndarray | None = None, arcs: "_Arcs | None" = None) -> None:
         self.points, self.chain, self.counts, self.width = points, chain, counts, float(width)
         self.n = len(counts)
         self.r_d = np.hypot(points[:, 0], points[:, 1])
         self.unit = points / np.maximum(self.r_d, 1e-12)[:, None]
+        self.family = np.full(self.n, -1) if family is None else family
+        self.arcs = arcs
 
     def subset(self, keep: np.ndarray) -> "_Problem":
         """Only the chains where ``keep`` (C,) is true (renumbered)."""
         new_index = np.cumsum(keep) - 1
         mask = keep[self.chain]
-        return _Problem(self.points[mask], new_index[self.chain[mask]], self.counts[keep], int(self.width))
+        return _Problem(self.points[mask], new_index[self.chain[mask]], self.counts[keep], int(self.width),
+                        self.family[keep], self.arcs)
 
-    def chain_mse(self, k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
-        """Mean squared distorted-frame residual (px²) per lens and chain -> (L, C); inf where invalid."""
+    def moments(self, k1: np.ndarray, k2: np.ndarray) -> dict:
+        """Per lens and chain (L, C): centre ``mx``, ``my``, central second moments ``cxx``, ``cyy``,
+        ``cxy`` of the undistorted points (lens units), mean magnification ``mag`` (r_d / r_u) and
+        ``invalid`` (L,) where the lens cannot undistort every point."""
         k1 = np.asarray(k1, np.float64).reshape(-1, 1)
         k2 = np.asarray(k2, np.float64).reshape(-1, 1)
         n_lens = len(k1)
         r_u = _undistort_radius(self.r_d[None, :], k1, k2)
         x = self.unit[:, 0] * r_u
         y = self.unit[:, 1] * r_u
-        mag = self.r_d[None, :] / np.maximum(r_u, 1e-12)
-        mag = np.where(self.r_d[None, :] > 1e-9, mag, 1.0)
+        mag = np.where(self.r_d[None, :] > 1e-9, self.r_d[None, :] / np.maximum(r_u, 1e-12), 1.0)
         index = (np.arange(n_lens)[:, None] * self.n + self.chain[None, :]).ravel()
         size = n_lens * self.n
-        cnt = np.bincount(index, minlength=size)
-        safe = np.maximum(cnt, 1)
+        safe = np.maximum(np.bincount(index, minlength=size), 1)
 
         def mean(v: np.ndarray) -> np.ndarray:
-            return np.bincount(index, v.ravel(), size) / safe
+            return (np.bincount(index, v.ravel(), size) / safe).reshape(n_lens, self.n)
 
         mx, my = mean(x), mean(y)
-        cxx = mean(x * x) - mx * mx
-        cyy = mean(y * y) - my * my
-        cxy = mean(x * y) - mx * my
+        return {"mx": mx, "my": my, "cxx": mean(x * x) - mx * mx, "cyy": mean(y * y) - my * my,
+                "cxy": mean(x * y) - mx * my, "mag": mean(mag), "invalid": np.isnan(r_u).any(axis=1)}
+
+    def chain_mse(self, k1: np.ndarray, k2: np.ndarray, m: dict | None = None) -> np.ndarray:
+        """Mean squared distorted-frame residual (px²) per lens and chain -> (L, C); inf where invalid."""
+        m = self.moments(k1, k2) if m is None else m
+        cxx, cyy, cxy = m["cxx"], m["cyy"], m["cxy"]
         lam = 0.5 * (cxx + cyy) - np.sqrt(0.25 * (cxx - cyy) ** 2 + cxy * cxy)
-        lam = np.maximum(lam, 0.0) * mean(mag) ** 2 * self.width**2
-        lam = lam.reshape(n_lens, self.n)
-        invalid = np.isnan(r_u).any(axis=1)
-        lam[invalid] = np.inf
+        lam = np.maximum(lam, 0.0) * m["mag"] ** 2 * self.width**2
+        lam[m["invalid"]] = np.inf
         lam[np.isnan(lam)] = np.inf
         return lam
 
@@ -170,13 +227,79 @@ class _Problem:
         e = self.chain_mse(k1, k2) if mse is None else mse
         return self.counts * e / (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2)
 
+    def family_chi2(self, m: dict) -> np.ndarray:
+        """Per lens and chain, (px offset of the chain's ends from its family's vanishing point /
+        SIGMA_VANISHING)² -> (L, C); 0 for chains in no family."""
+        if not (self.family >= 0).any():
+            return np.zeros_like(m["mx"])
+        # lenses that cannot undistort every point cost inf through chain_mse; keep these finite
+        m = {key: np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0) for key, v in m.items()}
+        normal, offset = pitch_geometry.line_params(m["mx"], m["my"], m["cxx"], m["cyy"], m["cxy"])
+        spread = 0.5 * (m["cxx"] + m["cyy"]) + np.sqrt(0.25 * (m["cxx"] - m["cyy"]) ** 2 + m["cxy"] ** 2)
+        half = np.sqrt(3.0 * np.maximum(spread, 0.0))  # half-length of a uniform segment
+        centre = np.stack([m["mx"], m["my"]], axis=-1)
+        off = pitch_geometry.family_residuals(normal, offset, centre, half, self.family)
+        return (off * m["mag"] * self.width / SIGMA_VANISHING) ** 2
+
+    def chain_rms_px(self, k1: float, k2: float, used: np.ndarray) -> float:
+        """RMS point residual (px at REPORT_WIDTH) of the chains where ``used``, at one lens."""
+        mse = self.chain_mse(np.array([k1]), np.array([k2]))[0]
+        weight = self.counts * used
+        return float(np.sqrt(np.sum(weight * mse) / max(np.sum(weight), 1e-12))) * REPORT_WIDTH / self.width
+
+
+class _Arcs:
+    """Groups of arc points that should lie on one conic once undistorted (lens units)."""
+
+    def __init__(self, points: np.ndarray, group: np.ndarray, counts: np.ndarray, width: float) -> None:
+        self.points, self.group, self.counts, self.width = points, group, counts, float(width)
+        self.n = len(counts)
+        self.r_d = np.hypot(points[:, 0], points[:, 1])
+        self.unit = points / np.maximum(self.r_d, 1e-12)[:, None]
+
+    def subset(self, keep: np.ndarray) -> "_Arcs | None":
+        if not keep.any():
+            return None
+        mask = keep[self.group]
+        return _Arcs(self.points[mask], (np.cumsum(keep) - 1)[self.group[mask]], self.counts[keep], self.width)
+
+    def mse(self, k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
+        """Mean squared distorted-frame distance (px²) of each group's points from its best conic,
+        per lens -> (L, G); inf where the lens cannot undistort every point."""
+        k1 = np.asarray(k1, np.float64).reshape(-1, 1)
+        k2 = np.asarray(k2, np.float64).reshape(-1, 1)
+        r_u = _undistort_radius(self.r_d[None, :], k1, k2)
+        bad = np.isnan(r_u).any(axis=1)
+        r_u = np.where(np.isnan(r_u), self.r_d[None, :], r_u)
+        pts = self.unit[None, :, :] * r_u[:, :, None]
+        rms = pitch_geometry.conic_rms(pts, self.group, self.n)
+        mag = np.ones_like(rms)
+        for g in range(self.n):
+            sel = self.group == g
+            mag[:, g] = np.mean(self.r_d[sel] / np.maximum(r_u[:, sel], 1e-12), axis=1)
+        out = (rms * mag * self.width) ** 2
+        out[bad] = np.inf
+        return out
+
+    def chi2(self, k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
+        return self.counts * self.mse(k1, k2) / (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2)
+
+
+def _robust(chi: np.ndarray) -> np.ndarray:
+    return ROBUST_T * np.log1p(chi / ROBUST_T)
+
 
 def _cost(problem: _Problem, k1: np.ndarray, k2: np.ndarray, prior_k1: float | None,
           mse: np.ndarray | None = None) -> np.ndarray:
     k1 = np.asarray(k1, np.float64)
     k2 = np.asarray(k2, np.float64)
-    chi = problem.chi2(k1, k2, mse)
-    total = (ROBUST_T * np.log1p(chi / ROBUST_T)).sum(axis=1)
+    m = problem.moments(k1, k2) if mse is None or (problem.family >= 0).any() else None
+    chi = problem.chi2(k1, k2, problem.chain_mse(k1, k2, m) if mse is None else mse)
+    total = _robust(chi).sum(axis=1)
+    if (problem.family >= 0).any():
+        total = total + _robust(problem.family_chi2(m)).sum(axis=1)
+    if problem.arcs is not None:
+        total = total + _robust(problem.arcs.chi2(k1, k2)).sum(axis=1)
     total = total + ((k2 - manifold_k2(k1)) / K2_PRIOR_SIGMA) ** 2
     if prior_k1 is not None:
         total = total + ((k1 - prior_k1) / K1_PRIOR_SIGMA) ** 2
@@ -202,8 +325,8 @@ def _trim(problem: _Problem, k1: float, k2: float) -> _Problem:
         keep[np.flatnonzero(m)] = d <= max(TRIM_PX, 3.0 * robust)
     counts = np.bincount(problem.chain[keep], minlength=problem.n).astype(np.float64)
     ratio = counts / np.maximum(np.bincount(problem.chain, minlength=problem.n), 1)
-    out = _Problem(problem.points[keep], problem.chain[keep], problem.counts * ratio, int(problem.width))
-    return out
+    return _Problem(problem.points[keep], problem.chain[keep], problem.counts * ratio, int(problem.width),
+                    problem.family, problem.arcs)
 
 
 def _displacement_sigma(cov: np.ndarray) -> float:
@@ -252,31 +375,115 @@ def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None) -> 
     return k1, k2, hessian
 
 
+def _arc_candidates(problem: _Problem, best: np.ndarray) -> np.ndarray:
+    """Chains that no lens straightens (``best`` RMS² above STRAIGHT_RMS²) with enough points to be
+    tried as arcs of a conic."""
+    return np.flatnonzero((best > STRAIGHT_RMS**2) & (problem.counts >= MIN_ARC_POINTS))
+
+
+def _conics(full: _Problem, arc_ids: np.ndarray, k1: float, k2: float, grid: np.ndarray) -> _Arcs | None:
+    """Arcs of ``full`` (chains ``arc_ids``) joined into ellipses at lens ``(k1, k2)``
+    (:func:`glradial.estimation.pitch_geometry.group_arcs`), kept where some lens on the manifold
+    makes them a conic within STRAIGHT_RMS and the lens choice matters (INFORMATIVE_RMS)."""
+    if len(arc_ids) < 2:
+        return None
+    arcs = []
+    for c in arc_ids:
+        p = full.points[full.chain == c]
+        r_u = _undistort_radius(np.hypot(p[:, 0], p[:, 1]), np.float64(k1), np.float64(k2))
+        if np.isnan(r_u).any():
+            return None
+        arcs.append(p / np.maximum(np.hypot(p[:, 0], p[:, 1]), 1e-12)[:, None] * r_u[:, None])
+    labels = pitch_geometry.group_arcs(arcs)
+    multi = np.bincount(labels) >= 2  # one arc of <= 30 degrees of turn fits a conic under any lens
+    if not multi.any():
+        return None
+    sel = multi[labels]
+    ids, groups = arc_ids[sel], (np.cumsum(multi) - 1)[labels[sel]]
+    mask = np.isin(full.chain, ids)
+    group_of_chain = dict(zip(ids.tolist(), groups.tolist()))
+    group = np.array([group_of_chain[c] for c in full.chain[mask].tolist()], np.intp)
+    counts = np.bincount(groups, full.counts[ids], int(multi.sum()))
+    result = _Arcs(full.points[mask], group, counts, full.width)
+    mse = result.mse(grid, manifold_k2(grid))
+    best, worst = np.min(mse, axis=0), np.max(np.where(np.isfinite(mse), mse, 0.0), axis=0)
+    return result.subset((best <= STRAIGHT_RMS**2) & (worst >= INFORMATIVE_RMS**2))
+
+
+def _families(problem: _Problem, k1: float, k2: float) -> np.ndarray:
+    """Vanishing-point family of each chain of ``problem`` at lens ``(k1, k2)`` (-1: none)."""
+    m = {key: v[0] if key != "invalid" else v for key, v in problem.moments(np.array([k1]), np.array([k2])).items()}
+    if m["invalid"].any():
+        return np.full(problem.n, -1)
+    normal, offset = pitch_geometry.line_params(m["mx"], m["my"], m["cxx"], m["cyy"], m["cxy"])
+    spread = 0.5 * (m["cxx"] + m["cyy"]) + np.sqrt(0.25 * (m["cxx"] - m["cyy"]) ** 2 + m["cxy"] ** 2)
+    half = np.sqrt(3.0 * np.maximum(spread, 0.0))
+    centre = np.stack([m["mx"], m["my"]], axis=-1)
+    return pitch_geometry.find_families(normal, offset, centre, half)
+
+
+def _covariance(problem: _Problem, hessian: np.ndarray | None, chi: np.ndarray) -> tuple[np.ndarray | None, float]:
+    """(k1, k2) covariance from the cost's Hessian (scaled by the reduced chi² when above 1) and the
+    Hessian's condition number; ``(None, inf)`` when it is not positive definite."""
+    if hessian is None or not np.isfinite(hessian).all():
+        return None, math.inf
+    eig = np.linalg.eigvalsh(hessian)
+    if eig.min() <= 0:
+        return None, math.inf
+    dof = max(problem.n - 2, 1)
+    reduced = float(np.sum(np.minimum(chi, ROBUST_T * 4))) / dof
+    return 2.0 * np.linalg.inv(hessian) * max(1.0, reduced), float(eig.max() / eig.min())
+
+
+def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int) -> LineFit:
+    """The :class:`LineFit` of a finished fit (diagnostics, ``ok`` and ``reason``)."""
+    chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
+    used_mask = chi <= USED_CHI**2
+    used = int(used_mask.sum())
+    cov, condition = _covariance(problem, hessian, chi)
+    sigma = _displacement_sigma(cov) if cov is not None else math.inf
+    families = int(sum(np.sum(problem.family == f) >= pitch_geometry.MIN_FAMILY_LINES for f in range(pitch_geometry.MAX_FAMILIES)))
+    conics = problem.arcs.n if problem.arcs is not None else 0
+    used_points = used_mask[problem.chain]
+    reach = float(problem.r_d[used_points].max() / CORNER_RADIUS_16_9) if used_points.any() else 0.0
+    ok = used >= MIN_CHAINS and math.isfinite(sigma)
+    reason = "" if ok else ("too_few_chains" if used < MIN_CHAINS else "ill_conditioned")
+    difficulty = sigma * (1.0 + 2.0 / max(used + families + conics, 1)) / max(reach, 0.25)
+    return LineFit(float(k1), float(k2), sigma, used, candidates, ok, problem.chain_rms_px(k1, k2, used_mask),
+                   None if cov is None else (tuple(map(float, cov[0])), tuple(map(float, cov[1]))),
+                   condition, families, conics, reach, difficulty, reason)
+
+
 def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) -> LineFit:
     """Fit ``(k1, k2)`` to the chains of ``evidence`` (see the module docstring).
 
     ``prior``: the CNN's ``(k1, k2)`` (only k1 is used, as a weak prior). Returns a :class:`LineFit`
-    with ``ok=False`` (and the prior, or ``(0, 0)``, as the lens) when no chain passes screening.
+    with ``ok=False``, a ``reason`` (and the prior, or ``(0, 0)``, as the lens) when no fit was made.
     """
     fallback = prior if prior is not None else (0.0, 0.0)
     prior_k1 = float(prior[0]) if prior is not None else None
-    points, chain, counts = _compact(evidence)
-    problem = _Problem(points, chain, counts, evidence.width)
-    if problem.n == 0:
-        return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, 0, False)
+    full = _Problem(*_compact(evidence), evidence.width)
+    if full.n == 0:
+        return _failed(fallback, "no_chains")
     grid = np.arange(K1_RANGE[0], K1_RANGE[1] + 1e-9, K1_STEP)
-    mse = problem.chain_mse(grid, manifold_k2(grid))  # (L, C)
+    mse = full.chain_mse(grid, manifold_k2(grid))  # (L, C)
     best = np.min(mse, axis=0)
     worst = np.max(np.where(np.isfinite(mse), mse, 0.0), axis=0)
     keep = (best <= STRAIGHT_RMS**2) & (worst >= INFORMATIVE_RMS**2)
     if not keep.any():
-        return LineFit(float(fallback[0]), float(fallback[1]), math.inf, 0, 0, False)
-    problem = problem.subset(keep)
+        return _failed(fallback, "no_line_candidates")
+    problem = full.subset(keep)
     candidates = problem.n
     cost = _cost(problem, grid, manifold_k2(grid), prior_k1, mse[:, keep])
     k1 = float(grid[int(np.argmin(cost))])
     k2 = float(manifold_k2(k1))
     problem = _trim(problem, k1, k2)
+    problem.family = _families(problem, k1, k2)
+    problem.arcs = _conics(full, _arc_candidates(full, best), k1, k2, grid)
+    if (problem.family >= 0).any() or problem.arcs is not None:
+        cost = _cost(problem, grid, manifold_k2(grid), prior_k1)
+        k1 = float(grid[int(np.argmin(cost))])
+        k2 = float(manifold_k2(k1))
     k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
     # drop the chains the fitted lens does not straighten (arcs that passed screening, mis-linked
     # chains) and fit again with the rest
@@ -285,18 +492,4 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
     if 0 < inliers.sum() < problem.n:
         problem = problem.subset(inliers)
         k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
-    chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
-    used = int(np.sum(chi <= USED_CHI**2))
-    sigma = math.inf
-    if hessian is not None:
-        try:
-            eig = np.linalg.eigvalsh(hessian)
-            if eig.min() > 0:
-                cov = 2.0 * np.linalg.inv(hessian)
-                dof = max(problem.n - 2, 1)
-                reduced = float(np.sum(np.minimum(chi, ROBUST_T * 4))) / dof
-                cov = cov * max(1.0, reduced)
-                sigma = _displacement_sigma(cov)
-        except np.linalg.LinAlgError:
-            pass
-    return LineFit(float(k1), float(k2), sigma, used, candidates, used >= MIN_CHAINS and math.isfinite(sigma))
+    return _result(problem, k1, k2, hessian, candidates)
