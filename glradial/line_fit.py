@@ -52,7 +52,7 @@ K1_RANGE = (-1.0, 0.4)
 #: Coarse search step along the manifold (k1, lens units).
 K1_STEP = 0.025
 #: Points per chain after averaging consecutive points in groups.
-MAX_CHAIN_POINTS = 32
+MAX_CHAIN_POINTS = 16
 #: Per-point localisation noise and per-chain error floor (px of the detection copy).
 SIGMA_POINT, SIGMA_FLOOR = 0.25, 0.08
 #: Robust loss scale (chi² units) of one chain.
@@ -73,8 +73,11 @@ TRIM_PX = 1.0
 #: Vanishing-point term: px (detection copy) a line's ends may miss its family's vanishing point
 #: (painted lines are not exactly parallel, the pitch not exactly flat).
 SIGMA_VANISHING = 0.5
-#: Arcs (chains no lens straightens) with fewer points are not tried as conics.
-MIN_ARC_POINTS = 24
+#: With vanishing points or conics, the grid is searched again this far (k1) around the lines' minimum.
+GEOMETRY_WINDOW = 0.2
+#: Arcs (chains no lens straightens) with fewer points are not tried as conics, and only the
+#: MAX_ARCS longest are (the centre circle and two penalty arcs give a few each).
+MIN_ARC_POINTS, MAX_ARCS = 24, 8
 
 
 @dataclass(frozen=True)
@@ -232,8 +235,8 @@ class _Problem:
         SIGMA_VANISHING)² -> (L, C); 0 for chains in no family."""
         if not (self.family >= 0).any():
             return np.zeros_like(m["mx"])
-        # lenses that cannot undistort every point cost inf through chain_mse; keep these finite
-        m = {key: np.nan_to_num(v, nan=0.0, posinf=0.0, neginf=0.0) for key, v in m.items()}
+        if m["invalid"].any():  # such lenses cost inf through chain_mse; keep these rows finite
+            m = {key: np.where(m["invalid"][:, None], 0.0, m[key]) for key in ("mx", "my", "cxx", "cyy", "cxy", "mag")}
         normal, offset = pitch_geometry.line_params(m["mx"], m["my"], m["cxx"], m["cyy"], m["cxy"])
         spread = 0.5 * (m["cxx"] + m["cyy"]) + np.sqrt(0.25 * (m["cxx"] - m["cyy"]) ** 2 + m["cxy"] ** 2)
         half = np.sqrt(3.0 * np.maximum(spread, 0.0))  # half-length of a uniform segment
@@ -337,9 +340,11 @@ def _displacement_sigma(cov: np.ndarray) -> float:
     return float(np.sqrt(max(float(var.max()), 0.0)))
 
 
-def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None) -> tuple[float, float, np.ndarray | None]:
-    """Newton steps on a quadratic fitted to a 3 x 3 stencil of the cost -> (k1, k2, Hessian)."""
-    h1, h2 = 0.02, 0.02
+def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None,
+            h: float = 0.02) -> tuple[float, float, np.ndarray | None]:
+    """Newton steps on a quadratic fitted to a 3 x 3 stencil (half-width ``h``, shrinking to 0.004)
+    of the cost -> (k1, k2, Hessian); stops once a step is below 1e-4 on the smallest stencil."""
+    h1, h2 = h, h
     hessian = None
     for _ in range(6):
         d1, d2 = np.meshgrid([-h1, 0.0, h1], [-h2, 0.0, h2])
@@ -360,25 +365,38 @@ def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None) -> 
         # limit the step to the trust region, and accept it only if the cost falls
         scale = min(1.0, 0.1 / max(np.abs(step).max(), 1e-12))
         step = step * scale
-        accepted = False
-        for _ in range(4):
-            trial = _cost(problem, np.array([k1 + step[0]]), np.array([k2 + step[1]]), prior_k1)[0]
-            if trial <= c[1, 1]:
-                k1, k2 = k1 + float(step[0]), k2 + float(step[1])
-                accepted = True
-                break
-            step = step / 4
+        # the step, then a quarter of it, ... (one batched evaluation): the first that lowers the cost
+        steps = step[None, :] * (0.25 ** np.arange(4))[:, None]
+        trial = _cost(problem, k1 + steps[:, 0], k2 + steps[:, 1], prior_k1)
+        falls = np.flatnonzero(trial <= c[1, 1])
+        accepted = len(falls) > 0
+        step = steps[falls[0]] if accepted else steps[-1] / 4
+        if accepted:
+            k1, k2 = k1 + float(step[0]), k2 + float(step[1])
         if not accepted or np.abs(step).max() < 1e-4:
-            h1, h2 = max(h1 / 2, 0.004), max(h2 / 2, 0.004)
-            if not accepted:
+            if not accepted or max(h1, h2) <= 0.004:
                 break
+            h1, h2 = max(h1 / 2, 0.004), max(h2 / 2, 0.004)
     return k1, k2, hessian
+
+
+def _grid_minimum(grid: np.ndarray, cost: np.ndarray) -> float:
+    """k1 of the smallest ``cost`` on the evenly spaced ``grid``, refined by the parabola through it
+    and its two neighbours (the coarse lens decides which points are trimmed)."""
+    i = int(np.argmin(cost))
+    if 0 < i < len(grid) - 1 and np.isfinite(cost[i - 1:i + 2]).all():
+        a, b, c = cost[i - 1:i + 2]
+        curvature = a - 2 * b + c
+        if curvature > 0:
+            return float(grid[i] + 0.5 * (a - c) / curvature * (grid[1] - grid[0]))
+    return float(grid[i])
 
 
 def _arc_candidates(problem: _Problem, best: np.ndarray) -> np.ndarray:
     """Chains that no lens straightens (``best`` RMS² above STRAIGHT_RMS²) with enough points to be
     tried as arcs of a conic."""
-    return np.flatnonzero((best > STRAIGHT_RMS**2) & (problem.counts >= MIN_ARC_POINTS))
+    ids = np.flatnonzero((best > STRAIGHT_RMS**2) & (problem.counts >= MIN_ARC_POINTS))
+    return ids[np.argsort(-problem.counts[ids], kind="stable")[:MAX_ARCS]]
 
 
 def _conics(full: _Problem, arc_ids: np.ndarray, k1: float, k2: float, grid: np.ndarray) -> _Arcs | None:
@@ -474,15 +492,14 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
         return _failed(fallback, "no_line_candidates")
     problem = full.subset(keep)
     candidates = problem.n
-    cost = _cost(problem, grid, manifold_k2(grid), prior_k1, mse[:, keep])
-    k1 = float(grid[int(np.argmin(cost))])
+    k1 = _grid_minimum(grid, _cost(problem, grid, manifold_k2(grid), prior_k1, mse[:, keep]))
     k2 = float(manifold_k2(k1))
     problem = _trim(problem, k1, k2)
     problem.family = _families(problem, k1, k2)
     problem.arcs = _conics(full, _arc_candidates(full, best), k1, k2, grid)
-    if (problem.family >= 0).any() or problem.arcs is not None:
-        cost = _cost(problem, grid, manifold_k2(grid), prior_k1)
-        k1 = float(grid[int(np.argmin(cost))])
+    if (problem.family >= 0).any() or problem.arcs is not None:  # the grid again, near the first minimum
+        near = grid[np.abs(grid - k1) <= GEOMETRY_WINDOW + 1e-9]
+        k1 = _grid_minimum(near, _cost(problem, near, manifold_k2(near), prior_k1))
         k2 = float(manifold_k2(k1))
     k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
     # drop the chains the fitted lens does not straighten (arcs that passed screening, mis-linked
@@ -491,5 +508,5 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
     inliers = chi <= OUTLIER_CHI**2 * max(1.0, float(np.median(chi)))
     if 0 < inliers.sum() < problem.n:
         problem = problem.subset(inliers)
-        k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
+        k1, k2, hessian = _refine(problem, k1, k2, prior_k1, h=0.008)
     return _result(problem, k1, k2, hessian, candidates)
