@@ -49,6 +49,9 @@ from .metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
 
 #: Range of k1 searched (lens units): real broadcast and pitch cameras reach -0.72.
 K1_RANGE = (-1.0, 0.4)
+#: The refinement may leave the searched range up to these limits (a lens at k1 = -1.0 is then an
+#: interior minimum, not one pinned to the edge of the search).
+K1_LIMITS = (-1.3, 0.6)
 #: Coarse search step along the manifold (k1, lens units).
 K1_STEP = 0.025
 #: Points per chain after averaging consecutive points in groups.
@@ -73,6 +76,9 @@ TRIM_PX = 1.0
 #: Vanishing-point term: px (detection copy) a line's ends may miss its family's vanishing point
 #: (painted lines are not exactly parallel, the pitch not exactly flat).
 SIGMA_VANISHING = 0.5
+#: After the first refinement, a line whose ends miss its family's vanishing point by more than this
+#: many SIGMA_VANISHING leaves the family.
+FAMILY_CHI = 3.0
 #: With vanishing points or conics, the grid is searched again this far (k1) around the lines' minimum.
 GEOMETRY_WINDOW = 0.2
 #: Arcs (chains no lens straightens) with fewer points are not tried as conics, and only the
@@ -174,23 +180,27 @@ class _Problem:
     """Chains of one frame in the form the cost needs (lens units; px = lens * width).
 
     ``family``: per chain, the vanishing-point family it belongs to (-1: none; set by
-    :func:`_add_geometry`); ``arcs``: the conic groups (an :class:`_Arcs`) or ``None``."""
+    :func:`_families`); ``arcs``: the conic groups (an :class:`_Arcs`) or ``None``;
+    ``informative``: per chain, whether the lens changes its straightness (a chain through the
+    centre does not, yet its direction counts for its vanishing point)."""
 
     def __init__(self, points: np.ndarray, chain: np.ndarray, counts: np.ndarray, width: int,
-                 family: np.ndarray | None = None, arcs: "_Arcs | None" = None) -> None:
+                 family: np.ndarray | None = None, arcs: "_Arcs | None" = None,
+                 informative: np.ndarray | None = None) -> None:
         self.points, self.chain, self.counts, self.width = points, chain, counts, float(width)
         self.n = len(counts)
         self.r_d = np.hypot(points[:, 0], points[:, 1])
         self.unit = points / np.maximum(self.r_d, 1e-12)[:, None]
         self.family = np.full(self.n, -1) if family is None else family
         self.arcs = arcs
+        self.informative = np.ones(self.n, bool) if informative is None else informative
 
     def subset(self, keep: np.ndarray) -> "_Problem":
         """Only the chains where ``keep`` (C,) is true (renumbered)."""
         new_index = np.cumsum(keep) - 1
         mask = keep[self.chain]
         return _Problem(self.points[mask], new_index[self.chain[mask]], self.counts[keep], int(self.width),
-                        self.family[keep], self.arcs)
+                        self.family[keep], self.arcs, self.informative[keep])
 
     def moments(self, k1: np.ndarray, k2: np.ndarray) -> dict:
         """Per lens and chain (L, C): centre ``mx``, ``my``, central second moments ``cxx``, ``cyy``,
@@ -298,7 +308,8 @@ def _cost(problem: _Problem, k1: np.ndarray, k2: np.ndarray, prior_k1: float | N
     k2 = np.asarray(k2, np.float64)
     m = problem.moments(k1, k2) if mse is None or (problem.family >= 0).any() else None
     chi = problem.chi2(k1, k2, problem.chain_mse(k1, k2, m) if mse is None else mse)
-    total = _robust(chi).sum(axis=1)
+    total = _robust(chi[:, problem.informative]).sum(axis=1)  # the others count for their family only
+    total = total + np.where(np.isinf(chi).any(axis=1), np.inf, 0.0)
     if (problem.family >= 0).any():
         total = total + _robust(problem.family_chi2(m)).sum(axis=1)
     if problem.arcs is not None:
@@ -306,7 +317,7 @@ def _cost(problem: _Problem, k1: np.ndarray, k2: np.ndarray, prior_k1: float | N
     total = total + ((k2 - manifold_k2(k1)) / K2_PRIOR_SIGMA) ** 2
     if prior_k1 is not None:
         total = total + ((k1 - prior_k1) / K1_PRIOR_SIGMA) ** 2
-    outside = (k1 < K1_RANGE[0] - 1e-9) | (k1 > K1_RANGE[1] + 1e-9)
+    outside = (k1 < K1_LIMITS[0]) | (k1 > K1_LIMITS[1])
     return np.where(outside | ~np.isfinite(total), np.inf, total)
 
 
@@ -329,7 +340,7 @@ def _trim(problem: _Problem, k1: float, k2: float) -> _Problem:
     counts = np.bincount(problem.chain[keep], minlength=problem.n).astype(np.float64)
     ratio = counts / np.maximum(np.bincount(problem.chain, minlength=problem.n), 1)
     return _Problem(problem.points[keep], problem.chain[keep], problem.counts * ratio, int(problem.width),
-                    problem.family, problem.arcs)
+                    problem.family, problem.arcs, problem.informative)
 
 
 def _displacement_sigma(cov: np.ndarray) -> float:
@@ -440,6 +451,18 @@ def _families(problem: _Problem, k1: float, k2: float) -> np.ndarray:
     return pitch_geometry.find_families(normal, offset, centre, half)
 
 
+def _family_inliers(problem: _Problem, k1: float, k2: float) -> np.ndarray:
+    """Family labels with the lines that miss their vanishing point at lens ``(k1, k2)`` by more
+    than FAMILY_CHI sigmas taken out, and families left with fewer than the lines they need dropped
+    (lines that met by chance at the coarse lens, not parallels on the pitch)."""
+    chi = problem.family_chi2(problem.moments(np.array([k1]), np.array([k2])))[0]
+    labels = np.where(chi <= FAMILY_CHI**2, problem.family, -1)
+    for f in np.unique(labels[labels >= 0]):
+        if np.sum(labels == f) < pitch_geometry.MIN_FAMILY_LINES:
+            labels[labels == f] = -1
+    return labels
+
+
 def _covariance(problem: _Problem, hessian: np.ndarray | None, chi: np.ndarray) -> tuple[np.ndarray | None, float]:
     """(k1, k2) covariance from the cost's Hessian (scaled by the reduced chi² when above 1) and the
     Hessian's condition number; ``(None, inf)`` when it is not positive definite."""
@@ -456,7 +479,7 @@ def _covariance(problem: _Problem, hessian: np.ndarray | None, chi: np.ndarray) 
 def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int) -> LineFit:
     """The :class:`LineFit` of a finished fit (diagnostics, ``ok`` and ``reason``)."""
     chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
-    used_mask = chi <= USED_CHI**2
+    used_mask = (chi <= USED_CHI**2) & problem.informative
     used = int(used_mask.sum())
     cov, condition = _covariance(problem, hessian, chi)
     sigma = _displacement_sigma(cov) if cov is not None else math.inf
@@ -487,11 +510,12 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
     mse = full.chain_mse(grid, manifold_k2(grid))  # (L, C)
     best = np.min(mse, axis=0)
     worst = np.max(np.where(np.isfinite(mse), mse, 0.0), axis=0)
-    keep = (best <= STRAIGHT_RMS**2) & (worst >= INFORMATIVE_RMS**2)
-    if not keep.any():
+    keep = best <= STRAIGHT_RMS**2
+    full.informative = worst >= INFORMATIVE_RMS**2
+    if not (keep & full.informative).any():
         return _failed(fallback, "no_line_candidates")
     problem = full.subset(keep)
-    candidates = problem.n
+    candidates = int(problem.informative.sum())
     k1 = _grid_minimum(grid, _cost(problem, grid, manifold_k2(grid), prior_k1, mse[:, keep]))
     k2 = float(manifold_k2(k1))
     problem = _trim(problem, k1, k2)
@@ -505,8 +529,10 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
     # drop the chains the fitted lens does not straighten (arcs that passed screening, mis-linked
     # chains) and fit again with the rest
     chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
-    inliers = chi <= OUTLIER_CHI**2 * max(1.0, float(np.median(chi)))
-    if 0 < inliers.sum() < problem.n:
+    inliers = chi <= OUTLIER_CHI**2 * max(1.0, float(np.median(chi[problem.informative])))
+    families = _family_inliers(problem, k1, k2)
+    if (0 < (inliers & problem.informative).sum() and inliers.sum() < problem.n) or (families != problem.family).any():
+        problem.family = families
         problem = problem.subset(inliers)
         k1, k2, hessian = _refine(problem, k1, k2, prior_k1, h=0.008)
     return _result(problem, k1, k2, hessian, candidates)

@@ -25,13 +25,19 @@ import numpy as np
 
 #: A line joins a family when pointing it at the family's vanishing point moves its ends by at most
 #: this much (lens units; 2 px of an 800-px detection copy).
-FAMILY_TOL = 2.5e-3
+FAMILY_TOL = 1.25e-3
+#: Two pieces are one line when each centre lies this close (lens units; 8 px of an 800-px copy) to
+#: the other's line and their directions agree within SAME_LINE_ANGLE (radians).
+SAME_LINE_TOL, SAME_LINE_ANGLE = 1e-2, 0.03
 #: ...and the line's direction at most this far (radians) from the vanishing point's: a short piece
 #: points nowhere in particular.
 FAMILY_ANGLE = 0.01
+#: A line counts towards a family only through a piece at least this long (half-length, lens units;
+#: 100 px of a 1280-px frame): a short piece points at many places within tolerance.
+FAMILY_MIN_HALF_LENGTH = 0.04
 #: Distinct lines a family needs (two lines always meet; a third can pass near their point by chance in a
 #: frame of many lines, a fourth rarely does).
-MIN_FAMILY_LINES = 4
+MIN_FAMILY_LINES = 5
 #: At most this many families (a pitch has two directions of lines).
 MAX_FAMILIES = 2
 #: Arcs join one conic when a conic through all of them fits within this RMS (lens units; 1 px of an
@@ -76,13 +82,14 @@ def family_residuals(normal, offset, centre, half_length, labels) -> np.ndarray:
     return out
 
 
-def same_lines(normal, offset, centre, tol: float = FAMILY_TOL) -> np.ndarray:
+def same_lines(normal, offset, centre, tol: float = SAME_LINE_TOL) -> np.ndarray:
     """Label per line (C,) such that pieces of one straight line (each centre within ``tol`` of the
-    other's line, directions within :data:`FAMILY_ANGLE`) share a label: pieces of one line all
-    pass through any point of it, so they must count once in a family."""
+    other's line, directions within :data:`SAME_LINE_ANGLE`) share a label: pieces of one line all
+    pass through any point of it, so they must count once in a family. Loose on purpose (pieces far
+    apart, seen through a rough lens): joining two lines only makes a family harder to form."""
     n = len(offset)
     across = np.abs(centre @ normal.T - offset[None, :])  # [i, j]: centre i from line j
-    parallel = np.abs(normal[:, 0, None] * normal[None, :, 1] - normal[:, 1, None] * normal[None, :, 0]) <= FAMILY_ANGLE
+    parallel = np.abs(normal[:, 0, None] * normal[None, :, 1] - normal[:, 1, None] * normal[None, :, 0]) <= SAME_LINE_ANGLE
     same = (across <= tol) & (across.T <= tol) & parallel
     label = np.arange(n)
     for i, j in zip(*np.nonzero(np.triu(same, 1))):
@@ -94,8 +101,8 @@ def find_families(normal, offset, centre, half_length, tol: float = FAMILY_TOL) 
     """Group lines (one lens: ``normal`` (C, 2), ``offset`` (C,), ``centre`` (C, 2), ``half_length``
     (C,)) into families that share a vanishing point: the point where two lines meet that the most
     other distinct lines point at (ends within ``tol`` and direction within :data:`FAMILY_ANGLE`),
-    at least :data:`MIN_FAMILY_LINES` distinct lines (:func:`same_lines`), then the same among the
-    rest. Returns labels (C,): family 0, 1 or -1 (none)."""
+    at least :data:`MIN_FAMILY_LINES` distinct lines (:func:`same_lines`) with a piece of
+    :data:`FAMILY_MIN_HALF_LENGTH`, then the same among the rest. Returns labels (C,): family 0, 1 or -1 (none)."""
     n = len(offset)
     labels = np.full(n, -1)
     line_id = same_lines(normal, offset, centre, tol)
@@ -112,7 +119,8 @@ def find_families(normal, offset, centre, half_length, tol: float = FAMILY_TOL) 
         vp /= np.maximum(np.linalg.norm(vp, axis=1, keepdims=True), 1e-18)
         off = end_offsets(normal[None, free], offset[None, free], centre[None, free], half_length[free], vp)
         inside = (off <= tol) & (off <= FAMILY_ANGLE * half_length[free])
-        lines = ((inside.astype(np.float64) @ onehot[free]) > 0).sum(axis=1)
+        pointing = inside & (half_length[free] >= FAMILY_MIN_HALF_LENGTH)  # long enough to count
+        lines = ((pointing.astype(np.float64) @ onehot[free]) > 0).sum(axis=1)
         score = lines - np.where(inside, off, 0.0).sum(axis=1) / (tol * n)
         best = int(np.argmax(score))
         if lines[best] < MIN_FAMILY_LINES:
