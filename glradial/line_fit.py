@@ -111,7 +111,7 @@ class LineFit:
     * ``reach``: farthest point of the chains used from the principal point, as a share of the 16:9
       corner radius (a lens read from chains near the centre is extrapolated to the corners);
     * ``difficulty``: ``sigma_px * (1 + 2 / (chains + families + conics)) / max(reach, 0.25)``,
-      larger is harder (``inf`` without a fit): a per-frame scale for calibrating a bound;
+      larger is harder (``inf`` when not ``ok``): a per-frame scale for calibrating a bound;
     * ``reason``: ``""`` when ``ok``; else one of :data:`REASONS` (machine-readable).
     """
 
@@ -489,7 +489,7 @@ def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int) -
     reach = float(problem.r_d[used_points].max() / CORNER_RADIUS_16_9) if used_points.any() else 0.0
     ok = used >= MIN_CHAINS and math.isfinite(sigma)
     reason = "" if ok else ("too_few_chains" if used < MIN_CHAINS else "ill_conditioned")
-    difficulty = sigma * (1.0 + 2.0 / max(used + families + conics, 1)) / max(reach, 0.25)
+    difficulty = sigma * (1.0 + 2.0 / max(used + families + conics, 1)) / max(reach, 0.25) if ok else math.inf
     return LineFit(float(k1), float(k2), sigma, used, candidates, ok, problem.chain_rms_px(k1, k2, used_mask),
                    None if cov is None else (tuple(map(float, cov[0])), tuple(map(float, cov[1]))),
                    condition, families, conics, reach, difficulty, reason)
