@@ -24,15 +24,15 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial import real_eval  # noqa: E402
-from glradial.lens_estimate import choose, line_candidates  # noqa: E402
-from glradial.metrics import max_displacement_px  # noqa: E402
+from glradial.evaluation import real_eval  # noqa: E402
+from glradial.estimation.lens_estimate import choose, line_candidates  # noqa: E402
+from glradial.lens.metrics import max_displacement_px  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared/data/real_football"
 
 
 def _build(frames_dir: Path, procedural: int, lenses: int = 12, seed: int = 0) -> list[dict]:
-    from glradial.remap import correct
+    from glradial.remapping.remap import correct
 
     evaluator = real_eval.Evaluator(threads=1)
     frames, panoramas = real_eval.frames_in(frames_dir)

@@ -34,8 +34,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from glradial.atomic import atomic_path
-from glradial.model_check import write_checksum
+from glradial.estimation.model_check import write_checksum
+from glradial.media.atomic import atomic_path
 
 from .model import DistortionNet, ModelConfig, normalise_batch
 

@@ -1,4 +1,4 @@
-"""The paper's distortion loss (DESIGN.md).
+"""The paper's distortion loss (docs/DESIGN.md).
 
 Convention: a lens is ``(k1, k2)`` in width-normalised lens units; the radial map is
 ``P(r, (k1, k2)) = r (1 + k1 r^2 + k2 r^4)``. Radii are ``samples`` points evenly spaced on
@@ -12,7 +12,7 @@ the paper.
 
 Training loss ``L = DL(y, (k1_hat, k2)) + DL(y, (k1, k2_hat))``: each coefficient judged with the
 other one true. Optionally (``joint_weight`` w > 0, not the paper's) ``+ w DL_c(y, y_hat)``, both
-coefficients judged together on radii up to the 16:9 corner radius (:data:`glradial.metrics.CORNER_RADIUS_16_9`): the
+coefficients judged together on radii up to the 16:9 corner radius (:data:`glradial.lens.metrics.CORNER_RADIUS_16_9`): the
 quantity behind the evaluation's maximum displacement error, which rewards a k2 that offsets the
 network's own k1 error inside the frame.
 """
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import torch
 
-from glradial.metrics import CORNER_RADIUS_16_9, LOSS_R_MAX, LOSS_SAMPLES
+from glradial.lens.metrics import CORNER_RADIUS_16_9, LOSS_R_MAX, LOSS_SAMPLES
 
 
 def loss_radii(samples: int = LOSS_SAMPLES, r_max: float = LOSS_R_MAX, *, device=None, dtype=torch.float32) -> torch.Tensor:

@@ -6,7 +6,7 @@ Convention:
             ``mean``/``std`` from :class:`ModelConfig`. The frame is the whole 16:9 frame the lens
             refers to, resized (area interpolation) to ``input_size = (W, H)``; the aspect ratio is
             not kept when ``W / H != 16 / 9`` (the paper squashes 16:9 into 224 x 224).
-    output  float32 ``N x 2``: ``(k1, k2)`` in width-normalised lens units (DESIGN.md).
+    output  float32 ``N x 2``: ``(k1, k2)`` in width-normalised lens units (docs/DESIGN.md).
 
 Architecture (timm-style: ``forward_features`` -> pooled features, ``forward_head`` -> (k1, k2)):
 a 3x3 stride-2 stem, stages of MobileNetV2 inverted residual blocks (expand 1x1, depthwise 3x3,
@@ -28,8 +28,8 @@ from typing import Any
 import torch
 from torch import nn
 
-from glradial.atomic import atomic_write_text
-from glradial.metrics import PAPER_SIZE, manifold_k2
+from glradial.lens.metrics import PAPER_SIZE, manifold_k2
+from glradial.media.atomic import atomic_write_text
 
 #: ITU-R BT.601 luma weights (R, G, B) used by the grayscale variant.
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)

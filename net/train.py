@@ -20,7 +20,7 @@ over the budget (so a run ends on time on a shared machine; then the run is not 
 An exponential moving average (EMA) of the weights is kept and is what validation, the "best"
 checkpoint and export use.
 
-Outputs in ``--out`` (written through :mod:`glradial.atomic`, except the log ``train.csv``, one
+Outputs in ``--out`` (written through :mod:`glradial.media.atomic`, except the log ``train.csv``, one
 row per log interval appended and flushed as it comes), ``last.pt`` (every
 ``checkpoint_s`` seconds and at the end; ``--resume`` continues from it), ``best.pt`` (best
 validation median max-displacement), ``config.json`` (the full run config, model config included).
@@ -44,13 +44,14 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from glradial.atomic import atomic_path, atomic_write_text
-from glradial.evaluation import metrics
+from glradial.evaluation.evaluation import metrics
+from glradial.media.atomic import atomic_path, atomic_write_text
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
 from .loss import training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
+
 
 @dataclass
 class TrainConfig:
@@ -137,7 +138,7 @@ def panorama_source(spec: dict, cache_dir: str) -> PanoramaSource:
     """Build a :class:`PanoramaSource` from a config entry (``seeds`` a list or ``{split, n, start}``)."""
     seeds = spec.get("seeds", [])
     if isinstance(seeds, dict):
-        from glradial.stadium_style import split_seeds
+        from glradial.synthesis.stadium_style import split_seeds
 
         seeds = split_seeds(seeds["split"], int(seeds["n"]), int(seeds.get("start", 0)))
     return PanoramaSource(kind=spec["kind"], seeds=list(seeds), size=tuple(spec.get("size", (2048, 1024))),
@@ -213,7 +214,7 @@ def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, 
     return CropProducers(producers, [len(part) for _, part in shards], cfg.producer_chunk)
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI's option handling; complexity 33)
     parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
     parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig; \"base\" names the config it extends)")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")

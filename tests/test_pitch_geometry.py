@@ -1,5 +1,5 @@
 """Pitch geometry in the line fit (glradial.estimation.corners, glradial.estimation.pitch_geometry,
-glradial.line_fit): chains cut at corners, vanishing-point families, conics, and the fit on a
+glradial.estimation.line_fit): chains cut at corners, vanishing-point families, conics, and the fit on a
 standard pitch drawn through a known pinhole pose and lens (tests/pitch_template.py; the lens is
 applied with Lens.maps + cv2.remap, independent of the fit). Known answers: the pose and lens."""
 
@@ -13,9 +13,9 @@ import pytest
 from glradial.estimation.corners import split_at_corners
 from glradial.estimation.pitch_geometry import conic_fit, find_families, line_params
 from glradial.lens import Lens, lens_to_pixels
-from glradial.line_fit import REASONS, LineFit, fit_lines
-from glradial.lines import detect_chains
-from glradial.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
+from glradial.estimation.line_fit import REASONS, LineFit, fit_lines
+from glradial.estimation.lines import detect_chains
+from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
 from pitch_template import BOX_VIEW, CENTRE_VIEW, distorted, homography, markings, render
 
 

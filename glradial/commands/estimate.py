@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..image_io import media_kind, read_image
-from ..lens_estimate import METHODS
+from ..lens.options import METHODS
+from ..media.image_io import media_kind, read_image
 from . import positive_int, show_progress
 
 DESCRIPTION = """\
@@ -45,13 +45,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..frames import to_rgb8
-    from ..estimator import Estimator
+    from ..estimation.estimator import Estimator
+    from ..media.frames import to_rgb8
 
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:
         if media_kind(path) == "video":
-            from ..video_pipeline import track_report, track_video
+            from ..video.video_pipeline import track_report, track_video
 
             # the estimator loaded above (its --threads), not a second one per video
             track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method), every=args.every,

@@ -1,7 +1,7 @@
 """Split a linked chain where it turns a corner: one chain must be one line.
 
 Pieces of one orientation bin that touch, or that continue each other, are linked into chains by
-:mod:`glradial.lines`. Where two pitch lines meet at a shallow image angle (the corner of the goal
+:mod:`glradial.estimation.lines`. Where two pitch lines meet at a shallow image angle (the corner of the goal
 area or the penalty box seen from the main camera, a touchline meeting the goal line far away), or
 a line runs into an arc, the chain goes round the corner and no lens straightens it. This module
 finds such breaks and cuts the chain there.

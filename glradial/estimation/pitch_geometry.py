@@ -11,7 +11,7 @@ that plane, so
   terms that no conic follows.
 
 These constrain ``(k1, k2)`` where each line alone is too short to (a few short lines near the
-centre still have to agree on a vanishing point). :mod:`glradial.line_fit` adds them to its cost.
+centre still have to agree on a vanishing point). :mod:`glradial.estimation.line_fit` adds them to its cost.
 
 Convention: all coordinates are lens units (image width = 1, origin at the principal point),
 undistorted with the lens being tried; arrays carry a leading lens axis ``L``. A line is given by
