@@ -24,8 +24,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial.evaluation import real_eval  # noqa: E402
 from glradial.estimation.lens_estimate import choose, line_candidates  # noqa: E402
+from glradial.evaluation import real_eval  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared/data/real_football"

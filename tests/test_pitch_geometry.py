@@ -9,14 +9,14 @@ import math
 
 import numpy as np
 import pytest
+from pitch_template import BOX_VIEW, CENTRE_VIEW, distorted, homography, markings, render
 
 from glradial.estimation.corners import split_at_corners
-from glradial.estimation.pitch_geometry import conic_fit, find_families, line_params
-from glradial.lens import Lens, lens_to_pixels
 from glradial.estimation.line_fit import REASONS, LineFit, fit_lines
 from glradial.estimation.lines import detect_chains
+from glradial.estimation.pitch_geometry import conic_fit, find_families, line_params
+from glradial.lens import Lens, lens_to_pixels
 from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
-from pitch_template import BOX_VIEW, CENTRE_VIEW, distorted, homography, markings, render
 
 
 def error_px(fit: LineFit, k1: float, k2: float) -> float:
