@@ -8,14 +8,22 @@ Convention:
     squared perpendicular distance is scaled back to the distorted frame by the chain's mean
     magnification ``r_d / r_u`` (``e_c(k)``, px²).
 
-Cost (minimised over ``k1`` in :data:`K1_RANGE`):
-    ``sum_c rho(n_c e_c / (SIGMA_POINT² + n_c SIGMA_FLOOR²)) + ((k2 - m(k1)) / K2_PRIOR_SIGMA)²
+Cost (grid over ``k1`` in :data:`K1_RANGE`, refined within :data:`K1_LIMITS`):
+    ``sum_c rho(n_c e_c / (SIGMA_POINT² + n_c SIGMA_FLOOR²)) + sum_c rho((v_c / SIGMA_VANISHING)²)
+    + sum_g rho(n_g q_g / (SIGMA_POINT² + n_g SIGMA_FLOOR²)) + ((k2 - m(k1)) / K2_PRIOR_SIGMA)²
     + ((k1 - k1_prior) / K1_PRIOR_SIGMA)²``
 
     * ``n_c`` points of chain ``c``; the per-chain error floor ``SIGMA_FLOOR`` bounds what a long
       chain can claim, and each chain enters once (not once per point), so many short chains near
       the centre, whose residual hardly depends on the lens, cannot outvote a long chain near the
       frame edge, whose residual does.
+    * ``v_c`` (px): how far the ends of chain ``c`` miss the least-squares vanishing point of its
+      family once undistorted (:mod:`glradial.estimation.pitch_geometry`): families of at least
+      :data:`~glradial.estimation.pitch_geometry.MIN_FAMILY_LINES` distinct lines that meet in one
+      point at the coarse lens; lines that miss by more than :data:`FAMILY_CHI` sigmas at the first
+      fitted lens leave their family before the second fit.
+    * ``q_g`` (px²): mean squared Sampson distance of the points of arc group ``g`` (arcs that no
+      lens straightens, joined when one ellipse fits them at the coarse lens) from their best conic.
     * ``rho(x) = T log(1 + x / T)``: a chain that no lens straightens (an arc, a curved stand, a
       mis-linked chain) costs at most logarithmically.
     * ``m`` is :func:`glradial.lens.metrics.manifold_k2`: k2 is held loosely to the manifold unless the
@@ -23,10 +31,11 @@ Cost (minimised over ``k1`` in :data:`K1_RANGE`):
       missing is the estimator's job).
 
 Screening (before the fit): a chain is kept only if some lens on the manifold over the k1 range
-straightens it (RMS at most :data:`STRAIGHT_RMS` px) AND the choice of lens changes its residual
-(RMS at least :data:`INFORMATIVE_RMS` px somewhere on the range). Circles, arcs and bowl-shaped
-stands fail the first test; lines through the frame centre (straight under every lens) fail the
-second and are not counted.
+straightens it (RMS at most :data:`STRAIGHT_RMS` px). It enters the straightness cost only if the
+choice of lens changes its residual (RMS at least :data:`INFORMATIVE_RMS` px somewhere on the
+range); a line through the frame centre is straight under every lens, yet its direction still
+counts for its family's vanishing point. Circles, arcs and bowl-shaped stands fail the first test
+and are tried as conics.
 
 Uncertainty: the cost's curvature at the minimum (a quadratic fitted to a 3 x 3 stencil) gives a
 covariance of ``(k1, k2)``, scaled by the reduced chi² when above 1; :attr:`LineFit.sigma_px` is the
