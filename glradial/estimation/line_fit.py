@@ -88,8 +88,8 @@ SIGMA_VANISHING = 0.5
 #: After the first refinement, a line whose ends miss its family's vanishing point by more than this
 #: many SIGMA_VANISHING leaves the family.
 FAMILY_CHI = 3.0
-#: With vanishing points or conics, the grid is searched again this far (k1) around the lines' minimum.
-GEOMETRY_WINDOW = 0.2
+#: Conics are tried only when fewer informative line chains than this passed screening.
+CONIC_BELOW_LINES = 4
 #: Arcs (chains no lens straightens) with fewer points are not tried as conics, and only the
 #: MAX_ARCS longest are (the centre circle and two penalty arcs give a few each).
 MIN_ARC_POINTS, MAX_ARCS = 24, 8
@@ -480,8 +480,8 @@ def _covariance(problem: _Problem, hessian: np.ndarray | None, chi: np.ndarray) 
     eig = np.linalg.eigvalsh(hessian)
     if eig.min() <= 0:
         return None, math.inf
-    dof = max(problem.n - 2, 1)
-    reduced = float(np.sum(np.minimum(chi, ROBUST_T * 4))) / dof
+    dof = max(int(problem.informative.sum()) - 2, 1)  # the chains in the straightness cost
+    reduced = float(np.sum(np.minimum(chi[problem.informative], ROBUST_T * 4))) / dof
     return 2.0 * np.linalg.inv(hessian) * max(1.0, reduced), float(eig.max() / eig.min())
 
 
@@ -529,11 +529,9 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
     k2 = float(manifold_k2(k1))
     problem = _trim(problem, k1, k2)
     problem.family = _families(problem, k1, k2)
-    problem.arcs = _conics(full, _arc_candidates(full, best), k1, k2, grid)
-    if (problem.family >= 0).any() or problem.arcs is not None:  # the grid again, near the first minimum
-        near = grid[np.abs(grid - k1) <= GEOMETRY_WINDOW + 1e-9]
-        k1 = _grid_minimum(near, _cost(problem, near, manifold_k2(near), prior_k1))
-        k2 = float(manifold_k2(k1))
+    problem = problem.subset(problem.informative | (problem.family >= 0))  # the rest would weigh nothing
+    if candidates < CONIC_BELOW_LINES:  # where lines are few: conics added nothing measurable beside many
+        problem.arcs = _conics(full, _arc_candidates(full, best), k1, k2, grid)
     k1, k2, hessian = _refine(problem, k1, k2, prior_k1)
     # drop the chains the fitted lens does not straighten (arcs that passed screening, mis-linked
     # chains) and fit again with the rest

@@ -293,6 +293,16 @@ def _link(p: _Pieces) -> list[list[int]]:
     return list(groups.values())
 
 
+def _percentiles(a: np.ndarray, quantiles: tuple[float, float]) -> tuple[float, float]:
+    """``np.percentile(a, 100 * q)`` (linear interpolation) for two quantiles, by one partial sort."""
+    h = (len(a) - 1) * np.asarray(quantiles)
+    lo = np.floor(h).astype(np.intp)
+    hi = np.minimum(lo + 1, len(a) - 1)
+    part = np.partition(a, np.unique(np.r_[lo, hi]))
+    value = part[lo] + (h - lo) * (part[hi] - part[lo])
+    return float(value[0]), float(value[1])
+
+
 def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
     """Pixel-straight, axis-aligned and off the centre row/column: broadcast graphics. Flatness is
     the 2-98 percentile range across the axis, so a corner or a crossing line at an end does not
@@ -301,7 +311,7 @@ def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
     for across, centre, extent in ((y, (height - 1) / 2, height), (x, (width - 1) / 2, width)):
         if np.ptp(across) > 0.05 * extent:  # far from axis-aligned: skip the percentiles
             continue
-        lo, hi = np.percentile(across, [2, 98])
+        lo, hi = _percentiles(across, (0.02, 0.98))
         if hi - lo <= 2 * OVERLAY_FLATNESS and abs(np.median(across) - centre) > OVERLAY_OFF_CENTRE * extent:
             return True
     return False
@@ -359,8 +369,8 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
             continue
         idx = np.concatenate([pieces.members[k] for k in group])
         kind = "edge" if pieces.kind[group[0]] else "ridge"
-        for part in _one_line_parts(idx, xs, ys, lx, ly):  # a chain round a corner is cut there
-            found = _chain(part, xs, ys, kind, (height, width), (width_full, height_full))
+        for part, axis in _one_line_parts(idx, xs, ys, lx, ly):  # a chain round a corner is cut there
+            found = _chain(part, xs, ys, kind, (height, width), (width_full, height_full), axis)
             overlays += found is _OVERLAY
             if isinstance(found, Chain):
                 chains.append(found)
@@ -371,26 +381,29 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
 _OVERLAY = object()
 
 
-def _one_line_parts(idx: np.ndarray, xs, ys, lx, ly) -> list[np.ndarray]:
+def _one_line_parts(idx: np.ndarray, xs, ys, lx, ly) -> list[tuple[np.ndarray, np.ndarray | None]]:
     """The point indices ``idx`` of one linked chain, ordered along it and cut where it turns a
     corner (:func:`glradial.estimation.corners.split_at_corners`, on the points undistorted with
-    the hint, ``lx``, ``ly``)."""
+    the hint, ``lx``, ``ly``), each with its axis when known (an uncut chain keeps the chain's)."""
     pts = np.stack([xs[idx], ys[idx]], axis=1)
     centre = pts.mean(axis=0)
     _, v = np.linalg.eigh(np.cov((pts - centre).T))
     ordered = idx[np.argsort((pts - centre) @ v[:, 1])]
-    hinted = np.stack([lx[ordered], ly[ordered]], axis=1)
-    return [ordered[s] for s in split_at_corners(hinted)]
+    parts = split_at_corners(np.stack([lx[ordered], ly[ordered]], axis=1))
+    return [(ordered, v[:, 1])] if len(parts) == 1 else [(ordered[s], None) for s in parts]
 
 
-def _chain(idx: np.ndarray, xs, ys, kind: str, shape: tuple[int, int], size_full: tuple[int, int]):
-    """A :class:`Chain` of the detection-copy points ``idx`` (ordered along it), ``None`` when
-    shorter than :data:`MIN_CHAIN_LENGTH`, :data:`_OVERLAY` when it is broadcast graphics."""
+def _chain(idx: np.ndarray, xs, ys, kind: str, shape: tuple[int, int], size_full: tuple[int, int],
+           axis: np.ndarray | None = None):
+    """A :class:`Chain` of the detection-copy points ``idx`` (along ``axis``, the direction of their
+    largest spread, computed when ``None``); ``None`` when shorter than :data:`MIN_CHAIN_LENGTH`,
+    :data:`_OVERLAY` when it is broadcast graphics."""
     x, y = xs[idx], ys[idx]
     pts = np.stack([x, y], axis=1)
     centre = pts.mean(axis=0)
-    _, v = np.linalg.eigh(np.cov((pts - centre).T))
-    s = (pts - centre) @ v[:, 1]
+    if axis is None:
+        axis = np.linalg.eigh(np.cov((pts - centre).T))[1][:, 1]
+    s = (pts - centre) @ axis
     length = float(np.ptp(s))
     if length < MIN_CHAIN_LENGTH:
         return None
