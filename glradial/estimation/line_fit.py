@@ -396,7 +396,7 @@ def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None,
         if not accepted or np.abs(step).max() < 1e-4:
             if not accepted or max(h1, h2) <= 0.004:
                 break
-            h1, h2 = max(h1 / 2, 0.004), max(h2 / 2, 0.004)
+            h1, h2 = max(h1 / 4, 0.004), max(h2 / 4, 0.004)
     return k1, k2, hessian
 
 
