@@ -8,6 +8,7 @@ import sys
 from fractions import Fraction
 from pathlib import Path
 
+from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted
 from . import UsageError, add_lens_options, finite_float, lens_from_args, lens_given, positive_float, positive_int, show_progress
 
 DESCRIPTION = """\
@@ -101,6 +102,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                        help="warn about shots whose smoothed lens is less sure than this (px at 1920 wide, ~p90; default 10)")
     video.add_argument("--sidecar", metavar="PATH",
                        help="per-frame lens file: .csv or .json (default: OUTPUT.lens.csv)")
+    add_opentrackio_options(parser)
     return parser
 
 
@@ -146,6 +148,9 @@ def run(args: argparse.Namespace) -> int:
     if args.crf is not None and args.bitrate is not None:
         raise UsageError("give --crf or --bitrate, not both")
     kind = _check_paths(args)
+    check_opentrackio_output(args)
+    if args.opentrackio and os.path.abspath(args.opentrackio) in (os.path.abspath(args.input), os.path.abspath(args.output)):
+        raise UsageError("--opentrackio must differ from INPUT and OUTPUT")
     progress = show_progress(args)
     options = dict(fit=args.fit, interpolation=args.interpolation, backend=args.backend)
 
@@ -160,8 +165,10 @@ def run(args: argparse.Namespace) -> int:
         from ..lens import Lens
 
         image = read_image(args.input, order="rgb")
+        uncertainty = None
+        from ..lens_track import DOUBTFUL_PX
+
         if args.auto:
-            from ..lens_track import DOUBTFUL_PX
             from ..frames import to_rgb8
             from ..video_pipeline import _as_pair, default_estimator
 
@@ -177,6 +184,13 @@ def run(args: argparse.Namespace) -> int:
         else:
             lens = lens_from_args(args, (image.shape[1], image.shape[0]))
         write_image(args.output, correct(image, lens, **options), order="rgb", overwrite=args.overwrite)
+        if opentrackio_wanted(args):
+            from .engine_options import camera_from_args, write_opentrackio
+
+            known = args.auto and uncertainty is not None
+            write_opentrackio(args, [[lens.k1, lens.k2]], camera_from_args(args, (image.shape[1], image.shape[0])),
+                              uncertainty_px=[uncertainty] if known else None,
+                              doubtful=[uncertainty > DOUBTFUL_PX] if known else None)
         return 0
 
     from ..video_io import EncodeOptions, VideoReader
@@ -192,7 +206,16 @@ def run(args: argparse.Namespace) -> int:
         with VideoReader(args.input, rate=args.rate) as reader:
             info = reader.info
         lens = lens_from_args(args, info.size)  # validated before any frame is decoded
-        _summary(args.output, correct_video(args.input, args.output, lambda _i: lens, **video), info.frame_count)
+        if opentrackio_wanted(args):
+            from ..export.opentrackio import track_samples
+            from .engine_options import camera_from_args, write_opentrackio
+
+            camera = camera_from_args(args, info.size, info.rate, info.timecode)
+            track_samples([lens], camera)  # a lens the standard cannot carry is refused before any frame
+        written = correct_video(args.input, args.output, lambda _i: lens, **video)
+        _summary(args.output, written, info.frame_count)
+        if opentrackio_wanted(args):
+            write_opentrackio(args, [lens] * written, camera)
         return 0
 
     if args.lens_track:
@@ -203,6 +226,10 @@ def run(args: argparse.Namespace) -> int:
         track = load_lens_track(args.lens_track, info.rate, info.size)
         written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
         _summary(args.output, written, info.frame_count)
+        if opentrackio_wanted(args):
+            from .engine_options import write_track_opentrackio
+
+            write_track_opentrackio(args, track, info)
         return 0
 
     from ..atomic import check_output_folder
@@ -239,6 +266,10 @@ def run(args: argparse.Namespace) -> int:
         sure = f" uncertainty {shot['uncertainty_px']:.1f} px" if shot["uncertainty_px"] is not None else ""
         flag = " DOUBTFUL" if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
+    if opentrackio_wanted(args):
+        from .engine_options import write_track_opentrackio
+
+        write_track_opentrackio(args, track, info)
     return 0
 
 
