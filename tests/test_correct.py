@@ -1,7 +1,7 @@
 """glradial.correct against OpenCV on real photographs, every dtype, channel count and backend.
 
 Oracle: ``cv2.undistort(img, K, (k1, k2, 0, 0))`` with ``K = [[W, 0, (W-1)/2], [0, W, (H-1)/2],
-[0, 0, 1]]`` (DESIGN.md: with f = W OpenCV's coefficients equal ours), and for nearest / cubic
+[0, 0, 1]]`` (docs/DESIGN.md: with f = W OpenCV's coefficients equal ours), and for nearest / cubic
 ``cv2.remap`` on the maps of ``cv2.initUndistortRectifyMap`` with the same K. Photos are downscaled
 to 320×180 (coefficients are resolution independent) to keep llvmpipe fast.
 
@@ -221,7 +221,8 @@ def test_identity_lens_is_exact(ctx):
 
 
 def test_auto_backend_decision(ctx):
-    from glradial import egl, remap
+    from glradial.gl import egl
+    from glradial.remapping import remap
 
     expected = "cpu" if egl.is_software_renderer(ctx) else "gl"
     assert remap.auto_backend() == expected
@@ -233,7 +234,7 @@ def test_render_texture_embeds_in_a_callers_pipeline(ctx, photos):
     """A caller's texture drawn into a caller's framebuffer (no CPU round trip) gives what
     correct() returns; a viewport draws into part of a larger framebuffer."""
     from glradial import Remapper
-    from glradial.egl import release_objects
+    from glradial.gl.egl import release_objects
 
     image = photos["road"]
     h, w = image.shape[:2]

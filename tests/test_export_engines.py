@@ -12,15 +12,14 @@ import struct
 from fractions import Fraction
 from pathlib import Path
 
-import cv2
 import jsonschema
 import numpy as np
 import pytest
 
 from glradial.cli import main
 from glradial.export import engines, opentrackio, opentrackio_udp, overscan
+from glradial.export.stmap import lens_stmap, unreal_stmap
 from glradial.lens import Lens
-from glradial.stmap import lens_stmap, read_stmap, unreal_stmap
 
 DATA = Path(__file__).parent / "data" / "opentrackio"
 SIZE = (1920, 1080)

@@ -19,9 +19,10 @@ import time
 import numpy as np
 import pytest
 
-from glradial import Remapper, correct, egl, render_crops
-from glradial.crops import CropParams, CropRenderer
-from glradial.stadium import StadiumRenderer, stadium_panorama
+from glradial import Remapper, correct, render_crops
+from glradial.gl import egl
+from glradial.synthesis.crops import CropParams, CropRenderer
+from glradial.synthesis.stadium import StadiumRenderer, stadium_panorama
 
 #: a child that has not exited by then is hung (each does well under 1 s of GL work on llvmpipe)
 CHILD_TIMEOUT_S = 60
@@ -195,7 +196,7 @@ def test_objects_refuse_other_threads(ctx, what):
         use = lambda: obj.render([CropParams(0.0, 0.0, 0.0, 60.0, -0.1, 0.0)])  # noqa: E731
     else:
         obj = StadiumRenderer(ctx)
-        from glradial.stadium_style import sample_style
+        from glradial.synthesis.stadium_style import sample_style
 
         use = lambda: obj.render(sample_style(1), (64, 32))  # noqa: E731
     try:

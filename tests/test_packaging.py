@@ -91,12 +91,16 @@ def test_wheel_layout(wheel):
     shipped_modules = {n for n in names if n.startswith("glradial/") and n.endswith(".py")}
     repo_modules = {str(p.relative_to(ROOT)) for p in (ROOT / "glradial").rglob("*.py")}
     assert repo_modules == shipped_modules
+    sub_packages = {p.parent.relative_to(ROOT).as_posix() for p in (ROOT / "glradial").glob("*/__init__.py")}
+    shipped_packages = {Path(n).parent.as_posix() for n in names if n.endswith("/__init__.py")}
+    assert "glradial/py.typed" in names, "py.typed must ship: type checkers read the exports"
+    assert sub_packages and sub_packages <= shipped_packages, f"sub-packages missing from the wheel: {sorted(sub_packages - shipped_packages)}"
 
 
 def test_installed_wheel_works_from_any_folder(installed, tmp_path):
     probe = BLOCKER + (
         "import glradial\n"
-        "from glradial.shaderlib import shader_dir\n"
+        "from glradial.gl.shaderlib import shader_dir\n"
         "assert str(shader_dir()).startswith(sys.argv[1]), shader_dir()\n"
         "assert glradial.__file__.startswith(sys.argv[1]), glradial.__file__\n"
         "print(glradial.Lens(-0.2, 0.03).inverse_coefficients()[0])\n"
@@ -118,8 +122,8 @@ def test_installed_wheel_evaluates_without_torch(installed, tmp_path):
     probe = BLOCKER + (
         "from glradial.cli import main\n"
         "status = main(sys.argv[2:])\n"
-        "import glradial.evaluation\n"
-        "assert glradial.evaluation.__file__.startswith(sys.argv[1]), glradial.evaluation.__file__\n"
+        "import glradial.evaluation.evaluation\n"
+        "assert glradial.evaluation.evaluation.__file__.startswith(sys.argv[1]), glradial.evaluation.evaluation.__file__\n"
         "loaded = sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'net'))\n"
         "assert not loaded, loaded\n"
         "sys.exit(status)\n"

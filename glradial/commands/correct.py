@@ -8,8 +8,17 @@ import sys
 from fractions import Fraction
 from pathlib import Path
 
-from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted
+from ..lens.options import BACKENDS, FITS, INTERPOLATIONS, METHODS
 from . import UsageError, add_lens_options, finite_float, lens_from_args, lens_given, positive_float, positive_int, show_progress
+from .engine_options import (
+    add_opentrackio_options,
+    camera_from_args,
+    check_opentrackio_output,
+    opentrackio_wanted,
+    write_image_opentrackio,
+    write_opentrackio,
+    write_track_opentrackio,
+)
 
 DESCRIPTION = """\
 Undistort INPUT into OUTPUT. Images: PNG, JPEG, TIFF (8- and 16-bit and float32 TIFF kept, alpha
@@ -67,21 +76,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_lens_options(lens)
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
-    lens.add_argument("--method", choices=("auto", "net", "lines"),
+    lens.add_argument("--method", choices=METHODS,
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
     lens.add_argument("--lens-track", metavar="CSV", help="videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)")
     render = parser.add_argument_group("rendering")
     render.add_argument(
-        "--fit", choices=("same", "crop", "full"), default="same",
+        "--fit", choices=FITS, default="same",
         help="output scale: same = centre scale kept (as cv2.undistort), crop = zoom in until every "
         "output pixel has a source, full = zoom out until the whole input is visible (default: same)",
     )
     render.add_argument(
-        "--interpolation", choices=("nearest", "linear", "cubic"), default="linear",
+        "--interpolation", choices=INTERPOLATIONS, default="linear",
         help="resampling filter (default: linear)",
     )
     render.add_argument(
-        "--backend", choices=("auto", "gl", "cpu"), default="auto",
+        "--backend", choices=BACKENDS, default="auto",
         help="gl = GLSL shaders through EGL, cpu = the same maps through cv2.remap, auto = the faster "
         "one on this machine (default: auto)",
     )
@@ -114,9 +123,9 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def _check_paths(args: argparse.Namespace) -> str:
-    from ..atomic import check_output_folder
-    from ..image_io import media_kind
-    from ..video_io import check_video_overwrite, is_sequence
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import media_kind
+    from ..media.video_io import check_video_overwrite, is_sequence
 
     source, target = Path(args.input), Path(args.output)
     if not is_sequence(source) and not source.exists():
@@ -131,7 +140,8 @@ def _check_paths(args: argparse.Namespace) -> str:
     return kind_in
 
 
-def run(args: argparse.Namespace) -> int:
+def _check_lens_options(args: argparse.Namespace) -> bool:
+    """The lens is given one way and the options fit it; returns whether it is given by numbers."""
     given = lens_given(args)
     sources = [name for name, used in (("--k1/--k2/--cx/--cy/--pixel-aspect/--lens", given), ("--auto", args.auto),
                                        ("--lens-track", args.lens_track)) if used]
@@ -147,109 +157,124 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
     if args.crf is not None and args.bitrate is not None:
         raise UsageError("give --crf or --bitrate, not both")
+    return given
+
+
+def run(args: argparse.Namespace) -> int:
+    given = _check_lens_options(args)
     kind = _check_paths(args)
     check_opentrackio_output(args)
     if args.opentrackio and os.path.abspath(args.opentrackio) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--opentrackio must differ from INPUT and OUTPUT")
-    progress = show_progress(args)
     options = dict(fit=args.fit, interpolation=args.interpolation, backend=args.backend)
-
     if kind == "image":
-        from ..remap import correct
-        from ..image_io import read_image, write_image
-
-        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "every", "window",
-                     "max_uncertainty"):
-            if getattr(args, name) is not None:
-                raise UsageError(f"--{name.replace('_', '-')} is for videos")
-        from ..lens import Lens
-
-        image = read_image(args.input, order="rgb")
-        uncertainty = None
-        from ..lens_track import DOUBTFUL_PX
-
-        if args.auto:
-            from ..frames import to_rgb8
-            from ..video_pipeline import _as_pair, default_estimator
-
-            estimate = default_estimator(args.model, args.method)(to_rgb8(image))
-            k1, k2 = _as_pair(estimate)
-            method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
-            stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
-            print(f"{args.input}: estimated k1={k1:.6f} k2={k2:.6f}{stated}")
-            if uncertainty is not None and uncertainty > DOUBTFUL_PX:
-                print(f"glradial: warning: the estimate of {args.input} is doubtful (uncertainty {uncertainty:.1f} px > "
-                      f"{DOUBTFUL_PX:g} px at 1920 wide); check the result or give the lens", file=sys.stderr)
-            lens = Lens(k1, k2)
-        else:
-            lens = lens_from_args(args, (image.shape[1], image.shape[0]))
-        write_image(args.output, correct(image, lens, **options), order="rgb", overwrite=args.overwrite)
-        if opentrackio_wanted(args):
-            from .engine_options import camera_from_args, write_opentrackio
-
-            known = args.auto and uncertainty is not None
-            write_opentrackio(args, [[lens.k1, lens.k2]], camera_from_args(args, (image.shape[1], image.shape[0])),
-                              uncertainty_px=[uncertainty] if known else None,
-                              doubtful=[uncertainty > DOUBTFUL_PX] if known else None)
-        return 0
-
-    from ..video_io import EncodeOptions, VideoReader
-    from ..video_pipeline import correct_video
+        return _run_image(args, options)
+    from ..media.video_io import EncodeOptions, is_sequence
 
     encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
-    from ..video_io import is_sequence
-
     if args.rate is not None and not is_sequence(args.input):
         raise UsageError("--rate is for image-sequence inputs (videos keep their own frame rate)")
-    video = dict(progress=progress, options=encode, overwrite=args.overwrite, rate=args.rate, **options)
-    if given:
-        with VideoReader(args.input, rate=args.rate) as reader:
-            info = reader.info
-        lens = lens_from_args(args, info.size)  # validated before any frame is decoded
-        if opentrackio_wanted(args):
-            from ..export.opentrackio import track_samples
-            from .engine_options import camera_from_args, write_opentrackio
+    video = dict(progress=show_progress(args), options=encode, overwrite=args.overwrite, rate=args.rate, **options)
+    if given or args.lens_track:
+        return _run_video_with_lens(args, video)
+    return _run_video_auto(args, encode, video)
 
-            camera = camera_from_args(args, info.size, info.rate, info.timecode)
-            track_samples([lens], camera)  # a lens the standard cannot carry is refused before any frame
-        written = correct_video(args.input, args.output, lambda _i: lens, **video)
-        _summary(args.output, written, info.frame_count)
-        if opentrackio_wanted(args):
-            write_opentrackio(args, [lens] * written, camera)
-        return 0
 
+def _run_image(args: argparse.Namespace, options: dict) -> int:
+    """One image: the lens given or estimated, corrected, written atomically."""
+    from ..media.image_io import read_image, write_image
+    from ..remapping.remap import correct
+
+    for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "every", "window",
+                 "max_uncertainty"):
+        if getattr(args, name) is not None:
+            raise UsageError(f"--{name.replace('_', '-')} is for videos")
+    image = read_image(args.input, order="rgb")
+    lens = _estimate_image(args, image) if args.auto else lens_from_args(args, (image.shape[1], image.shape[0]))
+    write_image(args.output, correct(image, lens, **options), order="rgb", overwrite=args.overwrite)
+    if opentrackio_wanted(args):
+        write_image_opentrackio(args, (image.shape[1], image.shape[0]), lens)
+    return 0
+
+
+def _estimate_image(args: argparse.Namespace, image):
+    """``--auto`` on an image: the estimate, printed with its stated uncertainty, warned if doubtful."""
+    from ..lens.lens import as_lens
+    from ..media.frames import to_rgb8
+    from ..video.lens_track import DOUBTFUL_PX
+    from ..video.video_pipeline import default_estimator
+
+    lens = as_lens(default_estimator(args.model, args.method)(to_rgb8(image)))
+    method, uncertainty = getattr(lens, "method", None), getattr(lens, "uncertainty_px", None)
+    stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920)" if method and uncertainty is not None else ""
+    print(f"{args.input}: estimated k1={lens.k1:.6f} k2={lens.k2:.6f}{stated}")
+    if uncertainty is not None and uncertainty > DOUBTFUL_PX:
+        print(f"glradial: warning: the estimate of {args.input} is doubtful (uncertainty {uncertainty:.1f} px > "
+              f"{DOUBTFUL_PX:g} px at 1920 wide); check the result or give the lens", file=sys.stderr)
+    return lens
+
+
+def _run_video_with_lens(args: argparse.Namespace, video: dict) -> int:
+    """A video with the lens given: by numbers (one lens, checked before any frame is decoded) or
+    by a lens track (one lens per frame, as many frames as the video)."""
+    from ..media.video_io import VideoReader
+    from ..video.lens_track import load_lens_track
+    from ..video.video_pipeline import correct_video
+
+    with VideoReader(args.input, rate=args.rate) as reader:
+        info = reader.info
     if args.lens_track:
-        from ..lens_track import load_lens_track
-
-        with VideoReader(args.input, rate=args.rate) as reader:
-            info = reader.info
         track = load_lens_track(args.lens_track, info.rate, info.size)
         written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
         _summary(args.output, written, info.frame_count)
         if opentrackio_wanted(args):
-            from .engine_options import write_track_opentrackio
-
             write_track_opentrackio(args, track, info)
         return 0
+    lens = lens_from_args(args, info.size)  # validated before any frame is decoded
+    camera = _video_camera(args, lens, info) if opentrackio_wanted(args) else None
+    written = correct_video(args.input, args.output, lambda _i: lens, **video)
+    _summary(args.output, written, info.frame_count)
+    if camera is not None:
+        write_opentrackio(args, [lens] * written, camera)
+    return 0
 
-    from ..atomic import check_output_folder
-    from ..image_io import check_overwrite
-    from ..lens_track import DOUBTFUL_PX
-    from ..video_pipeline import default_estimator, doubtful_warnings, track_video
+
+def _video_camera(args: argparse.Namespace, lens, info):
+    """The camera of ``--opentrackio`` for a video with one lens, checked (the lens too: one the
+    standard cannot carry is refused) before any frame is decoded."""
+    from ..export.opentrackio import track_samples
+
+    camera = camera_from_args(args, info.size, info.rate, info.timecode)
+    track_samples([lens], camera)
+    return camera
+
+
+def _auto_sidecar(args: argparse.Namespace) -> Path:
+    """The sidecar ``--auto`` writes, checked before anything runs."""
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import check_overwrite
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
     check_overwrite(sidecar, args.overwrite)
     if _same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
         raise UsageError("--sidecar must differ from INPUT and OUTPUT")
-    from ..video_io import VideoWriter
+    return sidecar
 
+
+def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
+    """``--auto`` on a video: pass 1 (track), pass 2 (correct), the sidecar; both outputs or neither."""
+    from ..media.video_io import VideoReader, VideoWriter
+    from ..video.lens_track import DOUBTFUL_PX
+    from ..video.video_pipeline import correct_video, default_estimator, doubtful_warnings, track_video
+
+    sidecar = _auto_sidecar(args)
     with VideoReader(args.input, rate=args.rate, copy_streams=True) as reader:
         info = reader.info
         # the encoder, its options and the container are checked before the estimation pass: open and drop
         VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
     given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
-    track = track_video(args.input, default_estimator(args.model, args.method), progress=progress,  # its defaults: every 5, window 2 s
+    track = track_video(args.input, default_estimator(args.model, args.method), progress=video["progress"],  # its defaults: every 5, window 2 s
                         doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
@@ -260,17 +285,19 @@ def run(args: argparse.Namespace) -> int:
         Path(args.output).unlink(missing_ok=True)  # both outputs or neither
         raise
     _summary(args.output, written, info.frame_count)
+    _print_shots(args.input, track, sidecar)
+    if opentrackio_wanted(args):
+        write_track_opentrackio(args, track, info)
+    return 0
+
+
+def _print_shots(source: str, track, sidecar: Path) -> None:
     shots = track.per_shot()
-    print(f"{args.input}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
+    print(f"{source}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
         sure = f" uncertainty {shot['uncertainty_px']:.1f} px" if shot["uncertainty_px"] is not None else ""
         flag = " DOUBTFUL" if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
-    if opentrackio_wanted(args):
-        from .engine_options import write_track_opentrackio
-
-        write_track_opentrackio(args, track, info)
-    return 0
 
 
 def _summary(output: str, written: int, header: int) -> None:

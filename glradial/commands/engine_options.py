@@ -14,7 +14,7 @@ import numpy as np
 from . import UsageError, positive_float
 
 __all__ = ["add_camera_options", "add_opentrackio_options", "camera_from_args", "opentrackio_wanted",
-           "check_opentrackio_output", "write_opentrackio", "write_track_opentrackio"]
+           "check_opentrackio_output", "write_opentrackio", "write_image_opentrackio", "write_track_opentrackio"]
 
 SENSOR_NAMES = ("2/3-inch",)  # glradial.export.opentrackio.SENSOR_PRESETS, listed here to keep --help import-light
 MODELS = {"U-D": "Brown-Conrady U-D", "D-U": "Brown-Conrady D-U"}
@@ -22,14 +22,10 @@ MODELS = {"U-D": "Brown-Conrady U-D", "D-U": "Brown-Conrady D-U"}
 
 def add_camera_options(group: argparse._ArgumentGroup) -> None:
     """``--sensor-width-mm --sensor-height-mm --sensor --focal-mm`` (read by :func:`camera_from_args`)."""
-    group.add_argument("--sensor-width-mm", type=positive_float, metavar="MM",
-                       help="width of the camera sensor's active area in mm (the frame's width)")
-    group.add_argument("--sensor-height-mm", type=positive_float, metavar="MM",
-                       help="its height in mm (default: width x H / W, square photosites)")
-    group.add_argument("--sensor", choices=SENSOR_NAMES,
-                       help="a named sensor instead of --sensor-width-mm: 2/3-inch = 9.59 x 5.39 mm (16:9 broadcast)")
-    group.add_argument("--focal-mm", type=positive_float, metavar="MM",
-                       help="pinhole focal length of the lens in mm (glradial measures distortion, not the field of view)")
+    group.add_argument("--sensor-width-mm", type=positive_float, metavar="MM", help="width of the camera sensor's active area in mm (the frame's width)")
+    group.add_argument("--sensor-height-mm", type=positive_float, metavar="MM", help="its height in mm (default: width x H / W, square photosites)")
+    group.add_argument("--sensor", choices=SENSOR_NAMES, help="a named sensor instead of --sensor-width-mm: 2/3-inch = 9.59 x 5.39 mm (16:9 broadcast)")
+    group.add_argument("--focal-mm", type=positive_float, metavar="MM", help="pinhole focal length of the lens in mm (glradial measures distortion, not the field of view)")
 
 
 def add_opentrackio_options(parser: argparse.ArgumentParser) -> None:
@@ -89,8 +85,8 @@ def _camera_numbers(args: argparse.Namespace, what: str) -> tuple[float, float |
 
 def check_opentrackio_output(args: argparse.Namespace) -> None:
     """Before any work: the options fit together, the file can be written (``-y`` to replace)."""
-    from ..atomic import check_output_folder
-    from ..image_io import check_overwrite
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import check_overwrite
 
     given = [name for name in ("distortion_model", "cbor") if getattr(args, name) not in (None, False, "U-D")]
     if not opentrackio_wanted(args):
@@ -136,10 +132,21 @@ def write_opentrackio(args: argparse.Namespace, lenses: np.ndarray, camera, *, u
 
 
 def write_track_opentrackio(args: argparse.Namespace, track, video_info) -> None:
-    """:func:`write_opentrackio` of a :class:`glradial.lens_track.LensTrack` (its per-frame lens,
+    """:func:`write_opentrackio` of a :class:`glradial.video.lens_track.LensTrack` (its per-frame lens,
     stated uncertainty, doubtful shots and shot ids) with the video's rate and timecode."""
     camera = camera_from_args(args, track.size, video_info.rate, video_info.timecode)
     doubtful_shots = set(track.doubtful_shots())
     known = np.isfinite(track.uncertainty_px).any()
     write_opentrackio(args, track.lens, camera, uncertainty_px=track.uncertainty_px if known else None,
                       doubtful=[int(s) in doubtful_shots for s in track.shot] if known else None, shots=track.shot)
+
+
+def write_image_opentrackio(args: argparse.Namespace, size: tuple[int, int], lens) -> None:
+    """:func:`write_opentrackio` of one image's lens; an estimate's stated uncertainty (and whether
+    it is doubtful) goes in ``custom``."""
+    from ..video.lens_track import DOUBTFUL_PX
+
+    uncertainty = getattr(lens, "uncertainty_px", None)
+    known = uncertainty is not None
+    write_opentrackio(args, [[lens.k1, lens.k2]], camera_from_args(args, size), uncertainty_px=[uncertainty] if known else None,
+                      doubtful=[uncertainty > DOUBTFUL_PX] if known else None)

@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import json
 
-from ..image_io import media_kind, read_image
-from ..lens_estimate import METHODS
+from ..lens.options import METHODS
+from ..media.image_io import media_kind, read_image
 from . import UsageError, positive_int, show_progress
-from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted
+from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted, write_image_opentrackio, write_track_opentrackio
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT image with the bundled CNN (ONNX, onnxruntime). Each image
@@ -48,8 +48,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..frames import to_rgb8
-    from ..estimator import Estimator
+    from ..estimation.estimator import Estimator
+    from ..media.frames import to_rgb8
 
     if opentrackio_wanted(args) and len(args.inputs) != 1:
         raise UsageError(f"--opentrackio/--send take one INPUT (its samples), got {len(args.inputs)}")
@@ -57,15 +57,14 @@ def run(args: argparse.Namespace) -> int:
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:
         if media_kind(path) == "video":
-            from ..video_pipeline import track_report, track_video
+            from ..video.video_pipeline import track_report, track_video
 
             # the estimator loaded above (its --threads), not a second one per video
             track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method), every=args.every,
                                 progress=show_progress(args))
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             if opentrackio_wanted(args):
-                from ..video_io import VideoReader
-                from .engine_options import write_track_opentrackio
+                from ..media.video_io import VideoReader
 
                 with VideoReader(path) as reader:
                     info = reader.info
@@ -79,15 +78,6 @@ def run(args: argparse.Namespace) -> int:
             print(f"{path}\tk1={lens.k1:.6f}\tk2={lens.k2:.6f}\tmethod={lens.method}\t"
                   f"uncertainty={lens.uncertainty_px:.1f}px\tchains={lens.chains}", flush=True)
         if opentrackio_wanted(args):
-            _image_sample(args, image, lens)
+            write_image_opentrackio(args, (image.shape[1], image.shape[0]), lens)
     return 0
 
-
-def _image_sample(args: argparse.Namespace, image, lens) -> None:
-    """The one OpenTrackIO sample of an estimated image (its stated uncertainty in custom)."""
-    from ..lens_track import DOUBTFUL_PX
-    from .engine_options import camera_from_args, write_opentrackio
-
-    camera = camera_from_args(args, (image.shape[1], image.shape[0]))
-    write_opentrackio(args, [[lens.k1, lens.k2]], camera, uncertainty_px=[lens.uncertainty_px],
-                      doubtful=[lens.uncertainty_px > DOUBTFUL_PX])

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..lens.options import DIRECTIONS, FITS, INVERSES, LAYOUTS, ORIGINS
 from . import UsageError, add_lens_options, lens_from_args, lens_given, parse_size
 
 DESCRIPTION = """\
@@ -35,15 +36,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     add_lens_options(parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect] or --lens FILE)"))
     parser.add_argument("--size", type=parse_size, required=True, metavar="WxH", help="frame size in pixels, e.g. 1920x1080")
-    parser.add_argument("--direction", choices=("undistort", "distort"), default="undistort",
+    parser.add_argument("--direction", choices=DIRECTIONS, default="undistort",
                         help="undistort = map that corrects distorted footage, distort = map that adds the lens (default: undistort)")
-    parser.add_argument("--fit", choices=("same", "crop", "full"), default="same",
+    parser.add_argument("--fit", choices=FITS, default="same",
                         help="output scale, as in 'glradial correct' (default: same)")
-    parser.add_argument("--inverse", choices=("exact", "drap"), default="exact",
+    parser.add_argument("--inverse", choices=INVERSES, default="exact",
                         help="with --direction distort: exact inverse (Newton) or the paper's Drap-Lefevre polynomial (default: exact)")
-    parser.add_argument("--layout", choices=("nuke", "unreal"), default="nuke",
+    parser.add_argument("--layout", choices=LAYOUTS, default="nuke",
                         help="nuke = RGB, S T in R G (default); unreal = RGBA, undistortion in RG and distortion in BA")
-    parser.add_argument("--origin", choices=("top-left", "bottom-left"),
+    parser.add_argument("--origin", choices=ORIGINS,
                         help="--layout unreal: pixel origin of T (default top-left; Nuke's layout is always bottom-left)")
     parser.add_argument("--overscan", nargs="?", const="auto", metavar="FACTOR",
                         help="maps for an overscanned undistorted render: FACTOR >= 1, or the lens's own overscan when "
@@ -76,8 +77,8 @@ def _jobs(args: argparse.Namespace) -> list[tuple[str, object, str]]:
         raise UsageError("--lens-track cannot be combined with --k1/--k2/--cx/--cy/--pixel-aspect/--lens")
     from fractions import Fraction
 
-    from ..lens import Lens
-    from ..lens_track import load_lens_track
+    from ..lens.lens import Lens
+    from ..video.lens_track import load_lens_track
 
     track = load_lens_track(args.lens_track, Fraction(25), args.size)  # the rate only fills times, unused here
     out = Path(args.out)
@@ -86,9 +87,9 @@ def _jobs(args: argparse.Namespace) -> list[tuple[str, object, str]]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_output_folder
-    from ..image_io import check_overwrite
-    from ..stmap import check_stmap_path, lens_stmap, unreal_stmap, write_stmap
+    from ..export.stmap import check_stmap_path, lens_stmap, unreal_stmap, write_stmap
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import check_overwrite
 
     if args.origin is not None and args.layout != "unreal":
         raise UsageError("--origin is for --layout unreal (Nuke's layout has its origin at the bottom left)")

@@ -41,7 +41,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..lens import Lens, frame_size, real_number
+from ..lens.lens import Lens, frame_size
+from ..lens.options import real_number
 
 __all__ = [
     "UndistortionFit", "openlensio_radial", "lens_from_openlensio", "openlensio_du_fit", "projection_offset_mm",

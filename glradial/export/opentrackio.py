@@ -33,7 +33,8 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from ..lens import Lens, frame_size, real_number
+from ..lens.lens import Lens, frame_size
+from ..lens.options import real_number
 from .engines import MODEL_DU, MODEL_UD, openlensio_du_fit, openlensio_radial, projection_offset_mm
 from .overscan import overscan_factor
 
@@ -229,8 +230,9 @@ def track_samples(
 
 @lru_cache(maxsize=1)
 def _validator():
-    import jsonschema
     from importlib import resources
+
+    import jsonschema
 
     schema = json.loads(resources.files("glradial.data").joinpath("opentrackio_schema.json").read_text())
     return jsonschema.Draft202012Validator(schema)
@@ -263,7 +265,7 @@ def encode_sample(sample: dict, cbor: bool = False) -> bytes:
 def write_samples(path: str | os.PathLike, samples: Iterable[dict], cbor: bool = False) -> Path:
     """Write samples atomically: JSON lines (one sample per line), or with ``cbor`` a CBOR sequence
     (RFC 8742: the samples' CBOR items one after another)."""
-    from ..atomic import atomic_write_bytes, check_output_folder
+    from ..media.atomic import atomic_write_bytes, check_output_folder
 
     target = check_output_folder(path)
     separator = b"" if cbor else b"\n"

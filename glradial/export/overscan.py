@@ -21,7 +21,8 @@ import math
 
 import numpy as np
 
-from ..lens import Lens, frame_size, pixels_to_lens, real_number
+from ..lens.lens import Lens, frame_size, pixels_to_lens
+from ..lens.options import real_number
 
 __all__ = [
     "overscan_factor", "track_overscan", "overscan_size", "overscan_uv", "from_overscan_uv", "uv_maps",

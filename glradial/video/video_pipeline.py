@@ -1,0 +1,425 @@
+"""Automatic lens correction of videos: estimate per frame, detect cuts, smooth per shot, correct.
+
+Pipeline (two passes over the file, so memory does not grow with its length):
+
+1. :func:`track_video` decodes every frame once, feeds each (converted :data:`DETECT_WIDTH` px
+   wide) to a :class:`~glradial.video.smoothing.ShotDetector` and runs the estimator (on a copy at most
+   :data:`ESTIMATE_WIDTH` px wide: what the estimators look at) on the first frame of every shot
+   and then every ``every``-th frame of the shot. The per-shot robust smoother (:func:`~glradial.video.smoothing.smooth_track`) turns those
+   samples into a lens for every frame, weighting each sample by the confidence its estimator
+   states (``uncertainty_px`` of a :class:`glradial.Lens` subclass; equal weights for a plain lens
+   or a pair). A smoothed lens that would fold over on the frame is replaced by the nearest
+   accepted raw estimate of the same shot. Shots whose smoothed lens is doubtful (median stated
+   uncertainty above :data:`~glradial.video.lens_track.DOUBTFUL_PX`) are listed by
+   :meth:`LensTrack.doubtful_shots`.
+2. :func:`correct_video` decodes the file again, corrects each frame with its lens and encodes it
+   (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags and depth kept).
+   Decoding, correction and encoding overlap on three threads with at most ``depth`` frames
+   queued between two steps; the correction runs on one worker thread, which owns its GL context
+   (released when it ends) or uses the CPU path.
+
+The result of pass 1 is a :class:`~glradial.video.lens_track.LensTrack`, written as a sidecar
+(format: :mod:`glradial.video.lens_track`).
+
+Convention: frames are ``H x W x 3`` RGB (uint8, or uint16 for deeper sources) when they reach the
+corrector; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (docs/DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import sys
+import threading
+from dataclasses import dataclass, field
+from fractions import Fraction
+from typing import Any, Callable, Iterable, Iterator
+
+import numpy as np
+
+from ..lens.lens import Lens, as_lens, corner_radius
+from ..lens.metrics import REPORT_WIDTH, max_displacement
+from ..media.frames import to_rgb8
+from ..media.progress import Progress
+from ..media.video_io import CopiedPacket, EncodeOptions, VideoFrame, VideoReader, VideoWriter
+from .lens_track import DOUBTFUL_PX, LensTrack
+from .smoothing import ShotDetector, smooth_track
+
+__all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
+
+#: estimator: RGB uint8 frame -> (k1, k2) or a Lens (a LensEstimate carries uncertainty_px and method)
+EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
+
+#: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
+#: detector at <= 960 px, so a full-size conversion would be wasted
+ESTIMATE_WIDTH = 960
+
+#: pass 1 converts every frame this wide (px) for the shot detector, which compares 64 x 36 thumbnails
+DETECT_WIDTH = 64
+
+#: frames queued between two threads of the pipeline (bounded memory: ~3 x depth frames in flight)
+DEPTH = 4
+
+#: pass 2 keeps the previous frame's lens (and so its cached maps) while the next frame's lens
+#: would move no point of the frame by more than this (px of the frame): half the 1/32-px step of
+#: the CPU path's fixed-point maps, which cannot resolve a smaller change anyway. A static or panning
+#: camera then builds its maps once per shot instead of once per frame; a zoom still rebuilds them.
+MAP_REUSE_PX = 1.0 / 64.0
+
+
+class Pipelined:
+    """Run ``items`` (an iterator: e.g. a decoder) on one thread and ``work`` on a second, with
+    bounded queues (``depth`` items) between them and the consumer; iterate to get ``work(item)`` in
+    order. ``work=None`` passes items through (decode-ahead only). ``on_worker_exit`` runs on the
+    worker thread when it ends (release what it owns, e.g. a GL context). An exception on either
+    thread is raised in the consumer; leaving the ``with`` block (normally, by an exception or a
+    signal) stops and joins both threads."""
+
+    _END = object()
+
+    def __init__(
+        self,
+        items: Iterable,
+        work: Callable | None = None,
+        *,
+        depth: int = DEPTH,
+        on_worker_exit: Callable[[], None] | None = None,
+    ) -> None:
+        self._items, self._work, self._exit = iter(items), work, on_worker_exit
+        self._decoded: queue.Queue = queue.Queue(depth)
+        self._done: queue.Queue = queue.Queue(depth)
+        self._stop = threading.Event()
+        self._threads = [threading.Thread(target=self._produce, name="glradial-decode", daemon=True)]
+        if work is not None:
+            self._threads.append(threading.Thread(target=self._transform, name="glradial-correct", daemon=True))
+        else:
+            self._decoded = self._done
+
+    def _put(self, target: queue.Queue, entry: tuple) -> bool:
+        while not self._stop.is_set():
+            try:
+                target.put(entry, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _produce(self) -> None:
+        try:
+            for item in self._items:
+                if not self._put(self._decoded, (True, item)):
+                    return
+            self._put(self._decoded, (True, self._END))
+        except BaseException as err:  # handed to the consumer
+            self._put(self._decoded, (False, err))
+
+    def _transform(self) -> None:
+        try:
+            while not self._stop.is_set():
+                try:
+                    ok, item = self._decoded.get(timeout=0.05)
+                except queue.Empty:
+                    continue
+                if not ok or item is self._END:
+                    self._put(self._done, (ok, item))
+                    return
+                if not self._put(self._done, (True, self._work(item))):
+                    return
+        except BaseException as err:
+            self._put(self._done, (False, err))
+        finally:
+            if self._exit is not None:
+                self._exit()
+
+    def __enter__(self) -> "Pipelined":
+        for thread in self._threads:
+            thread.start()
+        return self
+
+    def __iter__(self) -> Iterator:
+        while True:
+            ok, item = self._done.get()
+            if not ok:
+                raise item
+            if item is self._END:
+                return
+            yield item
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join()
+
+
+def default_estimator(model: str | os.PathLike | None = None, method: str | None = None) -> EstimatorFn:
+    """The bundled estimator (:class:`glradial.Estimator`), as a frame -> lens function; ``method``
+    (e.g. "auto", "net", "lines") is handed to ``Estimator.estimate`` when given."""
+    from ..estimation.estimator import Estimator
+
+    estimator = Estimator(model) if model is not None else Estimator()
+    if method is None:
+        return lambda frame: estimator.estimate(frame)
+    return lambda frame: estimator.estimate(frame, method=method)
+
+
+def _confidence(value: object) -> tuple[float, str]:
+    """``(uncertainty_px, method)`` an estimate states (a LensEstimate), NaN and "" for a plain
+    Lens or a pair."""
+    sure = getattr(value, "uncertainty_px", None)
+    method = getattr(value, "method", None)
+    try:
+        sure = float(sure) if sure is not None else np.nan
+    except (TypeError, ValueError):
+        sure = np.nan
+    return (sure if sure >= 0 else np.nan), (str(method) if method else "")
+
+
+def track_video(
+    path: str | os.PathLike,
+    estimator: EstimatorFn,
+    *,
+    every: int = 5,
+    window_s: float = 2.0,
+    detector: ShotDetector | None = None,
+    progress: bool | None = None,
+    doubtful_px: float = DOUBTFUL_PX,
+    rate: Fraction | None = None,
+) -> LensTrack:
+    """Pass 1: estimate, detect cuts and smooth; see the module docstring.
+
+    ``every`` (frames) is the estimation stride inside a shot; ``window_s`` (seconds) is the
+    smoother's half window (longer = steadier, slower to follow a zoom); ``doubtful_px`` (px at
+    1920) the median uncertainty above which a shot is doubtful; ``rate`` the frame rate of an
+    image-sequence input (default 25). Samples are weighted by their stated uncertainty where every
+    estimate states one (else all equally).
+    """
+    if every < 1:
+        raise ValueError(f"every must be >= 1 frame, got {every}")
+    if not window_s > 0:
+        raise ValueError(f"window must be > 0 seconds, got {window_s}")
+    seen = _estimate_frames(path, estimator, every, detector or ShotDetector(), progress, rate)
+    info, n = seen.info, len(seen.shots)
+    shot_array = np.asarray(seen.shots, dtype=np.int64)
+    samples = np.asarray(seen.estimates, dtype=np.float64).reshape(-1, 2)
+    time_array = np.asarray(seen.times, dtype=np.int64)
+    stated_array = np.asarray(seen.stated, dtype=np.float64)
+    known = bool(len(stated_array)) and bool(np.all(np.isfinite(stated_array)))
+    radius = corner_radius(info.size)
+    smoothed, weights, sure = smooth_track(
+        time_array, samples, shot_array, half_window=window_s * info.fps, radius=radius,
+        uncertainty=stated_array / REPORT_WIDTH if known else None,
+    )
+    # a smoothed lens must not fold over on the frame: fall back to the nearest accepted raw estimate
+    for i in range(n):
+        lens = Lens(*smoothed[i])
+        if lens.fold_radius() <= radius:
+            mine = np.flatnonzero((shot_array[time_array] == shot_array[i]) & (weights > 0))
+            mine = mine if len(mine) else np.flatnonzero(shot_array[time_array] == shot_array[i])
+            nearest = mine[np.argmin(np.abs(time_array[mine] - i))]
+            smoothed[i] = samples[nearest]
+            sure[i] = stated_array[nearest] / REPORT_WIDTH
+    raw, weight, raw_sure = np.full((n, 2), np.nan), np.full(n, np.nan), np.full(n, np.nan)
+    raw[time_array], weight[time_array], raw_sure[time_array] = samples, weights, stated_array
+    method = [""] * n
+    for t, m in zip(seen.times, seen.methods):
+        method[t] = m
+    return LensTrack(info.rate, info.size, shot_array, smoothed, raw, weight, time_s=np.asarray(seen.stamps),
+                     uncertainty_px=sure * REPORT_WIDTH, raw_uncertainty_px=raw_sure, method=method,
+                     doubtful_px=doubtful_px)
+
+
+@dataclass
+class _Estimates:
+    """What pass 1 saw: per frame its shot and time stamp; per estimated frame its index, lens
+    ``(k1, k2)``, stated uncertainty (px at 1920, NaN if none) and method."""
+
+    info: Any = None
+    shots: list[int] = field(default_factory=list)
+    stamps: list[float] = field(default_factory=list)
+    times: list[int] = field(default_factory=list)
+    estimates: list[tuple[float, float]] = field(default_factory=list)
+    stated: list[float] = field(default_factory=list)
+    methods: list[str] = field(default_factory=list)
+
+
+def _estimate_frames(path: str | os.PathLike, estimator: EstimatorFn, every: int, detector: ShotDetector,
+                     progress: bool | None, rate: Fraction | None) -> _Estimates:
+    """Decode ``path`` once: cuts on every frame, the estimator on each shot's first and every ``every``-th frame."""
+    seen = _Estimates()
+    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
+        info = seen.info = reader.info
+        shot, since_start = -1, 0
+        with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
+            for item in frames:
+                index = item.index
+                seen.stamps.append(float(item.pts * info.time_base) if item.pts is not None else index / info.fps)
+                if detector.update(item.image):
+                    shot, since_start = shot + 1, 0
+                if since_start % every == 0:
+                    seen.times.append(index)
+                    value = estimator(to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
+                    lens = as_lens(value)
+                    seen.estimates.append((lens.k1, lens.k2))
+                    sure, method = _confidence(value)
+                    seen.stated.append(sure)
+                    seen.methods.append(method)
+                seen.shots.append(shot)
+                since_start += 1
+                bar.update()
+    return seen
+
+
+class _FrameCorrector:
+    """Corrects frames on the pipeline's worker thread: ``backend`` "gl" makes a
+    :class:`~glradial.remapping.remap.Remapper` with its own context on first use there (falling back to the
+    CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
+
+    def __init__(self, backend: str, fit: str, interpolation: str) -> None:
+        from ..lens.options import BACKENDS
+        from ..remapping.remap import auto_backend
+
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        self.backend = auto_backend() if backend == "auto" else backend
+        self.fit, self.interpolation = fit, interpolation
+        self._remapper = None
+        self._last: Lens | None = None
+
+    def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
+        from ..remapping.remap import Remapper, correct
+
+        height, width = image.shape[:2]
+        last = self._last
+        if (last is not None and (last.cx, last.cy, last.pixel_aspect) == (lens.cx, lens.cy, lens.pixel_aspect)
+                and max_displacement((lens.k1, lens.k2), (last.k1, last.k2), lens.frame_radius((width, height))) * width
+                <= MAP_REUSE_PX):
+            lens = last  # the same maps (cached) for a change no point of the frame can show
+        else:
+            self._last = lens
+        if self.backend == "gl":
+            if self._remapper is None:
+                self._remapper = Remapper()
+            if max(image.shape[:2]) <= self._remapper.max_texture_size:
+                return self._remapper.correct(image, lens, fit=self.fit, interpolation=self.interpolation)
+        return correct(image, lens, fit=self.fit, interpolation=self.interpolation, backend="cpu")
+
+    def release(self) -> None:
+        if self._remapper is not None:
+            self._remapper.release()
+            self._remapper = None
+
+
+def correct_video(
+    source: str | os.PathLike,
+    target: str | os.PathLike,
+    lenses: Callable[[int], Lens | tuple[float, float]],
+    *,
+    fit: str = "same",
+    interpolation: str = "linear",
+    backend: str = "auto",
+    progress: bool | None = None,
+    label: str = "correct",
+    options: EncodeOptions = EncodeOptions(),
+    overwrite: bool = False,
+    frames_expected: int | None = None,
+    rate: Fraction | None = None,
+) -> int:
+    """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` (a :class:`Lens` or
+    ``(k1, k2)``) into ``target``
+    (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.media.video_io`;
+    encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
+    track's length): a video with another frame count is an error and leaves no output. A header
+    frame count that differs from the frames decoded gives a warning on stderr with both counts.
+    ``rate``: frame rate of an image-sequence input (default 25)."""
+    corrector = _FrameCorrector(backend, fit, interpolation)
+    with VideoReader(source, order="rgb", copy_streams=True, rate=rate) as reader:
+        info = reader.info
+        writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
+        try:
+            def work(item):
+                if isinstance(item, VideoFrame):
+                    lens = as_lens(lenses(item.index))
+                    return writer.frame(corrector(item.image, lens), item.pts)
+                return item
+
+            with Progress(info.frame_count, label, enabled=progress) as bar, \
+                    Pipelined(reader.items(), work, on_worker_exit=corrector.release) as done:
+                for item in done:
+                    if isinstance(item, CopiedPacket):
+                        writer.mux(item)
+                    else:
+                        writer.write(item)
+                        bar.update()
+            if frames_expected is not None and writer.frames_written != frames_expected:
+                raise ValueError(
+                    f"the lens track has {frames_expected} frames but {source} has {writer.frames_written}: "
+                    "it belongs to another video"
+                )
+            writer.close()
+        except BaseException:
+            writer.abort()
+            raise
+    if 0 < info.frame_count != writer.frames_written:
+        sys.stderr.write(
+            f"glradial: warning: {source} reports {info.frame_count} frames in its header; "
+            f"{writer.frames_written} could be decoded and were written\n"
+        )
+    return writer.frames_written
+
+
+def estimate_video(
+    path: str | os.PathLike,
+    *,
+    model: str | os.PathLike | None = None,
+    every: int = 5,
+    window_s: float = 2.0,
+    progress: bool | None = None,
+    method: str | None = None,
+) -> LensTrack:
+    """Per-frame and per-shot lens of a video with the bundled estimator (or ``model``, with
+    ``method`` when given): the first pass of ``glradial correct --auto`` (:func:`track_video`)
+    without the correction (what ``glradial estimate VIDEO`` prints, with the estimator it loaded)."""
+    return track_video(path, default_estimator(model, method), every=every, window_s=window_s, progress=progress)
+
+
+def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_json: bool = False) -> str:
+    """Text for ``glradial estimate VIDEO``: one line per shot (or per frame with ``per_frame``),
+    with the stated uncertainty (px at 1920) and the methods where the estimator states them, or one
+    JSON document (``{"input", "fps", "size", "shots": [...], "frames": [...]}``)."""
+    if as_json:
+        document = {"input": source, "fps": track.fps, "size": list(track.size), "shots": track.per_shot()}
+        if per_frame:
+            document["frames"] = track.rows()
+        return json.dumps(document)
+    lines = []
+    if per_frame:
+        for row in track.rows():
+            lines.append(f"{source}: frame {row['frame']} shot {row['shot']} k1={row['k1']:.6f} k2={row['k2']:.6f}"
+                         + _confidence_text(row["uncertainty_px"], [row["method"]] if row["method"] else []))
+    else:
+        for shot in track.per_shot():
+            lines.append(
+                f"{source}: shot {shot['shot']} frames {shot['first_frame']}-{shot['last_frame']} "
+                f"k1={shot['k1']:.6f} k2={shot['k2']:.6f}" + _confidence_text(shot["uncertainty_px"], shot["methods"])
+                + (" DOUBTFUL" if shot["doubtful"] else "")
+            )
+    return "\n".join(lines)
+
+
+def _confidence_text(uncertainty_px: float | None, methods: list[str]) -> str:
+    text = f" uncertainty={uncertainty_px:.1f}px" if uncertainty_px is not None else ""
+    return text + (f" method={'+'.join(methods)}" if methods else "")
+
+
+def doubtful_warnings(track: LensTrack, source: str) -> list[str]:
+    """One warning line per doubtful shot of ``track`` (for ``correct --auto``)."""
+    lines = []
+    for shot in track.per_shot():
+        if shot["doubtful"]:
+            lines.append(
+                f"glradial: warning: {source}: shot {shot['shot']} (frames {shot['first_frame']}-{shot['last_frame']}) "
+                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful: uncertainty {shot['uncertainty_px']:.1f} px "
+                f"> {track.doubtful_px:g} px at 1920 wide; check the shot or give its lens in a --lens-track file"
+            )
+    return lines
