@@ -252,3 +252,30 @@ def test_cli_correct_writes_one_valid_sample_per_frame(tmp_path, schema, capsys,
     assert "--focal-mm" in capsys.readouterr().err and not (tmp_path / "o2.mov").exists()
     argv3 = ["correct", str(source), str(tmp_path / "o3.mov"), "--k1", "-0.2", "--focal-mm", "9"]
     assert main(argv3) == 2 and "need(s) --opentrackio" in capsys.readouterr().err  # a camera option alone
+
+
+def test_cli_distort_overscan_fills_the_frame_and_half_the_overscan_does_not(tmp_path, capsys):
+    """``glradial distort --overscan``: a uniform overscanned render (the pixel pitch kept) comes out
+    as a full distorted frame, no pixel empty, at the lens's own factor; at half its overscan the
+    corners are empty (the check can fail)."""
+    from glradial.media.image_io import read_image, write_image
+
+    lens, size = Lens(-0.25, 0.05), (320, 180)
+    factor = overscan.overscan_factor(lens, size)
+    assert factor > 1.02
+    render = tmp_path / "render.png"
+    write_image(render, np.full((*overscan.overscan_size(size, factor)[::-1], 3), 200, np.uint8))
+    argv = ["--k1", "-0.25", "--k2", "0.05", "--size", "320x180", "-q"]
+    assert main(["distort", str(render), str(tmp_path / "full.png"), *argv, "--overscan"]) == 0
+    assert f"overscan {factor:.6f}" in capsys.readouterr().out
+    full = read_image(tmp_path / "full.png")
+    assert full.shape == (180, 320, 3) and full.min() == 200
+    half = 1.0 + (factor - 1.0) / 2
+    assert main(["distort", str(render), str(tmp_path / "half.png"), *argv, "--overscan", repr(half)]) == 0
+    assert (read_image(tmp_path / "half.png") == 0).all(axis=-1).sum() > 0
+    for extra, message in ((["--fit", "crop"], "replaces --fit"), (["--backend", "gl"], "cv2.remap"),
+                           (["--inverse", "drap"], "replaces --inverse"), (["--overscan", "0.9"], "factor >= 1")):
+        assert main(["distort", str(render), str(tmp_path / "x.png"), *argv, "--overscan", *extra]) == 2
+        assert message in capsys.readouterr().err
+    assert main(["distort", str(render), str(tmp_path / "x.png"), "--k1", "-0.25", "--size", "320x180"]) == 2
+    assert "--size is for --overscan" in capsys.readouterr().err

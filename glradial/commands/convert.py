@@ -6,8 +6,9 @@ import argparse
 import json
 import sys
 
+from ..lens.options import DISTORTION_MODELS
 from . import UsageError, finite_float, parse_size, positive_float
-from .engine_options import MODELS, add_camera_options, camera_from_args
+from .engine_options import add_camera_options, camera_from_args
 
 CONVENTIONS = ("glradial", "width", "opencv", "ffmpeg", "lensfun", "pixel", "height", "opentrackio")
 #: graphics-engine conventions (output only, except opentrackio U-D, which converts back exactly)
@@ -63,7 +64,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--json", action="store_true", help="print JSON with the glradial lens and the result")
     parser.add_argument("values", nargs="+", type=finite_float, metavar="VALUE", help="coefficients in the --from convention")
     engine = parser.add_argument_group("graphics engines (--to opentrackio, unreal, 3de4-radial-deg4)")
-    engine.add_argument("--distortion-model", choices=("U-D", "D-U"), default="U-D",
+    engine.add_argument("--distortion-model", choices=DISTORTION_MODELS, default="U-D",
                         help="--to opentrackio: U-D (exact, default) or D-U (fitted)")
     add_camera_options(engine)
     return parser
@@ -138,10 +139,11 @@ def _engine(lens, args: argparse.Namespace) -> tuple[dict, str]:
             focal = camera.focal_mm / camera.sensor_width_mm * args.size[0]
         document = engines.unreal_spherical(lens, args.size, focal)
         return document, " ".join(f"{document[k]:.12g}" for k in ("K1", "K2", "K3", "P1", "P2"))
+    from ..export.engines import MODEL_NAMES
     from ..export.opentrackio import lens_object
 
     camera = camera_from_args(args, args.size, what="--to opentrackio")
-    document, error = lens_object(lens, camera, model=MODELS[args.distortion_model])
+    document, error = lens_object(lens, camera, model=MODEL_NAMES[args.distortion_model])
     if error is not None:
         print(f"glradial: D-U fit over the {args.size[0]}x{args.size[1]} frame: largest error {error:.3g} px", file=sys.stderr)
     return document, " ".join(f"{v:.12g}" for v in document["distortion"][0]["radial"])

@@ -11,20 +11,34 @@ from pathlib import Path
 
 import numpy as np
 
+from ..lens.options import DISTORTION_MODELS, SENSORS
 from . import UsageError, positive_float
+from .remapping import RemapHook
 
 __all__ = ["add_camera_options", "add_opentrackio_options", "camera_from_args", "opentrackio_wanted",
-           "check_opentrackio_output", "write_opentrackio", "write_image_opentrackio", "write_track_opentrackio"]
+           "check_opentrackio_output", "write_opentrackio", "write_image_opentrackio", "write_track_opentrackio",
+           "OpenTrackIOHook", "opentrackio_hook", "overscan_value"]
 
-SENSOR_NAMES = ("2/3-inch",)  # glradial.export.opentrackio.SENSOR_PRESETS, listed here to keep --help import-light
-MODELS = {"U-D": "Brown-Conrady U-D", "D-U": "Brown-Conrady D-U"}
+
+def overscan_value(text: str | None) -> float | None:
+    """The factor of ``--overscan [FACTOR]`` (``nargs="?", const="auto"``): a number >= 1, or None
+    when not given or given without a value (the lens's own overscan)."""
+    if text in (None, "auto"):
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value >= 1.0 or value == float("inf"):
+        raise UsageError(f"--overscan takes a factor >= 1 (or no value: the lens's own), got {text!r}")
+    return value
 
 
 def add_camera_options(group: argparse._ArgumentGroup) -> None:
     """``--sensor-width-mm --sensor-height-mm --sensor --focal-mm`` (read by :func:`camera_from_args`)."""
     group.add_argument("--sensor-width-mm", type=positive_float, metavar="MM", help="width of the camera sensor's active area in mm (the frame's width)")
     group.add_argument("--sensor-height-mm", type=positive_float, metavar="MM", help="its height in mm (default: width x H / W, square photosites)")
-    group.add_argument("--sensor", choices=SENSOR_NAMES, help="a named sensor instead of --sensor-width-mm: 2/3-inch = 9.59 x 5.39 mm (16:9 broadcast)")
+    group.add_argument("--sensor", choices=SENSORS, help="a named sensor instead of --sensor-width-mm: 2/3-inch = 9.59 x 5.39 mm (16:9 broadcast)")
     group.add_argument("--focal-mm", type=positive_float, metavar="MM", help="pinhole focal length of the lens in mm (glradial measures distortion, not the field of view)")
 
 
@@ -34,7 +48,7 @@ def add_opentrackio_options(parser: argparse.ArgumentParser) -> None:
         "OpenTrackIO output (one sample per frame for a graphics engine; needs the sensor width and focal length)")
     group.add_argument("--opentrackio", metavar="FILE",
                        help="write one OpenTrackIO sample per frame (JSON lines; a CBOR sequence with --cbor)")
-    group.add_argument("--distortion-model", choices=tuple(MODELS), default="U-D",
+    group.add_argument("--distortion-model", choices=DISTORTION_MODELS, default="U-D",
                        help="U-D = undistorted->distorted, glradial's own direction (exact; default); D-U = "
                             "distorted->undistorted, the schema's default (a least-squares fit; error printed)")
     group.add_argument("--cbor", action="store_true", help="write CBOR instead of JSON (needs the cbor2 package)")
@@ -111,17 +125,18 @@ def check_opentrackio_output(args: argparse.Namespace) -> None:
 def write_opentrackio(args: argparse.Namespace, lenses: np.ndarray, camera, *, uncertainty_px=None, doubtful=None,
                       shots=None) -> None:
     """Make the samples of ``lenses`` (N, 2), write ``--opentrackio`` and stream to ``--send``."""
+    from ..export.engines import MODEL_NAMES
     from ..export.opentrackio import encode_sample, track_samples, write_samples
     from ..export.opentrackio_udp import ENCODING_CBOR, ENCODING_JSON, parse_address, send_payloads
 
-    samples = track_samples(lenses, camera, model=MODELS[args.distortion_model], uncertainty_px=uncertainty_px,
+    samples = track_samples(lenses, camera, model=MODEL_NAMES[args.distortion_model], uncertainty_px=uncertainty_px,
                             doubtful=doubtful, shots=shots)
     overscan = samples[0]["static"]["lens"]["distortionOverscanMax"]
     errors = [s["custom"]["glradial"]["fit_max_error_px"] for s in samples if "fit_max_error_px" in s["custom"]["glradial"]]
     stated = f"; D-U fit error up to {max(errors):.3g} px" if errors else ""
     if args.opentrackio:
         write_samples(args.opentrackio, samples, cbor=args.cbor)
-        print(f"wrote {args.opentrackio}: {len(samples)} OpenTrackIO sample(s) ({MODELS[args.distortion_model]}, "
+        print(f"wrote {args.opentrackio}: {len(samples)} OpenTrackIO sample(s) ({MODEL_NAMES[args.distortion_model]}, "
               f"overscan up to {overscan:.4f}{stated})", file=sys.stderr, flush=True)
     if args.send:
         address = parse_address(args.send)
@@ -150,3 +165,47 @@ def write_image_opentrackio(args: argparse.Namespace, size: tuple[int, int], len
     known = uncertainty is not None
     write_opentrackio(args, [[lens.k1, lens.k2]], camera_from_args(args, size), uncertainty_px=[uncertainty] if known else None,
                       doubtful=[uncertainty > DOUBTFUL_PX] if known else None)
+
+
+class OpenTrackIOHook(RemapHook):
+    """``correct --opentrackio``/``--send`` on an image or a video whose lens is given or read from a
+    lens track: the camera (and a video's one lens, which the standard may refuse) checked before
+    any frame is decoded, the samples written once the picture is."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.args = args
+        self.size: tuple[int, int] | None = None
+        self.lens = self.track = self.info = self.camera = None
+
+    def lens_known(self, size, lens=None, *, track=None, info=None) -> None:
+        from ..export.opentrackio import track_samples
+
+        self.size, self.lens, self.track, self.info = size, lens, track, info
+        if info is not None:
+            self.camera = camera_from_args(self.args, info.size, info.rate, info.timecode)
+            if lens is not None:
+                track_samples([lens], self.camera)  # a lens the standard cannot carry is refused now
+
+    def written(self, frames: int) -> None:
+        if self.track is not None:
+            write_track_opentrackio(self.args, self.track, self.info)
+        elif self.info is not None:
+            write_opentrackio(self.args, [self.lens] * frames, self.camera)
+        else:
+            write_image_opentrackio(self.args, self.size, self.lens)
+
+
+def opentrackio_hook(args: argparse.Namespace, kind: str) -> OpenTrackIOHook | None:
+    """The hook of ``correct``'s OpenTrackIO options for INPUT of ``kind`` (None when no sample is
+    asked for), after checking them before any work: a folder is refused (one camera per run), the
+    file must differ from INPUT and OUTPUT and may be written."""
+    import os
+
+    check_opentrackio_output(args)
+    if not opentrackio_wanted(args):
+        return None
+    if kind == "folder":
+        raise UsageError("--opentrackio and --send are for an image or a video, not a folder")
+    if args.opentrackio and os.path.abspath(args.opentrackio) in (os.path.abspath(args.input), os.path.abspath(args.output)):
+        raise UsageError("--opentrackio must differ from INPUT and OUTPUT")
+    return OpenTrackIOHook(args)

@@ -6,6 +6,7 @@ import argparse
 
 from ..lens.options import DIRECTIONS, FITS, INVERSES, LAYOUTS, ORIGINS
 from . import UsageError, add_lens_options, lens_from_args, lens_given, parse_size
+from .engine_options import overscan_value
 
 DESCRIPTION = """\
 Write the STMap of the lens (--k1 --k2 [--cx --cy --pixel-aspect], or --lens FILE) on a WxH frame: a
@@ -55,18 +56,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
-def _overscan(text: str | None) -> float | None:
-    if text in (None, "auto"):
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not value >= 1.0 or value == float("inf"):
-        raise UsageError(f"--overscan takes a factor >= 1 (or no value: the lens's own), got {text!r}")
-    return value
-
-
 def _jobs(args: argparse.Namespace) -> list[tuple[str, object, str]]:
     """(output path, lens, label) of each map to write."""
     from pathlib import Path
@@ -95,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--origin is for --layout unreal (Nuke's layout has its origin at the bottom left)")
     if args.overscan is not None and args.fit != "same":
         raise UsageError("--overscan replaces --fit: give one of them")
-    factor = _overscan(args.overscan)
+    factor = overscan_value(args.overscan)
     jobs = _jobs(args)
     for path, _lens, _label in jobs:
         check_overwrite(check_output_folder(check_stmap_path(path)), args.overwrite)  # before any work

@@ -42,15 +42,18 @@ from typing import Callable
 import numpy as np
 
 from ..lens.lens import Lens, frame_size
-from ..lens.options import real_number
+from ..lens.options import DISTORTION_MODELS, real_number
 
 __all__ = [
     "UndistortionFit", "openlensio_radial", "lens_from_openlensio", "openlensio_du_fit", "projection_offset_mm",
     "unreal_spherical", "tde4_radial_deg4", "fit_undistortion", "MODEL_UD", "MODEL_DU",
+    "MODEL_NAMES",
 ]
 
-MODEL_UD = "Brown-Conrady U-D"
-MODEL_DU = "Brown-Conrady D-U"
+#: OpenLensIO's model string of each direction of :data:`glradial.lens.options.DISTORTION_MODELS`
+MODEL_NAMES = {direction: f"Brown-Conrady {direction}" for direction in DISTORTION_MODELS}
+MODEL_UD = MODEL_NAMES["U-D"]
+MODEL_DU = MODEL_NAMES["D-U"]
 
 #: distorted-frame grid the fits sample (columns, rows), frame edges included
 FIT_GRID = (65, 37)

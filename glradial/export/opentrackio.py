@@ -34,7 +34,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from ..lens.lens import Lens, frame_size
-from ..lens.options import real_number
+from ..lens.options import SENSORS, real_number
 from .engines import MODEL_DU, MODEL_UD, openlensio_du_fit, openlensio_radial, projection_offset_mm
 from .overscan import overscan_factor
 
@@ -47,7 +47,7 @@ PROTOCOL = {"name": "OpenTrackIO", "version": [1, 0, 1]}
 
 #: named sensors: active area (width, height) in mm. "2/3-inch": the 16:9 image area of a 2/3-inch
 #: broadcast camera sensor (11 mm diagonal)
-SENSOR_PRESETS = {"2/3-inch": (9.59, 5.39)}
+SENSOR_PRESETS = dict(zip(SENSORS, [(9.59, 5.39)], strict=True))
 
 
 @dataclass(frozen=True)
