@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from .errors import Error, GLUnavailableError, LensTrackError, ModelLoadError, ShaderCompileError
     from .estimation.estimator import Estimator, estimate
     from .estimation.lens_estimate import LensEstimate
+    from .gl.shaderlib import shader_dir, shader_path
     from .lens.lens import Lens
     from .remapping.remap import Remapper, correct, distort, fit_scale
     from .synthesis.crop_producer import crop_batches

@@ -384,3 +384,21 @@ def test_pixels_without_an_undistorted_point_are_zero(ctx, field_panorama) -> No
     assert (got[inside].max(axis=-1) > 0).mean() > 0.99
     with pytest.raises(ValueError, match="Drap"):
         render_crops(field_panorama, [params], size=size, inverse="drap")
+
+
+def test_a_lens_that_folds_over_inside_the_frame_is_refused_on_the_exact_path_too():
+    # k1 = -1.2, k2 = 0 folds over at r = 1/sqrt(3.6) = 0.527, inside the 16:9 corner (0.5737):
+    # distort refuses it, and so does the crop renderer (it used to render 38 % black pixels)
+    from glradial.lens import lensfuncs
+    from glradial.synthesis.crops import CropParams, render_crops
+
+    assert abs(lensfuncs.fold_radius(-1.2, 0.0) - 1 / np.sqrt(3.6)) < 1e-9
+    panorama = np.full((64, 128, 3), 128, np.uint8)
+    params = [CropParams(pan=0.0, tilt=0.0, roll=0.0, hfov=60.0, k1=-1.2, k2=0.0)]
+    for inverse in ("exact", "drap"):
+        with pytest.raises(ValueError, match="folds over"):
+            render_crops(panorama, params, size=(1280, 720), out_size=(64, 36), inverse=inverse)
+    # just outside the fold (k1 = -1.0: fold radius 0.577 > 0.5737) still renders
+    ok = render_crops(panorama, [CropParams(pan=0.0, tilt=0.0, roll=0.0, hfov=60.0, k1=-1.0, k2=0.0)],
+                      size=(1280, 720), out_size=(64, 36))
+    assert ok.shape == (1, 36, 64, 3)

@@ -353,14 +353,14 @@ def test_configs_name_a_base_and_hold_their_differences(tmp_path):
 
 
 def test_the_shipped_stage_config_describes_the_shipped_model():
-    # stage10_shipped.json is the run that produced glradial/models/glradial_k1k2.onnx: the same
-    # network as the model's embedded config
+    # stage11_error_head.json is the run that produced glradial/models/glradial_k1k2.onnx (stage 10's
+    # network with an error head): the same network as the model's embedded config
     import onnx
 
     from net.train import TrainConfig
 
     root = Path(__file__).resolve().parents[1]
-    cfg = TrainConfig.from_json(root / "net" / "configs" / "stage10_shipped.json")
+    cfg = TrainConfig.from_json(root / "net" / "configs" / "stage11_error_head.json")
     props = {p.key: p.value for p in onnx.load(str(root / "glradial" / "models" / "glradial_k1k2.onnx")).metadata_props}
     assert ModelConfig.from_dict(cfg.model) == ModelConfig.from_dict(json.loads(props["model_config"]))
 

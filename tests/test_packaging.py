@@ -100,8 +100,9 @@ def test_wheel_layout(wheel):
 def test_installed_wheel_works_from_any_folder(installed, tmp_path):
     probe = BLOCKER + (
         "import glradial\n"
-        "from glradial.gl.shaderlib import shader_dir\n"
+        "shader_dir = glradial.shader_dir\n"
         "assert str(shader_dir()).startswith(sys.argv[1]), shader_dir()\n"
+        "assert (shader_dir() / 'common.glsl').read_text().strip() and glradial.shader_path('correct.frag').is_file()\n"
         "assert glradial.__file__.startswith(sys.argv[1]), glradial.__file__\n"
         "print(glradial.Lens(-0.2, 0.03).inverse_coefficients()[0])\n"
     )
@@ -157,3 +158,12 @@ def test_glradial_never_imports_torch_or_net():
                 continue
             offenders += [f"{path.relative_to(ROOT)}:{node.lineno} {n}" for n in names if n.split(".")[0] in BLOCKED]
     assert not offenders, offenders
+
+
+def test_shader_dir_works_in_the_editable_install(tmp_path):
+    """The checkout's own install (``make setup``: editable): ``glradial.shader_dir()`` from another
+    folder finds the checkout's shaders/, the same files the wheel ships."""
+    probe = "import glradial; d = glradial.shader_dir(); print(d); assert (d / 'common.glsl').is_file()"
+    result = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert Path(result.stdout.strip()) == ROOT / "shaders"

@@ -273,5 +273,5 @@ def test_command_names_an_unknown_image_extension(tmp_path, capsys, name):
     assert main(["stadium", "--seed", "1", "--size", "64x32", "--out", str(tmp_path / name)]) == 1
     err = capsys.readouterr().err
     suffix = repr(Path(name).suffix or "(none)")
-    assert f"unknown image extension {suffix}; use .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
+    assert f"unknown image extension {suffix}; use .exr, .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
     assert "video" not in err and list(tmp_path.iterdir()) == []

@@ -110,6 +110,7 @@ class Estimator:
         info = check_model(self._session, path)  # names, ranks, dtypes, N×2 output, input size, probe
         self.input_size: tuple[int, int] = info.input_size
         self._input_name = info.input_name
+        self._output_names = [o.name for o in self._session.get_outputs()]
 
     @property
     def metrics(self) -> dict:
@@ -135,23 +136,39 @@ class Estimator:
             return np.ascontiguousarray(frame)
         return cv2.resize(frame, self.input_size, interpolation=cv2.INTER_AREA)
 
+    @property
+    def has_error_head(self) -> bool:
+        """Whether the model also outputs its own expected error (``error_px``, net/export.py)."""
+        return len(self._output_names) > 1
+
     def run(self, images: np.ndarray) -> np.ndarray:
         """Preprocessed uint8 ``N x H x W x 3`` batch -> float64 ``N x 2`` (k1, k2).
 
         With :attr:`mirror_average` the result is the mean of the outputs for the images and for
         their left-right mirrors.
         """
+        return self.run_with_error(images)[0]
+
+    def run_with_error(self, images: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """:meth:`run`, and the network's own expected error per frame (float64 ``N``, px of a
+        1920-wide frame: the scale of a Laplace model of its maximum displacement error over the
+        16:9 frame, uncalibrated) when the model has an error head, else ``None``. Mirror averaging
+        averages both."""
         images = np.asarray(images)
         width, height = self.input_size
         if images.dtype != np.uint8 or images.shape[1:] != (height, width, 3):
             raise ValueError(f"images must be uint8 N×{height}×{width}×3, got {images.dtype} {images.shape}")
         n = len(images)
         batch = np.concatenate([images, images[:, :, ::-1]]) if self.mirror_average else images
-        out = self._session.run(None, {self._input_name: np.ascontiguousarray(batch)})[0]
-        out = np.asarray(out, dtype=np.float64)
+        outputs = self._session.run(self._output_names, {self._input_name: np.ascontiguousarray(batch)})
+        out = np.asarray(outputs[0], dtype=np.float64)
         if out.shape != (len(batch), 2):
             raise ModelLoadError(f"{self.model_path}: output of shape {out.shape} for a batch of {len(batch)}, not {len(batch)}×2")
-        return 0.5 * (out[:n] + out[n:]) if self.mirror_average else out
+        error = np.asarray(outputs[1], dtype=np.float64).reshape(-1) if len(outputs) > 1 else None
+        if self.mirror_average:
+            out = 0.5 * (out[:n] + out[n:])
+            error = None if error is None else 0.5 * (error[:n] + error[n:])
+        return out, error
 
     def estimate_batch(self, frames: Sequence[np.ndarray], method: Method = "auto") -> list[LensEstimate]:
         """Estimate each frame of a sequence (or an ``N x H x W x C`` array); the CNN runs in one

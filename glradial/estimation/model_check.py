@@ -25,6 +25,8 @@ from ..errors import ModelLoadError
 #: input and output names of a model exported by net/export.py (``glradial_format`` metadata)
 INPUT_NAME = "image"
 OUTPUT_NAME = "k"
+#: the optional second output: the network's own expected error, px at 1920 (net.export)
+ERROR_OUTPUT_NAME = "error_px"
 #: value of a probe frame's pixels (mid-grey)
 PROBE_LEVEL = 128
 
@@ -110,9 +112,10 @@ def check_model(session: Any, path: Path) -> ModelInfo:
     return its :class:`ModelInfo`; :class:`ModelLoadError` otherwise."""
     meta = dict(session.get_modelmeta().custom_metadata_map)
     inputs, outputs = session.get_inputs(), session.get_outputs()
-    if len(inputs) != 1 or len(outputs) != 1:
+    if len(inputs) != 1 or len(outputs) not in (1, 2) or (len(outputs) == 2 and outputs[1].name != ERROR_OUTPUT_NAME):
         raise ModelLoadError(
-            f"{path} is not a glradial model: expected 1 input and 1 output, got {len(inputs)} and {len(outputs)}"
+            f"{path} is not a glradial model: expected 1 input and 1 output (or 2, the second named "
+            f"{ERROR_OUTPUT_NAME!r}), got {len(inputs)} and {[o.name for o in outputs]}"
         )
     inp, out = inputs[0], outputs[0]
     if "glradial_format" in meta and (inp.name, out.name) != (INPUT_NAME, OUTPUT_NAME):
@@ -131,7 +134,7 @@ def check_model(session: Any, path: Path) -> ModelInfo:
     width, height = _input_size(path, shape, meta)
     probe = np.full((2, height, width, 3), PROBE_LEVEL, np.uint8)
     try:
-        result = np.asarray(session.run(None, {inp.name: probe})[0])
+        result = np.asarray(session.run([out.name], {inp.name: probe})[0])
     except Exception as err:  # onnxruntime raises its own exception types
         raise ModelLoadError(f"{path}: the probe batch of 2 frames {width}×{height} fails: {' '.join(str(err).split())[:300]}") from None
     if result.shape != (2, 2):

@@ -32,7 +32,12 @@ _ERROR_LOCATION = re.compile(r"\b(\d+):(\d+)(\(\d+\))?")
 
 
 def shader_dir() -> Path:
-    """Folder holding the GLSL files: package data in a wheel, ``shaders/`` in a checkout."""
+    """The folder holding glradial's GLSL files (public: ``glradial.shader_dir()``), for embedding
+    them in another renderer: ``common.glsl`` (the lens functions), ``sampling.glsl``,
+    ``correct.frag``, ``distort.frag`` ... (docs/SHADERS.md). Package data in an installed wheel,
+    the checkout's ``shaders/`` in the editable install ``make setup`` makes (where
+    ``importlib.resources.files("glradial.shaders")`` cannot find them); ``FileNotFoundError`` when
+    neither holds them."""
     here = Path(__file__).resolve().parents[1]  # the glradial package
     for candidate in (here / "shaders", here.parent / "shaders"):
         if (candidate / "common.glsl").is_file():

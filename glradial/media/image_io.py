@@ -8,6 +8,9 @@ Convention:
   row 0 is the top of the picture.
 * Bit depth is kept: 8-bit (uint8), 16-bit (uint16, PNG and TIFF) and 32-bit float (float32, TIFF)
   are read and written unchanged. JPEG stores uint8 only; writing anything else to a JPEG raises.
+  OpenEXR (``.exr``, :mod:`glradial.media.exr_io`): float16 (HALF) and float32 (FLOAT) arrays with the
+  channel sets Y, RGB, RGBA (:data:`EXR_CHANNEL_SETS`); values beyond [0, 1] are kept. Other
+  channel sets (layers, depth): :func:`glradial.media.exr_io.read_exr`.
 * Every output is written to a temporary file in the target's folder and renamed into place when it
   is complete (:mod:`glradial.media.atomic`): an error or Ctrl-C leaves no partial file.
 * Errors name the path: ``FileNotFoundError`` for a missing input, ``ValueError`` for an unknown
@@ -46,7 +49,10 @@ IMAGE_EXTENSIONS: dict[str, tuple[str, ...]] = {
     ".jpeg": ("uint8",),
     ".tif": ("uint8", "uint16", "float32"),
     ".tiff": ("uint8", "uint16", "float32"),
+    ".exr": ("float16", "float32"),
 }
+#: channel names of an EXR written from an H×W×C array, by C (reading takes the same sets)
+EXR_CHANNEL_SETS = {1: ("Y",), 3: ("R", "G", "B"), 4: ("R", "G", "B", "A")}
 
 def _extension(path: str | os.PathLike) -> str:
     return Path(path).suffix.lower()
@@ -86,6 +92,8 @@ def _check_order(order: str) -> None:
 
 def _swap_rb(array: np.ndarray) -> np.ndarray:
     """RGB(A) <-> BGR(A) with OpenCV (one pass, SIMD); grey images pass through."""
+    if array.dtype == np.float16 and array.ndim == 3 and array.shape[2] in (3, 4):
+        return array[:, :, [2, 1, 0, 3][: array.shape[2]]]  # OpenCV converts no half floats
     if array.ndim == 3 and array.shape[2] == 3:
         return cv2.cvtColor(array, cv2.COLOR_RGB2BGR)
     if array.ndim == 3 and array.shape[2] == 4:
@@ -101,6 +109,8 @@ def read_image(path: str | os.PathLike, order: ChannelOrder = "rgb") -> np.ndarr
     if not is_image_path(source):
         known = ", ".join(sorted(IMAGE_EXTENSIONS))
         raise ValueError(f"{str(source)!r} is not a still image ({known}); videos: glradial.media.video_io")
+    if _extension(source) == ".exr":
+        return _read_exr_array(source, order)
     data = np.fromfile(source, dtype=np.uint8)
     with silenced():  # libpng/libjpeg chatter on a corrupt file: the ValueError below says it
         image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
@@ -133,6 +143,8 @@ def write_image(
         hint = f"; write {' or '.join(able)} to keep it" if able else ""
         raise ValueError(f"{_extension(target)} cannot store {image.dtype} samples (it stores {', '.join(allowed)}){hint}")
     pixels = _swap_rb(image) if order == "rgb" else image
+    if _extension(target) == ".exr":
+        return _write_exr_array(target, image if order == "rgb" else _swap_rb(image))
     params = [cv2.IMWRITE_JPEG_QUALITY, int(jpeg_quality)] if _extension(target) in (".jpg", ".jpeg") else []
     with silenced():
         ok, encoded = cv2.imencode(_extension(target), pixels, params)
@@ -141,3 +153,27 @@ def write_image(
     # through a file object, not ndarray.tofile: a short write (full disk) then raises with its errno
     atomic_write_bytes(target, encoded.tobytes())
     return target
+
+
+def _read_exr_array(source: Path, order: ChannelOrder) -> np.ndarray:
+    """An EXR of one of :data:`EXR_CHANNEL_SETS` as ``H x W(x C)`` float32 (HALF widened exactly)."""
+    from .exr_io import read_exr
+
+    exr = read_exr(source)
+    names = tuple(exr.channels)
+    for wanted in EXR_CHANNEL_SETS.values():
+        if sorted(names) == sorted(wanted):
+            stack = np.stack([exr.channels[name].astype(np.float32) for name in wanted], axis=-1)
+            image = stack[:, :, 0] if stack.shape[2] == 1 else stack
+            return _swap_rb(image) if order == "bgr" else image
+    raise ValueError(f"OpenEXR image {str(source)!r} has channels {', '.join(sorted(names))}, not one of "
+                     "Y, RGB, RGBA: read it with glradial.media.exr_io.read_exr")
+
+
+def _write_exr_array(target: Path, image: np.ndarray) -> Path:
+    """``image`` (RGB order) as an EXR with the :data:`EXR_CHANNEL_SETS` names, its dtype kept."""
+    from .exr_io import ExrImage, write_exr
+
+    planes = image[:, :, None] if image.ndim == 2 else image
+    names = EXR_CHANNEL_SETS[planes.shape[2]]
+    return write_exr(target, ExrImage({name: planes[:, :, i] for i, name in enumerate(names)}))

@@ -32,6 +32,7 @@ import glob
 import os
 import re
 import shutil
+import threading
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -52,6 +53,7 @@ __all__ = [
     "VideoReader",
     "VideoWriter",
     "check_video_overwrite",
+    "has_alpha",
     "is_sequence",
     "probe_video",
     "sequence_files",
@@ -130,6 +132,18 @@ class VideoInfo:
     color_range: int = 0
     field_order: int = 0
     bit_rate: int = 0
+    interlaced: bool = False
+
+    @property
+    def fields(self) -> str:
+        """``"tff"``, ``"bff"`` or ``"progressive"``: the stream's field order (FFmpeg's
+        AVFieldOrder: TT/TB = top field first, BB/BT = bottom first); a stream that states none but
+        whose first frame is flagged interlaced is taken as TFF (the HD broadcast order)."""
+        if self.field_order in (FIELD_TT, FIELD_TB):
+            return "tff"
+        if self.field_order in (FIELD_BB, FIELD_BT):
+            return "bff"
+        return "tff" if self.interlaced and self.field_order != FIELD_PROGRESSIVE else "progressive"
 
     @property
     def fps(self) -> float:
@@ -180,8 +194,24 @@ def _bit_depth(pix_fmt: str) -> int:
         return 8
 
 
-def _rgb_format(depth: int, order: str) -> str:
+#: FFmpeg's AVFieldOrder values
+FIELD_UNKNOWN, FIELD_PROGRESSIVE, FIELD_TT, FIELD_BB, FIELD_TB, FIELD_BT = range(6)
+#: ``VideoInfo.fields`` name -> the AVFieldOrder written
+FIELD_ORDER_CODES = {"progressive": FIELD_PROGRESSIVE, "tff": FIELD_TT, "bff": FIELD_BB}
+
+
+def _rgb_format(depth: int, order: str, alpha: bool = False) -> str:
+    if alpha:
+        return f"{order}a" if depth <= 8 else f"{order}a64le"
     return f"{order}24" if depth <= 8 else f"{order}48le"
+
+
+def has_alpha(pix_fmt: str) -> bool:
+    """Whether FFmpeg's pixel format ``pix_fmt`` stores an alpha plane (yuva444p12le, rgba, gbrap ...)."""
+    try:
+        return any(component.is_alpha for component in av.VideoFormat(pix_fmt).components)
+    except (ValueError, av.FFmpegError):
+        return False
 
 
 def _matrix(colorspace: int, height: int) -> int:
@@ -206,7 +236,9 @@ class VideoReader:
     wider than it in the conversion (area filter), e.g. for an estimator; ``keep_decoded`` hands
     each decoded frame along too, for :meth:`convert` at another size. ``info`` describes the
     stream. A file that cannot be opened or has no video raises ``ValueError`` naming it; a decoding
-    error midway raises ``ValueError`` with the number of frames decoded before it.
+    error midway raises ``ValueError`` with the number of frames decoded before it. ``alpha=True``:
+    frames of a source with alpha (ProRes 4444, PNG or QuickTime RLE with alpha, FFV1 yuva ...) are
+    ``H x W x 4``, alpha last, straight (as FFmpeg decodes them); other sources stay 3 channels.
     """
 
     def __init__(
@@ -218,6 +250,7 @@ class VideoReader:
         max_width: int | None = None,
         rate: Fraction | None = None,
         keep_decoded: bool = False,
+        alpha: bool = False,
     ) -> None:
         if order not in ("rgb", "bgr"):
             raise ValueError(f"order must be 'rgb' or 'bgr', got {order!r}")
@@ -254,6 +287,7 @@ class VideoReader:
             color_trc=tags[1],
             colorspace=tags[2],
             color_range=tags[3],
+            interlaced=tags[4],
             field_order=int(getattr(context, "field_order", 0) or 0),
             bit_rate=int(context.bit_rate or stream.bit_rate or 0) if hasattr(stream, "bit_rate") else int(context.bit_rate or 0),
         )
@@ -265,7 +299,17 @@ class VideoReader:
         self.keep_decoded = keep_decoded
         self.frames_read = 0
         self._last_pts: int | None = None
-        self._format = _rgb_format(self.info.bit_depth, order)
+        self._take_alpha(alpha)
+
+    def _take_alpha(self, wanted: bool) -> None:
+        """Set :attr:`alpha` (frames carry the source's alpha as a 4th channel: ``alpha=True`` and a
+        pix_fmt with alpha) and the conversion format; VP8/VP9 with an alpha plane get libvpx's
+        decoder, which returns it (yuva420p)."""
+        self._decoder = _alpha_decoder(self.stream) if wanted else None
+        if self._decoder is not None:
+            self.info = VideoInfo(**{**self.info.__dict__, "pix_fmt": self._decoder.pix_fmt or "yuva420p"})
+        self.alpha = bool(wanted) and has_alpha(self.info.pix_fmt)
+        self._format = _rgb_format(self.info.bit_depth, self.order, self.alpha)
 
     # -- frames --------------------------------------------------------------------------------
     def convert(self, frame: av.VideoFrame, max_width: int | None = None) -> np.ndarray:
@@ -290,7 +334,7 @@ class VideoReader:
                     if packet.dts is not None:
                         yield CopiedPacket(packet)
                     continue
-                for frame in packet.decode():
+                for frame in (self._decoder.decode(packet) if self._decoder is not None else packet.decode()):
                     image = self.convert(frame, self.max_width)
                     self.frames_read += 1
                     if frame.pts is not None:
@@ -339,15 +383,16 @@ class VideoReader:
         self.close()
 
 
-def _first_frame_tags(path: Path, options: dict) -> tuple[int, int, int, int]:
-    """Colour tags (primaries, transfer, matrix, range) of the first decoded frame: what the
-    bitstream says (the decoder context before decoding may report defaults instead)."""
+def _first_frame_tags(path: Path, options: dict) -> tuple[int, int, int, int, bool]:
+    """Colour tags (primaries, transfer, matrix, range) and the interlaced flag of the first decoded
+    frame: what the bitstream says (the decoder context before decoding may report defaults instead)."""
     try:
         with av.open(str(path), "r", options=options) as container:
             frame = next(container.decode(video=0))
-            return int(frame.color_primaries), int(frame.color_trc), int(frame.colorspace), int(frame.color_range)
+            return (int(frame.color_primaries), int(frame.color_trc), int(frame.colorspace), int(frame.color_range),
+                    bool(frame.interlaced_frame))
     except (av.FFmpegError, StopIteration, UnicodeDecodeError):
-        return _UNSPECIFIED, _UNSPECIFIED, _UNSPECIFIED, 0
+        return _UNSPECIFIED, _UNSPECIFIED, _UNSPECIFIED, 0, False
 
 
 def _copyable(stream: av.stream.Stream) -> bool:
@@ -355,6 +400,63 @@ def _copyable(stream: av.stream.Stream) -> bool:
         return False
     tag = getattr(stream.codec_context, "codec_tag", "") if stream.codec_context else ""
     return not (stream.type == "data" and (tag == "tmcd" or "timecode" in stream.metadata))
+
+
+class _FieldFlags:
+    """Marks frames interlaced with a field order (FFmpeg's ``setfield`` filter: PyAV cannot set a
+    frame's flags), which the encoders (libx264, prores_ks, mpeg2video ...) follow."""
+
+    def __init__(self, fields: str) -> None:
+        self.fields = fields
+        self._graph: av.filter.Graph | None = None
+        self._lock = threading.Lock()
+
+    def __call__(self, frame: av.VideoFrame) -> av.VideoFrame:
+        with self._lock:
+            if self._graph is None:
+                graph = av.filter.Graph()
+                source = graph.add_buffer(width=frame.width, height=frame.height, format=frame.format.name,
+                                          time_base=frame.time_base)
+                mark, sink = graph.add("setfield", self.fields), graph.add("buffersink")
+                source.link_to(mark)
+                mark.link_to(sink)
+                graph.configure()
+                self._graph = graph
+            self._graph.push(frame)
+            marked = self._graph.pull()
+        marked.pts, marked.time_base = frame.pts, frame.time_base
+        return marked
+
+
+#: FFmpeg's native VP8/VP9 decoders drop the alpha a WebM file stores beside the picture
+#: (Matroska AlphaMode, BlockAdditional); libvpx's decoders return it
+_ALPHA_DECODERS = {"vp8": "libvpx", "vp9": "libvpx-vp9"}
+
+
+def _alpha_decoder(stream: av.video.stream.VideoStream) -> "av.codec.context.CodecContext | None":
+    """A libvpx decoder for a VP8/VP9 stream that states an alpha plane (``alpha_mode`` = 1); None
+    otherwise (or when this FFmpeg has no libvpx decoder)."""
+    name = _ALPHA_DECODERS.get(stream.codec_context.name)
+    if name is None or stream.metadata.get("alpha_mode") != "1":
+        return None
+    try:
+        decoder = av.CodecContext.create(name, "r")
+    except (av.FFmpegError, ValueError):
+        return None
+    decoder.extradata = stream.codec_context.extradata
+    decoder.pix_fmt = "yuva420p"
+    return decoder
+
+
+def _interlace_encoder(context: av.codec.context.CodecContext, info: VideoInfo) -> "_FieldFlags | None":
+    """For an interlaced ``info`` (:attr:`VideoInfo.fields`), ask the encoder for interlaced coding
+    (field DCT and motion estimation) and return the frame marker; None for progressive."""
+    if info.fields == "progressive":
+        return None
+    context.flags |= av.codec.context.Flags.interlaced_dct | av.codec.context.Flags.interlaced_me
+    if info.field_order in (FIELD_UNKNOWN, FIELD_PROGRESSIVE):  # frames flagged interlaced, stream silent
+        context.field_order = FIELD_ORDER_CODES[info.fields]
+    return _FieldFlags(info.fields)
 
 
 def probe_video(path: str | os.PathLike) -> VideoInfo:
@@ -424,13 +526,16 @@ def _pick_pix_fmt(codec: av.Codec, wanted: str | None, source: str) -> str:
 
     def layout(name: str) -> tuple:
         fmt = av.VideoFormat(name, 64, 64)  # a size, so that the chroma planes have one
-        return (fmt.is_rgb, tuple(c.width for c in fmt.components[:3]), tuple(c.height for c in fmt.components[:3]))
+        return (fmt.is_rgb, tuple(c.width for c in fmt.components[:3]), tuple(c.height for c in fmt.components[:3]),
+                has_alpha(name))
 
     wanted_layout = layout(source)
 
     def distance(name: str) -> tuple[int, int, int]:
         bits = _bit_depth(name)
-        return (abs(bits - depth) + (100 if bits < depth else 0), 0 if layout(name) == wanted_layout else 1, formats.index(name))
+        alpha_lost = 1000 if has_alpha(source) and not has_alpha(name) else 0  # a key is never dropped by default
+        return (abs(bits - depth) + (100 if bits < depth else 0) + alpha_lost, 0 if layout(name) == wanted_layout else 1,
+                formats.index(name))
 
     return min(formats, key=distance)
 
@@ -549,6 +654,7 @@ class VideoWriter:
                 context.field_order = info.field_order
             except (AttributeError, TypeError, ValueError):
                 pass
+        self._fields = _interlace_encoder(context, info)
         codec_options: dict[str, str] = {}
         if options.crf is not None:
             if codec.name not in CRF_ENCODERS:
@@ -595,10 +701,13 @@ class VideoWriter:
         worker thread can convert while the caller encodes."""
         image = np.asarray(image)
         width, height = self.info.size
-        if image.shape != (height, width, 3) or image.dtype not in (np.uint8, np.uint16):
-            raise ValueError(f"video frames must be {height}×{width}×3 uint8 or uint16, got shape {image.shape} {image.dtype}")
+        if image.shape not in ((height, width, 3), (height, width, 4)) or image.dtype not in (np.uint8, np.uint16):
+            raise ValueError(f"video frames must be {height}×{width}×3 (or ×4 with alpha) uint8 or uint16, got shape "
+                             f"{image.shape} {image.dtype}")
+        if image.shape[2] == 4 and not has_alpha(self._pix_fmt):
+            image = image[:, :, :3]  # an output format without alpha, chosen with pix_fmt (check_alpha_kept)
         depth = 8 if image.dtype == np.uint8 else 16
-        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order))
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order, image.shape[2] == 4))
         frame = frame.reformat(format=self._pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
                                dst_color_range=self._range, interpolation="BILINEAR")
         # the source's tags, not those of the conversion (which names its matrix even when untagged)
@@ -606,7 +715,17 @@ class VideoWriter:
         frame.color_primaries, frame.color_trc = self.info.color_primaries, self.info.color_trc
         frame.pts = pts
         frame.time_base = self.info.time_base  # the muxer may give the stream another time base
-        return frame
+        return self._fields(frame) if self._fields is not None else frame
+
+    def check_alpha_kept(self) -> None:
+        """``ValueError`` when the source has alpha (``info.pix_fmt``) and the output format has none,
+        unless that format was chosen (``options.pix_fmt``): a key is never dropped silently."""
+        if has_alpha(self.info.pix_fmt) and not has_alpha(self._pix_fmt) and self.options.pix_fmt is None:
+            raise ValueError(
+                f"the input has alpha ({self.info.pix_fmt}) but {str(self.path)!r} would be written as {self._pix_fmt} "
+                f"({self._codec_name}), which stores none: write ProRes 4444 (.mov, --codec prores), FFV1 (.mkv), VP9 in "
+                f".webm or a PNG sequence to keep it, or give --pix-fmt (e.g. {self._pix_fmt}) to drop it"
+            )
 
     def write(self, image: np.ndarray | av.VideoFrame, pts: int | None = None) -> None:
         frame = image if isinstance(image, av.VideoFrame) else self.frame(image, pts)

@@ -33,6 +33,12 @@ frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k
   Such pixels get ``fill`` exactly; every other pixel is interpolated with taps beyond the edge
   repeating the edge pixel (``BORDER_REPLICATE``), so the fill never bleeds into valid pixels
   (OpenCV's ``cv2.undistort`` instead blends the outermost ring with black).
+* ``alpha``: a 4-channel frame is RGBA with alpha last; ``"straight"`` (default) frames are
+  interpolated premultiplied and returned straight, ``"premultiplied"`` frames (and 4 channels that
+  are not colour and alpha) are resampled channel by channel (:mod:`glradial.remapping.alpha`). Textures given
+  to :meth:`Remapper.render_texture` are resampled as stored: give it premultiplied ones.
+* A lens and fit that would leave most of the output empty (under :data:`MIN_COVERAGE` of its pixels
+  with a source) is a ``ValueError`` naming the lens, on every backend (:func:`check_coverage`).
 * ``interpolation``: ``"nearest"``, ``"linear"`` (bilinear) or ``"cubic"`` (Keys, a = -0.75, the
   kernel of OpenCV's ``INTER_CUBIC``).
 * ``backend``: ``"gl"`` (the shaders, through :class:`Remapper` on the thread's EGL context),
@@ -74,6 +80,7 @@ from ..lens.options import (
     check_choice,
     check_positive,
 )
+from .alpha import Alpha, remap_with_alpha
 
 _CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
 _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}
@@ -219,7 +226,43 @@ def _checked_scale(lens: Lens, size: tuple[int, int], direction: str, fit: Fit, 
         s = lens.fit_scale(size, fit, direction)
     check_numeric_policy(lens, size, direction, s, "fit" if scale is None else "scale")
     lens.check_frame(size, s)
+    check_coverage(lens, size, direction, s, fit if scale is None else s)
     return s
+
+
+#: the smallest fraction of a remap's output pixels that must have a source. Below it the output
+#: is mostly ``fill``: a lens far outside any real one (``k1=5``: 47% on a 16:9 frame with fit
+#: "same", ``k1=1e6``: 0%). Real lenses keep far more: 68% or more on every fit across the
+#: estimator's training range (k1 in [-0.7, 0.3], k2 up to 0.2), 100% with fit "crop".
+MIN_COVERAGE = 0.5
+#: the output is sampled on a grid this many points wide (the fraction is then known to ~1%)
+COVERAGE_GRID = 96
+
+
+def check_coverage(lens: Lens, size: tuple[int, int], direction: str, scale: float, fit: object = "same") -> float:
+    """The fraction of the output of a ``size`` frame whose pixels have a source; ``ValueError``
+    naming the lens and ``fit`` when it is below :data:`MIN_COVERAGE` (mostly empty output)."""
+    covered = _coverage(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, size, direction, scale)
+    if covered < MIN_COVERAGE:
+        raise ValueError(
+            f"lens k1={lens.k1:g}, k2={lens.k2:g} with fit={fit!r} leaves {1 - covered:.0%} of the {size[0]}×{size[1]} "
+            f"output with no source (at least {MIN_COVERAGE:.0%} must show the input): the coefficients are far "
+            f"outside a real lens (width-normalised: image width = 1; broadcast lenses have |k1| < 1)"
+        )
+    return covered
+
+
+@functools.lru_cache(maxsize=64)
+def _coverage(k1: float, k2: float, cx: float, cy: float, pixel_aspect: float, size: tuple[int, int], direction: str,
+              scale: float) -> float:
+    """:func:`check_coverage`'s fraction, on a grid of at most :data:`COVERAGE_GRID` points wide with
+    the frame's aspect (lens units do not depend on the resolution)."""
+    width, height = size
+    grid_w = min(width, COVERAGE_GRID)
+    grid = (grid_w, max(1, round(height * grid_w / width)))
+    map_x, map_y = Lens(k1, k2, cx, cy, pixel_aspect).maps(grid, direction, scale=scale)
+    inside = (map_x >= -0.5) & (map_x <= grid[0] - 0.5) & (map_y >= -0.5) & (map_y <= grid[1] - 0.5)
+    return float(np.mean(inside))
 
 
 @functools.lru_cache(maxsize=64)
@@ -287,11 +330,13 @@ class Remapper:
         interpolation: Interpolation = "linear",
         fill: float | Sequence[float] = 0,
         out: np.ndarray | None = None,
+        alpha: Alpha = "straight",
     ) -> np.ndarray:
         """Undistort one ``frame`` (uint8, uint16 or float32) on the GPU with a :class:`Lens` or
         ``k1, k2``; see the module docstring. ``out``: an array of the frame's shape and dtype to read
-        the result into (returned). Batches and float64: :func:`correct`."""
-        return self._remap(frame, _lens(lens, k2), "undistort", fit, interpolation, fill, "exact", out)
+        the result into (returned). ``alpha``: the convention of a 4-channel frame
+        (:mod:`glradial.remapping.alpha`). Batches and float64: :func:`correct`."""
+        return self._remap_alpha(frame, _lens(lens, k2), "undistort", fit, interpolation, fill, "exact", out, alpha)
 
     def distort(
         self,
@@ -304,10 +349,11 @@ class Remapper:
         fill: float | Sequence[float] = 0,
         inverse: InverseMethod = "exact",
         out: np.ndarray | None = None,
+        alpha: Alpha = "straight",
     ) -> np.ndarray:
         """Apply the lens (a :class:`Lens` or ``k1, k2``) to one undistorted ``frame`` on the GPU;
-        see the module docstring."""
-        return self._remap(frame, _lens(lens, k2), "distort", fit, interpolation, fill, inverse, out)
+        see the module docstring (``alpha``: :mod:`glradial.remapping.alpha`)."""
+        return self._remap_alpha(frame, _lens(lens, k2), "distort", fit, interpolation, fill, inverse, out, alpha)
 
     def render_texture(
         self,
@@ -333,7 +379,8 @@ class Remapper:
         (``gl_FragCoord.y = 0.5``), no flip; a window's default framebuffer shows row 0 at the
         bottom. ``viewport = (x, y, width, height)`` in ``target`` pixels (default: all of it) is
         the output frame; its size sets the fit and the fold-over check. ``fill`` is RGBA in
-        texture units (0..1 for normalized textures). ``scale`` overrides ``fit``. The caller's
+        texture units (0..1 for normalized textures). Texels are interpolated as stored: a key and
+        fill must be premultiplied to keep their edges free of fringes. ``scale`` overrides ``fit``. The caller's
         blend, scissor and other state apply; the sampler state of ``source`` is ignored (taps
         are texelFetch).
         """
@@ -394,6 +441,17 @@ class Remapper:
         return self._source.glo, self._target.glo
 
     # -- internals -------------------------------------------------------------------------------
+    def _remap_alpha(self, frame, lens, direction, fit, interpolation, fill, inverse, out, alpha) -> np.ndarray:
+        """:meth:`_remap` in ``alpha``'s convention (:func:`glradial.remapping.alpha.remap_with_alpha`)."""
+        result = remap_with_alpha(frame, fill, alpha, lambda work, fill_values: self._remap(
+            work, lens, direction, fit, interpolation, fill_values, inverse, out if work is frame else None))
+        if out is not None and result is not out:
+            if not (isinstance(out, np.ndarray) and out.shape == result.shape and out.dtype == result.dtype):
+                raise ValueError(f"out must be a C-contiguous {result.dtype} array of shape {result.shape}")
+            out[...] = result
+            return out
+        return result
+
     def _check_alive(self) -> None:
         """``RuntimeError`` once released or off the owning thread; then make this Remapper's
         context the thread's current one (:meth:`egl.GLOwner.enter`): creating another context on
@@ -649,6 +707,7 @@ def correct(
     interpolation: Interpolation = "linear",
     fill: float | Sequence[float] = 0,
     backend: Backend = "auto",
+    alpha: Alpha = "straight",
 ) -> np.ndarray:
     """Remove a lens from ``frame`` (or a batch of frames); a new array of the same shape and dtype.
 
@@ -659,8 +718,14 @@ def correct(
     ``K, dist = lens.to_opencv((W, H))``. Raises ``ValueError`` when the lens folds over inside the
     (fitted) frame, for bad shapes and unknown option values, ``TypeError`` for non-array frames,
     unsupported dtypes, non-real coefficients and a Lens given together with ``k2``.
+
+    ``alpha``: the convention of a 4-channel (RGBA) frame, ``"straight"`` (default; PNG, ProRes 4444)
+    or ``"premultiplied"`` (OpenEXR; also for 4 channels that are not colour and alpha). Either way
+    the frame is interpolated premultiplied, so a key's edge has no fringe, and returned in the
+    convention it came in (:mod:`glradial.remapping.alpha`).
     """
-    return _run(frame, lens, k2, "undistort", fit, interpolation, fill, "exact", backend)
+    return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
+        work, lens, k2, "undistort", fit, interpolation, fill_values, "exact", backend))
 
 
 def distort(
@@ -673,14 +738,17 @@ def distort(
     fill: float | Sequence[float] = 0,
     inverse: InverseMethod = "exact",
     backend: Backend = "auto",
+    alpha: Alpha = "straight",
 ) -> np.ndarray:
     """Apply a lens (a :class:`glradial.Lens`, or ``k1, k2``) to an undistorted ``frame`` (or a
     batch); a new array, same shape and dtype.
 
     Each output pixel samples the input at the inverse of the lens (``inverse="exact"``: bounded
     Newton, pixels the lens never reaches get ``fill``; ``"drap"``: the paper's four-term
-    polynomial, up to ~0.002 lens units off at the extremes of its k1 range). Same conventions and
+    polynomial, up to 0.0015 image widths off inside the frame width at k1 = -0.7 and 0.022 at the 16:9
+    corner: docs/CROPS.md). Same conventions and
     errors as :func:`correct`; ``correct(distort(x, lens), lens) ≈ x`` for the same scale
-    (``fit="same"``, the same number, or "crop" here with "full" there).
+    (``fit="same"``, the same number, or "crop" here with "full" there). ``alpha``: as in :func:`correct`.
     """
-    return _run(frame, lens, k2, "distort", fit, interpolation, fill, inverse, backend)
+    return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
+        work, lens, k2, "distort", fit, interpolation, fill_values, inverse, backend))

@@ -487,8 +487,11 @@ class CropRenderer:
     def render(self, params: Sequence[CropParams], out: np.ndarray | None = None) -> np.ndarray:
         """Render crops -> array ``(N, h, w, C)`` of the panorama's dtype (``(N, h, w)`` for an H×W one).
 
-        With ``inverse="exact"`` pixels that no undistorted point maps to are 0; with ``"drap"`` a lens
-        that fails :func:`lens_covers_frame` on ``size`` is a ``ValueError``.
+        A lens that folds over inside the ``size`` frame (``lensfuncs.fold_radius`` at or below the
+        corner radius) is a ``ValueError`` on both paths, as in :func:`glradial.distort`. With
+        ``inverse="exact"`` pixels that no undistorted point maps to (beyond a barrel lens's reach)
+        are 0; with ``"drap"`` a lens that fails :func:`lens_covers_frame` on ``size`` is a
+        ``ValueError``.
 
         ``out`` may be a preallocated C-contiguous array of that shape and dtype. Crops are drawn
         ``tiles_per_pass`` at a time (one instanced draw call and one readback per pass).
@@ -502,6 +505,12 @@ class CropRenderer:
         for i, item in enumerate(params):
             if not isinstance(item, CropParams):
                 raise TypeError(f"params[{i}] must be a CropParams, got {type(item).__name__}")
+            if lensfuncs.fold_radius(item.k1, item.k2) <= corner_radius(self.size):
+                raise ValueError(
+                    f"params[{i}]: lens k1={item.k1:g}, k2={item.k2:g} folds over at radius "
+                    f"{lensfuncs.fold_radius(item.k1, item.k2):.4f} inside the {self.size[0]}×{self.size[1]} "
+                    f"frame (corner radius {corner_radius(self.size):.4f}): no crop is rendered through it"
+                )
             if self.inverse == "drap" and not lens_covers_frame(item.k1, item.k2, self.size):
                 raise ValueError(
                     f"params[{i}]: lens k1={item.k1:g}, k2={item.k2:g} folds over or leaves parts of a "

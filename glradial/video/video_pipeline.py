@@ -32,7 +32,7 @@ import os
 import queue
 import sys
 import threading
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from typing import Any, Callable, Iterable, Iterator
 
@@ -42,7 +42,7 @@ from ..lens.lens import Lens, as_lens, corner_radius
 from ..lens.metrics import REPORT_WIDTH, max_displacement
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
-from ..media.video_io import CopiedPacket, EncodeOptions, VideoFrame, VideoReader, VideoWriter
+from ..media.video_io import FIELD_ORDER_CODES, CopiedPacket, EncodeOptions, VideoFrame, VideoInfo, VideoReader, VideoWriter
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .smoothing import ShotDetector, smooth_track
 
@@ -275,20 +275,22 @@ class _FrameCorrector:
     :class:`~glradial.remapping.remap.Remapper` with its own context on first use there (falling back to the
     CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
 
-    def __init__(self, backend: str, fit: str, interpolation: str) -> None:
-        from ..lens.options import BACKENDS
+    def __init__(self, backend: str, fit: str, interpolation: str, direction: str = "undistort", **extra: object) -> None:
+        from ..lens.options import BACKENDS, DIRECTIONS
         from ..remapping.remap import auto_backend
 
         if backend not in BACKENDS:
             raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        if direction not in DIRECTIONS:
+            raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
         self.backend = auto_backend() if backend == "auto" else backend
-        self.fit, self.interpolation = fit, interpolation
+        self.fit, self.interpolation, self.direction = fit, interpolation, direction
+        self.extra = extra  # inverse= (distort), alpha=
+        self.interlaced = False  # True: each field on its own geometry (glradial.remapping.fields)
         self._remapper = None
         self._last: Lens | None = None
 
     def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
-        from ..remapping.remap import Remapper, correct
-
         height, width = image.shape[:2]
         last = self._last
         if (last is not None and (last.cx, last.cy, last.pixel_aspect) == (lens.cx, lens.cy, lens.pixel_aspect)
@@ -297,17 +299,39 @@ class _FrameCorrector:
             lens = last  # the same maps (cached) for a change no point of the frame can show
         else:
             self._last = lens
+        if not self.interlaced:
+            return self._remap(image, lens, self.fit)
+        from ..remapping.fields import remap_fields
+
+        return remap_fields(image, lens, lens.fit_scale((width, height), self.fit, self.direction), self._remap)
+
+    def _remap(self, image: np.ndarray, lens: Lens, fit: object) -> np.ndarray:
+        from ..remapping.remap import Remapper, correct, distort
+
+        options = dict(fit=fit, interpolation=self.interpolation, **self.extra)
         if self.backend == "gl":
             if self._remapper is None:
                 self._remapper = Remapper()
             if max(image.shape[:2]) <= self._remapper.max_texture_size:
-                return self._remapper.correct(image, lens, fit=self.fit, interpolation=self.interpolation)
-        return correct(image, lens, fit=self.fit, interpolation=self.interpolation, backend="cpu")
+                method = self._remapper.correct if self.direction == "undistort" else self._remapper.distort
+                return method(image, lens, **options)
+        return (correct if self.direction == "undistort" else distort)(image, lens, backend="cpu", **options)
 
     def release(self) -> None:
         if self._remapper is not None:
             self._remapper.release()
             self._remapper = None
+
+
+def _with_fields(info: VideoInfo, field_order: str) -> VideoInfo:
+    """``info`` with ``field_order`` forced (``"auto"``: unchanged)."""
+    from ..remapping.fields import FIELD_ORDERS
+
+    if field_order not in FIELD_ORDERS:
+        raise ValueError(f"field_order must be one of {', '.join(FIELD_ORDERS)}, got {field_order!r}")
+    if field_order == "auto":
+        return info
+    return replace(info, field_order=FIELD_ORDER_CODES[field_order], interlaced=field_order != "progressive")
 
 
 def correct_video(
@@ -324,19 +348,27 @@ def correct_video(
     overwrite: bool = False,
     frames_expected: int | None = None,
     rate: Fraction | None = None,
+    direction: str = "undistort",
+    field_order: str = "auto",
+    **remap_options: object,
 ) -> int:
-    """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` (a :class:`Lens` or
-    ``(k1, k2)``) into ``target``
+    """Pass 2: correct (``direction="distort"``: distort) every frame of ``source`` with
+    ``lenses(frame_index)`` (a :class:`Lens` or ``(k1, k2)``) into ``target``
     (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.media.video_io`;
     encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
     track's length): a video with another frame count is an error and leaves no output. A header
     frame count that differs from the frames decoded gives a warning on stderr with both counts.
-    ``rate``: frame rate of an image-sequence input (default 25)."""
-    corrector = _FrameCorrector(backend, fit, interpolation)
-    with VideoReader(source, order="rgb", copy_streams=True, rate=rate) as reader:
-        info = reader.info
+    ``rate``: frame rate of an image-sequence input (default 25). ``remap_options``: ``inverse``
+    (distort) and ``alpha`` of :func:`glradial.distort`. ``field_order``: ``"auto"`` (the stream's,
+    :attr:`VideoInfo.fields`), or ``"progressive"``, ``"tff"``, ``"bff"`` to force one; interlaced
+    frames are remapped field by field (:mod:`glradial.remapping.fields`) and written with that field order."""
+    corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
+    with VideoReader(source, order="rgb", copy_streams=True, rate=rate, alpha=True) as reader:
+        info = _with_fields(reader.info, field_order)
+        corrector.interlaced = info.fields != "progressive"
         writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
         try:
+            writer.check_alpha_kept()
             def work(item):
                 if isinstance(item, VideoFrame):
                     lens = as_lens(lenses(item.index))
