@@ -169,20 +169,11 @@ def _compact(evidence: LineEvidence) -> tuple[np.ndarray, np.ndarray, np.ndarray
 
 
 def _undistort_radius(r_d: np.ndarray, k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
-    """Exact inverse radius for L lenses (``k1``, ``k2`` of shape (L, 1)) and M radii -> (L, M);
-    NaN where a lens folds over before reaching the radius."""
-    b1, b2, b3, b4 = lensfuncs.drap_coefficients(k1, k2)
-    rd2 = r_d * r_d
-    r = r_d * (1.0 + rd2 * (b1 + rd2 * (b2 + rd2 * (b3 + rd2 * b4))))
-    for _ in range(4):
-        r2 = r * r
-        f = r * (1.0 + r2 * (k1 + k2 * r2)) - r_d
-        slope = 1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2)
-        r = r - f / np.maximum(slope, 1e-6)
-    r2 = r * r
-    slope = 1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2)
-    bad = (np.abs(r * (1.0 + r2 * (k1 + k2 * r2)) - r_d) > 1e-7) | (slope <= 0.0) | (r < 0.0)
-    return np.where(bad, np.nan, r)
+    """The lens model's exact inverse (:func:`~glradial.lens.lensfuncs.undistort_radius_exact`:
+    Drap-Lefevre seed, Newton clamped at the fold radius) for lenses ``k1``, ``k2`` that broadcast
+    against the radii (e.g. (L, 1) against (M,) -> (L, M)); NaN where a lens does not reach the radius."""
+    r_u, valid = lensfuncs.undistort_radius_exact(r_d, k1, k2)
+    return np.where(valid, r_u, np.nan)
 
 
 class _Problem:
