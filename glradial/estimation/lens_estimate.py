@@ -101,7 +101,9 @@ def frame_evidence(frame: np.ndarray, net: tuple[float, float], view_features: t
     usable = fit.ok and math.isfinite(fit.k1) and math.isfinite(fit.k2) and math.isfinite(fit.sigma_px)
     return FrameEvidence(net, (float(fit.k1), float(fit.k2)) if usable else None,
                          float(fit.sigma_px) if usable else math.inf, int(fit.chains) if usable else 0,
-                         int(fit.candidates), green, gray_std, float(evidence.edge_density), net_error)
+                         int(fit.candidates), green, gray_std, float(evidence.edge_density), net_error,
+                         float(fit.rms_px), int(fit.families), int(fit.conics), float(fit.reach),
+                         float(fit.difficulty) if usable else math.inf)
 
 
 def judge(evidence: FrameEvidence, method: str, trust: TrustModel | None = None) -> LensEstimate:

@@ -9,7 +9,7 @@ Convention:
 
 Bound (split conformal):
     * a line fit: ``scale = sqrt(floor² + (a · sigma)² + (w · disagreement)²)`` where ``sigma`` is the
-      fit's own 1-sigma (:attr:`glradial.estimation.line_fit.LineFit.sigma_px`) and ``disagreement`` the displacement
+      fit's own 1-sigma or, with ``scale_feature = "difficulty"``, its difficulty (:attr:`glradial.estimation.line_fit.LineFit.sigma_px`) and ``disagreement`` the displacement
       between the line fit and the CNN; bound ``= q_lines · scale``;
     * the CNN alone: bound ``= q_net`` or, when its model has an error head and the calibration
       measured it, ``q_net_rel · net_error_px`` (the network's own expected error of the frame);
@@ -70,7 +70,9 @@ class FrameEvidence:
     the 16:9 view in its dominant pitch-green hue window (:func:`view_features`); ``gray_std``: grey-level standard deviation (0..255);
     ``edge_density``: share of Canny edge pixels (``None`` when lines were not run);
     ``net_error_px``: the network's own expected error (its error head, px at 1920; ``None`` for a
-    model without one).
+    model without one); ``rms_px``, ``families``, ``conics``, ``reach``, ``fit_difficulty``: the line
+    fit's diagnostics (:class:`glradial.estimation.line_fit.LineFit`; ``fit_difficulty`` inf without
+    a fit, ``None`` when not measured).
     """
 
     net: tuple[float, float]
@@ -82,6 +84,11 @@ class FrameEvidence:
     gray_std: float = 255.0
     edge_density: float | None = None
     net_error_px: float | None = None
+    rms_px: float | None = None
+    families: int = 0
+    conics: int = 0
+    reach: float | None = None
+    fit_difficulty: float | None = None
 
     @property
     def disagreement_px(self) -> float:
@@ -92,13 +99,18 @@ class FrameEvidence:
 
     @property
     def difficulty(self) -> float:
-        """The fit's own difficulty: its 1-sigma (px at 1920; inf without a fit). Larger is harder."""
-        return float(self.sigma_px) if self.lines is not None else math.inf
+        """The fit's own difficulty (:attr:`glradial.estimation.line_fit.LineFit.difficulty`, or its
+        1-sigma where not measured; px at 1920, inf without a fit). Larger is harder."""
+        if self.lines is None:
+            return math.inf
+        return float(self.fit_difficulty) if self.fit_difficulty is not None else float(self.sigma_px)
 
     def as_dict(self) -> dict:
         """JSON-ready (inf as None)."""
         out = asdict(self)
         out["sigma_px"] = None if not math.isfinite(self.sigma_px) else self.sigma_px
+        if self.fit_difficulty is not None and not math.isfinite(self.fit_difficulty):
+            out["fit_difficulty"] = "inf"
         return out
 
     @classmethod
@@ -108,6 +120,8 @@ class FrameEvidence:
         values["net"] = tuple(values["net"])
         values["lines"] = tuple(values["lines"]) if values.get("lines") is not None else None
         values["sigma_px"] = math.inf if values.get("sigma_px") is None else values["sigma_px"]
+        if values.get("fit_difficulty") == "inf":
+            values["fit_difficulty"] = math.inf
         return cls(**values)
 
 
@@ -157,12 +171,15 @@ class TrustModel:
     noise_edge_density: float
     q_net_rel: float = 0.0
     q_no_lines_rel: float = 0.0
+    scale_feature: str = "sigma_px"
     note: str = ""
 
     def lines_scale(self, evidence: FrameEvidence) -> float:
-        """The per-frame scale of a line fit (px at 1920): its 1-sigma, disagreement and floor."""
+        """The per-frame scale of a line fit (px at 1920): its 1-sigma (or, with ``scale_feature =
+        "difficulty"``, the fit's difficulty), the line/CNN disagreement and a floor."""
         d = evidence.disagreement_px
-        return math.sqrt(self.floor_px**2 + (self.sigma_weight * evidence.sigma_px) ** 2 + (self.disagree_weight * d) ** 2)
+        spread = evidence.difficulty if self.scale_feature == "difficulty" else evidence.sigma_px
+        return math.sqrt(self.floor_px**2 + (self.sigma_weight * spread) ** 2 + (self.disagree_weight * d) ** 2)
 
     def lines_bound(self, evidence: FrameEvidence) -> float:
         return self.q_lines * self.lines_scale(evidence)

@@ -16,8 +16,8 @@ Steps:
        seeds) and ``procedural`` (validation-split stadium crops). Each frame belongs to an
        independence group (a clip, a real frame, a pose seed, a stadium) and each group to one of two
        folds.
-    2. **Fit** per fold: the scale's ``floor_px``, ``sigma_weight`` and ``disagree_weight`` (a small
-       grid: the triple that makes the median bound on line-rich frames smallest, each half of the
+    2. **Fit** per fold: the scale's spread feature (the fit's 1-sigma or its difficulty),
+       ``floor_px``, ``sigma_weight`` and ``disagree_weight`` (a small grid: the triple that makes the median bound on line-rich frames smallest, each half of the
        fold's independence groups bounded by the quantile of the other half), then
        ``q_lines`` = the conformal 90 % quantile (``ceil((n + 1) 0.9)``-th smallest) of
        ``|error| / scale`` over the fold's line-fit answers, ``q_net`` the same of the CNN's errors and
@@ -195,23 +195,28 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
         q_no_lines_rel = conformal_quantile(net_err[no_fit] / own[no_fit]) if no_fit.any() else q_net_rel
     lined = [r for r in records if r.evidence.lines is not None]
     err, _, _ = _errors(lined, base, "lines")  # the line fit's answer does not depend on the scale
-    sigma = np.array([r.evidence.sigma_px for r in lined])
+    spreads = {"sigma_px": np.array([r.evidence.sigma_px for r in lined]),
+               "difficulty": np.array([r.evidence.difficulty for r in lined])}
+    if not np.all(np.isfinite(spreads["difficulty"])):
+        del spreads["difficulty"]  # evidence collected before the fit reported its difficulty
     disagree = np.array([r.evidence.disagreement_px for r in lined])
     rich = np.array([r.line_rich for r in lined])
     halves = _halves(lined)
     best = None
-    for floor in FLOOR_GRID:
-        for a in SIGMA_GRID:
-            for weight in WEIGHT_GRID:
-                scale = np.sqrt(floor**2 + (a * sigma) ** 2 + (weight * disagree) ** 2)
-                bound = np.empty(len(lined))
-                for half in (0, 1):  # the shape is judged on groups its quantile did not see
-                    bound[halves == half] = conformal_quantile((err / scale)[halves != half]) * scale[halves == half]
-                median = float(np.median(bound[rich] if rich.any() else bound))
-                if best is None or median < best[0]:
-                    best = (median, replace(base, floor_px=floor, sigma_weight=a, disagree_weight=weight,
-                                            q_lines=conformal_quantile(err / scale), q_net=q_net, q_no_lines=q_no_lines,
-                                            q_net_rel=q_net_rel, q_no_lines_rel=q_no_lines_rel))
+    for feature, spread in spreads.items():
+        for floor in FLOOR_GRID:
+            for a in SIGMA_GRID:
+                for weight in WEIGHT_GRID:
+                    scale = np.sqrt(floor**2 + (a * spread) ** 2 + (weight * disagree) ** 2)
+                    bound = np.empty(len(lined))
+                    for half in (0, 1):  # the shape is judged on groups its quantile did not see
+                        bound[halves == half] = conformal_quantile((err / scale)[halves != half]) * scale[halves == half]
+                    median = float(np.median(bound[rich] if rich.any() else bound))
+                    if best is None or median < best[0]:
+                        best = (median, replace(base, floor_px=floor, sigma_weight=a, disagree_weight=weight,
+                                                scale_feature=feature, q_lines=conformal_quantile(err / scale),
+                                                q_net=q_net, q_no_lines=q_no_lines, q_net_rel=q_net_rel,
+                                                q_no_lines_rel=q_no_lines_rel))
     trust = best[1]
     rich = [r for r in lined if r.line_rich]
     disagree = np.array([r.evidence.disagreement_px for r in (rich or lined)])
@@ -295,12 +300,12 @@ def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel,
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
     lines += ["", "Reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())), "",
               "Models (fold = the fold they were checked on; fitted on the other):", "",
-              "| fitted | q_lines | q_net px | q_no_lines px | q_net_rel | q_no_lines_rel | floor px | sigma weight | "
-              "disagree weight | disagree max px |",
-              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+              "| fitted | q_lines | q_net px | q_no_lines px | q_net_rel | q_no_lines_rel | spread | floor px | "
+              "spread weight | disagree weight | disagree max px |",
+              "| --- | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
     for name, m in [*((f"for fold {f}", m) for f, m in models.items()), ("shipped (all folds)", shipped)]:
         lines.append(f"| {name} | {m.q_lines:.3f} | {m.q_net:.1f} | {m.q_no_lines:.1f} | {m.q_net_rel:.2f} | "
-                     f"{m.q_no_lines_rel:.2f} | {m.floor_px:g} | {m.sigma_weight:g} | {m.disagree_weight:g} | "
+                     f"{m.q_no_lines_rel:.2f} | {m.scale_feature} | {m.floor_px:g} | {m.sigma_weight:g} | {m.disagree_weight:g} | "
                      f"{m.disagree_max_px:.1f} |")
     return "\n".join(lines) + "\n"
 
