@@ -13,17 +13,23 @@ column                  meaning
 ``k1``, ``k2``          the lens the frame is corrected with (width-normalised, DESIGN.md) (required)
 ``uncertainty_px``      stated uncertainty of that lens (~p90 of the maximum displacement error,
                         px at 1920 wide); empty when the estimator states none
-``doubtful``            1 when the frame's shot is doubtful (median uncertainty above the
-                        threshold of the run), else 0
+``doubtful``            1 when the frame's shot is doubtful (see ``reason``), else 0
+``reason``              why the shot is doubtful, machine-readable (``no_geometry``,
+                        ``uncertain``, ``fold_over``; tracks without it: uncertainty above the
+                        run's threshold); empty when it is not
+``applied``             1 when the frame was corrected with ``k1``, ``k2``; 0 when it was passed
+                        through uncorrected (a doubtful shot, by default)
 ``method``              how the frame's raw estimate was made (``net``, ``lines``); empty when
                         the frame was not estimated
 ``k1_raw``, ``k2_raw``  the raw estimate on this frame (empty when not estimated)
 ``raw_uncertainty_px``  the uncertainty the estimator stated for it
-``weight``              robustness weight of the raw estimate in the smoothing (0 = rejected)
+``weight``              weight of the raw estimate (1 where one was made; tracks of older
+                        versions: its robustness weight in their smoothing, 0 = rejected)
 ======================  ====================================================================
 
 Reading (:func:`load_lens_track`) needs only ``frame``, ``k1`` and ``k2``: edit those and feed
-the file back. Every row is checked (one row per frame in order, finite coefficients, a lens that
+the file back; an ``applied`` column is honoured (0 = the frame passes through uncorrected, and its
+lens is then not checked), so a track read back corrects exactly as the run that wrote it. Every row is checked (one row per frame in order, finite coefficients, a lens that
 does not fold over on the frame, non-negative uncertainties); the first bad row raises
 ``ValueError`` naming the file and the line.
 """
@@ -52,7 +58,7 @@ __all__ = ["DOUBTFUL_PX", "LensTrack", "load_lens_track"]
 #: procedural test set; above it, correcting can easily do more harm than good.
 DOUBTFUL_PX = 10.0
 
-COLUMNS = ["frame", "time_s", "shot", "k1", "k2", "uncertainty_px", "doubtful", "method",
+COLUMNS = ["frame", "time_s", "shot", "k1", "k2", "uncertainty_px", "doubtful", "reason", "applied", "method",
            "k1_raw", "k2_raw", "raw_uncertainty_px", "weight"]
 
 
@@ -62,7 +68,9 @@ class LensTrack:
 
     ``rate`` frames per second (exact), ``size`` (W, H); ``uncertainty_px`` and
     ``raw_uncertainty_px`` are NaN where unknown; ``raw`` and ``weight`` NaN on frames that were not
-    estimated; ``method`` "" there. ``doubtful_px`` is the threshold that marks a shot doubtful.
+    estimated; ``method`` "" there. ``doubtful_px`` is the threshold that marks a shot doubtful
+    when ``doubtful`` (bool per frame) is not given; ``reason`` (per frame) says why; ``applied``
+    (bool per frame, default all) whether the frame is corrected or passed through.
     """
 
     rate: Fraction
@@ -76,9 +84,20 @@ class LensTrack:
     raw_uncertainty_px: np.ndarray | None = None
     method: list[str] = field(default_factory=list)
     doubtful_px: float = DOUBTFUL_PX
+    doubtful: np.ndarray | None = None
+    reason: list[str] = field(default_factory=list)
+    applied: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.shot)
+        if self.doubtful is None:
+            self.doubtful = np.isin(self.shot, [s for s in np.unique(self.shot)
+                                                if self.shot_uncertainty(int(s)) > self.doubtful_px])
+            self.reason = ["uncertain" if d else "" for d in self.doubtful]
+        if not self.reason:
+            self.reason = [""] * n
+        if self.applied is None:
+            self.applied = np.ones(n, dtype=bool)
         if self.time_s is None:
             self.time_s = np.arange(n) / float(self.rate)
         if self.uncertainty_px is None:
@@ -102,6 +121,11 @@ class LensTrack:
             raise ValueError(f"the lens track has {self.n_frames} frames; the video has more (frame {frame})")
         return float(self.lens[frame, 0]), float(self.lens[frame, 1])
 
+    def lens_for(self, frame: int) -> Lens | None:
+        """The lens ``frame`` is corrected with, or ``None`` when it passes through uncorrected."""
+        k1, k2 = self.lens_at(frame)
+        return Lens(k1, k2) if self.applied[frame] else None
+
     def shot_uncertainty(self, shot: int) -> float:
         """Median stated uncertainty (px at 1920) of a shot's smoothed lenses; NaN if unknown."""
         values = self.uncertainty_px[self.shot == shot]
@@ -109,11 +133,10 @@ class LensTrack:
         return float(np.median(values)) if len(values) else math.nan
 
     def doubtful_shots(self) -> list[int]:
-        """Shots whose median uncertainty exceeds :attr:`doubtful_px` (unknown = not doubtful)."""
-        return [int(s) for s in np.unique(self.shot) if self.shot_uncertainty(int(s)) > self.doubtful_px]
+        """Shots marked doubtful (tracks without marks: median uncertainty above :attr:`doubtful_px`)."""
+        return [int(s) for s in np.unique(self.shot[self.doubtful])]
 
     def rows(self) -> list[dict]:
-        doubtful = set(self.doubtful_shots())
         out = []
         for i in range(self.n_frames):
             estimated = not math.isnan(self.raw[i, 0])
@@ -125,7 +148,9 @@ class LensTrack:
                     "k1": float(self.lens[i, 0]),
                     "k2": float(self.lens[i, 1]),
                     "uncertainty_px": _number(self.uncertainty_px[i]),
-                    "doubtful": int(int(self.shot[i]) in doubtful),
+                    "doubtful": int(bool(self.doubtful[i])),
+                    "reason": self.reason[i],
+                    "applied": int(bool(self.applied[i])),
                     "method": self.method[i],
                     "k1_raw": float(self.raw[i, 0]) if estimated else None,
                     "k2_raw": float(self.raw[i, 1]) if estimated else None,
@@ -137,7 +162,8 @@ class LensTrack:
 
     def per_shot(self) -> list[dict]:
         """One row per shot: first/last frame, the median smoothed lens, its median uncertainty
-        (px at 1920, None if unknown), whether it is doubtful, and the methods used."""
+        (px at 1920, None if unknown), whether it is doubtful and why, whether its lens was applied,
+        and the methods used."""
         shots = []
         for shot in np.unique(self.shot):
             frames = np.flatnonzero(self.shot == shot)
@@ -147,7 +173,8 @@ class LensTrack:
             shots.append({
                 "shot": int(shot), "first_frame": int(frames[0]), "last_frame": int(frames[-1]),
                 "k1": float(k[0]), "k2": float(k[1]), "uncertainty_px": _number(sure),
-                "doubtful": bool(sure > self.doubtful_px), "methods": methods,
+                "doubtful": bool(self.doubtful[frames].any()), "reason": self.reason[frames[0]],
+                "applied": bool(self.applied[frames].all()), "methods": methods,
             })
         return shots
 
@@ -209,7 +236,7 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
         raise ValueError(f"lens track {str(path)!r} has no rows")
     n = len(rows)
     lens, shot, sure = np.empty((n, 2)), np.zeros(n, dtype=np.int64), np.full(n, np.nan)
-    method = [""] * n
+    method, applied = [""] * n, np.ones(n, dtype=bool)
     for index, (line, row) in enumerate(rows):
         where = f"lens track {str(path)!r} line {line}"
 
@@ -232,8 +259,13 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
         if frame != index:
             raise ValueError(f"{where}: frame {row.get('frame')!r}, expected {index} (one row per frame, in order from 0)")
         k1, k2 = value("k1"), value("k2")
+        flag = value("applied", required=False)
+        if flag not in (None, 0, 1):
+            raise ValueError(f"{where}: applied must be 0 or 1, got {row.get('applied')!r}")
+        applied[index] = flag != 0
         try:
-            Lens(k1, k2).check_frame(size)
+            if applied[index]:
+                Lens(k1, k2).check_frame(size)
         except ValueError as err:
             raise ValueError(f"{where}: {err}") from None
         lens[index] = (k1, k2)
@@ -249,4 +281,4 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
             sure[index] = uncertainty
         method[index] = str(row.get("method") or "")
     return LensTrack(rate, size, shot, lens, np.full((n, 2), np.nan), np.full(n, np.nan),
-                     uncertainty_px=sure, method=method)
+                     uncertainty_px=sure, method=method, applied=applied)

@@ -1,17 +1,12 @@
-"""Automatic lens correction of videos: estimate per frame, detect cuts, smooth per shot, correct.
+"""Automatic lens correction of videos: one lens per shot, then correct.
 
-Pipeline (two passes over the file, so memory does not grow with its length):
+Pipeline (memory does not grow with the file's length):
 
-1. :func:`track_video` decodes every frame once, feeds each (converted :data:`DETECT_WIDTH` px
-   wide) to a :class:`~glradial.smoothing.ShotDetector` and runs the estimator (on a copy at most
-   :data:`ESTIMATE_WIDTH` px wide: what the estimators look at) on the first frame of every shot
-   and then every ``every``-th frame of the shot. The per-shot robust smoother (:func:`~glradial.smoothing.smooth_track`) turns those
-   samples into a lens for every frame, weighting each sample by the confidence its estimator
-   states (``uncertainty_px`` of a :class:`glradial.Lens` subclass; equal weights for a plain lens
-   or a pair). A smoothed lens that would fold over on the frame is replaced by the nearest
-   accepted raw estimate of the same shot. Shots whose smoothed lens is doubtful (median stated
-   uncertainty above :data:`~glradial.lens_track.DOUBTFUL_PX`) are listed by
-   :meth:`LensTrack.doubtful_shots`.
+1. :func:`track_video` decodes every frame once, detects cuts on 64 px thumbnails and gathers a
+   cheap subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
+   then, on copies at most :data:`ESTIMATE_WIDTH` px wide); each shot gets one joint lens fit, a
+   function of its zoom when the picture zooms (:mod:`glradial.shot_track`,
+   :mod:`glradial.shot_fit`). A doubtful shot is marked and, by default, passed through uncorrected.
 2. :func:`correct_video` decodes the file again, corrects each frame with its lens and encodes it
    (:mod:`glradial.video_io`: audio and other streams copied, timing, colour tags and depth kept).
    Decoding, correction and encoding overlap on three threads with at most ``depth`` frames
@@ -37,12 +32,12 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from .frames import to_rgb8
-from .lens import Lens, corner_radius
+from .lens import Lens
 from .lens_track import DOUBTFUL_PX, LensTrack
-from .metrics import REPORT_WIDTH, max_displacement
+from .metrics import max_displacement
 from .progress import Progress
-from .smoothing import ShotDetector, smooth_track
+from .shot_track import ESTIMATE_EVERY, EVERY, track_shots
+from .smoothing import ShotDetector
 from .video_io import CopiedPacket, EncodeOptions, VideoFrame, VideoReader, VideoWriter
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
@@ -53,9 +48,6 @@ EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
 #: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
 #: detector at <= 960 px, so a full-size conversion would be wasted
 ESTIMATE_WIDTH = 960
-
-#: pass 1 converts every frame this wide (px) for the shot detector, which compares 64 x 36 thumbnails
-DETECT_WIDTH = 64
 
 #: frames queued between two threads of the pipeline (bounded memory: ~3 x depth frames in flight)
 DEPTH = 4
@@ -162,106 +154,21 @@ def default_estimator(model: str | os.PathLike | None = None, method: str | None
     return lambda frame: estimator.estimate(frame, method=method)
 
 
-def _as_pair(value: object) -> tuple[float, float]:
-    if isinstance(value, Lens):
-        return value.k1, value.k2
-    k1, k2 = value  # type: ignore[misc]
-    return float(k1), float(k2)
-
-
-def _confidence(value: object) -> tuple[float, str]:
-    """``(uncertainty_px, method)`` an estimate states (a LensEstimate), NaN and "" for a plain
-    Lens or a pair."""
-    sure = getattr(value, "uncertainty_px", None)
-    method = getattr(value, "method", None)
-    try:
-        sure = float(sure) if sure is not None else np.nan
-    except (TypeError, ValueError):
-        sure = np.nan
-    return (sure if sure >= 0 else np.nan), (str(method) if method else "")
-
-
 def track_video(
     path: str | os.PathLike,
     estimator: EstimatorFn,
     *,
-    every: int = 5,
-    window_s: float = 2.0,
+    every: int = EVERY,
+    estimate_every: int = ESTIMATE_EVERY,
     detector: ShotDetector | None = None,
     progress: bool | None = None,
     doubtful_px: float = DOUBTFUL_PX,
+    apply_doubtful: bool = False,
     rate: Fraction | None = None,
 ) -> LensTrack:
-    """Pass 1: estimate, detect cuts and smooth; see the module docstring.
-
-    ``every`` (frames) is the estimation stride inside a shot; ``window_s`` (seconds) is the
-    smoother's half window (longer = steadier, slower to follow a zoom); ``doubtful_px`` (px at
-    1920) the median uncertainty above which a shot is doubtful; ``rate`` the frame rate of an
-    image-sequence input (default 25). Samples are weighted by their stated uncertainty where every
-    estimate states one (else all equally).
-    """
-    if every < 1:
-        raise ValueError(f"every must be >= 1 frame, got {every}")
-    if not window_s > 0:
-        raise ValueError(f"window must be > 0 seconds, got {window_s}")
-    detector = detector or ShotDetector()
-    shots: list[int] = []
-    times: list[int] = []
-    stamps: list[float] = []
-    estimates: list[tuple[float, float]] = []
-    stated: list[float] = []
-    methods: list[str] = []
-    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
-        info = reader.info
-        shot, since_start = -1, 0
-        with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
-            for item in frames:
-                index = item.index
-                stamps.append(float(item.pts * info.time_base) if item.pts is not None else index / info.fps)
-                if detector.update(item.image):
-                    shot, since_start = shot + 1, 0
-                if since_start % every == 0:
-                    times.append(index)
-                    value = estimator(to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
-                    estimates.append(_as_pair(value))
-                    sure, method = _confidence(value)
-                    stated.append(sure)
-                    methods.append(method)
-                shots.append(shot)
-                since_start += 1
-                bar.update()
-    n = len(shots)
-    shot_array = np.asarray(shots, dtype=np.int64)
-    samples = np.asarray(estimates, dtype=np.float64).reshape(-1, 2)
-    time_array = np.asarray(times, dtype=np.int64)
-    stated_array = np.asarray(stated, dtype=np.float64)
-    known = bool(len(stated_array)) and bool(np.all(np.isfinite(stated_array)))
-    radius = corner_radius(info.size)
-    smoothed, weights, sure = smooth_track(
-        time_array, samples, shot_array, half_window=window_s * info.fps, radius=radius,
-        uncertainty=stated_array / REPORT_WIDTH if known else None,
-    )
-    # a smoothed lens must not fold over on the frame: fall back to the nearest accepted raw estimate
-    for i in range(n):
-        lens = Lens(*smoothed[i])
-        if lens.fold_radius() <= radius:
-            mine = np.flatnonzero((shot_array[time_array] == shot_array[i]) & (weights > 0))
-            mine = mine if len(mine) else np.flatnonzero(shot_array[time_array] == shot_array[i])
-            nearest = mine[np.argmin(np.abs(time_array[mine] - i))]
-            smoothed[i] = samples[nearest]
-            sure[i] = stated_array[nearest] / REPORT_WIDTH
-    raw = np.full((n, 2), np.nan)
-    raw[time_array] = samples
-    weight = np.full(n, np.nan)
-    weight[time_array] = weights
-    raw_sure = np.full(n, np.nan)
-    raw_sure[time_array] = stated_array
-    method = [""] * n
-    for t, m in zip(times, methods):
-        method[t] = m
-    return LensTrack(info.rate, info.size, shot_array, smoothed, raw, weight, time_s=np.asarray(stamps),
-                     uncertainty_px=sure * REPORT_WIDTH, raw_uncertainty_px=raw_sure, method=method,
-                     doubtful_px=doubtful_px)
+    """Pass 1: detect cuts and fit one lens per shot while decoding (:func:`glradial.shot_track.track_shots`)."""
+    return track_shots(path, estimator, every=every, estimate_every=estimate_every, detector=detector,
+                       progress=progress, doubtful_px=doubtful_px, apply_doubtful=apply_doubtful, rate=rate)
 
 
 class _FrameCorrector:
@@ -306,7 +213,7 @@ class _FrameCorrector:
 def correct_video(
     source: str | os.PathLike,
     target: str | os.PathLike,
-    lenses: Callable[[int], Lens | tuple[float, float]],
+    lenses: Callable[[int], Lens | tuple[float, float] | None],
     *,
     fit: str = "same",
     interpolation: str = "linear",
@@ -319,7 +226,7 @@ def correct_video(
     rate: Fraction | None = None,
 ) -> int:
     """Pass 2: correct every frame of ``source`` with ``lenses(frame_index)`` (a :class:`Lens` or
-    ``(k1, k2)``) into ``target``
+    ``(k1, k2)``; ``None`` passes the frame through uncorrected) into ``target``
     (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.video_io`;
     encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
     track's length): a video with another frame count is an error and leaves no output. A header
@@ -333,6 +240,8 @@ def correct_video(
             def work(item):
                 if isinstance(item, VideoFrame):
                     lens = lenses(item.index)
+                    if lens is None:  # passed through uncorrected (a doubtful shot)
+                        return writer.frame(item.image, item.pts)
                     lens = lens if isinstance(lens, Lens) else Lens(*lens)
                     return writer.frame(corrector(item.image, lens), item.pts)
                 return item
@@ -366,15 +275,14 @@ def estimate_video(
     path: str | os.PathLike,
     *,
     model: str | os.PathLike | None = None,
-    every: int = 5,
-    window_s: float = 2.0,
+    every: int = EVERY,
     progress: bool | None = None,
     method: str | None = None,
 ) -> LensTrack:
     """Per-frame and per-shot lens of a video with the bundled estimator (or ``model``, with
     ``method`` when given): the first pass of ``glradial correct --auto`` (:func:`track_video`)
     without the correction (what ``glradial estimate VIDEO`` prints, with the estimator it loaded)."""
-    return track_video(path, default_estimator(model, method), every=every, window_s=window_s, progress=progress)
+    return track_video(path, default_estimator(model, method), every=every, progress=progress)
 
 
 def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_json: bool = False) -> str:
@@ -396,7 +304,8 @@ def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_j
             lines.append(
                 f"{source}: shot {shot['shot']} frames {shot['first_frame']}-{shot['last_frame']} "
                 f"k1={shot['k1']:.6f} k2={shot['k2']:.6f}" + _confidence_text(shot["uncertainty_px"], shot["methods"])
-                + (" DOUBTFUL" if shot["doubtful"] else "")
+                + (f" DOUBTFUL({shot['reason']})" if shot["doubtful"] else "")
+                + ("" if shot["applied"] else " not-applied")
             )
     return "\n".join(lines)
 
@@ -413,7 +322,8 @@ def doubtful_warnings(track: LensTrack, source: str) -> list[str]:
         if shot["doubtful"]:
             lines.append(
                 f"glradial: warning: {source}: shot {shot['shot']} (frames {shot['first_frame']}-{shot['last_frame']}) "
-                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful: uncertainty {shot['uncertainty_px']:.1f} px "
-                f"> {track.doubtful_px:g} px at 1920 wide; check the shot or give its lens in a --lens-track file"
+                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful ({shot['reason']}, uncertainty "
+                f"{shot['uncertainty_px'] or float('nan'):.1f} px at 1920 wide): "
+                + ("passed through uncorrected (--apply-doubtful applies it)" if not shot["applied"] else "applied anyway")
             )
     return lines

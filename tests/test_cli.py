@@ -180,7 +180,7 @@ def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypat
     monkeypatch.setattr("glradial.video_pipeline.default_estimator", fake_estimator)
     source, out = tmp_path / "in.mkv", tmp_path / "out.mkv"
     _pan_video(source, field_panorama, n=n, fps=25, cut=cut, marker=True, lenses=truth)
-    assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--window", "0.5", "--backend", "cpu"]) == 0
+    assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--backend", "cpu"]) == 0
     sidecar = tmp_path / "out.mkv.lens.csv"
     assert _names(tmp_path) == ["in.mkv", "out.mkv", "out.mkv.lens.csv"]
     assert calls == sorted(set(range(0, cut, 2)) | set(range(cut, n, 2)))

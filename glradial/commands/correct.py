@@ -20,10 +20,11 @@ where an encoder exists (else the container's default); --codec, --crf/--bitrate
 --pix-fmt choose another. The lens is given (--k1/--k2, width-normalised: image width = 1, origin
 at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel; --cx/--cy/--pixel-aspect
 for an off-centre principal point and non-square pixels; or --lens FILE, e.g. an OpenCV
-calibration), read per frame from a lens track (--lens-track) or estimated (--auto, centred model). For a video, --auto estimates every Nth frame,
-detects shot cuts, smooths the lens within each shot weighting each estimate by its stated
-confidence, warns about every shot whose lens is doubtful (uncertainty above --max-uncertainty)
-and writes the per-frame lens to a sidecar (OUTPUT.lens.csv by default; format in docs/CLI.md),
+calibration), read per frame from a lens track (--lens-track) or estimated (--auto, centred model). For a video, --auto detects shot
+cuts and fits one lens per shot from the pitch lines of every Nth frame and the frame-to-frame
+motion between them (a zooming shot's lens follows the zoom); a doubtful shot (too little geometry,
+or uncertainty above --max-uncertainty) is reported and passed through uncorrected unless
+--apply-doubtful; the per-frame lens goes to a sidecar the per-frame lens to a sidecar (OUTPUT.lens.csv by default; format in docs/CLI.md),
 which can be edited and fed back with --lens-track. Outputs appear only when complete; an existing
 OUTPUT is replaced only with -y."""
 
@@ -94,11 +95,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     encode.add_argument("--pix-fmt", metavar="FMT", help="output pixel format, e.g. yuv420p, yuv422p10le (default: the input's where the encoder takes it)")
     video = parser.add_argument_group("video with --auto")
     video.add_argument("--every", type=positive_int, default=None, metavar="N",
-                       help="estimate every N-th frame of each shot, plus each shot's first frame (frames; default 5)")
-    video.add_argument("--window", type=positive_float, default=None, metavar="SECONDS",
-                       help="half width of the per-shot smoothing window (seconds; default 2.0)")
+                       help="read the evidence of every N-th frame of each shot, plus each shot's first frame (frames; default 10)")
     video.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
-                       help="warn about shots whose smoothed lens is less sure than this (px at 1920 wide, ~p90; default 10)")
+                       help="a shot whose lens is less sure than this is doubtful (px at 1920 wide, ~p90; default 10)")
+    video.add_argument("--apply-doubtful", action="store_true",
+                       help="correct doubtful shots too (default: they pass through uncorrected and are reported)")
     video.add_argument("--sidecar", metavar="PATH",
                        help="per-frame lens file: .csv or .json (default: OUTPUT.lens.csv)")
     return parser
@@ -138,8 +139,8 @@ def run(args: argparse.Namespace) -> int:
     if not sources:
         raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect) or --lens FILE, --lens-track, "
                          "or --auto to estimate it")
-    for name in ("model", "method", "sidecar", "max_uncertainty", "every", "window"):
-        if getattr(args, name) is not None and not args.auto:
+    for name in ("model", "method", "sidecar", "max_uncertainty", "every", "apply_doubtful"):
+        if getattr(args, name) not in (None, False) and not args.auto:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
     if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
         raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
@@ -153,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
         from ..remap import correct
         from ..image_io import read_image, write_image
 
-        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "every", "window",
+        for name in ("sidecar", "lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "every",
                      "max_uncertainty"):
             if getattr(args, name) is not None:
                 raise UsageError(f"--{name.replace('_', '-')} is for videos")
@@ -201,7 +202,7 @@ def run(args: argparse.Namespace) -> int:
         with VideoReader(args.input, rate=args.rate) as reader:
             info = reader.info
         track = load_lens_track(args.lens_track, info.rate, info.size)
-        written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+        written = correct_video(args.input, args.output, track.lens_for, frames_expected=track.n_frames, **video)
         _summary(args.output, written, info.frame_count)
         return 0
 
@@ -221,12 +222,13 @@ def run(args: argparse.Namespace) -> int:
         info = reader.info
         # the encoder, its options and the container are checked before the estimation pass: open and drop
         VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
-    given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
-    track = track_video(args.input, default_estimator(args.model, args.method), progress=progress,  # its defaults: every 5, window 2 s
-                        doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
+    given_options = {"every": args.every} if args.every is not None else {}
+    track = track_video(args.input, default_estimator(args.model, args.method), progress=progress,
+                        doubtful_px=args.max_uncertainty or DOUBTFUL_PX, apply_doubtful=args.apply_doubtful,
+                        rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
-    written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+    written = correct_video(args.input, args.output, track.lens_for, frames_expected=track.n_frames, **video)
     try:
         track.save(sidecar)
     except BaseException:
@@ -237,7 +239,7 @@ def run(args: argparse.Namespace) -> int:
     print(f"{args.input}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
         sure = f" uncertainty {shot['uncertainty_px']:.1f} px" if shot["uncertainty_px"] is not None else ""
-        flag = " DOUBTFUL" if shot["doubtful"] else ""
+        flag = (f" DOUBTFUL ({shot['reason']}, " + ("applied)" if shot["applied"] else "not applied)")) if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")
     return 0
 
