@@ -69,6 +69,7 @@ def main() -> None:
     parser.add_argument("clips", type=Path)
     parser.add_argument("--calibrate", default="proc_3,proc_11,real_a", help="clips the bound's scale is calibrated on")
     parser.add_argument("--json", type=Path)
+    parser.add_argument("--md", type=Path, help="write the per-shot table (markdown) here")
     args = parser.parse_args()
     manifest = json.loads((args.clips / "manifest.json").read_text())
     estimator = default_estimator()
@@ -96,6 +97,24 @@ def main() -> None:
     print("bound scale: in use", BOUND_SCALE, "p90 needed on the calibration clips", report["bound_scale_p90_on_calibration"])
     if args.json:
         args.json.write_text(json.dumps(report, indent=1) + "\n")
+    if args.md:
+        args.md.write_text(markdown(report, args.clips.name))
+
+
+def markdown(report: dict, name: str) -> str:
+    """The per-shot table and the summaries of ``report``."""
+    lines = [f"Clip set `{name}`: per shot (error = max displacement vs the true lens, px at 1920)", "",
+             "| clip | shot | median px | max px | stated px | covered | doubtful |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    for r in report["shots"]:
+        lines.append(f"| {r['clip']} | {r['shot']} | {r['median_px']:.1f} | {r['max_px']:.1f} | {r['stated_px']:.1f} | "
+                     f"{'yes' if r['covered'] else '**no**'} | {r['reason'] if r['doubtful'] else ''} |")
+    lines += ["", "| set | shots | median px | p90 px | after a cut: median / p90 px | coverage | doubtful | median stated px |",
+              "| --- | --- | --- | --- | --- | --- | --- | --- |"]
+    for key in ("all", "real", "procedural"):
+        m = report[key]
+        lines.append(f"| {key} | {m['shots']} | {m['median_px']:.1f} | {m['p90_px']:.1f} | {m['after_cut_median_px']:.1f} / "
+                     f"{m['after_cut_p90_px']:.1f} | {100 * m['coverage']:.0f} % | {100 * m['doubtful']:.0f} % | {m['median_stated_px']:.1f} |")
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":

@@ -36,8 +36,9 @@ is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`, calibrated on the
 ``scripts/make_clips.py`` (docs/eval/shots.md).
 
 Doubt (reason strings are machine-readable): ``no_geometry`` (fewer than :data:`MIN_CHAINS` chains
-agree with the fit and the camera did not pan :data:`PAN_MIN`: nothing but the per-frame
-estimates, i.e. the CNN, fixes the lens; the bound is then at least :data:`NO_GEOMETRY_PX`),
+pass screening and the camera did not pan :data:`PAN_MIN`: nothing but the per-frame
+estimates, i.e. the CNN, fixes the lens: the shot takes their median and their median bound,
+doubtful when that exceeds the threshold or when they say so themselves),
 ``uncertain`` (bound above the run's threshold), ``fold_over`` (the lens folds over inside the
 frame).
 """
@@ -52,6 +53,7 @@ from scipy.optimize import least_squares
 
 from .frame_motion import Matches, homography_of
 from .lens import Lens
+from .lens_track import DOUBTFUL_PX
 from .line_fit import INFORMATIVE_RMS, K1_PRIOR_SIGMA, K2_PRIOR_SIGMA, MAX_CHAIN_POINTS, OUTLIER_CHI, ROBUST_T, \
     SIGMA_FLOOR, SIGMA_POINT, STRAIGHT_RMS
 from .lines import LineEvidence
@@ -76,11 +78,11 @@ K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
 #: calibrated multiplier from the 1-sigma displacement (redundancy-corrected) to the 90 % bound, and
 #: the floor added to it (px at 1920): the error of a frame's own residual distortion and of the
 #: model (see the module docstring and docs/eval/shots.md)
-BOUND_SCALE = 2.0
+BOUND_SCALE = 0.6
 BOUND_FLOOR_PX = 1.0
 #: stated bound when the shot has no geometric evidence (px at 1920): the CNN's alone
 NO_GEOMETRY_PX = 16.0
-#: a shot has geometric evidence of its lens when at least this many chains agree with the fit...
+#: a shot has geometric evidence of its lens when at least this many chains pass screening...
 MIN_CHAINS = 2
 #: ...or the camera panned at least this far (frame widths). A static camera's frame pairs say
 #: nothing, and a pure zoom about the centre only ties the lens at one zoom to the lens at another
@@ -332,16 +334,23 @@ def _sigma_px(problem: _Problem, result, radius: float) -> float:
 
 
 def _fallback(evidence: ShotEvidence, doubtful_px: float) -> ShotLens:
-    """No geometric evidence: the median of the per-frame estimates, doubtful."""
+    """No geometric evidence in the shot: the median of the per-frame estimates, stating their
+    median bound (:data:`NO_GEOMETRY_PX` where they state none; never less for being many: they
+    read the same picture). Doubtful (``no_geometry``) when that bound exceeds ``doubtful_px``, or
+    (reason theirs) when most per-frame estimates say they are doubtful."""
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     k = np.median([[e.k1, e.k2] for e in estimates], axis=0) if estimates else np.zeros(2)
     stated = [float(getattr(e, "uncertainty_px", NO_GEOMETRY_PX)) for e in estimates]
-    bound = max(float(np.median(stated)) if stated else NO_GEOMETRY_PX, NO_GEOMETRY_PX)
+    bound = float(np.median(stated)) if stated else NO_GEOMETRY_PX
+    theirs = [str(getattr(e, "reason", "") or "doubtful") for e in estimates if getattr(e, "doubtful", False)]
+    reason = "no_geometry" if not bound <= doubtful_px else ""
+    if 2 * len(theirs) > len(estimates):
+        reason = max(set(theirs), key=theirs.count)
     theta = (float(k[0]), float(k[1] - manifold_k2(k[0])))
-    return ShotLens(theta, 0.0, bound, True, "no_geometry", 0, 0, 1.0, False)
+    return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False)
 
 
-def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = 10.0, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
+def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
     """The lens of one shot from all its evidence (see the module docstring). ``doubtful_px``: a
     bound above it makes the shot doubtful; ``radius``: the frame's corner radius (lens units)."""
     if not evidence.samples:
@@ -351,7 +360,7 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = 10.0, radius: float
     chains = _Chains(evidence.samples)
     chains = chains.subset(_screen(chains)) if chains.n else chains
     pairs = [p for p in evidence.pairs if len(p[2]) >= 4]
-    if chains.n == 0 and not pairs:
+    if chains.n < MIN_CHAINS and not (pairs and evidence.pan >= PAN_MIN):
         return _fallback(evidence, doubtful_px)
     zoom = np.asarray(evidence.zoom if len(evidence.zoom) == len(evidence.samples) else [0.0] * len(evidence.samples))
     zooming = float(np.ptp(zoom)) > ZOOM_MIN
@@ -368,19 +377,16 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = 10.0, radius: float
         if 0 < keep.sum() < chains.n:
             problem.chains = chains = chains.subset(keep)
             result = problem.solve(result.x)
-    return _result(problem, result, views, evidence.pan, centre, zooming, doubtful_px, radius)
+    return _result(problem, result, views, centre, zooming, doubtful_px, radius)
 
 
-def _result(problem: _Problem, result, views: float, pan: float, centre: float, zooming: bool, doubtful_px: float,
+def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, doubtful_px: float,
             radius: float) -> ShotLens:
     sigma = _sigma_px(problem, result, CORNER_RADIUS_16_9)
     bound = BOUND_SCALE * sigma + BOUND_FLOOR_PX
     lenses = problem.lenses(result.x)
     folds = any(Lens(float(k1), float(k2)).fold_radius() <= radius for k1, k2 in lenses)
-    geometry = problem.chains.n >= MIN_CHAINS or (pan >= PAN_MIN and problem.pairs)
-    if not geometry:
-        bound = max(bound, NO_GEOMETRY_PX)
-    reason = "fold_over" if folds else "no_geometry" if not geometry else "uncertain" if not bound <= doubtful_px else ""
+    reason = "fold_over" if folds else "uncertain" if not bound <= doubtful_px else ""
     matches = sum(len(m) for _, _, m in problem.pairs)
     return ShotLens(tuple(float(v) for v in result.x), centre, float(bound), bool(reason), reason,
                     problem.chains.n, matches, views, zooming)

@@ -154,6 +154,13 @@ def default_estimator(model: str | os.PathLike | None = None, method: str | None
     return lambda frame: estimator.estimate(frame, method=method)
 
 
+def _as_pair(value: object) -> tuple[float, float]:
+    if isinstance(value, Lens):
+        return value.k1, value.k2
+    k1, k2 = value  # type: ignore[misc]
+    return float(k1), float(k2)
+
+
 def track_video(
     path: str | os.PathLike,
     estimator: EstimatorFn,
