@@ -54,7 +54,7 @@ def summary(rows: list[dict]) -> dict:
     errors = np.concatenate([r["errors"] for r in rows])
     after = np.concatenate([r["errors"] for r in rows if r["after_cut"]] or [np.zeros(0)])
     return {
-        "shots": len(rows), "frames": len(errors),
+        "shots": len(rows), "frames": int(len(errors)),
         "median_px": float(np.median(errors)), "p90_px": float(np.percentile(errors, 90)),
         "after_cut_median_px": float(np.median(after)) if len(after) else None,
         "after_cut_p90_px": float(np.percentile(after, 90)) if len(after) else None,
@@ -88,11 +88,12 @@ def main() -> None:
         "real": summary([r for r in rows if r["group"] == "real"]),
         "procedural": summary([r for r in rows if r["group"] == "procedural"]),
         "held_out": summary([r for r in rows if r["clip"] not in calibrate]),
+        "confident": summary([r for r in rows if not r["doubtful"]]) if any(not r["doubtful"] for r in rows) else None,
         "bound_scale_in_use": BOUND_SCALE,
         "bound_scale_p90_on_calibration": float(np.quantile(needed, 0.9)) if needed else None,
         "shots": [{k: v for k, v in r.items() if k != "errors"} for r in rows],
     }
-    for key in ("all", "real", "procedural", "held_out"):
+    for key in ("all", "real", "procedural", "held_out", "confident"):
         print(key, json.dumps(report[key]))
     print("bound scale: in use", BOUND_SCALE, "p90 needed on the calibration clips", report["bound_scale_p90_on_calibration"])
     if args.json:
@@ -110,10 +111,13 @@ def markdown(report: dict, name: str) -> str:
                      f"{'yes' if r['covered'] else '**no**'} | {r['reason'] if r['doubtful'] else ''} |")
     lines += ["", "| set | shots | median px | p90 px | after a cut: median / p90 px | coverage | doubtful | median stated px |",
               "| --- | --- | --- | --- | --- | --- | --- | --- |"]
-    for key in ("all", "real", "procedural"):
+    for key in ("all", "real", "procedural", "confident"):
         m = report[key]
-        lines.append(f"| {key} | {m['shots']} | {m['median_px']:.1f} | {m['p90_px']:.1f} | {m['after_cut_median_px']:.1f} / "
-                     f"{m['after_cut_p90_px']:.1f} | {100 * m['coverage']:.0f} % | {100 * m['doubtful']:.0f} % | {m['median_stated_px']:.1f} |")
+        if m is None:
+            continue
+        after = "-" if m["after_cut_median_px"] is None else f"{m['after_cut_median_px']:.1f} / {m['after_cut_p90_px']:.1f}"
+        lines.append(f"| {key} | {m['shots']} | {m['median_px']:.1f} | {m['p90_px']:.1f} | {after} | "
+                     f"{100 * m['coverage']:.0f} % | {100 * m['doubtful']:.0f} % | {m['median_stated_px']:.1f} |")
     return "\n".join(lines) + "\n"
 
 

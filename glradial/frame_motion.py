@@ -32,7 +32,10 @@ __all__ = ["MOTION_WIDTH", "Matches", "motion_gray", "match_frames", "zoom_of", 
 #: ~0.3 px of a 1920-wide frame, below the displacement errors the lens fit aims at
 MOTION_WIDTH = 640
 #: corners tracked per pair of frames
-MAX_CORNERS = 600
+MAX_CORNERS = 400
+#: matches kept per pair (evenly thinned): the lens fit weighs a pair as at most
+#: :data:`glradial.shot_fit.MATCH_CAP` points anyway, and evaluates every kept one at each step
+MAX_MATCHES = 150
 #: corners closer than this to each other (px of the gray copy) are not both taken
 MIN_CORNER_DISTANCE = 10
 #: a track whose backward track misses its start by more than this (px of the gray copy) is dropped
@@ -115,9 +118,10 @@ def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0,
                                     maxIters=500, confidence=0.995)
     if inliers is None:
         return None
-    good = (inliers.ravel() == 1) & va & vb
-    if good.sum() < MIN_MATCHES:
+    good = np.flatnonzero((inliers.ravel() == 1) & va & vb)
+    if len(good) < MIN_MATCHES:
         return None
+    good = good[np.linspace(0, len(good) - 1, min(len(good), MAX_MATCHES)).astype(np.intp)]
     return Matches(pa[good], pb[good], width)
 
 
