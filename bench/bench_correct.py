@@ -22,8 +22,10 @@ import time
 import cv2
 import numpy as np
 
-from glradial import correct, egl, remap
-from glradial.lens import Lens
+from glradial import correct
+from glradial.gl import egl
+from glradial.lens.lens import Lens
+from glradial.remapping import remap
 
 K1, K2 = -0.3, 0.06
 

@@ -32,7 +32,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from glradial.crops import CropRenderer, sample_crop_params  # noqa: E402
+from glradial.synthesis.crops import CropRenderer, sample_crop_params  # noqa: E402
 
 
 def crops_per_second(fn, count: int) -> float:

@@ -25,9 +25,9 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial.estimator import Estimator, default_model_path  # noqa: E402
-from glradial.line_fit import fit_lines  # noqa: E402
-from glradial.lines import detect_chains  # noqa: E402
+from glradial.estimation.estimator import Estimator, default_model_path  # noqa: E402
+from glradial.estimation.line_fit import fit_lines  # noqa: E402
+from glradial.estimation.lines import detect_chains  # noqa: E402
 
 
 def _pitch_frame(path: str) -> np.ndarray:

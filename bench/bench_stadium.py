@@ -17,9 +17,9 @@ import time
 
 import numpy as np
 
-from glradial.egl import renderer_name, thread_context
-from glradial.stadium import StadiumRenderer
-from glradial.stadium_style import sample_style
+from glradial.gl.egl import renderer_name, thread_context
+from glradial.synthesis.stadium import StadiumRenderer
+from glradial.synthesis.stadium_style import sample_style
 
 
 def numpy_ground_checker(style, size: tuple[int, int]) -> np.ndarray:

@@ -10,8 +10,8 @@ from other processes on a shared machine falls on all alike), keeping the best r
 * ``ffmpeg``       the ffmpeg command transcoding the clip with the same codec settings and no
                    filter (``-c:v libx264 -crf C -preset P -c:a copy``)
 * ``pyav``         the same transcode in this process through PyAV (decode + encode, no RGB)
-* ``fixed lens``   :func:`glradial.video_pipeline.correct_video` with one lens (k1 -0.25, k2 0.05)
-* ``--auto``       pass 1 (:func:`~glradial.video_pipeline.track_video` with the bundled
+* ``fixed lens``   :func:`glradial.video.video_pipeline.correct_video` with one lens (k1 -0.25, k2 0.05)
+* ``--auto``       pass 1 (:func:`~glradial.video.video_pipeline.track_video` with the bundled
                    estimator: cuts on every frame, the shot evidence on every 10th, one lens fit
                    per shot) + pass 2 with the per-frame lens (doubtful shots applied too, so both
                    runs correct every frame)
@@ -38,8 +38,8 @@ from pathlib import Path
 
 import av
 
-from glradial.video_io import EncodeOptions
-from glradial.video_pipeline import correct_video, default_estimator, track_video
+from glradial.media.video_io import EncodeOptions
+from glradial.video.video_pipeline import correct_video, default_estimator, track_video
 
 K1, K2 = -0.25, 0.05
 
@@ -57,11 +57,10 @@ def make_clip(path: Path, size: tuple[int, int], frames: int, kind: str, source:
     """Render the clip's frames (crop of the real frame, resized, distorted) into H.264, then mux
     a 440 Hz AAC tone with the ffmpeg command."""
     import cv2
-    import numpy as np
 
     import glradial
-    from glradial.image_io import read_image
-    from glradial.video_io import VideoInfo, VideoWriter
+    from glradial.media.image_io import read_image
+    from glradial.media.video_io import VideoInfo, VideoWriter
 
     picture = read_image(source)
     height, width = picture.shape[:2]
@@ -110,8 +109,8 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
     """Median ms per call of each way to build the maps of a lens never seen before."""
     import numpy as np
 
-    from glradial.lens import Lens
-    from glradial.remap import cpu_maps
+    from glradial.lens.lens import Lens
+    from glradial.remapping.remap import cpu_maps
 
     ways = {
         "Lens.maps (float32)": lambda lens: lens.maps(size),

@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from glradial import correct
-from glradial.estimator import Estimator
+from glradial.estimation.estimator import Estimator
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 

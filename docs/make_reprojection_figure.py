@@ -27,8 +27,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from glradial import lensfuncs  # noqa: E402
-from glradial.metrics import manifold_k2  # noqa: E402
+from glradial.lens import lensfuncs  # noqa: E402
+from glradial.lens.metrics import manifold_k2  # noqa: E402
 
 RADII = {"width": 0.5, "corner": 0.5 * float(np.hypot(1.0, 9.0 / 16.0))}
 COLUMNS = [

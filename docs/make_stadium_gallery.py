@@ -4,7 +4,7 @@ Usage: python docs/make_stadium_gallery.py [--seeds 0 1 2 ...] [--pano-size 1024
 
 Panoramas: a grid of small equirectangular panoramas (seed, camera kind and lighting in the label).
 Crops: 16:9 frames (k = 0 and one barrel lens) at several horizontal fields of view, rendered by
-glradial.crops from larger panoramas of a few seeds, the way the training data is made.
+glradial.synthesis.crops from larger panoramas of a few seeds, the way the training data is made.
 """
 
 from __future__ import annotations
@@ -16,9 +16,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from glradial.crops import CropParams, render_crops
-from glradial.stadium import StadiumRenderer, project_point
-from glradial.stadium_style import HALF_WIDTH, sample_style
+from glradial.synthesis.crops import CropParams, render_crops
+from glradial.synthesis.stadium import StadiumRenderer, project_point
+from glradial.synthesis.stadium_style import HALF_WIDTH, sample_style
 
 DOCS = Path(__file__).resolve().parent
 

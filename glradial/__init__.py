@@ -1,49 +1,32 @@
 """glradial: radial lens distortion for sports-broadcast video, on the GPU through GLSL.
 
 Coefficients are width-normalised (image width = 1, origin at the image centre); see
-:class:`glradial.Lens` and DESIGN.md. Public names are imported lazily so that ``import glradial``
-stays light (no GL context is made, torch is never imported).
+:class:`glradial.Lens` and docs/DESIGN.md. Public names are imported lazily so that
+``import glradial`` stays light (no GL context is made, torch is never imported); the imports under
+``TYPE_CHECKING`` below are the list of them (``glradial.lazy`` reads it), and what type checkers see.
 """
 
 from __future__ import annotations
 
-import importlib
-from typing import Any
+from typing import TYPE_CHECKING
+
+from .lazy import attach
 
 __version__ = "0.1.0"
 
-#: public name -> module (relative to the package) that defines it
-_EXPORTS = {
-    "Lens": "lens",
-    "GLUnavailableError": "egl",
-    "ShaderCompileError": "shaderlib",
-    "correct": "remap",
-    "distort": "remap",
-    "fit_scale": "remap",
-    "Remapper": "remap",
-    "CropParams": "crops",
-    "sample_crop_params": "crops",
-    "render_crops": "crops",
-    "CropRenderer": "crops",
-    "crop_batches": "crop_producer",
-    "stadium_panorama": "stadium",
-    "StadiumRenderer": "stadium",
-    "estimate": "estimator",
-    "Estimator": "estimator",
-    "ModelLoadError": "estimator",
-    "LensEstimate": "lens_estimate",
-}
+if TYPE_CHECKING:
+    from .errors import Error, GLUnavailableError, LensTrackError, ModelLoadError, ShaderCompileError
+    from .estimation.estimator import Estimator, estimate
+    from .estimation.lens_estimate import LensEstimate
+    from .gl.shaderlib import shader_dir, shader_path
+    from .lens.lens import Lens
+    from .remapping.remap import Remapper, correct, distort, fit_scale
+    from .synthesis.crop_producer import crop_batches
+    from .synthesis.crops import CropParams, CropRenderer, render_crops, sample_crop_params
+    from .synthesis.stadium import StadiumRenderer, stadium_panorama
 
-__all__ = sorted(_EXPORTS) + ["__version__"]
-
-
-def __getattr__(name: str) -> Any:
-    module_name = _EXPORTS.get(name)
-    if module_name is None:
-        raise AttributeError(f"module 'glradial' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module_name}", __name__), name)
-    globals()[name] = value
-    return value
+__getattr__, _dir, _names = attach(__name__, __file__)
+__all__ = _names + ["__version__"]
 
 
 def __dir__() -> list[str]:

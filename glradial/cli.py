@@ -29,7 +29,7 @@ from .commands import CliError, UsageError
 __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: subcommands in the order ``glradial --help`` lists them
-COMMANDS = ("correct", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
+COMMANDS = ("correct", "distort", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
 
 PROG = "glradial"
 
@@ -67,8 +67,14 @@ def build_parser() -> argparse.ArgumentParser:
     parser = _Parser(
         prog=PROG,
         description=(
-            "Radial lens distortion for sports-broadcast video: correct frames and videos, estimate the "
-            "lens with the bundled CNN, convert coefficients, export STMaps, render training crops. "
+            "Radial lens distortion for sports-broadcast video. 'correct' removes a lens from images, "
+            "folders and videos (given, per-frame track, or --auto: estimated); 'distort' puts it into "
+            "graphics, the exact inverse (key and fill: alpha kept and interpolated premultiplied; "
+            "OpenEXR floats; interlaced fields). 'estimate' reads the lens from frames: method auto "
+            "(the pitch-line fit where it is surer than the CNN) errs by a median 1.1 px at 1920 wide on "
+            "held-out stadium crops and 2.1-6.5 px on real football frames, more where no pitch line is "
+            "seen; each estimate states its uncertainty, and a shot above 10 px is flagged doubtful. "
+            "Also: convert coefficients, export STMaps, render training crops and stadiums. "
             "Coefficients (k1, k2) are width-normalised: image width = 1, origin at the image centre, "
             "p_d = p_u (1 + k1 r^2 + k2 r^4)."
         ),

@@ -1,18 +1,18 @@
 """Training and test data for the estimator: panoramas, a background crop producer, a reuse pool.
 
 Convention: crops are uint8 RGB ``N x h x w x 3`` at the network input size ``out_size = (w, h)``,
-rendered by :class:`glradial.crops.CropRenderer` with the frame geometry ``size`` (1280 x 720, 16:9)
+rendered by :class:`glradial.synthesis.crops.CropRenderer` with the frame geometry ``size`` (1280 x 720, 16:9)
 that the labels refer to; labels are float32 ``N x 2`` = ``(k1, k2)`` in width-normalised lens
-units, drawn from the paper's distribution (:func:`glradial.crops.sample_crop_params`).
+units, drawn from the paper's distribution (:func:`glradial.synthesis.crops.sample_crop_params`).
 
 Panoramas: procedural stadiums rendered once per seed and size and cached as ``.npy`` under a cache
-folder (:func:`glradial.stadium.stadium_panorama_cached`; ``data_cache/`` by default, git-ignored);
-train / val / test seeds follow :func:`glradial.stadium_style.split_seeds`. ``synthetic_panorama``
+folder (:func:`glradial.synthesis.stadium.stadium_panorama_cached`; ``data_cache/`` by default, git-ignored);
+train / val / test seeds follow :func:`glradial.synthesis.stadium_style.split_seeds`. ``synthetic_panorama``
 is a fast stand-in (random lines and blobs) for tests.
 
 Throughput on a CPU-only machine: rendering a crop (llvmpipe) costs about as much as a training
 step on it, so the trainer keeps a pool of recent crops and, each step, pulls a fixed number of
-fresh crops from a producer process (glradial's crop producer, :mod:`glradial.crop_producer`,
+fresh crops from a producer process (glradial's crop producer, :mod:`glradial.synthesis.crop_producer`,
 which renders ahead, in parallel) and samples its batch from
 the pool. The number of fresh crops per step is fixed, so a run is deterministic per seed no matter
 how fast the producer is. Several producers (:class:`CropProducers`) each render their own shard
@@ -27,11 +27,11 @@ from typing import Sequence
 
 import numpy as np
 
-from glradial.crop_producer import crop_batches
-from glradial.crops import load_panorama
-from glradial.metrics import PAPER_SIZE
-from glradial.stadium import stadium_cache_path, stadium_panorama_cached
-from glradial.stadium_style import split_seeds
+from glradial.lens.metrics import PAPER_SIZE
+from glradial.synthesis.crop_producer import crop_batches
+from glradial.synthesis.crops import load_panorama
+from glradial.synthesis.stadium import stadium_cache_path, stadium_panorama_cached
+from glradial.synthesis.stadium_style import split_seeds
 
 # --- panoramas ------------------------------------------------------------------------------------
 
@@ -84,7 +84,7 @@ class PanoramaSource:
         raise ValueError(f"panorama source kind must be 'stadium', 'synthetic' or 'files', got {self.kind!r}")
 
     def inputs(self) -> list:
-        """What a crop producer reads (:func:`glradial.crop_producer.crop_batches`), loaded in its
+        """What a crop producer reads (:func:`glradial.synthesis.crop_producer.crop_batches`), loaded in its
         worker process: paths of the cached stadiums (rendered here first when missing) or of the
         files; arrays for synthetic panoramas and uncached stadiums."""
         if self.kind == "stadium" and self.cache_dir is not None:
@@ -130,7 +130,7 @@ class _ChunkReader:
 
 class CropProducer(_ChunkReader):
     """One background process rendering ``source``'s panoramas in chunks of ``chunk`` crops: the
-    glradial crop producer (:func:`glradial.crop_producer.crop_batches`, one worker, every panorama
+    glradial crop producer (:func:`glradial.synthesis.crop_producer.crop_batches`, one worker, every panorama
     kept uploaded, ``threads`` llvmpipe threads, up to ``prefetch`` chunks ahead; ``paired``: lens
     pairs).
 
@@ -261,9 +261,9 @@ def render_test_set(
     source: PanoramaSource, n: int, seed: int, out_size: tuple[int, int], *, ranges: dict | None = None,
 ) -> tuple[np.ndarray, np.ndarray, list]:
     """``n`` crops (no augmentation) spread evenly over ``source``'s panoramas, rendered in this
-    process by :func:`glradial.crops.render_crop_set`. Returns ``(images, labels float32, params)``;
+    process by :func:`glradial.synthesis.crops.render_crop_set`. Returns ``(images, labels float32, params)``;
     deterministic per ``seed``."""
-    from glradial.crops import crop_labels, render_crop_set
+    from glradial.synthesis.crops import crop_labels, render_crop_set
 
     images, params = render_crop_set(source.load(), n, seed, size=PAPER_SIZE, out_size=out_size, ranges=ranges)
     return images, crop_labels(params, np.float32), params

@@ -1,4 +1,4 @@
-"""``python -m net.evaluate``: ``glradial evaluate`` (:mod:`glradial.evaluation`) that also takes
+"""``python -m net.evaluate``: ``glradial evaluate`` (:mod:`glradial.evaluation.evaluation`) that also takes
 ``.pt`` checkpoints (through torch, in a checkout).
 
 Usage::
@@ -6,7 +6,7 @@ Usage::
     python -m net.evaluate --model runs/gpu384b/best.pt --out runs/gpu384b/eval [--split val] [--n 800]
 
 The options, the test set, the metrics and the report are those of ``glradial evaluate`` (see
-``glradial evaluate --help``); an ``.onnx`` model goes through :class:`glradial.estimator.Estimator`
+``glradial evaluate --help``); an ``.onnx`` model goes through :class:`glradial.estimation.estimator.Estimator`
 exactly as there.
 """
 
@@ -18,8 +18,8 @@ import sys
 import numpy as np
 
 from glradial.commands.evaluate import add_arguments, settings
-from glradial.estimator import default_model_path
-from glradial.evaluation import PREDICT_BATCH, OnnxPredictor, evaluate
+from glradial.estimation.estimator import default_model_path
+from glradial.evaluation.evaluation import PREDICT_BATCH, OnnxPredictor, evaluate
 
 
 class TorchPredictor:

@@ -34,8 +34,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from glradial.atomic import atomic_path
-from glradial.model_check import write_checksum
+from glradial.estimation.model_check import write_checksum
+from glradial.media.atomic import atomic_path
 
 from .model import DistortionNet, ModelConfig, normalise_batch
 
@@ -49,6 +49,8 @@ PREPROCESSING = (
     "channel and transposes to NCHW."
 )
 OUTPUT = "k: float32 N x 2 = (k1, k2), width-normalised lens units (image width = 1, origin at the centre)"
+ERROR_OUTPUT = ("error_px: float32 N x 1, the network's expected error for the frame: the scale of a Laplace "
+                "model of its maximum displacement error over the 16:9 frame, px at 1920 wide (uncalibrated)")
 
 
 class ExportWrapper(nn.Module):
@@ -58,8 +60,11 @@ class ExportWrapper(nn.Module):
         super().__init__()
         self.model = model
 
-    def forward(self, image: torch.Tensor) -> torch.Tensor:
-        return self.model(normalise_batch(image, self.model.config))
+    def forward(self, image: torch.Tensor):
+        out = self.model(normalise_batch(image, self.model.config))
+        if not self.model.config.error_head:
+            return out
+        return out[:, :2], torch.exp(out[:, 2:3])
 
 
 def load_checkpoint(path: str | Path, which: str = "auto") -> DistortionNet:
@@ -88,9 +93,11 @@ def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = 
         with warnings.catch_warnings():  # the TorchScript exporter is deprecated; onnxscript (dynamo) is not a dependency
             warnings.simplefilter("ignore", DeprecationWarning)
             warnings.simplefilter("ignore", torch.jit.TracerWarning)  # the preprocessing constants
+            outputs = ["k", "error_px"] if model.config.error_head else ["k"]
             torch.onnx.export(
-                wrapper, (dummy,), str(tmp), dynamo=False, input_names=["image"], output_names=["k"],
-                dynamic_axes={"image": {0: "N"}, "k": {0: "N"}}, opset_version=OPSET, do_constant_folding=True,
+                wrapper, (dummy,), str(tmp), dynamo=False, input_names=["image"], output_names=outputs,
+                dynamic_axes={"image": {0: "N"}, **{name: {0: "N"} for name in outputs}}, opset_version=OPSET,
+                do_constant_folding=True,
             )
         _add_metadata(tmp, model.config, metadata)
     write_checksum(path)  # the estimator refuses a model whose recorded SHA-256 differs
@@ -109,7 +116,7 @@ def _add_metadata(path: Path, config: ModelConfig, metadata: dict | None) -> Non
         "input_size": f"{width},{height}",
         "input_layout": "NHWC uint8 RGB",
         "preprocessing": PREPROCESSING,
-        "output": OUTPUT,
+        "output": OUTPUT + ("; " + ERROR_OUTPUT if config.error_head else ""),
     }
     try:
         from glradial import __version__
@@ -135,10 +142,13 @@ def check_agreement(model: DistortionNet, onnx_path: str | Path, n: int = 8, see
     width, height = model.config.input_size
     images = np.random.default_rng(seed).integers(0, 256, (n, height, width, 3), dtype=np.uint8)
     with torch.no_grad():
-        ref = ExportWrapper(model.eval())(torch.from_numpy(images)).numpy()
+        ref = ExportWrapper(model.eval())(torch.from_numpy(images))
+    ref = [t.numpy() for t in ref] if isinstance(ref, tuple) else [ref.numpy()]
     session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
-    got = session.run(None, {"image": images})[0]
-    err = float(np.abs(ref - got).max())
+    got = session.run(None, {"image": images})
+    # k in lens units; error_px relative (px of a 1920-wide frame, so the lens-unit tolerance x 1920)
+    err = max([float(np.abs(ref[0] - got[0]).max())]
+              + [float(np.abs(r - g).max() / 1920.0) for r, g in zip(ref[1:], got[1:])])
     if not err <= ATOL:
         raise AssertionError(f"onnxruntime and torch disagree by {err:.3g} > {ATOL} lens units")
     return err

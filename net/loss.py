@@ -1,4 +1,4 @@
-"""The paper's distortion loss (DESIGN.md).
+"""The paper's distortion loss (docs/DESIGN.md).
 
 Convention: a lens is ``(k1, k2)`` in width-normalised lens units; the radial map is
 ``P(r, (k1, k2)) = r (1 + k1 r^2 + k2 r^4)``. Radii are ``samples`` points evenly spaced on
@@ -12,7 +12,7 @@ the paper.
 
 Training loss ``L = DL(y, (k1_hat, k2)) + DL(y, (k1, k2_hat))``: each coefficient judged with the
 other one true. Optionally (``joint_weight`` w > 0, not the paper's) ``+ w DL_c(y, y_hat)``, both
-coefficients judged together on radii up to the 16:9 corner radius (:data:`glradial.metrics.CORNER_RADIUS_16_9`): the
+coefficients judged together on radii up to the 16:9 corner radius (:data:`glradial.lens.metrics.CORNER_RADIUS_16_9`): the
 quantity behind the evaluation's maximum displacement error, which rewards a k2 that offsets the
 network's own k1 error inside the frame.
 """
@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import torch
 
-from glradial.metrics import CORNER_RADIUS_16_9, LOSS_R_MAX, LOSS_SAMPLES
+from glradial.lens.metrics import CORNER_RADIUS_16_9, DISPLACEMENT_SAMPLES, LOSS_R_MAX, LOSS_SAMPLES, REPORT_WIDTH
 
 
 def loss_radii(samples: int = LOSS_SAMPLES, r_max: float = LOSS_R_MAX, *, device=None, dtype=torch.float32) -> torch.Tensor:
@@ -62,3 +62,21 @@ def training_loss(
         frame_radii = loss_radii(LOSS_SAMPLES, CORNER_RADIUS_16_9, device=y.device, dtype=y.dtype)
         loss = loss + joint_weight * distortion_loss(y, y_hat, frame_radii).mean()
     return loss
+
+
+def max_displacement_px(y: torch.Tensor, y_hat: torch.Tensor) -> torch.Tensor:
+    """Per-sample ``max_r |P(r, y) - P(r, y_hat)|`` over ``[0, CORNER_RADIUS_16_9]`` in px of a
+    ``REPORT_WIDTH``-wide frame (the torch twin of :func:`glradial.metrics.max_displacement_px`)."""
+    r = torch.linspace(0.0, CORNER_RADIUS_16_9, DISPLACEMENT_SAMPLES, device=y.device, dtype=y.dtype)
+    d = y - y_hat
+    return REPORT_WIDTH * (d[:, :1] * r**3 + d[:, 1:2] * r**5).abs().amax(dim=1)
+
+
+def error_scale_loss(y: torch.Tensor, y_hat: torch.Tensor, log_scale: torch.Tensor) -> torch.Tensor:
+    """Batch mean of the Laplace negative log-likelihood ``log b + e / b`` of the network's own error
+    ``e`` (:func:`max_displacement_px` of the detached ``y_hat``; px at 1920) under the predicted
+    scale ``b = exp(log_scale)`` (clamped to [-3, 6]: 0.05 to 400 px). Its minimiser is ``b = E[e]``,
+    the mean error of frames that look alike; only the error head learns from it."""
+    error = max_displacement_px(y, y_hat.detach())
+    log_b = log_scale.clamp(-3.0, 6.0)
+    return (log_b + error / torch.exp(log_b)).mean()

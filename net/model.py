@@ -6,7 +6,8 @@ Convention:
             ``mean``/``std`` from :class:`ModelConfig`. The frame is the whole 16:9 frame the lens
             refers to, resized (area interpolation) to ``input_size = (W, H)``; the aspect ratio is
             not kept when ``W / H != 16 / 9`` (the paper squashes 16:9 into 224 x 224).
-    output  float32 ``N x 2``: ``(k1, k2)`` in width-normalised lens units (DESIGN.md).
+    output  float32 ``N x 2``: ``(k1, k2)`` in width-normalised lens units (docs/DESIGN.md); with
+            ``error_head``, ``N x 3``: a third column, the log of the expected error in px at 1920.
 
 Architecture (timm-style: ``forward_features`` -> pooled features, ``forward_head`` -> (k1, k2)):
 a 3x3 stride-2 stem, stages of MobileNetV2 inverted residual blocks (expand 1x1, depthwise 3x3,
@@ -28,8 +29,11 @@ from typing import Any
 import torch
 from torch import nn
 
-from glradial.atomic import atomic_write_text
-from glradial.metrics import PAPER_SIZE, manifold_k2
+from glradial.lens.metrics import PAPER_SIZE, manifold_k2
+from glradial.media.atomic import atomic_write_text
+
+#: Initial log error scale of the error head (px at 1920): about the shipped model's median error.
+ERROR_INIT_LOG_PX = 1.5
 
 #: ITU-R BT.601 luma weights (R, G, B) used by the grayscale variant.
 LUMA_WEIGHTS = (0.299, 0.587, 0.114)
@@ -46,7 +50,10 @@ class ModelConfig:
     head_k2`` (the manifold term does not pass gradients back to k1). ``stages`` lists
     ``(expansion, out_channels, blocks, stride[, fused])`` (fused = 1: Fused-MBConv, a full 3x3
     expand conv instead of 1x1 + depthwise; faster to train in early stages). ``mean``/``std`` apply to ``x / 255`` per
-    channel in ``channel_order`` ("RGB" or "L").
+    channel in ``channel_order`` ("RGB" or "L"). ``error_head``: a third head predicts
+    ``log`` of the network's own error scale, in px of a 1920-wide frame (the maximum displacement
+    between its (k1, k2) and the true lens over the 16:9 frame, :func:`net.loss.error_scale_loss`);
+    it reads detached features, so it never changes what the k1/k2 heads learn.
     """
 
     input_size: tuple[int, int] = (224, 224)
@@ -60,6 +67,7 @@ class ModelConfig:
     coord_channels: bool = True
     pool_grid: int = 1
     k2_residual: bool = False
+    error_head: bool = False
     k_init: tuple[float, float] = (-0.2, 0.1)
     mean: tuple[float, ...] = (0.5, 0.5, 0.5)
     std: tuple[float, ...] = (0.25, 0.25, 0.25)
@@ -208,6 +216,7 @@ class DistortionNet(nn.Module):
         self.num_features = features
         self.head_k1 = RegressionHead(features, config.head_hidden, config.k_init[0])
         self.head_k2 = RegressionHead(features, config.head_hidden, config.k_init[1])
+        self.head_error = RegressionHead(features, config.head_hidden, ERROR_INIT_LOG_PX) if config.error_head else None
         for m in self.modules():
             if isinstance(m, nn.Conv2d):
                 nn.init.kaiming_normal_(m.weight, mode="fan_out")
@@ -223,13 +232,16 @@ class DistortionNet(nn.Module):
         return pooled
 
     def forward_head(self, features: torch.Tensor) -> torch.Tensor:
-        """Pooled features -> ``N x 2`` (k1, k2)."""
+        """Pooled features -> ``N x 2`` (k1, k2), or ``N x 3`` (k1, k2, log error scale in px at
+        1920) with ``error_head``."""
         k1 = self.head_k1(features)
         k2 = self.head_k2(features)
         if self.config.k2_residual:
             prior = k1.detach()
             k2 = k2 + manifold_k2(prior)
-        return torch.cat([k1, k2], dim=1)
+        if self.head_error is None:
+            return torch.cat([k1, k2], dim=1)
+        return torch.cat([k1, k2, self.head_error(features.detach())], dim=1)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.forward_head(self.forward_features(x))

@@ -20,7 +20,7 @@ over the budget (so a run ends on time on a shared machine; then the run is not 
 An exponential moving average (EMA) of the weights is kept and is what validation, the "best"
 checkpoint and export use.
 
-Outputs in ``--out`` (written through :mod:`glradial.atomic`, except the log ``train.csv``, one
+Outputs in ``--out`` (written through :mod:`glradial.media.atomic`, except the log ``train.csv``, one
 row per log interval appended and flushed as it comes), ``last.pt`` (every
 ``checkpoint_s`` seconds and at the end; ``--resume`` continues from it), ``best.pt`` (best
 validation median max-displacement), ``config.json`` (the full run config, model config included).
@@ -44,13 +44,14 @@ import numpy as np
 import torch
 import torch.distributed as dist
 
-from glradial.atomic import atomic_path, atomic_write_text
-from glradial.evaluation import metrics
+from glradial.evaluation.evaluation import metrics
+from glradial.media.atomic import atomic_path, atomic_write_text
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
-from .loss import training_loss
+from .loss import error_scale_loss, training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
+
 
 @dataclass
 class TrainConfig:
@@ -77,6 +78,9 @@ class TrainConfig:
     paired: bool = False
     stop_at_s: float | None = None  # stop after this much step time, leaving the schedule as it is
     joint_loss_weight: float = 0.0  # > 0 adds the joint in-frame term to the paper's loss (net.loss)
+    error_loss_weight: float = 0.1  # weight of the error head's Laplace likelihood (models with error_head)
+    error_head_lr_scale: float = 1.0  # the error head's learning rate over lr
+    error_head_only: bool = False  # train only the error head: the rest (batch-norm statistics too) stays as loaded
     panoramas: dict = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "train", "n": 16}, "size": [2048, 1024]})
     val_panoramas: dict | None = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "val", "n": 4}, "size": [2048, 1024]})
     val_size: int = 256
@@ -137,7 +141,7 @@ def panorama_source(spec: dict, cache_dir: str) -> PanoramaSource:
     """Build a :class:`PanoramaSource` from a config entry (``seeds`` a list or ``{split, n, start}``)."""
     seeds = spec.get("seeds", [])
     if isinstance(seeds, dict):
-        from glradial.stadium_style import split_seeds
+        from glradial.synthesis.stadium_style import split_seeds
 
         seeds = split_seeds(seeds["split"], int(seeds["n"]), int(seeds.get("start", 0)))
     return PanoramaSource(kind=spec["kind"], seeds=list(seeds), size=tuple(spec.get("size", (2048, 1024))),
@@ -151,13 +155,23 @@ def lr_factor(progress: float, step: int, cfg: TrainConfig) -> float:
     return warm * cosine
 
 
+def freeze_all_but_error_head(model: torch.nn.Module) -> None:
+    """Only ``head_error`` learns: every other parameter stops needing gradients and every other
+    batch norm uses (and keeps) its running statistics, so the (k1, k2) function stays as loaded."""
+    for name, p in model.named_parameters():
+        p.requires_grad_(name.startswith("head_error."))
+    for name, m in model.named_modules():
+        if isinstance(m, torch.nn.modules.batchnorm._BatchNorm) and not name.startswith("head_error."):
+            m.eval()
+
+
 def predict(model: torch.nn.Module, images: np.ndarray, config: ModelConfig, device, batch: int = 128) -> np.ndarray:
     model.eval()
     out = []
     with torch.no_grad():
         for i in range(0, len(images), batch):
             x = normalise_batch(torch.from_numpy(images[i : i + batch]).to(device), config)
-            out.append(model(x.contiguous(memory_format=torch.channels_last)).float().cpu().numpy())
+            out.append(model(x.contiguous(memory_format=torch.channels_last))[:, :2].float().cpu().numpy())
     return np.concatenate(out)
 
 
@@ -213,7 +227,7 @@ def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, 
     return CropProducers(producers, [len(part) for _, part in shards], cfg.producer_chunk)
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI's option handling; complexity 33)
     parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
     parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig; \"base\" names the config it extends)")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")
@@ -264,12 +278,14 @@ def main(argv: list[str] | None = None) -> int:
     model_cfg = ModelConfig.from_dict(cfg.model)
     model = DistortionNet(model_cfg).to(device).to(memory_format=torch.channels_last)
     ema = EMA(model, cfg.ema_decay)
-    decay, no_decay = [], []
+    decay, no_decay, error_head = [], [], []
     for name, p in model.named_parameters():
-        (no_decay if p.ndim <= 1 else decay).append(p)
-    optimizer = torch.optim.AdamW(
-        [{"params": decay, "weight_decay": cfg.weight_decay}, {"params": no_decay, "weight_decay": 0.0}], lr=cfg.lr
-    )
+        (error_head if name.startswith("head_error.") else no_decay if p.ndim <= 1 else decay).append(p)
+    groups = [{"params": decay, "weight_decay": cfg.weight_decay, "lr_scale": 1.0},
+              {"params": no_decay, "weight_decay": 0.0, "lr_scale": 1.0}]
+    if error_head:  # a new head next to trained weights: its own (larger) learning rate
+        groups.append({"params": error_head, "weight_decay": 0.0, "lr_scale": cfg.error_head_lr_scale})
+    optimizer = torch.optim.AdamW(groups, lr=cfg.lr)
     step, train_time, best = 0, 0.0, math.inf
     if args.init:
         state = torch.load(args.init, map_location=device, weights_only=False)
@@ -354,10 +370,15 @@ def main(argv: list[str] | None = None) -> int:
             y = torch.from_numpy(labels).to(device)
             factor = lr_factor(progress, step, cfg)
             for group in optimizer.param_groups:
-                group["lr"] = cfg.lr * factor
+                group["lr"] = cfg.lr * factor * group.get("lr_scale", 1.0)
             train_model.train()
-            pred = train_model(x)
+            if cfg.error_head_only:
+                freeze_all_but_error_head(model)
+            out_all = train_model(x)
+            pred = out_all[:, :2]
             loss = training_loss(y, pred, joint_weight=cfg.joint_loss_weight)
+            if model_cfg.error_head:
+                loss = loss + cfg.error_loss_weight * error_scale_loss(y, pred, out_all[:, 2])
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()

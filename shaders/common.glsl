@@ -2,9 +2,9 @@
 //
 // Include this file in every program (glradial.shaderlib expands the include directive); it needs
 // nothing injected from Python and compiles as GLSL 3.30 core on its own after a `#version` line.
-// Every function below has a NumPy twin of the same name in glradial/lensfuncs.py.
+// Every function below has a NumPy twin of the same name in glradial/lens/lensfuncs.py.
 //
-// Conventions (DESIGN.md):
+// Conventions (docs/DESIGN.md):
 //   Pixel (x, y): integer indices are pixel centres, x right, y down; image W x H.
 //   Texture coordinates: u = (x + 0.5) / W, v = (y + 0.5) / H; v = 0 is the first row in memory
 //     (the top of the image). Rendering keeps that: output row y is gl_FragCoord.y = y + 0.5, and the

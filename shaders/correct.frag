@@ -3,7 +3,7 @@
 // distorted input at p_d = distort_point(p_u, k).
 //
 // Uniforms:
-//   u_k          vec2   (k1, k2), width-normalised lens units (DESIGN.md)
+//   u_k          vec2   (k1, k2), width-normalised lens units (docs/DESIGN.md)
 //   u_centre     vec2   principal point offset from the image centre, width units (0, 0 = centred)
 //   u_pixel_aspect float fy / fx (1 = square pixels; must be set, GL's default 0 is invalid)
 //   u_scale      float  fit scale (1 = "same": the centre keeps its scale)

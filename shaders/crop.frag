@@ -9,7 +9,7 @@
 // Geometry of one output pixel (uv in <0;1> over the tile, lens aspect from the frame geometry):
 //   p_d = lens_from_uv(uv, u_aspect_hw); p_u = inverse(p_d): exact (bounded Newton, common.glsl),
 //   the same exact inverse as the lens's Chebyshev series in r_d^2 when CROP_INVERSE_SERIES is 1
-//   (fitted and checked per crop on the CPU: glradial/inverse_series.py), or Drap-Lefevre when
+//   (fitted and checked per crop on the CPU: glradial/lens/inverse_series.py), or Drap-Lefevre when
 //   CROP_INVERSE_DRAP is 1; camera ray (p_u.x, p_u.y, f); world ray w = R * camera ray;
 //   longitude = atan(w.x, w.z) (0 = centre column, + right), latitude = atan(-w.y, |w.xz|) (+ up);
 //   panorama texture coordinates u = 0.5 + lon / (2 pi), v = 0.5 - lat / pi (v = 0 is the top row).

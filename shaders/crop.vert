@@ -6,7 +6,7 @@
 //   in_r0 = (R00, R01, R02, f), in_r1 = (R10, R11, R12, k1), in_r2 = (R20, R21, R22, k2),
 // R = R_pan * R_tilt * R_roll (camera ray -> world ray), f = focal length in lens units;
 //   in_s0, in_s1, in_s2.xyz = the 11 Chebyshev coefficients c0..c10 of the lens's inverse series
-// (glradial/inverse_series.py; read only with CROP_INVERSE_SERIES).
+// (glradial/lens/inverse_series.py; read only with CROP_INVERSE_SERIES).
 
 uniform ivec2 u_tile_size;  // (w, h) of one tile in pixels
 uniform int u_tiles;        // tiles in the target (its height is u_tiles * h)

@@ -9,7 +9,7 @@
 // Inject SAMPLING_INTERPOLATION (glradial.shaderlib defines) as one of the names below; linear is
 // the default. Every tap is a texelFetch, so the caller's sampler state (filter, wrap, mipmaps)
 // never matters and the result is the same on every driver.
-//   Pixel coordinates: xy = uv * size - 0.5, pixel centres at integers (DESIGN.md).
+//   Pixel coordinates: xy = uv * size - 0.5, pixel centres at integers (docs/DESIGN.md).
 //   nearest: the tap at round(xy) (halves round up).
 //   linear:  bilinear over the 2x2 taps around xy.
 //   cubic:   Keys cubic convolution, a = -0.75, over the 4x4 taps (OpenCV's INTER_CUBIC kernel).

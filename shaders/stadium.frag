@@ -4,7 +4,7 @@
 // +90 deg at the top row. Pixel (x, y) of the full panorama (y = u_row0 + gl_FragCoord.y - 0.5 for
 // the strip being drawn) has lon = ((x + 0.5) / W - 0.5) * 2 pi, lat = (0.5 - (y + 0.5) / H) * pi.
 // Scene in metres: pitch centre at the origin, x along the length, y across, z up (see
-// glradial/stadium_style.py). The camera at u_cam looks horizontally along azimuth u_yaw at lon 0;
+// glradial/synthesis/stadium_style.py). The camera at u_cam looks horizontally along azimuth u_yaw at lon 0;
 // a direction is cos(lat) (cos(lon) f + sin(lon) r) + sin(lat) up with f = (cos yaw, sin yaw, 0)
 // and r = (sin yaw, -cos yaw, 0) (to the right of f).
 // Anti-aliasing: markings, stripes, boards, seats, posts and textures are box-filtered by each

@@ -15,7 +15,7 @@ DATA = Path(__file__).parent / "data"
 @pytest.fixture(scope="session")
 def gl_ctx():
     """The test thread's glradial context (the one the module-level functions use)."""
-    from glradial.egl import thread_context
+    from glradial.gl.egl import thread_context
 
     return thread_context()
 

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import glradial
 from glradial.commands.demo_real import FRAME_NAME
-from glradial.image_io import read_image
+from glradial.media.image_io import read_image
 
 ROOT = Path(__file__).resolve().parents[1]
 

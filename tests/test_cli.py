@@ -13,14 +13,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA
 
 import glradial
 from glradial import Lens
 from glradial.cli import build_parser, main
-from glradial.image_io import read_image, write_image
-from glradial.video_io import EncodeOptions, VideoInfo, VideoReader, VideoWriter, probe_video
-
-from conftest import DATA
+from glradial.media.image_io import read_image, write_image
+from glradial.media.video_io import EncodeOptions, VideoInfo, VideoReader, VideoWriter, probe_video
 
 K1, K2 = -0.25, 0.05
 
@@ -46,7 +45,7 @@ def test_correct_real_jpeg_matches_library_and_opencv(tmp_path):
     image = read_image(DATA / "road_straight_lines1.jpg")
     result = read_image(out)
     np.testing.assert_array_equal(result, glradial.correct(image, K1, K2, backend="cpu"))
-    # independent oracle (DESIGN.md): cv2.undistort with f = W; equal up to fixed-point rounding
+    # independent oracle (docs/DESIGN.md): cv2.undistort with f = W; equal up to fixed-point rounding
     h, w = image.shape[:2]
     camera = np.array([[w, 0, (w - 1) / 2], [0, w, (h - 1) / 2], [0, 0, 1]], np.float64)
     expected = cv2.undistort(image, camera, np.array([K1, K2, 0, 0], np.float64))
@@ -147,7 +146,7 @@ def test_correct_auto_checks_the_encoder_before_estimating(tmp_path, capfd, monk
     with VideoWriter(source, VideoInfo.of((64, 36), 25), options=EncodeOptions(codec="libx264")) as writer:
         for value in (0, 100, 200):
             writer.write(np.full((36, 64, 3), value, np.uint8))
-    monkeypatch.setattr("glradial.video_pipeline.track_video", lambda *a, **k: pytest.fail("estimation started"))
+    monkeypatch.setattr("glradial.video.video_pipeline.track_video", lambda *a, **k: pytest.fail("estimation started"))
     assert main(["correct", str(source), str(out), "--auto", "--preset", "ludicrous"]) == 1
     lines = [line for line in capfd.readouterr().err.splitlines() if line.strip()]
     assert lines == [f"glradial: error: cannot write {str(out)!r}: --preset 'ludicrous' is not a preset of libx264 "
@@ -174,7 +173,7 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
 
         return estimate
 
-    monkeypatch.setattr("glradial.video_pipeline.default_estimator", fake_estimator)
+    monkeypatch.setattr("glradial.video.video_pipeline.default_estimator", fake_estimator)
     source = tmp_path / "in.mkv"
     _pan_video(source, field_panorama, n=n, fps=25, cut=cut, marker=True, lenses=truth)
     for extra in ([], ["--apply-doubtful"]):
@@ -200,7 +199,7 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr("glradial.video_pipeline.default_estimator", lambda model=None, method=None: (lambda frame: Lens(-0.2, 0.03)))
+    monkeypatch.setattr("glradial.video.video_pipeline.default_estimator", lambda model=None, method=None: (lambda frame: Lens(-0.2, 0.03)))
     source, out = tmp_path / "in.png", tmp_path / "out.png"
     write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
     assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0
@@ -211,7 +210,7 @@ def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
 def test_ctrl_c_leaves_no_output(tmp_path, field_panorama, monkeypatch):
     source, out = tmp_path / "in.mp4", tmp_path / "out.mp4"
     _pan_video(source, field_panorama, n=12)
-    real = glradial.remap.correct
+    real = glradial.remapping.remap.correct
     count = {"n": 0}
 
     def interrupted(*args, **kwargs):
@@ -220,7 +219,7 @@ def test_ctrl_c_leaves_no_output(tmp_path, field_panorama, monkeypatch):
             raise KeyboardInterrupt
         return real(*args, **kwargs)
 
-    monkeypatch.setattr("glradial.remap.correct", interrupted)
+    monkeypatch.setattr("glradial.remapping.remap.correct", interrupted)
     assert main(["correct", str(source), str(out), "--k1", "-0.1", "--backend", "cpu"]) == 130
     assert _names(tmp_path) == ["in.mp4"]
 
@@ -284,7 +283,7 @@ def _convert(capsys, *argv: str) -> tuple[float, float]:
 
 def test_convert_known_answers(capsys):
     w, h = 1920, 1080
-    # OpenCV with f = W: the same numbers (DESIGN.md); with f = W/2: k1 (W/f)^2 = 4 k1, k2 (W/f)^4 = 16 k2
+    # OpenCV with f = W: the same numbers (docs/DESIGN.md); with f = W/2: k1 (W/f)^2 = 4 k1, k2 (W/f)^4 = 16 k2
     assert _convert(capsys, "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "1920", "-0.1", "0.01") == pytest.approx((-0.1, 0.01))
     assert _convert(capsys, "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "960", "-0.1", "0.01") == pytest.approx((-0.4, 0.16))
     # pixel units: k1 / W^2, k2 / W^4
@@ -328,7 +327,7 @@ def test_every_option_is_documented():
 def test_every_command_is_installed():
     parser = build_parser()
     subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(subparsers.choices) == {"correct", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate"}
+    assert set(subparsers.choices) == {"correct", "distort", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate"}
     for name, sub in subparsers.choices.items():
         assert "unavailable" not in (sub.description or ""), (name, sub.description)
 
@@ -398,10 +397,10 @@ def test_correct_auto_with_an_onnx_model(tmp_path, capsys):
 
 
 def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
-    """The video hook of 'glradial estimate' (glradial.video_pipeline.estimate_video): shots found, every
+    """The video hook of 'glradial estimate' (glradial.video.video_pipeline.estimate_video): shots found, every
     frame gets the model's lens, JSON and CSV sidecars agree."""
-    from glradial.lens_track import load_lens_track
-    from glradial.video_pipeline import estimate_video, track_report
+    from glradial.video.lens_track import load_lens_track
+    from glradial.video.video_pipeline import estimate_video, track_report
 
     model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
     source = tmp_path / "cut.mp4"
@@ -417,7 +416,7 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     document = json.loads(track_report(track, "cut.mp4", per_frame=True, as_json=True))
     assert len(document["frames"]) == 20 and document["fps"] == pytest.approx(25)
     # samples every 3rd frame of each shot (0, 3, 6, 9 | 12, 15, 18); the estimator runs on every
-    # 3rd sample of a shot (glradial.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12
+    # 3rd sample of a shot (glradial.video.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12
     assert [r["frame"] for r in document["frames"] if r["k1_raw"] is not None] == [0, 9, 12]
     track.save(tmp_path / "t.json")
     track.save(tmp_path / "t.csv")
@@ -447,7 +446,7 @@ def test_estimate_command_on_a_video_prints_shots(tmp_path, field_panorama, caps
 
 
 def test_estimate_command_bad_images_get_one_line(tmp_path, capsys):
-    """Missing and corrupt images (read by glradial.image_io.read_image) get one named error line."""
+    """Missing and corrupt images (read by glradial.media.image_io.read_image) get one named error line."""
     model = constant_model(tmp_path / "const.onnx", -0.21, 0.04)
     assert main(["estimate", str(tmp_path / "missing.png"), "--model", str(model)]) == 1
     assert "missing.png" in _error_line(capsys)
@@ -467,7 +466,7 @@ def test_quiet_anywhere_and_progress_on_stderr(tmp_path, capsys):
     import io
 
     from glradial.commands import show_progress
-    from glradial.progress import Progress
+    from glradial.media.progress import Progress
 
     parser = build_parser()
     base = ["correct", "a.png", "b.png", "--k1", "0.1"]

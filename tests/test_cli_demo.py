@@ -8,9 +8,9 @@ import numpy as np
 
 from glradial.cli import main
 from glradial.commands import demo
-from glradial.lens import corner_radius, lens_to_pixels
-from glradial.image_io import read_image
-from glradial.metrics import max_displacement_px
+from glradial.lens.lens import corner_radius, lens_to_pixels
+from glradial.lens.metrics import max_displacement_px
+from glradial.media.image_io import read_image
 
 
 def test_demo_small_end_to_end(tmp_path, capsys):
@@ -49,8 +49,8 @@ def test_reference_lines_lie_on_the_rendered_pitch_lines():
     projected penalty-box front line: the painted white line is brighter there than 6 px to either
     side (an independent check of the pan/tilt/axes conventions shared with crops and stadium)."""
     import glradial
-    from glradial.crops import CropParams, render_crops
-    from glradial.stadium_style import sample_style
+    from glradial.synthesis.crops import CropParams, render_crops
+    from glradial.synthesis.stadium_style import sample_style
 
     seed, size = demo.DEFAULT_SEED, (640, 360)
     style = sample_style(seed)
@@ -135,7 +135,7 @@ def test_real_demo_reports_the_estimate_error(tmp_path, capsys):
     metric of the printed difference."""
     from test_cli import constant_model
 
-    from glradial.metrics import max_displacement_px
+    from glradial.lens.metrics import max_displacement_px
 
     model = constant_model(tmp_path / "const.onnx", -0.30, 0.07)
     for method in ("net", "auto"):

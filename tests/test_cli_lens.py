@@ -9,15 +9,14 @@ import json
 import cv2
 import numpy as np
 import pytest
+from conftest import DATA
 
 import glradial
 from glradial import Lens
 from glradial.cli import main
-from glradial.image_io import read_image, write_image
-from glradial.video_io import VideoInfo, VideoReader, VideoWriter
-from glradial.stmap import lens_stmap, read_stmap
-
-from conftest import DATA
+from glradial.export.stmap import lens_stmap, read_stmap
+from glradial.media.image_io import read_image, write_image
+from glradial.media.video_io import VideoInfo, VideoReader, VideoWriter
 
 #: a 1280×720 calibration with its principal point 200 px right of and 60 px above the centre
 K_OFF = [[1100.0, 0.0, 839.5], [0.0, 1078.0, 299.5], [0.0, 0.0, 1.0]]

@@ -1,7 +1,7 @@
 """glradial.correct against OpenCV on real photographs, every dtype, channel count and backend.
 
 Oracle: ``cv2.undistort(img, K, (k1, k2, 0, 0))`` with ``K = [[W, 0, (W-1)/2], [0, W, (H-1)/2],
-[0, 0, 1]]`` (DESIGN.md: with f = W OpenCV's coefficients equal ours), and for nearest / cubic
+[0, 0, 1]]`` (docs/DESIGN.md: with f = W OpenCV's coefficients equal ours), and for nearest / cubic
 ``cv2.remap`` on the maps of ``cv2.initUndistortRectifyMap`` with the same K. Photos are downscaled
 to 320×180 (coefficients are resolution independent) to keep llvmpipe fast.
 
@@ -88,7 +88,7 @@ def test_correct_matches_cv2_undistort(ctx, photos, k, dtype, channels, backend)
     assert mask.mean() > 0.8
     for name, rgb in photos.items():
         image = as_dtype(rgb, dtype, channels)
-        result = correct(image, *k, backend=backend)
+        result = correct(image, *k, backend=backend, alpha="premultiplied")  # every channel as it is: cv2's oracle
         assert result.shape == image.shape and result.dtype == image.dtype
         reference = cv2.undistort(image, camera(SIZE), np.array([k[0], k[1], 0.0, 0.0])).reshape(image.shape)
         errors = level_errors(result, reference, dtype, mask)
@@ -221,7 +221,8 @@ def test_identity_lens_is_exact(ctx):
 
 
 def test_auto_backend_decision(ctx):
-    from glradial import egl, remap
+    from glradial.gl import egl
+    from glradial.remapping import remap
 
     expected = "cpu" if egl.is_software_renderer(ctx) else "gl"
     assert remap.auto_backend() == expected
@@ -233,7 +234,7 @@ def test_render_texture_embeds_in_a_callers_pipeline(ctx, photos):
     """A caller's texture drawn into a caller's framebuffer (no CPU round trip) gives what
     correct() returns; a viewport draws into part of a larger framebuffer."""
     from glradial import Remapper
-    from glradial.egl import release_objects
+    from glradial.gl.egl import release_objects
 
     image = photos["road"]
     h, w = image.shape[:2]

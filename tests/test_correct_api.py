@@ -100,7 +100,7 @@ def test_module_functions_survive_a_second_context_on_the_thread(ctx, photo):
 
 
 def test_render_texture_takes_a_lens(ctx, photo):
-    from glradial.egl import release_objects
+    from glradial.gl.egl import release_objects
 
     h, w = photo.shape[:2]
     source = ctx.texture((w, h), 3, np.ascontiguousarray(photo).tobytes())

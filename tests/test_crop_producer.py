@@ -1,15 +1,16 @@
-"""glradial.crop_producer, the training stream: determinism per seed, worker processes, labels, pairs, shutdown."""
+"""glradial.synthesis.crop_producer, the training stream: determinism per seed, worker processes, labels, pairs, shutdown."""
 
 from __future__ import annotations
 
+import subprocess
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from glradial import lensfuncs
-from glradial.crop_producer import PAPER_NEWTON_STEPS, crop_batches, plan_batch
-from glradial.crops import CropRenderer, render_crops, sample_crop_params
+from glradial.lens import lensfuncs
+from glradial.synthesis.crop_producer import PAPER_NEWTON_STEPS, crop_batches, plan_batch
+from glradial.synthesis.crops import CropRenderer, render_crops, sample_crop_params
 
 PANO = str(Path(__file__).parent / "data" / "panorama_field_2048x1024.jpg")
 
@@ -183,7 +184,6 @@ print("images", batch.images.shape, int(batch.images.sum()))
 def _run_script(tmp_path: Path, text: str) -> "subprocess.CompletedProcess[str]":
     """Run ``text`` as ``python script.py`` with its own TMPDIR (``tmp_path / "tmp"``)."""
     import os
-    import subprocess
     import sys
 
     script = tmp_path / "train_script.py"

@@ -1,7 +1,7 @@
 """Crop synthesis: geometry against independent NumPy ray casts, sign conventions, distortion.
 
 Oracles: the ray cast below is written from the conventions of issue 3 (it shares no code with
-glradial.crops: rotations are built from axis-angle formulas, bilinear sampling is explicit);
+glradial.synthesis.crops: rotations are built from axis-angle formulas, bilinear sampling is explicit);
 marker positions follow from pinhole geometry; the lens from OpenCV (cv2.undistortPoints).
 """
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from glradial import Lens
-from glradial.crops import (
+from glradial.synthesis.crops import (
     CropParams,
     CropRenderer,
     crop_lonlat,
@@ -223,7 +223,7 @@ def test_distortion_geometry_matches_opencv(ctx) -> None:
     pinhole = CropParams(0.0, 0.0, 0.0, 60.0, 0.0, 0.0)
     crops = render_crops(pano, [pinhole, params], size=size)
     x_u, y_u = _centroid(crops[0], 2)
-    # cv2.projectPoints with K = [[W, 0, cx], [0, W, cy]] and dist (k1, k2, 0, 0) is DESIGN.md's
+    # cv2.projectPoints with K = [[W, 0, cx], [0, W, cy]] and dist (k1, k2, 0, 0) is docs/DESIGN.md's
     # forward model in width units; project the undistorted pixel position through it.
     w = size[0]
     cxy = np.array([w / 2 - 0.5, size[1] / 2 - 0.5])
@@ -328,7 +328,7 @@ def test_out_size_is_area_filtered_frame(ctx, supersample) -> None:
 
 
 def test_oversized_panorama_is_downscaled_with_warning(ctx, monkeypatch) -> None:
-    import glradial.egl as glc
+    import glradial.gl.egl as glc
 
     monkeypatch.setattr(glc, "max_texture_size", lambda c: 256)
     pano = np.zeros((256, 512, 3), np.uint8)
@@ -350,7 +350,7 @@ def test_correcting_a_distorted_crop_gives_the_pinhole_crop(ctx, field_panorama,
     fixed = correct(crops[1], k1, k2).astype(float)
     # Valid area: output pixels whose distorted position lies inside the frame, 2 px from its border
     # (bilinear there reads the zero fill).
-    from glradial.lens import Lens
+    from glradial.lens.lens import Lens
 
     ys, xs = np.mgrid[0 : size[1], 0 : size[0]]
     pts = np.stack([xs.ravel(), ys.ravel()], axis=-1).astype(float)
@@ -366,7 +366,7 @@ def test_correcting_a_distorted_crop_gives_the_pinhole_crop(ctx, field_panorama,
 
 def test_pixels_without_an_undistorted_point_are_zero(ctx, field_panorama) -> None:
     """k1 = -0.7, k2 = 0.2 reaches only r_d = 0.509 < 0.5737: the exact inverse leaves the corners empty."""
-    from glradial import lensfuncs
+    from glradial.lens import lensfuncs
 
     params = CropParams(0.0, 0.0, 0.0, 40.0, -0.7, 0.2)
     size = (128, 72)
@@ -384,3 +384,21 @@ def test_pixels_without_an_undistorted_point_are_zero(ctx, field_panorama) -> No
     assert (got[inside].max(axis=-1) > 0).mean() > 0.99
     with pytest.raises(ValueError, match="Drap"):
         render_crops(field_panorama, [params], size=size, inverse="drap")
+
+
+def test_a_lens_that_folds_over_inside_the_frame_is_refused_on_the_exact_path_too():
+    # k1 = -1.2, k2 = 0 folds over at r = 1/sqrt(3.6) = 0.527, inside the 16:9 corner (0.5737):
+    # distort refuses it, and so does the crop renderer (it used to render 38 % black pixels)
+    from glradial.lens import lensfuncs
+    from glradial.synthesis.crops import CropParams, render_crops
+
+    assert abs(lensfuncs.fold_radius(-1.2, 0.0) - 1 / np.sqrt(3.6)) < 1e-9
+    panorama = np.full((64, 128, 3), 128, np.uint8)
+    params = [CropParams(pan=0.0, tilt=0.0, roll=0.0, hfov=60.0, k1=-1.2, k2=0.0)]
+    for inverse in ("exact", "drap"):
+        with pytest.raises(ValueError, match="folds over"):
+            render_crops(panorama, params, size=(1280, 720), out_size=(64, 36), inverse=inverse)
+    # just outside the fold (k1 = -1.0: fold radius 0.577 > 0.5737) still renders
+    ok = render_crops(panorama, [CropParams(pan=0.0, tilt=0.0, roll=0.0, hfov=60.0, k1=-1.0, k2=0.0)],
+                      size=(1280, 720), out_size=(64, 36))
+    assert ok.shape == (1, 36, 64, 3)

@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.crops import render_crops
-from glradial.dataset import SPLITS, assign_splits, read_labels, write_crops_dataset
+from glradial.synthesis.crops import render_crops
+from glradial.synthesis.dataset import SPLITS, assign_splits, read_labels, write_crops_dataset
 
 SIZE, OUT = (64, 36), (32, 32)
 
@@ -70,7 +70,7 @@ def test_dataset_is_deterministic(ctx, tmp_path, pano_files) -> None:
 def test_interrupted_write_leaves_no_partial_files_and_resumes(ctx, tmp_path, pano_files, monkeypatch) -> None:
     write_crops_dataset(pano_files, tmp_path / "whole", count=12, seed=3, size=SIZE, out_size=OUT)
     out = tmp_path / "cut"
-    from glradial import atomic, image_io
+    from glradial.media import atomic, image_io
 
     real_write = image_io.atomic_write_bytes
     calls = {"n": 0}
@@ -105,7 +105,7 @@ def test_full_disk_names_the_image_and_the_errno(ctx, tmp_path, pano_files, monk
     import errno
     import os
 
-    from glradial import atomic
+    from glradial.media import atomic
 
     calls = {"n": 0}
     real_fsync = atomic.os.fsync

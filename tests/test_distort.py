@@ -177,7 +177,7 @@ def test_distort_every_dtype_and_layout(ctx, photo, dtype, channels, backend):
     w, h = SIZE
     inside = (ox >= 2) & (ox <= w - 3) & (oy >= 2) & (oy <= h - 3)
     reference = cv2.remap(image, ox.astype(np.float32), oy.astype(np.float32), cv2.INTER_LINEAR).reshape(image.shape)
-    result = distort(image, *k, backend=backend)
+    result = distort(image, *k, backend=backend, alpha="premultiplied")  # channels as they are
     assert result.shape == image.shape and result.dtype == image.dtype
     errors = level_errors(result, reference, inside) * (255.0 / FULL_SCALE[dtype])
     assert errors.mean() <= 0.25 and np.percentile(errors, 99) <= 2.5 and errors.max() <= 5, (

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.egl import release_objects
-from glradial.shaderlib import shader_path
+from glradial.gl.egl import release_objects
+from glradial.gl.shaderlib import shader_path
 
 ROOT = Path(__file__).resolve().parent.parent
 K1, K2 = -0.28, 0.06  # a broadcast barrel lens near the Lopez-Antequera manifold

@@ -1,13 +1,12 @@
-"""glradial.estimator: the onnxruntime Estimator (errors, preprocessing) and the shipped model's quality."""
+"""glradial.estimation.estimator: the onnxruntime Estimator (errors, preprocessing) and the shipped model's quality."""
 
 from __future__ import annotations
-
 
 import numpy as np
 import pytest
 
 import glradial
-from glradial.estimator import Estimator, ModelLoadError, default_model_path
+from glradial.estimation.estimator import Estimator, ModelLoadError, default_model_path
 
 SHIPPED = default_model_path()
 needs_shipped = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped model in glradial/models")
@@ -69,8 +68,8 @@ def test_shipped_model_gives_finite_lens_and_consistent_paths(field_panorama):
 def test_shipped_model_beats_the_mean_baseline_on_held_out_stadiums():
     """A real check: on crops of a test-split stadium (never trained on), the model's distortion
     loss must be well below that of always predicting the training mean."""
-    from glradial.crops import CropRenderer, sample_crop_params
-    from glradial.stadium import split_seeds, stadium_panorama
+    from glradial.synthesis.crops import CropRenderer, sample_crop_params
+    from glradial.synthesis.stadium import split_seeds, stadium_panorama
 
     # A 1024x512 stadium (the training ones are 4096x2048) is cheap to render; hfov >= 45 deg keeps
     # its crops as sharp as the network input needs (45 deg of 1024 px = 128 px = the input width).

@@ -1,4 +1,4 @@
-"""glradial.evaluation's figures beyond the paper's: the median's bootstrap interval and the
+"""glradial.evaluation.evaluation's figures beyond the paper's: the median's bootstrap interval and the
 correlation of the k2 deviation from the manifold (known answers; no torch), and the `glradial evaluate` command (GL, the bundled model)."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from glradial.evaluation import deviation_correlation, metrics
-from glradial.metrics import manifold_k2, median_interval
+from glradial.evaluation.evaluation import deviation_correlation, metrics
+from glradial.lens.metrics import manifold_k2, median_interval
 
 
 def _lenses(k1: np.ndarray, deviation: np.ndarray) -> np.ndarray:
@@ -61,7 +61,7 @@ def test_evaluate_on_the_validation_split_uses_only_val_stadiums(tmp_path, capsy
     import json
 
     from glradial.cli import main
-    from glradial.stadium_style import split_seeds
+    from glradial.synthesis.stadium_style import split_seeds
 
     out = tmp_path / "eval"
     argv = ["evaluate", "--out", str(out), "--n", "6", "--test-panoramas", "2", "--panorama-size", "512x256",
@@ -110,8 +110,8 @@ def test_evaluate_out_of_domain_panorama_is_an_argument(tmp_path, capsys):
 def test_training_mean_is_the_mean_of_the_paper_distribution():
     # Monte Carlo over the sampler itself: 20 000 draws give the mean k2 to ~3 standard errors of
     # 0.08 / sqrt(20000) = 6e-4 (lenses rejected near fold-over shift it by less than that)
-    from glradial.crops import sample_crop_params
-    from glradial.evaluation import TRAINING_MEAN
+    from glradial.evaluation.evaluation import TRAINING_MEAN
+    from glradial.synthesis.crops import sample_crop_params
 
     k = np.array([(p.k1, p.k2) for p in sample_crop_params(20000, 7)])
     assert k.mean(axis=0) == pytest.approx(TRAINING_MEAN, abs=2e-3)
@@ -123,8 +123,8 @@ def test_training_mean_is_the_mean_of_the_paper_distribution():
 @pytest.mark.parametrize("k1_range", [(-0.5, -0.1), (-0.3, 0.3), (0.0, 0.2)])
 def test_lens_mean_follows_the_sampling_range(k1_range):
     # Same Monte Carlo bound as above (k2's spread is smaller on these narrower ranges).
-    from glradial.crops import sample_crop_params
-    from glradial.evaluation import lens_mean
+    from glradial.evaluation.evaluation import lens_mean
+    from glradial.synthesis.crops import sample_crop_params
 
     a, b = k1_range
     k = np.array([(p.k1, p.k2) for p in sample_crop_params(20000, 3, k1=k1_range)])
@@ -135,7 +135,7 @@ def test_lens_mean_follows_the_sampling_range(k1_range):
 def test_plots_without_matplotlib_say_so(tmp_path, monkeypatch, capsys):
     import sys
 
-    from glradial.evaluation import plots
+    from glradial.evaluation.evaluation import plots
 
     labels = np.array([[-0.2, 0.03], [0.1, 0.01]])
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib now raises ImportError

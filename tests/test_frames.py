@@ -1,11 +1,11 @@
-"""glradial.frames.to_rgb8: the one frame coercion (known answers per dtype and layout)."""
+"""glradial.media.frames.to_rgb8: the one frame coercion (known answers per dtype and layout)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from glradial.frames import to_rgb8
+from glradial.media.frames import to_rgb8
 
 
 def test_layouts_and_dtypes():

@@ -4,7 +4,7 @@ exception type, a hang or a silently wrong result; the CLI prints exactly one
 ``glradial: error: ...`` line naming the option. One test id per bad call.
 
 Also: the GL and CPU backends give the same answer or the same error at the edges of the numeric
-policy (glradial.remap.check_numeric_policy), and the Estimator validates models at load.
+policy (glradial.remapping.remap.check_numeric_policy), and the Estimator validates models at load.
 """
 
 from __future__ import annotations
@@ -17,14 +17,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from glradial import Lens, Remapper, correct, distort, fit_scale
-from glradial import cli
-from glradial.crops import CropParams, CropRenderer, render_crops, sample_crop_params
-from glradial.estimator import Estimator, ModelLoadError, default_model_path
-from glradial.lens import corner_radius, frame_size, lens_to_pixels, pixels_to_lens
-from glradial.stadium import StadiumRenderer, stadium_panorama
-from glradial.stadium_style import sample_style
-from glradial.stmap import lens_stmap, read_stmap
+from glradial import Lens, Remapper, cli, correct, distort, fit_scale
+from glradial.estimation.estimator import Estimator, ModelLoadError, default_model_path
+from glradial.export.stmap import lens_stmap, read_stmap
+from glradial.lens.lens import corner_radius, frame_size, lens_to_pixels, pixels_to_lens
+from glradial.synthesis.crops import CropParams, CropRenderer, render_crops, sample_crop_params
+from glradial.synthesis.stadium import StadiumRenderer, stadium_panorama
+from glradial.synthesis.stadium_style import sample_style
 
 U8 = np.zeros((18, 32, 3), np.uint8)
 F32 = np.zeros((18, 32, 3), np.float32)
@@ -329,7 +328,7 @@ def _cli_files(tmp: Path) -> dict[str, str]:
     (tmp / "empty.png").write_bytes(b"")
     from fractions import Fraction
 
-    from glradial.video_io import EncodeOptions, VideoInfo, VideoWriter
+    from glradial.media.video_io import EncodeOptions, VideoInfo, VideoWriter
 
     with VideoWriter(tmp / "clip.mp4", VideoInfo.of((64, 36), Fraction(25)), options=EncodeOptions(codec="libx264")) as writer:
         for value in range(0, 250, 50):
@@ -455,7 +454,6 @@ def _graph(tmp: Path, name: str, *, out_channels=2, hw=(216, 384), meta=None, in
         helper.make_node("Constant", [], ["axes"], value=helper.make_tensor("axes", TensorProto.INT64, [1], [1])),
         helper.make_node("Slice", ["ms", "starts", "ends", "axes"], ["sliced"]),
     ]
-    outputs = [out_name]
     if output_rank == 3:
         nodes.append(helper.make_node("Unsqueeze", ["sliced", "axes"], [out_name]))
         out_dims = ["N", 1, out_channels]
@@ -543,7 +541,7 @@ def test_write_on_a_full_disk_names_path_and_enospc(tmp_path, monkeypatch, capfd
     """ENOSPC simulated where a full disk reports it at the latest (flushing the file to disk)."""
     import errno
 
-    from glradial import atomic
+    from glradial.media import atomic
 
     def full_disk(fd):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
@@ -571,7 +569,7 @@ def test_file_size_limit_from_the_kernel_names_path_and_errno(tmp_path, capfd):
         resource.setrlimit(resource.RLIMIT_FSIZE, (2048, resource.getrlimit(resource.RLIMIT_FSIZE)[1]))
         noise = np.random.default_rng(0).integers(0, 256, (128, 128, 3), dtype=np.uint8)  # ~49 kB as PNG
         try:
-            from glradial.image_io import write_image
+            from glradial.media.image_io import write_image
 
             write_image(target, noise)
         except OSError as err:
@@ -597,7 +595,7 @@ def test_encoder_statistics_are_silenced(cli_env, capfd):
 
 
 def test_native_stderr_is_silenced_only_inside_the_block(capfd):
-    from glradial.native_stderr import silenced
+    from glradial.media.native_stderr import silenced
 
     os.write(2, b"before\n")
     with silenced():
@@ -610,9 +608,9 @@ def test_native_stderr_is_silenced_only_inside_the_block(capfd):
 
 
 def test_fork_inside_a_silenced_block_gives_the_child_its_stderr(capfd):
-    from glradial.native_stderr import silenced
-
     from test_gl_threads_fork import in_child
+
+    from glradial.media.native_stderr import silenced
 
     def child() -> int:
         os.write(2, b"child speaks\n")

@@ -19,9 +19,10 @@ import time
 import numpy as np
 import pytest
 
-from glradial import Remapper, correct, egl, render_crops
-from glradial.crops import CropParams, CropRenderer
-from glradial.stadium import StadiumRenderer, stadium_panorama
+from glradial import Remapper, correct, render_crops
+from glradial.gl import egl
+from glradial.synthesis.crops import CropParams, CropRenderer
+from glradial.synthesis.stadium import StadiumRenderer, stadium_panorama
 
 #: a child that has not exited by then is hung (each does well under 1 s of GL work on llvmpipe)
 CHILD_TIMEOUT_S = 60
@@ -195,7 +196,7 @@ def test_objects_refuse_other_threads(ctx, what):
         use = lambda: obj.render([CropParams(0.0, 0.0, 0.0, 60.0, -0.1, 0.0)])  # noqa: E731
     else:
         obj = StadiumRenderer(ctx)
-        from glradial.stadium_style import sample_style
+        from glradial.synthesis.stadium_style import sample_style
 
         use = lambda: obj.render(sample_style(1), (64, 32))  # noqa: E731
     try:
@@ -217,3 +218,39 @@ def test_another_context_on_the_thread_does_not_hijack_the_calls(ctx):
         assert np.array_equal(correct(FRAME, -0.2, 0.03, backend="gl"), expected)
     assert np.array_equal(correct(FRAME, -0.2, 0.03, backend="gl"), expected)
     assert np.array_equal(stadium_panorama(2, (64, 32)), stadium_panorama(2, (64, 32)))
+
+
+FORK_THEN_THREAD = """
+import os, sys, threading
+import numpy as np
+from glradial import correct
+frame = np.random.default_rng(0).integers(0, 256, (36, 64, 3), dtype=np.uint8)
+parent = correct(frame, -0.2, backend="gl")  # the parent's EGL display is initialised
+held = threading.Event(); release = threading.Event()
+def hold():  # a parent thread that owns a context while the fork happens
+    correct(frame, -0.1, backend="gl"); held.set(); release.wait()
+keeper = threading.Thread(target=hold); keeper.start(); held.wait()
+pid = os.fork()
+if pid == 0:
+    results = []
+    def work():
+        results.append(correct(frame, -0.2, backend="gl"))
+    worker = threading.Thread(target=work); worker.start(); worker.join()
+    os._exit(0 if results and np.array_equal(results[0], parent) else 3)
+_, status = os.waitpid(pid, 0)
+release.set(); keeper.join()
+sys.exit(os.waitstatus_to_exitcode(status))
+"""
+
+
+def test_a_new_thread_in_a_forked_child_uses_gl_without_hanging(tmp_path):
+    """A forked child whose parent used GL (and holds a context on another thread at the fork)
+    starts a new thread that corrects a frame on the GPU path: it finishes (no hang: the whole
+    script must end within CHILD_TIMEOUT_S, run in its own process so a hang cannot stall the
+    suite) and gives the parent's result byte for byte."""
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, "-c", FORK_THEN_THREAD], capture_output=True, text=True,
+                            timeout=CHILD_TIMEOUT_S, cwd=tmp_path)
+    assert result.returncode == 0, result.stderr

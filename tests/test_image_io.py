@@ -1,4 +1,4 @@
-"""glradial.image_io and glradial.atomic: bit depth, channel order, atomic writes, overwrite,
+"""glradial.media.image_io and glradial.media.atomic: bit depth, channel order, atomic writes, overwrite,
 clear errors on bad files."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.atomic import atomic_path, atomic_write_text
-from glradial.image_io import media_kind, read_image, write_image
+from glradial.media.atomic import atomic_path, atomic_write_text
+from glradial.media.image_io import media_kind, read_image, write_image
 
 
 def _files(folder: Path) -> list[str]:

@@ -1,6 +1,6 @@
-"""The per-lens Chebyshev series of the exact inverse (glradial.inverse_series) and its use in crops.
+"""The per-lens Chebyshev series of the exact inverse (glradial.lens.inverse_series) and its use in crops.
 
-Oracle: the forward model ``P(r) = r (1 + k1 r^2 + k2 r^4)`` (DESIGN.md), evaluated in float64: a
+Oracle: the forward model ``P(r) = r (1 + k1 r^2 + k2 r^4)`` (docs/DESIGN.md), evaluated in float64: a
 series value ``r_u`` is right when ``P(r_u)`` gives back ``r_d``. The check grid here (2 001 radii) is
 denser than the one the fit is accepted on (129), so it also tests between those points.
 """
@@ -10,11 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from glradial import lensfuncs
-from glradial.crops import CropParams, CropRenderer, sample_crop_params
-from glradial.metrics import manifold_k2
-from glradial.inverse_series import SERIES_TOLERANCE, fit_inverse_series, series_radius
-from glradial.lens import corner_radius
+from glradial.lens import lensfuncs
+from glradial.lens.inverse_series import SERIES_TOLERANCE, fit_inverse_series, series_radius
+from glradial.lens.lens import corner_radius
+from glradial.lens.metrics import manifold_k2
+from glradial.synthesis.crops import CropParams, CropRenderer, sample_crop_params
 
 CORNER = corner_radius((1280, 720))
 

@@ -12,7 +12,8 @@ import os
 
 import numpy as np
 
-from glradial import Remapper, correct, distort, remap
+from glradial import Remapper, correct, distort
+from glradial.remapping import remap
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 

@@ -1,4 +1,4 @@
-"""Line-based lens estimation (glradial.lines, glradial.line_fit, glradial.lens_estimate): synthetic
+"""Line-based lens estimation (glradial.estimation.lines, glradial.estimation.line_fit, glradial.estimation.lens_estimate): synthetic
 pitch drawings distorted with a known lens (through Lens.maps + cv2.remap, independent of the GL
 path) must be recovered; circles, arcs and broadcast overlays must not pull the fit."""
 
@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.estimator import Estimator, default_model_path
-from glradial.lens_estimate import NET_UNCERTAINTY_PX, NO_EVIDENCE_UNCERTAINTY_PX, LensEstimate
-from glradial.line_fit import fit_lines
-from glradial.lines import detect_chains
-from glradial.metrics import manifold_k2, max_displacement_px
+from glradial.estimation.estimator import Estimator, default_model_path
+from glradial.estimation.lens_estimate import NET_UNCERTAINTY_PX, NO_EVIDENCE_UNCERTAINTY_PX, LensEstimate
+from glradial.estimation.line_fit import fit_lines
+from glradial.estimation.lines import detect_chains
+from glradial.lens.metrics import manifold_k2, max_displacement_px
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 W, H = 1280, 720

@@ -1,12 +1,12 @@
-"""glradial.metrics: known answers of the displacement metric, the corner radius and the manifold."""
+"""glradial.lens.metrics: known answers of the displacement metric, the corner radius and the manifold."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from glradial.lens import corner_radius
-from glradial.metrics import CORNER_RADIUS_16_9, PAPER_SIZE, distortion_loss, manifold_k2, max_displacement, max_displacement_px
+from glradial.lens.lens import corner_radius
+from glradial.lens.metrics import CORNER_RADIUS_16_9, PAPER_SIZE, distortion_loss, manifold_k2, max_displacement, max_displacement_px
 
 
 def test_displacement_of_a_k1_error_alone_is_its_value_at_the_corner():

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -12,7 +11,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from glradial.lens import corner_radius  # noqa: E402
+from glradial.lens.lens import corner_radius  # noqa: E402
 from net.augment import AugmentConfig, augment_batch, augment_pairs, jpeg_roundtrip, motion_kernel  # noqa: E402
 from net.loss import distortion_loss, loss_radii, training_loss  # noqa: E402
 from net.model import DistortionNet, ModelConfig, count_parameters, load_grown  # noqa: E402
@@ -214,7 +213,7 @@ def test_export_agrees_with_onnxruntime(tmp_path):
     assert np.ptp(out[:, 0]) > 1e-3
     # the export records the SHA-256 beside the model: the estimator validates and accepts it, and
     # refuses the same file with one flipped byte
-    from glradial.estimator import Estimator, ModelLoadError
+    from glradial.estimation.estimator import Estimator, ModelLoadError
 
     assert path.with_suffix(".sha256").read_text().split() == [hashlib.sha256(path.read_bytes()).hexdigest(), "m.onnx"]
     assert Estimator(path, threads=1).input_size == (64, 36)
@@ -321,7 +320,7 @@ def test_training_producer_streams_the_glradial_crop_producer():
     # The trainer's producer is glradial's crop producer in one worker process over the source's
     # panoramas: its crops equal the in-process stream of the same seed (<= 1 level: llvmpipe's
     # thread count may differ between the processes)
-    from glradial.crop_producer import crop_batches
+    from glradial.synthesis.crop_producer import crop_batches
     from net.data import CropProducer, PanoramaSource
 
     source = PanoramaSource(kind="synthetic", seeds=[1, 2], size=(512, 256))
@@ -354,21 +353,21 @@ def test_configs_name_a_base_and_hold_their_differences(tmp_path):
 
 
 def test_the_shipped_stage_config_describes_the_shipped_model():
-    # stage10_shipped.json is the run that produced glradial/models/glradial_k1k2.onnx: the same
-    # network as the model's embedded config
+    # stage11_error_head.json is the run that produced glradial/models/glradial_k1k2.onnx (stage 10's
+    # network with an error head): the same network as the model's embedded config
     import onnx
 
     from net.train import TrainConfig
 
     root = Path(__file__).resolve().parents[1]
-    cfg = TrainConfig.from_json(root / "net" / "configs" / "stage10_shipped.json")
+    cfg = TrainConfig.from_json(root / "net" / "configs" / "stage11_error_head.json")
     props = {p.key: p.value for p in onnx.load(str(root / "glradial" / "models" / "glradial_k1k2.onnx")).metadata_props}
     assert ModelConfig.from_dict(cfg.model) == ModelConfig.from_dict(json.loads(props["model_config"]))
 
 
 def test_torch_distortion_loss_is_the_twin_of_glradial_metrics():
     # training's loss (torch) and the evaluation's (NumPy) compare the same radii: same numbers
-    from glradial.metrics import distortion_loss as numpy_loss
+    from glradial.lens.metrics import distortion_loss as numpy_loss
 
     rng = np.random.default_rng(5)
     y, y_hat = rng.normal(0.0, 0.3, (16, 2)), rng.normal(0.0, 0.3, (16, 2))
@@ -380,7 +379,7 @@ def test_net_evaluate_takes_a_checkpoint_and_matches_its_onnx_export(tmp_path):
     # python -m net.evaluate is glradial evaluate plus .pt checkpoints: a checkpoint and its ONNX
     # export, both run without mirror averaging, give the same figures on the same crops (float32
     # kernels of two libraries: 1e-4 lens units is 0.19 px at 1920 wide)
-    from glradial.evaluation import EvaluationSettings, OnnxPredictor, evaluate
+    from glradial.evaluation.evaluation import EvaluationSettings, OnnxPredictor, evaluate
     from net.evaluate import TorchPredictor, main
     from net.export import export_onnx
 

@@ -91,13 +91,18 @@ def test_wheel_layout(wheel):
     shipped_modules = {n for n in names if n.startswith("glradial/") and n.endswith(".py")}
     repo_modules = {str(p.relative_to(ROOT)) for p in (ROOT / "glradial").rglob("*.py")}
     assert repo_modules == shipped_modules
+    sub_packages = {p.parent.relative_to(ROOT).as_posix() for p in (ROOT / "glradial").glob("*/__init__.py")}
+    shipped_packages = {Path(n).parent.as_posix() for n in names if n.endswith("/__init__.py")}
+    assert "glradial/py.typed" in names, "py.typed must ship: type checkers read the exports"
+    assert sub_packages and sub_packages <= shipped_packages, f"sub-packages missing from the wheel: {sorted(sub_packages - shipped_packages)}"
 
 
 def test_installed_wheel_works_from_any_folder(installed, tmp_path):
     probe = BLOCKER + (
         "import glradial\n"
-        "from glradial.shaderlib import shader_dir\n"
+        "shader_dir = glradial.shader_dir\n"
         "assert str(shader_dir()).startswith(sys.argv[1]), shader_dir()\n"
+        "assert (shader_dir() / 'common.glsl').read_text().strip() and glradial.shader_path('correct.frag').is_file()\n"
         "assert glradial.__file__.startswith(sys.argv[1]), glradial.__file__\n"
         "print(glradial.Lens(-0.2, 0.03).inverse_coefficients()[0])\n"
     )
@@ -118,8 +123,8 @@ def test_installed_wheel_evaluates_without_torch(installed, tmp_path):
     probe = BLOCKER + (
         "from glradial.cli import main\n"
         "status = main(sys.argv[2:])\n"
-        "import glradial.evaluation\n"
-        "assert glradial.evaluation.__file__.startswith(sys.argv[1]), glradial.evaluation.__file__\n"
+        "import glradial.evaluation.evaluation\n"
+        "assert glradial.evaluation.evaluation.__file__.startswith(sys.argv[1]), glradial.evaluation.evaluation.__file__\n"
         "loaded = sorted(m for m in sys.modules if m.split('.')[0] in ('torch', 'net'))\n"
         "assert not loaded, loaded\n"
         "sys.exit(status)\n"
@@ -153,3 +158,12 @@ def test_glradial_never_imports_torch_or_net():
                 continue
             offenders += [f"{path.relative_to(ROOT)}:{node.lineno} {n}" for n in names if n.split(".")[0] in BLOCKED]
     assert not offenders, offenders
+
+
+def test_shader_dir_works_in_the_editable_install(tmp_path):
+    """The checkout's own install (``make setup``: editable): ``glradial.shader_dir()`` from another
+    folder finds the checkout's shaders/, the same files the wheel ships."""
+    probe = "import glradial; d = glradial.shader_dir(); print(d); assert (d / 'common.glsl').is_file()"
+    result = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert Path(result.stdout.strip()) == ROOT / "shaders"

@@ -182,7 +182,7 @@ def test_frame_radius_and_fits_against_brute_force(lens):
     size = (320, 180)
     w, h = size
     edge = frame_edge(size)
-    points = glradial.lens.pixels_to_lens(edge, size, lens.centre, lens.pixel_aspect)
+    points = glradial.lens.lens.pixels_to_lens(edge, size, lens.centre, lens.pixel_aspect)
     assert lens.frame_radius(size) == pytest.approx(np.hypot(*points.T).max(), rel=1e-12)
     assert lens.edge_radius(size) == pytest.approx(np.hypot(*points.T).min(), rel=1e-6)
     pp = np.array(lens.principal_point(size))

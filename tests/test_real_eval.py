@@ -1,4 +1,4 @@
-"""glradial.real_eval (real frames with known lenses -> per-source table) and the CLI hooks
+"""glradial.evaluation.real_eval (real frames with known lenses -> per-source table) and the CLI hooks
 (``glradial estimate --method``, ``glradial evaluate --frames``)."""
 
 from __future__ import annotations
@@ -12,11 +12,10 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.estimator import default_model_path
-from glradial.lens_estimate import LensEstimate
-from glradial.metrics import manifold_k2, max_displacement_px
-from glradial.real_eval import (Sample, centre_16_9, extended_lenses, frames_in, load_calibrated, markdown,
-                                summarise)
+from glradial.estimation.estimator import default_model_path
+from glradial.estimation.lens_estimate import LensEstimate
+from glradial.evaluation.real_eval import Sample, centre_16_9, extended_lenses, frames_in, load_calibrated, markdown, summarise
+from glradial.lens.metrics import manifold_k2, max_displacement_px
 
 ROOT = Path(__file__).resolve().parents[1]
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
@@ -74,7 +73,7 @@ def test_calibrated_camera_from_opencv_numbers(tmp_path):
     (tmp_path / "cam.json").write_text(json.dumps(spec))
     name, frames, lens = load_calibrated(tmp_path / "cam.json")
     assert name == "cam" and len(frames) == 1
-    assert (lens.k1, lens.k2) == pytest.approx((-0.2, 0.05))  # f = W: the numbers are ours (DESIGN.md)
+    assert (lens.k1, lens.k2) == pytest.approx((-0.2, 0.05))  # f = W: the numbers are ours (docs/DESIGN.md)
 
 
 def _pitch_png(path: Path) -> None:
@@ -118,8 +117,8 @@ def test_cli_evaluate_frames_writes_the_table(tmp_path):
 def test_agreed_own_lens_needs_both_readings_far_from_no_lens_and_close_to_each_other():
     """A frame's own lens is removed only when the line fit and the CNN agree on it: known answers
     for agreement (the bundled USL frame's readings), disagreement, near-pinhole and no line fit."""
-    from glradial.lens_estimate import LensEstimate
-    from glradial.real_eval import agreed_own_lens
+    from glradial.estimation.lens_estimate import LensEstimate
+    from glradial.evaluation.real_eval import agreed_own_lens
 
     lines = LensEstimate(-0.2305, 0.0432, uncertainty_px=7.7, method="lines", chains=2)
     net = LensEstimate(-0.248, 0.051, uncertainty_px=16.0, method="net")

@@ -9,7 +9,9 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial import Lens, Remapper, correct, distort, egl, remap
+from glradial import Lens, Remapper, correct, distort
+from glradial.gl import egl
+from glradial.remapping import remap
 
 FRAME = np.zeros((18, 32, 3), np.uint8)
 

@@ -1,5 +1,5 @@
-"""One lens per shot (glradial.shot_fit, shot_evidence, shot_track): clips rendered through a known
-lens (glradial.clips, checked against glradial.correct below), read back with a stand-in per-frame
+"""One lens per shot (glradial.video.shot_fit, shot_evidence, shot_track): clips rendered through a known
+lens (glradial.video.clips, checked against glradial.correct below), read back with a stand-in per-frame
 estimator that knows nothing (a fixed rough guess), so what is measured is the shot fit's own
 evidence: the line chains and the frame-to-frame matches."""
 
@@ -10,11 +10,11 @@ import math
 import numpy as np
 import pytest
 
-from glradial.clips import ShotSpec, render_clip, render_shot, write_clip
-from glradial.lens import Lens
-from glradial.metrics import manifold_k2, max_displacement_px
-from glradial.shot_evidence import ShotCollector
-from glradial.shot_fit import ShotEvidence, ShotSample, fit_shot
+from glradial.lens.lens import Lens
+from glradial.lens.metrics import manifold_k2, max_displacement_px
+from glradial.video.clips import ShotSpec, render_clip, render_shot, write_clip
+from glradial.video.shot_evidence import ShotCollector
+from glradial.video.shot_fit import ShotEvidence, ShotSample, fit_shot
 
 SIZE = (480, 270)
 #: the stand-in estimator's answer for every frame: a mild barrel lens, far from every truth below
@@ -134,7 +134,7 @@ def test_a_cut_between_two_lenses_keeps_them_apart(stadium, tmp_path):
     """The whole first pass on a lossless clip: a static shot through k1 -0.45 cut to a pan through
     k1 -0.15. The cut is found, each shot gets its own lens (even the frames right after the
     cut), the track says which shots were applied and why not; nothing is pooled across the cut."""
-    from glradial.video_pipeline import track_video
+    from glradial.video.video_pipeline import track_video
 
     shots = [pitch_view(stadium, 8, k1=(-0.45, -0.45)),
              ShotSpec(stadium, 8, (30.0, -12.0, 1.0), (38.0, -13.0, 1.0), (-0.15, -0.15), hfov_deg=50, panorama=True)]

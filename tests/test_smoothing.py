@@ -1,4 +1,4 @@
-"""Per-shot smoothing of per-frame lens estimates and shot-cut detection (glradial.smoothing)."""
+"""Per-shot smoothing of per-frame lens estimates and shot-cut detection (glradial.video.smoothing)."""
 
 from __future__ import annotations
 
@@ -6,11 +6,10 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.metrics import manifold_k2
-from glradial.metrics import max_displacement
-from glradial.smoothing import ShotDetector, detect_cuts, shot_ids, smooth_shot, smooth_track
+from glradial.lens.metrics import manifold_k2, max_displacement
+from glradial.video.smoothing import ShotDetector, detect_cuts, shot_ids, smooth_shot, smooth_track
 
-WIDTH_PX = 1920  # errors are reported in pixels of a 1920-wide frame, as in DESIGN.md
+WIDTH_PX = 1920  # errors are reported in pixels of a 1920-wide frame, as in docs/DESIGN.md
 
 
 def synthetic_track(seed: int = 0, n: int = 240, cut: int = 140, every: int = 3):
@@ -97,7 +96,7 @@ def _pan_frames(panorama: np.ndarray, x0: int, y0: int, n: int, step: int, windo
 def test_cut_detected_in_a_synthetic_video(field_panorama, tmp_path):
     """A slow pan over the real field panorama (4 px of panorama per frame), then a cut to another
     part of it, written to and read back from an .mp4: exactly one cut, at the right frame."""
-    from glradial.video_io import VideoInfo, VideoReader, VideoWriter
+    from glradial.media.video_io import VideoInfo, VideoReader, VideoWriter
 
     pano = field_panorama
     shot_a = _pan_frames(pano, 200, 420, 18, 4)
@@ -130,7 +129,7 @@ def test_cuts_between_cameras_of_one_stadium(ctx):
     """Broadcast cuts mostly join two views of the same green pitch: a zooming pan, a cut to a
     tighter camera, a cut to a third camera, then a fast pan (3° per frame): exactly the two cuts."""
     import glradial
-    from glradial.crops import CropParams, render_crops
+    from glradial.synthesis.crops import CropParams, render_crops
 
     panorama = glradial.stadium_panorama(9, (1024, 512))
     params = [CropParams(pan=-20 + 0.4 * i, tilt=-12, roll=0, hfov=50 - 0.5 * i, k1=-0.2, k2=0.03) for i in range(16)]
@@ -227,7 +226,7 @@ def test_hold_static_known_answers():
     """The rule on hand-made samples: two estimates 2 sigma apart in displacement (chi-square 1 each
     around their mean) are held at the inverse-variance mean; 4 sigma apart (chi-square 4) are not;
     rejected samples (weight 0) do not count; one accepted sample is not enough."""
-    from glradial.smoothing import P90_SIGMA, STATIC_CHI2, hold_static
+    from glradial.video.smoothing import P90_SIGMA, STATIC_CHI2, hold_static
 
     r = 0.5737
     u = np.array([2.0, 2.0]) / WIDTH_PX  # stated 90 % bounds, lens units

@@ -10,18 +10,17 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import check_existing_out_needs_y
 
-from glradial import lensfuncs
-from glradial.stadium import StadiumRenderer, project_point, stadium_panorama
-from glradial.stadium_style import (
+from glradial.lens import lensfuncs
+from glradial.synthesis.stadium import StadiumRenderer, project_point, stadium_panorama
+from glradial.synthesis.stadium_style import (
     HALF_WIDTH,
     SPLITS,
     sample_style,
     split_seeds,
     stadium_split,
 )
-
-from conftest import check_existing_out_needs_y
 
 # A main-camera stadium (camera on the halfway line, ~120 m from the far touchline), chosen by its
 # style so that the test survives changes of the style sampler.
@@ -116,7 +115,7 @@ def test_pitch_centre_is_grass_where_the_camera_says_for_every_camera_kind(ctx, 
 
 
 def test_strips_and_row_windows_give_the_same_pixels(ctx, renderer, monkeypatch):
-    import glradial.stadium as stadium
+    import glradial.synthesis.stadium as stadium
 
     style = sample_style(6).with_overrides(supersample=2)
     full = renderer.render(style, (256, 128)).copy()
@@ -176,7 +175,7 @@ def _predicted_rows(style, params, cols: np.ndarray, size=CROP) -> np.ndarray:
 
 
 def test_touchline_is_where_the_camera_says_straight_at_k0_curved_at_k1(ctx, renderer):
-    from glradial.crops import CropParams, render_crops
+    from glradial.synthesis.crops import CropParams, render_crops
 
     style = sample_style(SEED).with_overrides(line_width=0.3, **CLEAN)
     assert style.camera_kind == "main"
@@ -262,7 +261,7 @@ def test_command_writes_the_panorama(ctx, tmp_path):
 def test_command_replaces_an_existing_out_only_with_y(ctx, tmp_path, capsys, monkeypatch):
     out = tmp_path / "pano.png"
     argv = ["stadium", "--seed", "4", "--size", "64x32", "--out", str(out)]
-    check_existing_out_needs_y(argv, out, "glradial.stadium.stadium_panorama", monkeypatch, capsys)
+    check_existing_out_needs_y(argv, out, "glradial.synthesis.stadium.stadium_panorama", monkeypatch, capsys)
     written = cv2.cvtColor(cv2.imread(str(out)), cv2.COLOR_BGR2RGB)
     assert np.array_equal(written, stadium_panorama(4, (64, 32)))
 
@@ -274,5 +273,5 @@ def test_command_names_an_unknown_image_extension(tmp_path, capsys, name):
     assert main(["stadium", "--seed", "1", "--size", "64x32", "--out", str(tmp_path / name)]) == 1
     err = capsys.readouterr().err
     suffix = repr(Path(name).suffix or "(none)")
-    assert f"unknown image extension {suffix}; use .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
+    assert f"unknown image extension {suffix}; use .exr, .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
     assert "video" not in err and list(tmp_path.iterdir()) == []

@@ -1,4 +1,4 @@
-"""STMap export (glradial stmap / glradial.stmap): Nuke's convention, against Lens.maps and against
+"""STMap export (glradial stmap / glradial.export.stmap): Nuke's convention, against Lens.maps and against
 cv2.undistort as an independent oracle."""
 
 from __future__ import annotations
@@ -9,18 +9,18 @@ import subprocess
 import cv2
 import numpy as np
 import pytest
+from conftest import check_existing_out_needs_y
 
 from glradial import Lens
 from glradial.cli import main
-from glradial.stmap import STMAP_NO_SOURCE, lens_stmap, maps_from_stmap, read_stmap, write_stmap
-from conftest import check_existing_out_needs_y
+from glradial.export.stmap import STMAP_NO_SOURCE, lens_stmap, maps_from_stmap, read_stmap, write_stmap
 
 SIZE = (96, 54)
 
 
 def apply_stmap(image: np.ndarray, stmap: np.ndarray) -> np.ndarray:
     """What a compositor does with an STMap (Nuke's convention, written independently of
-    glradial.stmap): sample the source at x = S W - 0.5, y = (1 - T) H - 0.5 (bilinear)."""
+    glradial.export.stmap): sample the source at x = S W - 0.5, y = (1 - T) H - 0.5 (bilinear)."""
     height, width = stmap.shape[:2]
     map_x = (stmap[..., 0].astype(np.float64) * width - 0.5).astype(np.float32)
     map_y = ((1.0 - stmap[..., 1].astype(np.float64)) * height - 0.5).astype(np.float32)
@@ -57,7 +57,7 @@ def test_stmap_file_matches_lens_maps(tmp_path, direction, fit, ext):
 
 
 def test_undistort_stmap_applied_like_nuke_equals_cv2_undistort(road):
-    """Independent oracle: cv2.undistort with K(f = W) and dist = (k1, k2, 0, 0) (DESIGN.md)."""
+    """Independent oracle: cv2.undistort with K(f = W) and dist = (k1, k2, 0, 0) (docs/DESIGN.md)."""
     k1, k2 = -0.25, 0.04
     image = cv2.resize(road, SIZE, interpolation=cv2.INTER_AREA)
     stmap = lens_stmap(Lens(k1, k2), SIZE)
@@ -120,7 +120,7 @@ def test_stmap_bad_input(tmp_path, capsys):
 def test_stmap_replaces_an_existing_out_only_with_y(tmp_path, capsys, monkeypatch):
     out = tmp_path / "m.npy"
     argv = ["stmap", "--k1", "-0.1", "--size", "32x18", "--out", str(out)]
-    check_existing_out_needs_y(argv, out, "glradial.stmap.lens_stmap", monkeypatch, capsys)
+    check_existing_out_needs_y(argv, out, "glradial.export.stmap.lens_stmap", monkeypatch, capsys)
     np.testing.assert_array_equal(read_stmap(out), lens_stmap(Lens(-0.1, 0.0), (32, 18)))
 
 

@@ -1,4 +1,4 @@
-"""Every GLSL lens function in shaders/common.glsl against its NumPy twin in glradial.lensfuncs.
+"""Every GLSL lens function in shaders/common.glsl against its NumPy twin in glradial.lens.lensfuncs.
 
 Each GLSL function is evaluated per texel of a float32 texture of inputs and read back as float32.
 Tolerance: the GLSL side runs in float32 (relative round-off ~6e-8 per operation, a few dozen
@@ -10,9 +10,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from glradial import lensfuncs
-from glradial.egl import release_objects
-from glradial.shaderlib import preprocess
+from glradial.gl.egl import release_objects
+from glradial.gl.shaderlib import preprocess
+from glradial.lens import lensfuncs
 
 PROBE_MAIN = """
 uniform sampler2D u_input;

@@ -1,4 +1,4 @@
-"""Broadcast-grade video through 'glradial correct' (glradial.video_io on PyAV): real codecs made by
+"""Broadcast-grade video through 'glradial correct' (glradial.media.video_io on PyAV): real codecs made by
 the ffmpeg command and checked with ffprobe (the independent oracle): audio copied bit for bit,
 depth, exact frame rate, timecode and frame count kept, frames equal to glradial.correct() in
 memory; lens tracks in and out; nothing left behind on a full disk, SIGTERM/SIGHUP or a truncated
@@ -20,7 +20,7 @@ import pytest
 
 import glradial
 from glradial.cli import main
-from glradial.video_io import VideoInfo, VideoReader, VideoWriter, is_sequence, sequence_files
+from glradial.media.video_io import VideoInfo, VideoReader, VideoWriter, is_sequence, sequence_files
 
 FFMPEG = shutil.which("ffmpeg")
 FFPROBE = shutil.which("ffprobe")
@@ -202,7 +202,7 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
             writer.write(frame)
     # flat frames: no lines, no motion, so each shot rests on its per-frame estimates; shot 0's are
     # sure (2 px), shot 1's doubtful (40 px; many equal samples of one picture gain nothing)
-    monkeypatch.setattr("glradial.video_pipeline.default_estimator",
+    monkeypatch.setattr("glradial.video.video_pipeline.default_estimator",
                         lambda model=None, method=None: lambda f: _Estimate(-0.2, 0.03, 2.0, "lines") if f[0, 0, 0] < 12 else _Estimate(-0.1, 0.01, 40.0, "net"))
     auto = tmp_path / "auto.mkv"
     assert main(["correct", str(source), str(auto), "--auto", "--every", "3", "--backend", "cpu", "-q"]) == 0
@@ -318,8 +318,8 @@ def test_gl_corrector_lives_and_dies_on_its_worker_thread(tmp_path, ctx, monkeyp
     every frame with it like the GL path in memory, and releases it on that thread when it ends."""
     import threading
 
-    from glradial.remap import Remapper
-    from glradial.video_pipeline import correct_video
+    from glradial.remapping.remap import Remapper
+    from glradial.video.video_pipeline import correct_video
 
     made, released = [], []
     real_init, real_release = Remapper.__init__, Remapper.release

@@ -10,7 +10,7 @@ Modules import heavy libraries (moderngl, onnxruntime, torch) inside ``run``, ne
 so that ``glradial --help`` stays fast. ``run`` reports bad input by raising :class:`UsageError`
 (wrong combination of options: exit 2), :class:`CliError`, ``ValueError``, ``TypeError`` or ``OSError``
 (exit 1); the CLI prints one line ``glradial: error: <message>`` and no traceback. Outputs are written
-atomically (:mod:`glradial.atomic`, :mod:`glradial.image_io`, :mod:`glradial.video_io`).
+atomically (:mod:`glradial.media.atomic`, :mod:`glradial.media.image_io`, :mod:`glradial.media.video_io`).
 
 Shared helpers for command modules live here: :func:`parse_size`, :func:`positive_int`,
 :func:`show_progress`, :func:`add_lens_options` / :func:`lens_from_args` (the lens given on the
@@ -24,6 +24,8 @@ import json
 import re
 from pathlib import Path
 
+from ..errors import Error
+
 __all__ = [
     "CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress",
     "add_lens_options", "lens_from_args", "read_lens_file",
@@ -32,7 +34,7 @@ __all__ = [
 _SIZE = re.compile(r"^\s*(\d+)\s*[xX×,]\s*(\d+)\s*$")
 
 
-class CliError(Exception):
+class CliError(Error):
     """A user-facing error: the CLI prints its message on one line and exits with status 1."""
 
 
@@ -138,7 +140,7 @@ def lens_given(args: argparse.Namespace) -> bool:
 def lens_from_args(args: argparse.Namespace, size: tuple[int, int] | None = None):
     """The :class:`glradial.Lens` of ``--lens FILE`` or ``--k1 --k2 --cx --cy --pixel-aspect``
     (``size``: the frame's, for an OpenCV calibration file without its own size)."""
-    from ..lens import Lens
+    from ..lens.lens import Lens
 
     numbers = {"k1": args.k1, "k2": args.k2, "cx": args.cx, "cy": args.cy, "pixel_aspect": args.pixel_aspect}
     if args.lens is not None:
@@ -153,7 +155,7 @@ def lens_from_args(args: argparse.Namespace, size: tuple[int, int] | None = None
 
 def read_lens_file(path: str, size: tuple[int, int] | None = None):
     """A :class:`glradial.Lens` from a JSON file (formats: :data:`LENS_FILE_HELP`)."""
-    from ..lens import Lens
+    from ..lens.lens import Lens
 
     source = Path(path)
     if not source.is_file():

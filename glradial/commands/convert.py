@@ -48,7 +48,7 @@ def _canonical(name: str) -> str:
 
 def to_lens(source: str, values: list[float], size: tuple[int, int], focal: float | None, approximate: bool):
     """Lens from VALUES in convention ``source``."""
-    from ..lens import Lens
+    from ..lens.lens import Lens
 
     given, source = source, _canonical(source)
     if source == "opencv":

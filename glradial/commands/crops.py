@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from ..metrics import PAPER_SIZE
+from ..lens.metrics import PAPER_SIZE
+from ..lens.options import INVERSES
 from . import non_negative_int, parse_size, positive_int, show_progress
 
 DESCRIPTION = """\
@@ -23,7 +24,7 @@ atomically; rerunning the same command resumes an interrupted run, skipping fini
 def _supersample(text: str) -> int | str:
     if text == "auto":
         return text
-    from ..crops import MAX_SUPERSAMPLE
+    from ..synthesis.crops import MAX_SUPERSAMPLE
 
     value = positive_int(text)
     if value > MAX_SUPERSAMPLE:
@@ -54,7 +55,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="frame geometry the lens refers to, in pixels (default: 1280x720)")
     parser.add_argument("--out-size", type=parse_size, default=None, metavar="WxH",
                         help="size of the written images (area-filtered; default: --size)")
-    parser.add_argument("--inverse", choices=("exact", "drap"), default="exact",
+    parser.add_argument("--inverse", choices=INVERSES, default="exact",
                         help="lens inverse used to distort: exact (Newton) or the paper's Drap-Lefevre polynomial (default: exact)")
     parser.add_argument("--supersample", type=_supersample, default=1, metavar="N|auto",
                         help="anti-aliasing with --out-size: N x N area-averaged samples per pixel, or auto (near-square "
@@ -66,8 +67,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..dataset import write_crops_dataset
-    from ..progress import Progress
+    from ..media.progress import Progress
+    from ..synthesis.dataset import write_crops_dataset
 
     bar = Progress(args.count, "crops", unit="crops", enabled=show_progress(args))
     try:

@@ -20,7 +20,9 @@ from typing import Callable
 
 import numpy as np
 
-from ..metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from ..lens.lens import Lens
+from ..lens.metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from ..lens.options import METHODS
 from . import finite_float, parse_size, positive_float, positive_int
 
 DESCRIPTION = __doc__.split("\n\n", 1)[1]
@@ -51,7 +53,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--target", type=finite_float, nargs=2, default=(-18.0, 6.0), metavar=("X", "Y"),
                         help="pitch point the camera aims at, metres from the centre spot along / across the pitch (default -18 6)")
     parser.add_argument("--model", metavar="ONNX", help="ONNX model to use instead of the bundled one")
-    parser.add_argument("--method", choices=("auto", "net", "lines"), default="auto",
+    parser.add_argument("--method", choices=METHODS, default="auto",
                         help="estimation method (default auto: the pitch-line fit when it is surer than the CNN)")
     return parser
 
@@ -59,7 +61,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 # -- geometry -----------------------------------------------------------------------------------
 def pitch_lines() -> list[tuple[str, np.ndarray, np.ndarray]]:
     """The straight pitch markings as (name, start, end) scene points in metres (z = 0)."""
-    from ..stadium_style import HALF_LENGTH as L, HALF_WIDTH as W
+    from ..synthesis.stadium_style import HALF_LENGTH as L
+    from ..synthesis.stadium_style import HALF_WIDTH as W
 
     box_x, box_y = L - 16.5, 20.16
     area_x, area_y = L - 5.5, 9.16
@@ -221,7 +224,7 @@ def write_outputs(out: Path, frame: np.ndarray, corrected: np.ndarray, chords: l
                   straight: list[np.ndarray], labels: tuple[str, str, str, str], log: Callable[[str], None]) -> None:
     """Compose the figure (:func:`compose_figure`) and write ``demo.png``, ``distorted.png`` and
     ``corrected.png`` to ``out`` (both demo sources)."""
-    from ..image_io import write_image
+    from ..media.image_io import write_image
 
     figure = compose_figure(frame, corrected, chords, straight, labels)
     write_image(out / "distorted.png", frame)
@@ -230,18 +233,18 @@ def write_outputs(out: Path, frame: np.ndarray, corrected: np.ndarray, chords: l
     log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
 
 
-def estimate_and_report(frame: np.ndarray, true_lens, args: argparse.Namespace, log) -> "Lens":
+def estimate_and_report(frame: np.ndarray, true_lens, args: argparse.Namespace, log) -> Lens:
     """The lens the demo corrects with: the estimate of ``frame`` by ``args.method`` with the
     bundled model (or ``args.model``), printed beside the true lens with its maximum displacement
     error (px at 1920) and the uncertainty it states; the true lens when no model is shipped."""
-    from ..lens import corner_radius
+    from ..lens.lens import corner_radius
 
     model = _find_model(args.model)
     if model is None:
         print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
               "correcting with the true lens", flush=True)
         return true_lens
-    from ..estimator import Estimator
+    from ..estimation.estimator import Estimator
 
     estimate = Estimator(model).estimate(frame, method=args.method)
     size = (frame.shape[1], frame.shape[0])
@@ -260,14 +263,14 @@ def _find_model(explicit: str | None) -> Path | None:
         if not path.is_file():
             raise FileNotFoundError(f"model file {explicit!r} does not exist")
         return path
-    from ..estimator import default_model_path
+    from ..estimation.estimator import default_model_path
 
     path = default_model_path()
     return path if path.is_file() else None
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..progress import Progress
+    from ..media.progress import Progress
     from . import show_progress
 
     if args.source == "real":
@@ -283,11 +286,10 @@ def run(args: argparse.Namespace) -> int:
 
 def _run(args: argparse.Namespace, bar) -> int:
     """The demo's five steps (panorama, frame, estimate, correct, figure), one bar step each."""
-    from ..crops import CropParams, render_crops
-    from ..lens import Lens, lens_to_pixels
-    from ..remap import correct
-    from ..stadium import stadium_panorama
-    from ..stadium_style import sample_style
+    from ..remapping.remap import correct
+    from ..synthesis.crops import CropParams, render_crops
+    from ..synthesis.stadium import stadium_panorama
+    from ..synthesis.stadium_style import sample_style
 
     log = timed_log()
     size = args.size
@@ -315,7 +317,28 @@ def _run(args: argparse.Namespace, bar) -> int:
     bar.update()
     corrected = correct(frame, used[0], used[1], fit="same")
     bar.update()
-    used_lens = Lens(*used)
+    chords, straight, bow, residual = _reference_lines(frame, params, style, true_lens, Lens(*used))
+    labels = (
+        f"distorted frame, k1={true_lens.k1:.3f} k2={true_lens.k2:.3f}; red: chords between line ends",
+        f"corrected ({source} k1={used[0]:.3f} k2={used[1]:.3f}); red: true straight pitch lines",
+        "distorted: enlarged close-ups of the frame corners / edges with the most reference lines",
+        "corrected: the same close-ups",
+    )
+    if chords:
+        print(f"pitch lines: up to {bow:.1f} px from straight in the distorted frame, "
+              f"{residual:.1f} px after correction ({size[0]}x{size[1]} pixels)")
+    write_outputs(out, frame, corrected, chords, straight, labels, log)
+    bar.update()
+    return 0
+
+
+def _reference_lines(frame: np.ndarray, params, style, true_lens: Lens, used_lens: Lens):
+    """The painted lines the figure draws: ``(chords, straight, bow, residual)``: the chords between
+    the ends of each visible line in the distorted frame, the lines' true straight positions in the
+    corrected frame, and how far the paint is from straight before and after correction (px)."""
+    from ..lens.lens import lens_to_pixels
+
+    size = (frame.shape[1], frame.shape[0])
     chords, straight = [], []
     bow, residual = 0.0, 0.0
     for _name, a, b in pitch_lines():
@@ -342,18 +365,7 @@ def _run(args: argparse.Namespace, bar) -> int:
         visible = np.all(np.isfinite(px_u), axis=1)
         shown = used_lens.undistort_points(p_d[visible], size)
         residual = max(residual, float(np.nanmax(np.hypot(*(shown - px_u[visible]).T))) if visible.any() else 0.0)
-    labels = (
-        f"distorted frame, k1={true_lens.k1:.3f} k2={true_lens.k2:.3f}; red: chords between line ends",
-        f"corrected ({source} k1={used[0]:.3f} k2={used[1]:.3f}); red: true straight pitch lines",
-        "distorted: enlarged close-ups of the frame corners / edges with the most reference lines",
-        "corrected: the same close-ups",
-    )
-    if chords:
-        print(f"pitch lines: up to {bow:.1f} px from straight in the distorted frame, "
-              f"{residual:.1f} px after correction ({size[0]}x{size[1]} pixels)")
-    write_outputs(out, frame, corrected, chords, straight, labels, log)
-    bar.update()
-    return 0
+    return chords, straight, bow, residual
 
 
 def painted_fraction(frame: np.ndarray, px: np.ndarray, offset: float = 5.0, contrast: float = 3.0) -> float:

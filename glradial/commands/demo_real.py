@@ -8,7 +8,7 @@ pitch lines and recorded beside it, ``own_lens``) is removed with :func:`glradia
 looks like a real camera's frame), the lens is estimated from the distorted frame alone, and the
 frame is corrected with the estimate (``fit="same"``).
 
-Geometry of the reference lines (lens coordinates, DESIGN.md): a point ``p`` of the original frame
+Geometry of the reference lines (lens coordinates, docs/DESIGN.md): a point ``p`` of the original frame
 appears in the distorted frame at ``P(s p)`` (``s`` the distortion's crop scale) and, after a
 correction with the true lens, at ``s p`` in the corrected frame: a straight line of the original
 stays straight there. So the figure draws, on the distorted frame, the chord between the ends of
@@ -25,18 +25,20 @@ from pathlib import Path
 
 import numpy as np
 
+from ..lens.lens import Lens
+
 #: the bundled real frame and its reference lines (package ``glradial.data``)
 FRAME_NAME = "usl_broadcast_0195.jpg"
 LINES_NAME = "usl_broadcast_0195.json"
 
 
-def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray], "Lens"]:
+def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray], Lens]:
     """The shipped real frame made undistorted (H x W x 3 uint8 RGB: its own lens removed with
     ``correct(fit="crop")``), its reference lines ``{name: 2 x 2 end points in pixels of that
     undistorted frame}``, and the frame's own lens (both measured; see ``glradial/data/README.md``)."""
-    from ..image_io import read_image
-    from ..lens import Lens
-    from ..remap import correct
+    from ..lens.lens import Lens
+    from ..media.image_io import read_image
+    from ..remapping.remap import correct
 
     data = resources.files("glradial.data")
     shipped = read_image(Path(str(data.joinpath(FRAME_NAME))))
@@ -54,7 +56,7 @@ def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, i
     """Pixel positions of the points of one reference line (``ends`` 2 x 2, original pixels):
     ``(distorted, corrected)``, each ``samples x 2``: where the distorted frame shows them
     (``P(s p)``) and where a correction with the true lens shows them (``s p``)."""
-    from ..lens import lens_to_pixels, pixels_to_lens
+    from ..lens.lens import lens_to_pixels, pixels_to_lens
 
     t = np.linspace(0.0, 1.0, samples)[:, None]
     p = pixels_to_lens(ends[0] + t * (ends[1] - ends[0]), size) * scale
@@ -63,8 +65,8 @@ def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, i
 
 def run_real(args: argparse.Namespace) -> int:
     """``glradial demo --source real``: see the module docstring."""
-    from ..lens import Lens
-    from ..remap import correct, distort
+    from ..lens.lens import Lens
+    from ..remapping.remap import correct, distort
     from .demo import _distance_to_chord, estimate_and_report, timed_log, write_outputs
 
     log = timed_log()

@@ -1,5 +1,5 @@
 """``glradial evaluate``: evaluate an estimator model on held-out procedural stadiums
-(:mod:`glradial.evaluation`; torch-free: an installed glradial runs it)."""
+(:mod:`glradial.evaluation.evaluation`; torch-free: an installed glradial runs it)."""
 
 from __future__ import annotations
 
@@ -44,11 +44,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     add_arguments(parser)
-    real = parser.add_argument_group("real frames (net, lines and auto side by side; glradial.real_eval)")
+    real = parser.add_argument_group("real frames (net, lines and auto side by side; glradial.evaluation.real_eval)")
     real.add_argument("--frames", metavar="DIR", help="instead: evaluate net, lines and auto on the (nearly) undistorted "
                       "real frames of DIR with known lenses applied (writes real.md to --out)")
     real.add_argument("--calibrated", metavar="JSON", action="append", default=[],
-                      help="with --frames: also a calibrated camera (frames + known lens; see glradial.real_eval)")
+                      help="with --frames: also a calibrated camera (frames + known lens; see glradial.evaluation.real_eval)")
     real.add_argument("--procedural", type=non_negative_int, default=0, metavar="N",
                       help="with --frames: also N held-out procedural stadium crops (default 0)")
     real.add_argument("--remove-own-lens", action="store_true",
@@ -58,8 +58,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def settings(args: argparse.Namespace, command: str):
-    """The :class:`~glradial.evaluation.EvaluationSettings` of parsed options."""
-    from ..evaluation import EvaluationSettings
+    """The :class:`~glradial.evaluation.evaluation.EvaluationSettings` of parsed options."""
+    from ..evaluation.evaluation import EvaluationSettings
 
     return EvaluationSettings(
         n=args.n, panoramas=args.test_panoramas, split=args.split, panorama_size=tuple(args.panorama_size),
@@ -68,11 +68,11 @@ def settings(args: argparse.Namespace, command: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimator import default_model_path
-    from ..evaluation import OnnxPredictor, evaluate
+    from ..estimation.estimator import default_model_path
+    from ..evaluation.evaluation import OnnxPredictor, evaluate
 
     if args.frames or args.calibrated:
-        from ..real_eval import evaluate_folder
+        from ..evaluation.real_eval import evaluate_folder
 
         evaluate_folder(args.frames, args.out, calibrated=args.calibrated, procedural=args.procedural,
                         model=args.model, threads=args.threads, remove_own_lens=args.remove_own_lens)

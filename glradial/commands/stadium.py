@@ -36,10 +36,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from ..atomic import atomic_path, check_output_folder
-    from ..image_io import IMAGE_EXTENSIONS, check_overwrite, is_image_path, write_image
-    from ..stadium import stadium_panorama
-    from ..stadium_style import sample_style, stadium_split
+    from ..media.atomic import atomic_path, check_output_folder
+    from ..media.image_io import IMAGE_EXTENSIONS, check_overwrite, is_image_path, write_image
+    from ..synthesis.stadium import stadium_panorama
+    from ..synthesis.stadium_style import sample_style, stadium_split
 
     if args.seed < 0:
         raise ValueError(f"--seed must be >= 0, got {args.seed}")
@@ -48,7 +48,7 @@ def run(args: argparse.Namespace) -> int:
         overrides["supersample"] = args.supersample
     if args.lighting is not None:
         overrides["lighting"] = args.lighting
-    from ..progress import Progress
+    from ..media.progress import Progress
     from . import show_progress
 
     target = check_output_folder(args.out)  # everything about --out is checked before the render

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..lens.options import DIRECTIONS, FITS, INVERSES
 from . import add_lens_options, lens_from_args, parse_size
 
 DESCRIPTION = """\
@@ -25,11 +26,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     add_lens_options(parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect] or --lens FILE)"))
     parser.add_argument("--size", type=parse_size, required=True, metavar="WxH", help="frame size in pixels, e.g. 1920x1080")
-    parser.add_argument("--direction", choices=("undistort", "distort"), default="undistort",
+    parser.add_argument("--direction", choices=DIRECTIONS, default="undistort",
                         help="undistort = map that corrects distorted footage, distort = map that adds the lens (default: undistort)")
-    parser.add_argument("--fit", choices=("same", "crop", "full"), default="same",
+    parser.add_argument("--fit", choices=FITS, default="same",
                         help="output scale, as in 'glradial correct' (default: same)")
-    parser.add_argument("--inverse", choices=("exact", "drap"), default="exact",
+    parser.add_argument("--inverse", choices=INVERSES, default="exact",
                         help="with --direction distort: exact inverse (Newton) or the paper's Drap-Lefevre polynomial (default: exact)")
     parser.add_argument("--out", required=True, metavar="FILE", help="output .exr (recommended), .tif/.tiff or .npy")
     parser.add_argument("-y", "--overwrite", action="store_true", help="replace --out if it exists")
@@ -37,9 +38,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..atomic import check_output_folder
-    from ..image_io import check_overwrite
-    from ..stmap import check_stmap_path, lens_stmap, write_stmap
+    from ..export.stmap import check_stmap_path, lens_stmap, write_stmap
+    from ..media.atomic import check_output_folder
+    from ..media.image_io import check_overwrite
 
     check_overwrite(check_output_folder(check_stmap_path(args.out)), args.overwrite)  # before any work
     lens = lens_from_args(args, args.size)

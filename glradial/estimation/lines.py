@@ -1,0 +1,377 @@
+"""Line evidence for lens estimation: sub-pixel points on image structures that should be straight.
+
+Convention:
+    Input: an RGB (or gray) ``H x W (x C)`` uint8 frame, as :func:`glradial.media.frames.to_rgb8`
+    accepts. Detection runs on a gray copy at most :data:`DETECT_WIDTH` pixels wide (area
+    interpolation). Output points are in **lens units of the frame** (image width = 1, origin at the
+    frame centre, y down; :func:`glradial.lens.lens.pixels_to_lens`), so they do not depend on the
+    detection scale; :attr:`LineEvidence.width` is the detection width, the pixel unit that
+    residuals and tolerances are stated in (1 px there = ``1 / width`` lens units).
+
+What is detected:
+    * **Ridges**: the centre line of thin bright lines (painted pitch lines, goal posts, thin white
+      stripes) from the Hessian of the smoothed image: where the most negative eigenvalue dominates,
+      the sub-pixel centre is one Newton step along its eigenvector (Steger's ridge point).
+    * **Step edges** (ad boards, stand fronts, roofs): Canny pixels away from ridges, moved to the
+      sub-pixel maximum of the gradient magnitude along the gradient (parabola through 3 samples).
+
+Grouping: points are binned by orientation (6 bins over 180 degrees), split into connected pieces
+(per bin, so a line crossing a circle or another line stays apart from it), and pieces are linked into
+chains across gaps (players, nets, shadows) when they are nearly collinear. Masked first: a margin
+along the frame border and any letterbox (uniform rows or columns at the border). Chains that are
+pixel-straight and exactly horizontal or vertical away from the frame centre are taken for broadcast
+graphics (score bugs, clocks, tickers, watermarks) and dropped: a real straight line off the centre
+is curved by any lens with ``|k1|`` above a few hundredths, and such overlays would pull the fit to
+``k = 0``. Whether a chain is a straight line seen through a lens (and not a circle, an arc or a
+curved stand) is decided by :mod:`glradial.estimation.line_fit`, which owns the lens model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..lens.lens import lens_to_pixels, pixels_to_lens
+
+#: Largest width (pixels) of the gray copy lines are detected on (800: as accurate as 960 on validation
+#: crops, 2/3 of the pixels; docs/LINES.md).
+DETECT_WIDTH = 800
+#: Gaussian smoothing (pixels of the detection copy) before the derivatives.
+SMOOTH_SIGMA = 1.2
+#: Smallest ridge strength: the most negative Hessian eigenvalue, in grey levels (0..255) per px².
+RIDGE_MIN_CURVATURE = 1.5
+#: Canny hysteresis thresholds on the smoothed 8-bit image (Sobel 3x3 gradient, L2 norm).
+CANNY_LOW, CANNY_HIGH = 30, 70
+#: Points this close (pixels) to the frame border or a letterbox are ignored.
+BORDER_MARGIN = 4
+#: Orientation bins over 180 degrees (30 degrees each) for ridges and edges. The two edges of a
+#: thick line (opposite polarity) share a bin but do not touch; thin lines are ridges.
+ORIENTATION_BINS = 6
+#: Pieces with fewer points are dropped before linking.
+MIN_PIECE_POINTS = 8
+#: Linking: largest gap (px) between two pieces' extents, angle (degrees) between their directions,
+#: and perpendicular offset (px, plus a share of the gap) of one piece's ends from the other's line.
+LINK_GAP, LINK_ANGLE, LINK_OFFSET, LINK_OFFSET_PER_GAP = 80.0, 6.0, 1.5, 0.02
+#: Chains shorter than this (px of the detection copy, along their direction) are dropped.
+MIN_CHAIN_LENGTH = 60.0
+#: Graphics test: a chain whose points all lie within this many px of one row (or column)...
+OVERLAY_FLATNESS = 0.5
+#: ...and which lies at least this share of the frame height (width) from the centre row (column).
+OVERLAY_OFF_CENTRE = 0.12
+#: A uniform border row/column (letterbox): standard deviation below this (grey levels).
+LETTERBOX_STD = 4.0
+
+
+@dataclass(frozen=True)
+class Chain:
+    """One chain of points that may be the image of a straight line.
+
+    ``points``: float64 ``N x 2`` lens coordinates (see the module docstring), ordered along the
+    chain; ``kind``: ``"ridge"`` or ``"edge"``; ``length``: extent along its direction in px of the
+    detection copy.
+    """
+
+    points: np.ndarray
+    kind: str
+    length: float
+
+
+@dataclass(frozen=True)
+class LineEvidence:
+    """Chains found in one frame: ``size`` is the frame ``(W, H)``, ``width`` the detection width
+    (px), ``overlays`` the number of chains dropped as broadcast graphics, ``edge_density`` the
+    share of unmasked pixels that are Canny edges (high for noise, near 0 for a blank frame)."""
+
+    chains: list[Chain]
+    size: tuple[int, int]
+    width: int
+    overlays: int = 0
+    edge_density: float = 0.0
+
+
+def gray_copy(frame: np.ndarray, max_width: int = DETECT_WIDTH) -> np.ndarray:
+    """uint8 ``H x W x 3`` RGB (or ``H x W``) -> float32 gray at most ``max_width`` wide (area)."""
+    gray = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
+    height, width = gray.shape[:2]
+    if width > max_width:
+        size = (max_width, max(2, int(round(height * max_width / width))))
+        gray = cv2.resize(gray, size, interpolation=cv2.INTER_AREA)
+    return gray.astype(np.float32)
+
+
+def content_box(gray: np.ndarray) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)`` of the frame without letterbox/pillarbox bands: border rows (columns)
+    that are uniform (standard deviation below :data:`LETTERBOX_STD`) are peeled off."""
+    height, width = gray.shape
+    row_std, col_std = gray.std(axis=1), gray.std(axis=0)
+    y0, y1, x0, x1 = 0, height, 0, width
+    while y0 < height // 3 and row_std[y0] < LETTERBOX_STD:
+        y0 += 1
+    while y1 > 2 * height // 3 and row_std[y1 - 1] < LETTERBOX_STD:
+        y1 -= 1
+    while x0 < width // 3 and col_std[x0] < LETTERBOX_STD:
+        x0 += 1
+    while x1 > 2 * width // 3 and col_std[x1 - 1] < LETTERBOX_STD:
+        x1 -= 1
+    return x0, y0, x1, y1
+
+
+def _derivatives(g: np.ndarray) -> tuple[np.ndarray, ...]:
+    d1 = np.array([-0.5, 0.0, 0.5], np.float32)
+    d2 = np.array([1.0, -2.0, 1.0], np.float32)
+    one = np.array([1.0], np.float32)
+    gx = cv2.sepFilter2D(g, -1, d1, one)
+    gy = cv2.sepFilter2D(g, -1, one, d1)
+    gxx = cv2.sepFilter2D(g, -1, d2, one)
+    gyy = cv2.sepFilter2D(g, -1, one, d2)
+    gxy = cv2.sepFilter2D(g, -1, d1, d1)
+    return gx, gy, gxx, gyy, gxy
+
+
+def _ridge_points(gx, gy, gxx, gyy, gxy, valid):
+    """Sub-pixel centres of bright ridges: ``(x, y, angle, row, column)`` arrays (angle of the line
+    in [0, pi); row, column: the integer pixel of each point)."""
+    half_trace = cv2.addWeighted(gxx, 0.5, gyy, 0.5, 0.0)
+    root = cv2.magnitude(cv2.addWeighted(gxx, 0.5, gyy, -0.5, 0.0), gxy)
+    lam = cv2.subtract(half_trace, root)  # most negative eigenvalue
+    strong = cv2.compare(lam, -RIDGE_MIN_CURVATURE, cv2.CMP_LT)
+    # a ridge, not a blob: the other eigenvalue (half_trace + root) is not as negative
+    line_like = cv2.compare(cv2.addWeighted(half_trace, 1.0, root, 1.0, 0.0), cv2.multiply(lam, 0.5), cv2.CMP_GT)
+    idx = np.flatnonzero(cv2.bitwise_and(strong, line_like, mask=valid))
+    ys, xs = np.divmod(idx, lam.shape[1])
+    l1, a, b, c = lam.ravel()[idx], gxx.ravel()[idx], gyy.ravel()[idx], gxy.ravel()[idx]
+    # eigenvector of lam: (c, lam - a) or (lam - b, c), whichever is longer (numerically stable)
+    v1y, v2x = l1 - a, l1 - b
+    use1 = c * c + v1y * v1y >= v2x * v2x + c * c
+    nx, ny = np.where(use1, c, v2x), np.where(use1, v1y, c)
+    norm2 = nx * nx + ny * ny
+    ok = norm2 > 1e-12
+    # Newton step along the normal: offset = -(n . grad) n / (n^T H n), n^T H n = lam |n|^2
+    step = -(nx * gx.ravel()[idx] + ny * gy.ravel()[idx]) / (l1 * np.where(ok, norm2, 1.0))
+    ox, oy = step * nx, step * ny
+    keep = ok & (np.abs(ox) <= 0.5) & (np.abs(oy) <= 0.5)
+    ys, xs, nx, ny = ys[keep], xs[keep], nx[keep], ny[keep]
+    angle = np.mod(np.arctan2(nx, -ny), np.pi)  # line direction is perpendicular to the normal
+    return xs + ox[keep], ys + oy[keep], angle, ys, xs
+
+
+def _bilinear(image: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    height, width = image.shape
+    x = np.clip(x, 0.0, width - 1.001)
+    y = np.clip(y, 0.0, height - 1.001)
+    x0, y0 = x.astype(np.intp), y.astype(np.intp)
+    fx, fy = x - x0, y - y0
+    top = image[y0, x0] * (1 - fx) + image[y0, x0 + 1] * fx
+    bottom = image[y0 + 1, x0] * (1 - fx) + image[y0 + 1, x0 + 1] * fx
+    return top * (1 - fy) + bottom * fy
+
+
+def _edge_points(g, gx, gy, valid, near_ridge):
+    """Sub-pixel step-edge points ``(x, y, direction, row, column, density)``: direction of the
+    gradient in [0, 2 pi); ``valid`` (uint8) masks the frame, edges where ``near_ridge`` are
+    dropped (the flanks of thin lines); density: share of valid pixels that are edges."""
+    edges = cv2.Canny(np.clip(g, 0, 255).astype(np.uint8), CANNY_LOW, CANNY_HIGH, L2gradient=True)
+    edges = cv2.bitwise_and(edges, edges, mask=valid)
+    density = cv2.countNonZero(edges) / max(cv2.countNonZero(valid), 1)
+    edges[near_ridge > 0] = 0
+    idx = np.flatnonzero(edges)
+    ys, xs = np.divmod(idx, edges.shape[1])
+    ex, ey = gx[ys, xs], gy[ys, xs]
+    mag = np.hypot(ex, ey)
+    ok = mag > 1e-6
+    ys, xs, ex, ey, mag = ys[ok], xs[ok], ex[ok], ey[ok], mag[ok]
+    dx, dy = ex / mag, ey / mag
+    magnitude = cv2.magnitude(gx, gy)
+    before = _bilinear(magnitude, xs - dx, ys - dy)
+    after = _bilinear(magnitude, xs + dx, ys + dy)
+    denom = before - 2.0 * mag + after
+    offset = np.where(denom < -1e-6, 0.5 * (before - after) / np.where(denom < -1e-6, denom, -1.0), 0.0)
+    offset = np.clip(offset, -0.5, 0.5)
+    direction = np.mod(np.arctan2(dy, dx), 2.0 * np.pi)
+    return xs + offset * dx, ys + offset * dy, direction, ys, xs, density
+
+
+class _Pieces:
+    """Connected same-orientation, same-kind pieces: per-piece centre, unit axis, extent along it
+    (``lo``, ``hi``, px), kind (0 ridge, 1 edge) and the point indices of each piece.
+
+    Ridge and edge points never touch (edges within 2 px of a ridge were dropped), so each
+    orientation bin takes one connected-components pass for both kinds."""
+
+    def __init__(self, xs, ys, angle, kind, iy, ix, bins, shape):
+        empty = np.zeros(0)
+        self.centre, self.axis, self.lo, self.hi = np.zeros((0, 2)), np.zeros((0, 2)), empty, empty
+        self.kind = np.zeros(0, np.intp)
+        self.members: list[np.ndarray] = []
+        if len(xs) == 0:
+            return
+        b = (np.floor(angle / np.pi * bins + 0.5).astype(np.intp)) % bins
+        # connected pieces of each orientation bin (a line crossing a circle stays apart from it)
+        key = np.zeros(len(xs), np.int64)
+        mask = np.zeros(shape, np.uint8)
+        by_bin = np.argsort(b, kind="stable")
+        bounds = np.searchsorted(b[by_bin], np.arange(bins + 1))
+        for k in range(bins):
+            sel = by_bin[bounds[k]:bounds[k + 1]]
+            if len(sel) == 0:
+                continue
+            y0, y1 = int(iy[sel].min()), int(iy[sel].max()) + 1
+            x0, x1 = int(ix[sel].min()), int(ix[sel].max()) + 1
+            roi = mask[y0:y1, x0:x1]
+            roi[:] = 0
+            roi[iy[sel] - y0, ix[sel] - x0] = 1
+            _, labels = cv2.connectedComponentsWithAlgorithm(roi, 8, cv2.CV_32S, cv2.CCL_SAUF)
+            key[sel] = (labels[iy[sel] - y0, ix[sel] - x0].astype(np.int64) * bins + k) * 2 + kind[sel]
+        order = np.argsort(key, kind="stable")
+        key_sorted = key[order]
+        starts = np.flatnonzero(np.r_[True, key_sorted[1:] != key_sorted[:-1]])
+        counts = np.diff(np.r_[starts, len(key_sorted)])
+        big = counts >= MIN_PIECE_POINTS
+        group = np.repeat(np.cumsum(big) - 1, counts)  # piece index per sorted point (-1..)
+        keep = np.repeat(big, counts)
+        order, group = order[keep], group[keep]
+        n = int(big.sum())
+        if n == 0:
+            return
+        x, y = xs[order], ys[order]
+        cnt = np.bincount(group, minlength=n).astype(np.float64)
+        mx, my = np.bincount(group, x, n) / cnt, np.bincount(group, y, n) / cnt
+        dx, dy = x - mx[group], y - my[group]
+        cxx, cyy = np.bincount(group, dx * dx, n), np.bincount(group, dy * dy, n)
+        cxy = np.bincount(group, dx * dy, n)
+        theta = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+        self.axis = np.stack([np.cos(theta), np.sin(theta)], axis=1)
+        self.centre = np.stack([mx, my], axis=1)
+        s = dx * self.axis[group, 0] + dy * self.axis[group, 1]
+        bounds = np.r_[0, np.cumsum(cnt.astype(np.intp))[:-1]]
+        self.lo, self.hi = np.minimum.reduceat(s, bounds), np.maximum.reduceat(s, bounds)
+        self.members = np.split(order, bounds[1:])
+        self.kind = kind[order[bounds]]
+
+    def __len__(self) -> int:
+        return len(self.members)
+
+
+def _link(p: _Pieces) -> list[list[int]]:
+    """Union pieces that continue each other (collinear within tolerance, gap <= LINK_GAP)."""
+    n = len(p)
+    parent = list(range(n))
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    if n > 1:
+        aligned = np.abs(p.axis @ p.axis.T) >= np.cos(np.radians(LINK_ANGLE))
+        i, j = np.nonzero(np.triu(aligned & (p.kind[:, None] == p.kind[None, :]), 1))  # ridges with ridges
+        half = 0.5 * (p.hi - p.lo)
+        reach = np.hypot(*(p.centre[i] - p.centre[j]).T) <= half[i] + half[j] + LINK_GAP + 2.0
+        i, j = i[reach], j[reach]
+        ok = np.ones(len(i), bool)
+        gap = np.zeros(len(i))
+        for a, b, first in ((i, j, True), (j, i, False)):
+            ax = p.axis[a]
+            normal = np.stack([-ax[:, 1], ax[:, 0]], axis=1)
+            ends = p.centre[b][:, None, :] + np.stack([p.lo[b], p.hi[b]], axis=1)[:, :, None] * p.axis[b][:, None, :]
+            rel = ends - p.centre[a][:, None, :]
+            along = np.einsum("nkc,nc->nk", rel, ax)
+            across = np.abs(np.einsum("nkc,nc->nk", rel, normal)).max(axis=1)
+            if first:
+                gap = np.maximum(0.0, np.maximum(along.min(axis=1) - p.hi[a], p.lo[a] - along.max(axis=1)))
+            ok &= across <= LINK_OFFSET + LINK_OFFSET_PER_GAP * gap
+        ok &= gap <= LINK_GAP
+        for a, b in zip(i[ok].tolist(), j[ok].tolist()):
+            parent[find(a)] = find(b)
+    groups: dict[int, list[int]] = {}
+    for k in range(n):
+        groups.setdefault(find(k), []).append(k)
+    return list(groups.values())
+
+
+def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
+    """Pixel-straight, axis-aligned and off the centre row/column: broadcast graphics. Flatness is
+    the 2-98 percentile range across the axis, so a corner or a crossing line at an end does not
+    hide a graphics edge."""
+    height, width = shape
+    for across, centre, extent in ((y, (height - 1) / 2, height), (x, (width - 1) / 2, width)):
+        if np.ptp(across) > 0.05 * extent:  # far from axis-aligned: skip the percentiles
+            continue
+        lo, hi = np.percentile(across, [2, 98])
+        if hi - lo <= 2 * OVERLAY_FLATNESS and abs(np.median(across) - centre) > OVERLAY_OFF_CENTRE * extent:
+            return True
+    return False
+
+
+def _undistorted(x: np.ndarray, y: np.ndarray, size: tuple[int, int], lens: tuple[float, float]):
+    """Detection-copy pixels undistorted with ``lens`` (exact inverse); pixels with no undistorted
+    point (beyond the lens's reach) are kept as they are."""
+    from ..lens.lensfuncs import undistort_point_exact
+
+    p_d = pixels_to_lens(np.stack([x, y], axis=1), size)
+    p_u, valid = undistort_point_exact(p_d, float(lens[0]), float(lens[1]))
+    q = lens_to_pixels(np.where(valid[:, None], p_u, p_d), size)
+    return q[:, 0], q[:, 1]
+
+
+def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
+                  lens_hint: tuple[float, float] | None = None) -> LineEvidence:
+    """Find the chains of a uint8 RGB/gray frame (see the module docstring), detecting on a copy at
+    most ``max_width`` pixels wide.
+
+    ``lens_hint``: a rough ``(k1, k2)`` (e.g. the CNN's). Pieces are then linked where they continue
+    each other once undistorted with it, so strongly curved lines (k1 near -0.7 at the frame edge)
+    still form long chains; the chains' points stay those of the frame."""
+    height_full, width_full = frame.shape[:2]
+    gray = gray_copy(frame, max_width)
+    height, width = gray.shape
+    g = cv2.GaussianBlur(gray, (0, 0), SMOOTH_SIGMA)
+    gx, gy, gxx, gyy, gxy = _derivatives(g)
+    x0, y0, x1, y1 = content_box(gray)
+    valid = np.zeros((height, width), np.uint8)
+    m = BORDER_MARGIN
+    valid[y0 + m: y1 - m, x0 + m: x1 - m] = 1
+    rx, ry, rangle, riy, rix = _ridge_points(gx, gy, gxx, gyy, gxy, valid)
+    ridge_mask = np.zeros((height, width), np.uint8)
+    ridge_mask[riy, rix] = 1
+    near_ridge = cv2.dilate(ridge_mask, np.ones((5, 5), np.uint8))
+    ex, ey, edir, eiy, eix, density = _edge_points(g, gx, gy, valid, near_ridge)
+    chains: list[Chain] = []
+    overlays = 0
+    xs, ys = np.concatenate([rx, ex]), np.concatenate([ry, ey])
+    kinds = np.r_[np.zeros(len(rx), np.intp), np.ones(len(ex), np.intp)]
+    lx, ly = _undistorted(xs, ys, (width, height), lens_hint) if lens_hint is not None else (xs, ys)
+    pieces = _Pieces(lx, ly, np.concatenate([rangle, np.mod(edir, np.pi)]), kinds,
+                     np.concatenate([riy, eiy]), np.concatenate([rix, eix]), ORIENTATION_BINS, (height, width))
+    extent = pieces.hi - pieces.lo
+    for group in _link(pieces):  # an edge may change polarity along a line (boards, chessboards)
+        if len(group) == 1 and extent[group[0]] < MIN_CHAIN_LENGTH:
+            continue
+        # extent of the pieces' ends along the longest piece's axis: a cheap bound on the length
+        longest = group[int(np.argmax(pieces.hi[group] - pieces.lo[group]))]
+        ends = np.concatenate([pieces.centre[group] + pieces.lo[group, None] * pieces.axis[group],
+                               pieces.centre[group] + pieces.hi[group, None] * pieces.axis[group]])
+        if np.ptp(ends @ pieces.axis[longest]) < MIN_CHAIN_LENGTH:
+            continue
+        idx = np.concatenate([pieces.members[k] for k in group])
+        x, y = xs[idx], ys[idx]
+        pts = np.stack([x, y], axis=1)
+        centre = pts.mean(axis=0)
+        w, v = np.linalg.eigh(np.cov((pts - centre).T))
+        s = (pts - centre) @ v[:, 1]
+        length = float(np.ptp(s))
+        if length < MIN_CHAIN_LENGTH:
+            continue
+        if _is_overlay(x, y, (height, width)):
+            overlays += 1
+            continue
+        order = np.argsort(s)
+        # back to full-frame pixel centres, then lens units
+        scale = width_full / width
+        full = (pts[order] + 0.5) * np.array([scale, height_full / height]) - 0.5
+        kind = "edge" if pieces.kind[group[0]] else "ridge"
+        chains.append(Chain(pixels_to_lens(full, (width_full, height_full)), kind, length))
+    return LineEvidence(chains, (width_full, height_full), width, overlays, density)

@@ -1,0 +1,14 @@
+"""The lens of a video: cut detection and per-shot smoothing, the per-frame `LensTrack` and its
+sidecar, and `--auto`'s two passes (track, correct) on a decode/correct/encode pipeline."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ..lazy import attach
+
+if TYPE_CHECKING:
+    from .lens_track import DOUBTFUL_PX, LensTrack, load_lens_track
+    from .video_pipeline import correct_video, default_estimator, doubtful_warnings, track_report, track_video
+
+__getattr__, __dir__, __all__ = attach(__name__, __file__)

@@ -1,0 +1,364 @@
+"""Automatic lens correction of videos: one lens per shot, then correct.
+
+Pipeline (memory does not grow with the file's length):
+
+1. :func:`track_video` decodes every frame once, detects cuts on 64 px thumbnails and gathers a
+   cheap subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
+   then, on copies at most :data:`ESTIMATE_WIDTH` px wide); each shot gets one joint lens fit, a
+   function of its zoom when the picture zooms (:mod:`glradial.video.shot_track`,
+   :mod:`glradial.video.shot_fit`). A doubtful shot is marked and, by default, passed through
+   uncorrected.
+2. :func:`correct_video` decodes the file again, corrects each frame with its lens and encodes it
+   (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags and depth kept).
+   Decoding, correction and encoding overlap on three threads with at most ``depth`` frames
+   queued between two steps; the correction runs on one worker thread, which owns its GL context
+   (released when it ends) or uses the CPU path.
+
+The result of pass 1 is a :class:`~glradial.video.lens_track.LensTrack`, written as a sidecar
+(format: :mod:`glradial.video.lens_track`).
+
+Convention: frames are ``H x W x 3`` RGB (uint8, or uint16 for deeper sources) when they reach the
+corrector; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (docs/DESIGN.md).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import queue
+import sys
+import threading
+from dataclasses import replace
+from fractions import Fraction
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
+
+from ..lens.lens import Lens, as_lens
+from ..lens.metrics import max_displacement
+from ..media.progress import Progress
+from ..media.video_io import FIELD_ORDER_CODES, CopiedPacket, EncodeOptions, VideoFrame, VideoInfo, VideoReader, VideoWriter
+from .lens_track import DOUBTFUL_PX, LensTrack
+from .shot_track import ESTIMATE_EVERY, EVERY, track_shots
+from .smoothing import ShotDetector
+
+__all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
+
+#: estimator: RGB uint8 frame -> (k1, k2) or a Lens (a LensEstimate carries uncertainty_px and method)
+EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
+
+#: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
+#: detector at <= 960 px, so a full-size conversion would be wasted
+ESTIMATE_WIDTH = 960
+
+#: frames queued between two threads of the pipeline (bounded memory: ~3 x depth frames in flight)
+DEPTH = 4
+
+#: pass 2 keeps the previous frame's lens (and so its cached maps) while the next frame's lens
+#: would move no point of the frame by more than this (px of the frame): half the 1/32-px step of
+#: the CPU path's fixed-point maps, which cannot resolve a smaller change anyway. A static or panning
+#: camera then builds its maps once per shot instead of once per frame; a zoom still rebuilds them.
+MAP_REUSE_PX = 1.0 / 64.0
+
+
+class Pipelined:
+    """Run ``items`` (an iterator: e.g. a decoder) on one thread and ``work`` on a second, with
+    bounded queues (``depth`` items) between them and the consumer; iterate to get ``work(item)`` in
+    order. ``work=None`` passes items through (decode-ahead only). ``on_worker_exit`` runs on the
+    worker thread when it ends (release what it owns, e.g. a GL context). An exception on either
+    thread is raised in the consumer; leaving the ``with`` block (normally, by an exception or a
+    signal) stops and joins both threads."""
+
+    _END = object()
+
+    def __init__(
+        self,
+        items: Iterable,
+        work: Callable | None = None,
+        *,
+        depth: int = DEPTH,
+        on_worker_exit: Callable[[], None] | None = None,
+    ) -> None:
+        self._items, self._work, self._exit = iter(items), work, on_worker_exit
+        self._decoded: queue.Queue = queue.Queue(depth)
+        self._done: queue.Queue = queue.Queue(depth)
+        self._stop = threading.Event()
+        self._threads = [threading.Thread(target=self._produce, name="glradial-decode", daemon=True)]
+        if work is not None:
+            self._threads.append(threading.Thread(target=self._transform, name="glradial-correct", daemon=True))
+        else:
+            self._decoded = self._done
+
+    def _put(self, target: queue.Queue, entry: tuple) -> bool:
+        while not self._stop.is_set():
+            try:
+                target.put(entry, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def _produce(self) -> None:
+        try:
+            for item in self._items:
+                if not self._put(self._decoded, (True, item)):
+                    return
+            self._put(self._decoded, (True, self._END))
+        except BaseException as err:  # handed to the consumer
+            self._put(self._decoded, (False, err))
+
+    def _transform(self) -> None:
+        try:
+            while not self._stop.is_set():
+                try:
+                    ok, item = self._decoded.get(timeout=0.05)
+                except queue.Empty:
+                    continue
+                if not ok or item is self._END:
+                    self._put(self._done, (ok, item))
+                    return
+                if not self._put(self._done, (True, self._work(item))):
+                    return
+        except BaseException as err:
+            self._put(self._done, (False, err))
+        finally:
+            if self._exit is not None:
+                self._exit()
+
+    def __enter__(self) -> "Pipelined":
+        for thread in self._threads:
+            thread.start()
+        return self
+
+    def __iter__(self) -> Iterator:
+        while True:
+            ok, item = self._done.get()
+            if not ok:
+                raise item
+            if item is self._END:
+                return
+            yield item
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        for thread in self._threads:
+            thread.join()
+
+
+def default_estimator(model: str | os.PathLike | None = None, method: str | None = None) -> EstimatorFn:
+    """The bundled estimator (:class:`glradial.Estimator`), as a frame -> lens function; ``method``
+    (e.g. "auto", "net", "lines") is handed to ``Estimator.estimate`` when given."""
+    from ..estimation.estimator import Estimator
+
+    estimator = Estimator(model) if model is not None else Estimator()
+    if method is None:
+        return lambda frame: estimator.estimate(frame)
+    return lambda frame: estimator.estimate(frame, method=method)
+
+
+def track_video(
+    path: str | os.PathLike,
+    estimator: EstimatorFn,
+    *,
+    every: int = EVERY,
+    estimate_every: int = ESTIMATE_EVERY,
+    detector: ShotDetector | None = None,
+    progress: bool | None = None,
+    doubtful_px: float = DOUBTFUL_PX,
+    apply_doubtful: bool = False,
+    rate: Fraction | None = None,
+) -> LensTrack:
+    """Pass 1: detect cuts and fit one lens per shot while decoding (:func:`glradial.video.shot_track.track_shots`)."""
+    return track_shots(path, estimator, every=every, estimate_every=estimate_every, detector=detector,
+                       progress=progress, doubtful_px=doubtful_px, apply_doubtful=apply_doubtful, rate=rate)
+
+
+class _FrameCorrector:
+    """Corrects frames on the pipeline's worker thread: ``backend`` "gl" makes a
+    :class:`~glradial.remapping.remap.Remapper` with its own context on first use there (falling back to the
+    CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
+
+    def __init__(self, backend: str, fit: str, interpolation: str, direction: str = "undistort", **extra: object) -> None:
+        from ..lens.options import BACKENDS, DIRECTIONS
+        from ..remapping.remap import auto_backend
+
+        if backend not in BACKENDS:
+            raise ValueError(f"backend must be one of {', '.join(BACKENDS)}, got {backend!r}")
+        if direction not in DIRECTIONS:
+            raise ValueError(f"direction must be one of {', '.join(DIRECTIONS)}, got {direction!r}")
+        self.backend = auto_backend() if backend == "auto" else backend
+        self.fit, self.interpolation, self.direction = fit, interpolation, direction
+        self.extra = extra  # inverse= (distort), alpha=
+        self.interlaced = False  # True: each field on its own geometry (glradial.remapping.fields)
+        self._remapper = None
+        self._last: Lens | None = None
+
+    def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
+        height, width = image.shape[:2]
+        last = self._last
+        if (last is not None and (last.cx, last.cy, last.pixel_aspect) == (lens.cx, lens.cy, lens.pixel_aspect)
+                and max_displacement((lens.k1, lens.k2), (last.k1, last.k2), lens.frame_radius((width, height))) * width
+                <= MAP_REUSE_PX):
+            lens = last  # the same maps (cached) for a change no point of the frame can show
+        else:
+            self._last = lens
+        if not self.interlaced:
+            return self._remap(image, lens, self.fit)
+        from ..remapping.fields import remap_fields
+
+        return remap_fields(image, lens, lens.fit_scale((width, height), self.fit, self.direction), self._remap)
+
+    def _remap(self, image: np.ndarray, lens: Lens, fit: object) -> np.ndarray:
+        from ..remapping.remap import Remapper, correct, distort
+
+        options = dict(fit=fit, interpolation=self.interpolation, **self.extra)
+        if self.backend == "gl":
+            if self._remapper is None:
+                self._remapper = Remapper()
+            if max(image.shape[:2]) <= self._remapper.max_texture_size:
+                method = self._remapper.correct if self.direction == "undistort" else self._remapper.distort
+                return method(image, lens, **options)
+        return (correct if self.direction == "undistort" else distort)(image, lens, backend="cpu", **options)
+
+    def release(self) -> None:
+        if self._remapper is not None:
+            self._remapper.release()
+            self._remapper = None
+
+
+def _with_fields(info: VideoInfo, field_order: str) -> VideoInfo:
+    """``info`` with ``field_order`` forced (``"auto"``: unchanged)."""
+    from ..remapping.fields import FIELD_ORDERS
+
+    if field_order not in FIELD_ORDERS:
+        raise ValueError(f"field_order must be one of {', '.join(FIELD_ORDERS)}, got {field_order!r}")
+    if field_order == "auto":
+        return info
+    return replace(info, field_order=FIELD_ORDER_CODES[field_order], interlaced=field_order != "progressive")
+
+
+def correct_video(
+    source: str | os.PathLike,
+    target: str | os.PathLike,
+    lenses: Callable[[int], Lens | tuple[float, float] | None],
+    *,
+    fit: str = "same",
+    interpolation: str = "linear",
+    backend: str = "auto",
+    progress: bool | None = None,
+    label: str = "correct",
+    options: EncodeOptions = EncodeOptions(),
+    overwrite: bool = False,
+    frames_expected: int | None = None,
+    rate: Fraction | None = None,
+    direction: str = "undistort",
+    field_order: str = "auto",
+    **remap_options: object,
+) -> int:
+    """Pass 2: correct (``direction="distort"``: distort) every frame of ``source`` with
+    ``lenses(frame_index)`` (a :class:`Lens` or ``(k1, k2)``; ``None`` passes the frame through
+    uncorrected) into ``target``
+    (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.media.video_io`;
+    encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
+    track's length): a video with another frame count is an error and leaves no output. A header
+    frame count that differs from the frames decoded gives a warning on stderr with both counts.
+    ``rate``: frame rate of an image-sequence input (default 25). ``remap_options``: ``inverse``
+    (distort) and ``alpha`` of :func:`glradial.distort`. ``field_order``: ``"auto"`` (the stream's,
+    :attr:`VideoInfo.fields`), or ``"progressive"``, ``"tff"``, ``"bff"`` to force one; interlaced
+    frames are remapped field by field (:mod:`glradial.remapping.fields`) and written with that field order."""
+    corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
+    with VideoReader(source, order="rgb", copy_streams=True, rate=rate, alpha=True) as reader:
+        info = _with_fields(reader.info, field_order)
+        corrector.interlaced = info.fields != "progressive"
+        writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
+        try:
+            writer.check_alpha_kept()
+            def work(item):
+                if isinstance(item, VideoFrame):
+                    lens = lenses(item.index)
+                    if lens is None:  # passed through uncorrected (a doubtful shot)
+                        return writer.frame(item.image, item.pts)
+                    return writer.frame(corrector(item.image, as_lens(lens)), item.pts)
+                return item
+
+            with Progress(info.frame_count, label, enabled=progress) as bar, \
+                    Pipelined(reader.items(), work, on_worker_exit=corrector.release) as done:
+                for item in done:
+                    if isinstance(item, CopiedPacket):
+                        writer.mux(item)
+                    else:
+                        writer.write(item)
+                        bar.update()
+            if frames_expected is not None and writer.frames_written != frames_expected:
+                raise ValueError(
+                    f"the lens track has {frames_expected} frames but {source} has {writer.frames_written}: "
+                    "it belongs to another video"
+                )
+            writer.close()
+        except BaseException:
+            writer.abort()
+            raise
+    if 0 < info.frame_count != writer.frames_written:
+        sys.stderr.write(
+            f"glradial: warning: {source} reports {info.frame_count} frames in its header; "
+            f"{writer.frames_written} could be decoded and were written\n"
+        )
+    return writer.frames_written
+
+
+def estimate_video(
+    path: str | os.PathLike,
+    *,
+    model: str | os.PathLike | None = None,
+    every: int = EVERY,
+    progress: bool | None = None,
+    method: str | None = None,
+) -> LensTrack:
+    """Per-frame and per-shot lens of a video with the bundled estimator (or ``model``, with
+    ``method`` when given): the first pass of ``glradial correct --auto`` (:func:`track_video`)
+    without the correction (what ``glradial estimate VIDEO`` prints, with the estimator it loaded)."""
+    return track_video(path, default_estimator(model, method), every=every, progress=progress)
+
+
+def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_json: bool = False) -> str:
+    """Text for ``glradial estimate VIDEO``: one line per shot (or per frame with ``per_frame``),
+    with the stated uncertainty (px at 1920) and the methods where the estimator states them, or one
+    JSON document (``{"input", "fps", "size", "shots": [...], "frames": [...]}``)."""
+    if as_json:
+        document = {"input": source, "fps": track.fps, "size": list(track.size), "shots": track.per_shot()}
+        if per_frame:
+            document["frames"] = track.rows()
+        return json.dumps(document)
+    lines = []
+    if per_frame:
+        for row in track.rows():
+            lines.append(f"{source}: frame {row['frame']} shot {row['shot']} k1={row['k1']:.6f} k2={row['k2']:.6f}"
+                         + _confidence_text(row["uncertainty_px"], [row["method"]] if row["method"] else []))
+    else:
+        for shot in track.per_shot():
+            lines.append(
+                f"{source}: shot {shot['shot']} frames {shot['first_frame']}-{shot['last_frame']} "
+                f"k1={shot['k1']:.6f} k2={shot['k2']:.6f}" + _confidence_text(shot["uncertainty_px"], shot["methods"])
+                + (f" DOUBTFUL({shot['reason']})" if shot["doubtful"] else "")
+                + ("" if shot["applied"] else " not-applied")
+            )
+    return "\n".join(lines)
+
+
+def _confidence_text(uncertainty_px: float | None, methods: list[str]) -> str:
+    text = f" uncertainty={uncertainty_px:.1f}px" if uncertainty_px is not None else ""
+    return text + (f" method={'+'.join(methods)}" if methods else "")
+
+
+def doubtful_warnings(track: LensTrack, source: str) -> list[str]:
+    """One warning line per doubtful shot of ``track`` (for ``correct --auto``)."""
+    lines = []
+    for shot in track.per_shot():
+        if shot["doubtful"]:
+            lines.append(
+                f"glradial: warning: {source}: shot {shot['shot']} (frames {shot['first_frame']}-{shot['last_frame']}) "
+                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful ({shot['reason']}, uncertainty "
+                f"{shot['uncertainty_px'] or float('nan'):.1f} px at 1920 wide): "
+                + ("passed through uncorrected (--apply-doubtful applies it)" if not shot["applied"] else "applied anyway")
+            )
+    return lines

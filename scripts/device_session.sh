@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# One lent GPU machine (the device tool; NVIDIA, no network): install what glradial needs from carried
+# wheels and Debian packages, then `bench` (the GPU figures of docs/BENCH.md), `train` (stage 11 in the
+# background, logged to runs/stage11/log.txt) or `finish` (export + evaluation of the best checkpoint).
+# Usage from the repository root there: bash scripts/device_session.sh bench|train|finish
+set -uo pipefail
+OUT=${OUT:-out/device}
+mkdir -p "$OUT"
+if [ ! -e /tmp/site/.done ]; then
+  for f in .gl/*.deb; do dpkg -x "$f" /; done; ldconfig
+  python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target /tmp/site .whl/*.whl && touch /tmp/site/.done
+fi
+export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
+export __EGL_VENDOR_LIBRARY_FILENAMES=${__EGL_VENDOR_LIBRARY_FILENAMES:-/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json}
+case "$1" in
+  bench)
+    nvidia-smi --query-gpu=name,driver_version,memory.total --format=csv | tee "$OUT/gpu.txt"
+    python3 -c 'from glradial import egl; print("GL renderer:", egl.renderer_name(egl.thread_context()))' 2>&1 | tee -a "$OUT/gpu.txt"
+    for b in "bench_correct.py --frames 60" "bench_crops.py --rounds 5" "bench_stadium.py --full" \
+             "bench_estimate.py --frames 30 --pitch glradial/data/usl_broadcast_0195.jpg"; do
+      echo "== python3 bench/$b" | tee -a "$OUT/bench.txt"
+      timeout 150 python3 bench/$b 2>&1 | tee -a "$OUT/bench.txt"
+    done ;;
+  train)
+    python3 -m net.data --split train --n 80 --split val --n 4 --split test --n 8 --size 4096 2048 > "$OUT/data.txt" 2>&1
+    tail -3 "$OUT/data.txt"
+    mkdir -p runs/stage11
+    # in the foreground: a machine left idle between calls is given back with the run on it
+    python3 -m net.train --config net/configs/stage11_error_head.json --out runs/stage11 \
+      --init runs/shipped_from_onnx.pt > runs/stage11/log.txt 2>&1 < /dev/null
+    tail -5 runs/stage11/log.txt ;;
+  finish)
+    while pgrep -f "net.train" > /dev/null; do sleep 5; done
+    tail -4 runs/stage11/log.txt
+    python3 -m net.export --checkpoint runs/stage11/best.pt --out runs/stage11/model.onnx 2>&1 | tail -2
+    cp runs/stage11/log.txt runs/stage11/train.csv runs/stage11/best.pt runs/stage11/model.onnx "$OUT/" 2>/dev/null
+    for m in glradial/models/glradial_k1k2.onnx runs/stage11/model.onnx; do
+      n=$(basename $(dirname $m)); python3 -m glradial evaluate --model $m --out /tmp/eval_$n -q --threads 16 2>&1 | tail -3
+      cp /tmp/eval_$n/metrics.json $OUT/eval_$n.json
+    done
+    python3 -m net.error_calibration --model runs/stage11/model.onnx --split val --out $OUT/val_errors.npz
+    python3 -m net.error_calibration --model runs/stage11/model.onnx --split test --panoramas 8 --out $OUT/test_errors.npz ;;
+esac

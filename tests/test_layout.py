@@ -1,0 +1,194 @@
+"""The package's shape holds: sub-packages in a declared layer order (no import runs upward, none
+in a circle), no private name imported across sub-packages, no function over 60 lines of code, the
+public names the README and docs use import, and ruff finds nothing. All read the source with
+``ast`` (nothing is imported except in the public-names test)."""
+
+from __future__ import annotations
+
+import ast
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "glradial"
+
+#: The layers, lowest first: a unit may import from its own layer and the ones before it. Units are
+#: the top-level modules and the sub-packages; ``__init__`` (the lazy public API) is the top.
+LAYERS = ["errors", "lazy", "lens", "gl", "media", "remapping", "export", "synthesis", "estimation", "video",
+          "evaluation", "commands", "cli", "__main__", "__init__"]
+#: Folders under glradial/ that hold data, not code.
+DATA = {"data", "models", "__pycache__"}
+MAX_FUNCTION_LINES = 60
+MAX_TOP_LEVEL_MODULES = 8
+MAX_MODULES_PER_PACKAGE = 12
+
+
+def _sources() -> list[Path]:
+    return sorted(p for p in PACKAGE.rglob("*.py") if p.relative_to(PACKAGE).parts[0] not in DATA)
+
+
+def _unit(path: Path) -> str:
+    """The layer unit of a file: its sub-package, or its module name at top level."""
+    parts = path.relative_to(PACKAGE).parts
+    return parts[0] if len(parts) > 1 else parts[0][:-3]
+
+
+def _imports(path: Path) -> list[tuple[str, list[str], int]]:
+    """``(absolute module, imported names, line)`` of every glradial import in ``path`` (also inside
+    functions), resolved from relative form."""
+    package = ["glradial", *path.relative_to(PACKAGE).parts[:-1]]
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - node.level + 1]
+                module = ".".join(base + ([node.module] if node.module else []))
+            else:
+                module = node.module or ""
+            if module == "glradial" or module.startswith("glradial."):
+                found.append((module, [a.name for a in node.names], node.lineno))
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("glradial."):
+                    found.append((alias.name, [], node.lineno))
+    return found
+
+
+def _target_units(module: str, names: list[str]) -> list[tuple[str, str]]:
+    """``(unit, dotted path inside glradial)`` an import reaches: ``from glradial import x`` of a
+    sub-package or module reaches that unit."""
+    parts = module.split(".")[1:]
+    if not parts and all(name.startswith("__") for name in names):
+        return []  # ``from glradial import __version__``: a constant set before anything else
+    if parts:
+        return [(parts[0], ".".join(parts))]
+    return [(name, name) for name in names if (PACKAGE / name).is_dir() or (PACKAGE / f"{name}.py").is_file()] or [("__init__", "")]
+
+
+def _edges():
+    """``(file, its unit, imported module, imported names, line, target unit, dotted target)`` of every
+    glradial import in the package."""
+    for path in _sources():
+        mine = _unit(path)
+        for module, names, line in _imports(path):
+            for unit, dotted in _target_units(module, names):
+                yield path, mine, module, names, line, unit, dotted
+
+
+def test_layers_cover_the_package():
+    units = {_unit(p) for p in _sources()}
+    assert units == set(LAYERS), f"declare each unit's layer: missing {sorted(units - set(LAYERS))}, stale {sorted(set(LAYERS) - units)}"
+
+
+def test_no_import_runs_upward():
+    upward = [f"{path.relative_to(ROOT)}:{line} ({mine}) imports {module} ({unit})"
+              for path, mine, module, _, line, unit, _ in _edges() if unit in LAYERS and LAYERS.index(unit) > LAYERS.index(mine)]
+    assert not upward, "imports that run up the layers:\n" + "\n".join(upward)
+
+
+def test_no_circle_between_sub_packages():
+    graph: dict[str, set[str]] = {}
+    for _, mine, _, _, _, unit, _ in _edges():
+        if unit != mine and mine != "__init__":
+            graph.setdefault(mine, set()).add(unit)
+    state: dict[str, int] = {}
+
+    def visit(node: str, trail: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            assert state.get(nxt) != 1, "import circle: " + " -> ".join(trail + [node, nxt])
+            if nxt not in state:
+                visit(nxt, trail + [node])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [])
+
+
+def test_no_private_name_imported_across_sub_packages():
+    leaks = []
+    for path, mine, module, names, line, unit, dotted in _edges():
+        private = [p for p in dotted.split(".") + names if p.startswith("_") and not p.startswith("__")]
+        if unit != mine and private:
+            leaks.append(f"{path.relative_to(ROOT)}:{line} imports {', '.join(private)} from {module}")
+    assert not leaks, "private names used outside their sub-package:\n" + "\n".join(leaks)
+
+
+def test_sizes():
+    top = [p.name for p in PACKAGE.glob("*.py")]
+    assert len(top) <= MAX_TOP_LEVEL_MODULES, sorted(top)
+    for folder in PACKAGE.iterdir():
+        if folder.is_dir() and folder.name not in DATA:
+            modules = [p.name for p in folder.glob("*.py") if p.name != "__init__.py"]
+            assert (folder / "__init__.py").is_file(), folder
+            assert len(modules) <= MAX_MODULES_PER_PACKAGE, (folder.name, sorted(modules))
+            doc = ast.get_docstring(ast.parse((folder / "__init__.py").read_text(encoding="utf-8")))
+            assert doc, f"{folder.name}/__init__.py must say what the sub-package owns"
+
+
+def _code_lines(node: ast.AST, lines: list[str]) -> int:
+    """Lines of code of a function: its lines less its docstring, blank lines and comment lines."""
+    skip: set[int] = set()
+    first = node.body[0]
+    if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant) and isinstance(first.value.value, str):
+        skip = set(range(first.lineno, first.end_lineno + 1))
+    return sum(1 for i in range(node.lineno, node.end_lineno + 1)
+               if i not in skip and lines[i - 1].strip() and not lines[i - 1].strip().startswith("#"))
+
+
+def test_no_function_over_60_lines():
+    long = []
+    for path in _sources():
+        text = path.read_text(encoding="utf-8")
+        lines = text.splitlines()
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                n = _code_lines(node, lines)
+                if n > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {n} lines")
+    assert not long, f"functions over {MAX_FUNCTION_LINES} lines of code:\n" + "\n".join(long)
+
+
+#: Public names the README and docs use, beyond those found by pattern below.
+PUBLIC = ["correct", "distort", "estimate", "fit_scale", "Lens", "LensEstimate", "Estimator", "Remapper", "render_crops",
+          "CropParams", "CropRenderer", "sample_crop_params", "crop_batches", "stadium_panorama", "StadiumRenderer",
+          "Error", "GLUnavailableError", "ShaderCompileError", "ModelLoadError", "LensTrackError", "__version__"]
+
+
+def test_public_names_import():
+    import glradial
+
+    used = set(PUBLIC)
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        used |= set(re.findall(r"\bglradial\.([A-Za-z_]\w*)\b(?!\.py|/)", doc.read_text(encoding="utf-8")))
+    modules = {p.name for p in PACKAGE.iterdir() if p.is_dir()} | {p.stem for p in PACKAGE.glob("*.py")} | {"shaders"}
+    missing = [name for name in sorted(used - modules) if not hasattr(glradial, name)]
+    assert not missing, f"names the docs use that glradial does not export: {missing}"
+    assert set(PUBLIC) - {"__version__"} <= set(glradial.__all__)
+    for name in glradial.__all__:
+        getattr(glradial, name)
+    from glradial.lens import Lens
+
+    assert Lens is glradial.Lens
+
+
+def test_type_checkers_see_every_export():
+    """Every lazily exported name of each package is imported under ``TYPE_CHECKING``."""
+    for init in [PACKAGE / "__init__.py", *sorted(PACKAGE.glob("*/__init__.py"))]:
+        tree = ast.parse(init.read_text(encoding="utf-8"))
+        guarded = [n for n in tree.body if isinstance(n, ast.If) and getattr(n.test, "id", "") == "TYPE_CHECKING"]
+        if init.parent.name in DATA or "attach(" not in init.read_text(encoding="utf-8"):
+            continue
+        assert guarded, f"{init.relative_to(ROOT)}: no TYPE_CHECKING imports"
+
+
+def test_ruff_finds_nothing():
+    pytest.importorskip("ruff")
+    done = subprocess.run([sys.executable, "-m", "ruff", "check", "glradial", "net", "tests", "bench"], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stdout + done.stderr
