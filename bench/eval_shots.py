@@ -4,7 +4,7 @@ bound's coverage per shot, doubt; and the calibration of the bound's scale (spli
 calibrate on ``--calibrate`` clips, check on the others).
 
 Error = maximum displacement between the lens read and the true one over the 16:9 frame, px at
-1920 wide (:func:`glradial.metrics.max_displacement_px`). A shot is covered when its worst frame's
+1920 wide (:func:`glradial.lens.metrics.max_displacement_px`). A shot is covered when its worst frame's
 error is within the stated ``uncertainty_px``.
 
 Run: ``python bench/eval_shots.py CLIP_DIR [--calibrate proc_3,proc_11,real_a] [--json OUT.json]``.
@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from glradial.clips import read_truth
-from glradial.metrics import max_displacement_px
-from glradial.shot_fit import BOUND_FLOOR_PX, BOUND_SCALE
-from glradial.video_pipeline import default_estimator, track_video
+from glradial.lens.metrics import max_displacement_px
+from glradial.video.clips import read_truth
+from glradial.video.shot_fit import BOUND_FLOOR_PX, BOUND_SCALE
+from glradial.video.video_pipeline import default_estimator, track_video
 
 
 def evaluate(clip: Path, estimator) -> list[dict]:

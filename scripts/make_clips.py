@@ -1,6 +1,6 @@
 """Build the shot-evaluation clips: shots of a virtual broadcast camera (static, panning, zooming
 with the lens following the zoom) over real pictures and procedural stadiums, cut together, each
-with its per-frame ground truth beside it (``CLIP.mp4.truth.csv``, :func:`glradial.clips.write_clip`).
+with its per-frame ground truth beside it (``CLIP.mp4.truth.csv``, :func:`glradial.video.clips.write_clip`).
 
 Real sources (validation only, never training): the three pinhole stadium views and the stadium
 panorama of ``../shared/data/real_football/`` (their own lens is nil: rendered pinhole views and an
@@ -20,7 +20,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from glradial.clips import ShotSpec, render_clip, write_clip
+from glradial.video.clips import ShotSpec, render_clip, write_clip
 
 SIZE = (640, 360)
 

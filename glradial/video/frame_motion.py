@@ -34,7 +34,7 @@ MOTION_WIDTH = 640
 #: corners tracked per pair of frames
 MAX_CORNERS = 400
 #: matches kept per pair (evenly thinned): the lens fit weighs a pair as at most
-#: :data:`glradial.shot_fit.MATCH_CAP` points anyway, and evaluates every kept one at each step
+#: :data:`glradial.video.shot_fit.MATCH_CAP` points anyway, and evaluates every kept one at each step
 MAX_MATCHES = 150
 #: corners closer than this to each other (px of the gray copy) are not both taken
 MIN_CORNER_DISTANCE = 10

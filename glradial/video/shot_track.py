@@ -5,13 +5,13 @@ Every frame is decoded once and reduced to a 64 px thumbnail for the cut detecto
 every ``every``-th (the stride doubles each :data:`SAMPLES_PER_STRIDE` samples, so a long shot
 costs no more than a log factor) -- is converted at most
 :data:`glradial.video.video_pipeline.ESTIMATE_WIDTH` px wide and handed to a
-:class:`~glradial.shot_evidence.ShotCollector` (line chains, frame-to-frame matches, the per-frame
+:class:`~glradial.video.shot_evidence.ShotCollector` (line chains, frame-to-frame matches, the per-frame
 estimate on every ``estimate_every``-th sample). When a cut (or the end) closes the shot, its
 evidence is fitted jointly (:func:`glradial.video.shot_fit.fit_shot`) and dropped: memory holds one
 shot's evidence, never its frames. Every frame then gets its shot's lens at its zoom (the log zoom
 of the samples, interpolated linearly between them).
 
-Doubt policy: a doubtful shot (:class:`~glradial.shot_fit.ShotLens` ``doubtful``/``reason``) is
+Doubt policy: a doubtful shot (:class:`~glradial.video.shot_fit.ShotLens` ``doubtful``/``reason``) is
 marked in the track and, unless ``apply_doubtful``, not applied (its frames pass through
 uncorrected); a lens that folds over inside the frame (``fold_over``) is never applied.
 """
