@@ -38,9 +38,8 @@ from ..lens.lens import Lens, as_lens
 from ..lens.metrics import max_displacement
 from ..media.progress import Progress
 from ..media.video_io import FIELD_ORDER_CODES, CopiedPacket, EncodeOptions, VideoFrame, VideoInfo, VideoReader, VideoWriter
-from .lens_track import DOUBTFUL_PX, LensTrack
-from .shot_track import ESTIMATE_EVERY, EVERY, track_shots
-from .smoothing import ShotDetector
+from .lens_track import LensTrack
+from .shot_track import EVERY, track_shots
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
@@ -156,21 +155,8 @@ def default_estimator(model: str | os.PathLike | None = None, method: str | None
     return lambda frame: estimator.estimate(frame, method=method)
 
 
-def track_video(
-    path: str | os.PathLike,
-    estimator: EstimatorFn,
-    *,
-    every: int = EVERY,
-    estimate_every: int = ESTIMATE_EVERY,
-    detector: ShotDetector | None = None,
-    progress: bool | None = None,
-    doubtful_px: float = DOUBTFUL_PX,
-    apply_doubtful: bool = False,
-    rate: Fraction | None = None,
-) -> LensTrack:
-    """Pass 1: detect cuts and fit one lens per shot while decoding (:func:`glradial.video.shot_track.track_shots`)."""
-    return track_shots(path, estimator, every=every, estimate_every=estimate_every, detector=detector,
-                       progress=progress, doubtful_px=doubtful_px, apply_doubtful=apply_doubtful, rate=rate)
+#: pass 1: detect cuts and fit one lens per shot while decoding (:func:`glradial.video.shot_track.track_shots`)
+track_video = track_shots
 
 
 class _FrameCorrector:
