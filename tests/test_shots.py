@@ -153,7 +153,16 @@ def test_a_cut_between_two_lenses_keeps_them_apart(stadium, tmp_path):
         assert bool(row["reason"]) == bool(row["doubtful"])
 
 
-def test_shot_fit_input_errors():
+def test_shot_fit_input_errors(tmp_path):
+    from glradial.video.video_pipeline import track_video
+
+    for name, value in (("every", 0), ("estimate_every", 1.5)):
+        with pytest.raises(ValueError, match=f"{name} must be an integer >= 1, got {value}"):
+            track_video(tmp_path / "never-opened.mp4", guess, **{name: value})
+    with pytest.raises(ValueError, match="doubtful_px must be > 0"):
+        track_video(tmp_path / "never-opened.mp4", guess, doubtful_px=0)
+    with pytest.raises(ValueError, match="uint8"):
+        ShotCollector(guess).add(0, np.zeros((9, 16, 3), np.float32))
     with pytest.raises(ValueError, match="at least one sampled frame"):
         fit_shot(ShotEvidence())
     with pytest.raises(ValueError, match="estimate_every"):

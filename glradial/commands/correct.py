@@ -9,6 +9,7 @@ from pathlib import Path
 
 from ..lens.options import METHODS
 from . import UsageError, lens_given, positive_float, positive_int, show_progress
+from .engine_options import add_opentrackio_options, opentrackio_hook, opentrackio_wanted, write_track_opentrackio
 from .remapping import (
     add_encode_options,
     add_remap_parser,
@@ -70,6 +71,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                        help="correct doubtful shots too (default: they pass through uncorrected and are reported)")
     video.add_argument("--sidecar", metavar="PATH",
                        help="per-frame lens file: .csv or .json (default: OUTPUT.lens.csv)")
+    add_opentrackio_options(parser)
     return parser
 
 
@@ -97,10 +99,11 @@ def run(args: argparse.Namespace) -> int:
     kind = check_paths(args)
     if kind == "folder" and args.auto:
         raise UsageError("--auto on a folder is not supported: estimate each image with 'glradial estimate', or give the lens")
+    hook = opentrackio_hook(args, kind)
     if kind == "image" and args.auto:
-        return run_with_lens(args, "undistort", kind, _estimated_lens_for(args), video_only=AUTO_VIDEO_OPTIONS)
+        return run_with_lens(args, "undistort", kind, _estimated_lens_for(args), video_only=AUTO_VIDEO_OPTIONS, hook=hook)
     if kind != "video" or given or args.lens_track:
-        return run_with_lens(args, "undistort", kind, video_only=AUTO_VIDEO_OPTIONS)
+        return run_with_lens(args, "undistort", kind, video_only=AUTO_VIDEO_OPTIONS, hook=hook)
     from ..media.video_io import EncodeOptions, is_sequence
 
     encode = EncodeOptions(codec=args.codec, crf=args.crf, bitrate=args.bitrate, preset=args.preset, pix_fmt=args.pix_fmt)
@@ -174,6 +177,8 @@ def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
         raise
     summary(args.output, written, info.frame_count)
     _print_shots(args.input, track, sidecar)
+    if opentrackio_wanted(args):
+        write_track_opentrackio(args, track, info)
     return 0
 
 

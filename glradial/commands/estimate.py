@@ -7,7 +7,8 @@ import json
 
 from ..lens.options import METHODS
 from ..media.image_io import media_kind, read_image
-from . import positive_int, show_progress
+from . import UsageError, positive_int, show_progress
+from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted, write_image_opentrackio, write_track_opentrackio
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT. How well (maximum displacement error, px of a 1920-wide
@@ -45,6 +46,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--method", choices=METHODS, default="auto",
                         help="auto (default: the line fit when it is surer than the CNN), net (the CNN alone) or "
                              "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
+    parser.add_argument("-y", "--overwrite", action="store_true", help="replace the --opentrackio FILE if it exists")
+    add_opentrackio_options(parser)
     return parser
 
 
@@ -52,6 +55,9 @@ def run(args: argparse.Namespace) -> int:
     from ..estimation.estimator import Estimator
     from ..media.frames import to_rgb8
 
+    if opentrackio_wanted(args) and len(args.inputs) != 1:
+        raise UsageError(f"--opentrackio/--send take one INPUT (its samples), got {len(args.inputs)}")
+    check_opentrackio_output(args)
     estimator = Estimator(args.model, threads=args.threads)
     for path in args.inputs:
         if media_kind(path) == "video":
@@ -61,11 +67,21 @@ def run(args: argparse.Namespace) -> int:
             track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method), every=args.every,
                                 progress=show_progress(args))
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
+            if opentrackio_wanted(args):
+                from ..media.video_io import VideoReader
+
+                with VideoReader(path) as reader:
+                    info = reader.info
+                write_track_opentrackio(args, track, info)
             continue
-        lens = estimator.estimate(to_rgb8(read_image(path)), method=args.method)
+        image = to_rgb8(read_image(path))
+        lens = estimator.estimate(image, method=args.method)
         if args.json:
             print(json.dumps({"path": path, **lens.as_dict()}), flush=True)
         else:
             print(f"{path}\tk1={lens.k1:.6f}\tk2={lens.k2:.6f}\tmethod={lens.method}\t"
                   f"uncertainty={lens.uncertainty_px:.1f}px\tchains={lens.chains}", flush=True)
+        if opentrackio_wanted(args):
+            write_image_opentrackio(args, (image.shape[1], image.shape[0]), lens)
     return 0
+

@@ -24,7 +24,7 @@ __all__ = [
     "bitrate", "frame_rate", "add_remap_parser", "add_io_arguments", "add_render_options", "add_encode_options", "check_paths",
     "reject_for", "check_encode_options", "image_transform", "run_with_lens", "remap_image_file", "remap_folder",
     "remap_video", "same_file", "summary", "video_alpha", "folder_images", "ALPHA_CHOICES",
-    "VIDEO_OPTIONS",
+    "VIDEO_OPTIONS", "RemapHook",
 ]
 
 #: ``--alpha``: auto = premultiplied for OpenEXR (its convention), straight for everything else
@@ -33,6 +33,19 @@ ALPHA_CHOICES = ("auto",) + ALPHAS
 VIDEO_OPTIONS = ("lens_track", "codec", "crf", "bitrate", "preset", "pix_fmt", "rate", "field_order")
 
 Transform = Callable[[np.ndarray, object, str], np.ndarray]
+
+
+class RemapHook:
+    """What a command adds to :func:`run_with_lens`'s work on an image or a video (e.g. ``correct
+    --opentrackio``, :class:`glradial.commands.engine_options.OpenTrackIOHook`); each method is
+    called once, and does nothing here."""
+
+    def lens_known(self, size: tuple[int, int], lens=None, *, track=None, info=None) -> None:
+        """The lens (or a video's lens ``track``) of a ``(W, H)`` INPUT is known and no frame is
+        decoded yet; ``info``: the video's ``VideoInfo`` (None for an image)."""
+
+    def written(self, frames: int) -> None:
+        """OUTPUT is complete: ``frames`` written (1 for an image)."""
 
 
 def bitrate(text: str) -> int:
@@ -278,32 +291,50 @@ def remap_folder(args: argparse.Namespace, lens_for, transform: Transform, progr
 
 
 def run_with_lens(args: argparse.Namespace, direction: str, kind: str, lens_for=None, *,
-                  video_only: tuple[str, ...] = (), **extra: object) -> int:
+                  video_only: tuple[str, ...] = (), hook: RemapHook | None = None, transform: Transform | None = None,
+                  **extra: object) -> int:
     """The work of ``correct``/``distort`` once INPUT's ``kind`` (:func:`check_paths`) and the lens
     are known: ``lens_for((W, H))`` (default: the command line's, :func:`lens_from_args`) or, for a
     video, ``--lens-track``. Images and folders refuse the video options (and ``video_only``).
-    ``extra``: keywords of the remap (``inverse=`` for distort)."""
+    ``hook``: told the lens and the end of an image's or a video's work (not a folder's).
+    ``transform``: an image's remap (default: :func:`image_transform` of ``direction``; a video's
+    is always that). ``extra``: keywords of the remap (``inverse=`` for distort)."""
     from . import lens_from_args, show_progress
 
     lens_for = lens_for or (lambda size: lens_from_args(args, size))
+    hook = hook or RemapHook()
     progress = show_progress(args)
     if kind == "video":
-        remap_video(args, direction, lens_for, progress, alpha=video_alpha(args), **extra)
+        remap_video(args, direction, lens_for, progress, hook=hook, alpha=video_alpha(args), **extra)
         return 0
     reject_for(args, VIDEO_OPTIONS + video_only, "videos")
-    transform = image_transform(args, direction, **extra)
+    transform = transform or image_transform(args, direction, **extra)
     label = "correct" if direction == "undistort" else "distort"
     if kind == "folder":
         remap_folder(args, lens_for, transform, progress, label)
-    else:
-        remap_image_file(Path(args.input), Path(args.output), lens_for, transform, alpha=args.alpha, overwrite=args.overwrite)
+        return 0
+    remap_image_file(Path(args.input), Path(args.output), _told(lens_for, hook), transform, alpha=args.alpha,
+                     overwrite=args.overwrite)
+    hook.written(1)
     return 0
 
 
+def _told(lens_for, hook: RemapHook):
+    """``lens_for`` that also tells ``hook`` the lens it gives."""
+    def told(size: tuple[int, int]):
+        lens = lens_for(size)
+        hook.lens_known(size, lens)
+        return lens
+
+    return told
+
+
 # -- videos ---------------------------------------------------------------------------------------------
-def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bool | None, **extra: object) -> int:
+def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bool | None, *,
+                hook: RemapHook | None = None, **extra: object) -> int:
     """A video or image sequence with a lens given (``lens_for((W, H))`` -> Lens, checked before any
-    frame is decoded) or, with ``--lens-track``, one per frame; ends with :func:`summary`."""
+    frame is decoded) or, with ``--lens-track``, one per frame; ends with :func:`summary`, then
+    ``hook.written``."""
     from ..media.video_io import EncodeOptions, VideoReader, is_sequence
     from ..video.video_pipeline import correct_video
 
@@ -315,15 +346,19 @@ def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bo
     video = dict(fit=args.fit, interpolation=args.interpolation, backend=args.backend, progress=progress,
                  options=encode, overwrite=args.overwrite, rate=args.rate, direction=direction,
                  field_order=args.field_order or "auto", **extra)
+    hook = hook or RemapHook()
     if getattr(args, "lens_track", None):
         from ..video.lens_track import load_lens_track
 
         track = load_lens_track(args.lens_track, info.rate, info.size)
+        hook.lens_known(info.size, track=track, info=info)
         written = correct_video(args.input, args.output, track.lens_for, frames_expected=track.n_frames, **video)
     else:
         lens = lens_for(info.size)
+        hook.lens_known(info.size, lens, info=info)
         written = correct_video(args.input, args.output, lambda _i: lens, **video)
     summary(args.output, written, info.frame_count)
+    hook.written(written)
     return written
 
 

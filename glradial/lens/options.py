@@ -17,6 +17,9 @@ Backend = Literal["auto", "gl", "cpu"]
 Method = Literal["auto", "net", "lines"]
 Alpha = Literal["straight", "premultiplied"]
 FieldOrder = Literal["auto", "progressive", "tff", "bff"]
+Layout = Literal["nuke", "unreal"]
+Origin = Literal["bottom-left", "top-left"]
+DistortionModel = Literal["U-D", "D-U"]
 
 #: how an inverse radial map is computed: bounded Newton ("exact") or the paper's series ("drap")
 INVERSES: tuple[str, ...] = ("exact", "drap")
@@ -36,6 +39,15 @@ SOURCES: tuple[str, ...] = ("net", "lines")
 ALPHAS: tuple[str, ...] = ("straight", "premultiplied")
 #: a video's field order: the stream's ("auto"), or forced (glradial.remapping.fields)
 FIELD_ORDERS: tuple[str, ...] = ("auto", "progressive", "tff", "bff")
+#: channel layouts of an ST map: Nuke's (RGB, S T in R G) or Unreal Engine's (RGBA, undistort RG, distort BA)
+LAYOUTS: tuple[str, ...] = ("nuke", "unreal")
+#: pixel origins of an ST map's T (v) coordinate
+ORIGINS: tuple[str, ...] = ("bottom-left", "top-left")
+#: named camera sensors (``--sensor``); their sizes in mm are glradial.export.opentrackio.SENSOR_PRESETS
+SENSORS: tuple[str, ...] = ("2/3-inch",)
+#: directions of an OpenLensIO Brown-Conrady model: U-D (undistorted to distorted, glradial's own,
+#: exact) or D-U (distorted to undistorted, fitted); the model strings are glradial.export.engines.MODEL_NAMES
+DISTORTION_MODELS: tuple[str, ...] = ("U-D", "D-U")
 
 
 def real_number(name: str, value: object) -> float:

@@ -47,6 +47,9 @@ class ShotCollector:
 
     def add(self, index: int, frame: np.ndarray) -> None:
         """Add the sampled frame ``index`` (uint8 RGB, any size up to the estimate width)."""
+        if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3:
+            raise ValueError(f"frame must be a uint8 H x W x 3 RGB array, got {getattr(frame, 'dtype', type(frame).__name__)} "
+                             f"{getattr(frame, 'shape', '')}")
         n = len(self.evidence.samples)
         estimate = None
         if n % self.estimate_every == 0:
