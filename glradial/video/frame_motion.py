@@ -43,6 +43,8 @@ FB_MAX_PX = 0.4
 #: RANSAC inlier threshold (px of the gray copy) on points undistorted with the hint lens: wide
 #: enough for a hint 10 px (at 1920) off, narrow enough to drop a running player
 RANSAC_PX = 1.5
+#: seed of OpenCV's generator before each RANSAC, so that a video gives the same lens every run
+RANSAC_SEED = 25
 #: fewer inliers than this: the pair gives no evidence (too little texture, or no overlap)
 MIN_MATCHES = 30
 #: corners this close to the border (px of the gray copy) are not used (overlays, letterbox edges)
@@ -114,6 +116,7 @@ def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0,
     pa, pb = pixels_to_lens(p[keep], size), pixels_to_lens(q[keep], size)
     ua, va = undistort_point_exact(pa, float(hint[0]), float(hint[1]))
     ub, vb = undistort_point_exact(pb, float(hint[0]), float(hint[1]))
+    cv2.setRNGSeed(RANSAC_SEED)  # this thread's OpenCV generator: the same frames give the same matches
     _, inliers = cv2.findHomography(lens_to_pixels(ua, size), lens_to_pixels(ub, size), cv2.RANSAC, RANSAC_PX,
                                     maxIters=500, confidence=0.995)
     if inliers is None:
