@@ -211,3 +211,32 @@ def test_lens_value_validation_and_fold_radius():
     Lens(-0.3, 0.06).check_frame((1920, 1080))
     with pytest.raises(ValueError, match="folds over"):
         Lens(-1.5, 0.0).check_frame((1920, 1080))
+
+
+def test_fold_radii_is_fold_radius_for_many_lenses():
+    # the vectorised fold radius (used by the exact inverse for many lenses at once, e.g. the line
+    # fit's grid) equals the scalar twin of the GLSL function everywhere, unbounded lenses included
+    from glradial.lens import lensfuncs
+
+    rng = np.random.default_rng(7)
+    k1, k2 = rng.uniform(-1.3, 0.6, 2000), rng.uniform(-0.3, 0.8, 2000)
+    k1[:20], k2[:10] = 0.0, 0.0
+    expected = np.array([lensfuncs.fold_radius(a, b) for a, b in zip(k1, k2)])
+    np.testing.assert_array_equal(lensfuncs.fold_radii(k1, k2), expected)
+
+
+def test_the_line_fit_uses_the_lens_models_inverse():
+    # one exact inverse: the line fit's radii are undistort_radius_exact's, NaN where it is invalid
+    from glradial.estimation.line_fit import _undistort_radius
+    from glradial.lens import lensfuncs
+
+    r_d = np.linspace(0.0, 0.6, 50)
+    k1, k2 = np.array([[-0.9], [-0.3], [0.2]]), np.array([[0.1], [0.05], [0.0]])
+    ours = _undistort_radius(r_d, k1, k2)
+    for i in range(3):
+        r_u, valid = lensfuncs.undistort_radius_exact(r_d, float(k1[i, 0]), float(k2[i, 0]))
+        np.testing.assert_array_equal(np.isnan(ours[i]), ~valid)
+        np.testing.assert_allclose(ours[i][valid], r_u[valid], rtol=0, atol=1e-12)
+        # and it inverts the forward model where valid
+        np.testing.assert_allclose(r_u[valid] * lensfuncs.radial_factor(r_u[valid] ** 2, k1[i, 0], k2[i, 0]),
+                                   r_d[valid], atol=1e-9)

@@ -34,6 +34,7 @@ import cv2
 import numpy as np
 
 from ..lens.lens import lens_to_pixels, pixels_to_lens
+from .corners import split_at_corners
 
 #: Largest width (pixels) of the gray copy lines are detected on (800: as accurate as 960 on validation
 #: crops, 2/3 of the pixels; docs/LINES.md).
@@ -193,6 +194,43 @@ def _edge_points(g, gx, gy, valid, near_ridge):
     return xs + offset * dx, ys + offset * dy, direction, ys, xs, density
 
 
+@dataclass(frozen=True)
+class _Points:
+    """Sub-pixel line points of one frame: position (``x``, ``y``, px; in the hint-undistorted frame
+    when the detector has a lens hint), orientation ``angle`` (radians in [0, pi)), ``kind`` (0 ridge,
+    1 edge) and the integer pixel (``iy``, ``ix``) each was found in."""
+
+    x: np.ndarray
+    y: np.ndarray
+    angle: np.ndarray
+    kind: np.ndarray
+    iy: np.ndarray
+    ix: np.ndarray
+
+
+def _piece_keys(points: _Points, bins: int, shape: tuple[int, int]) -> np.ndarray:
+    """A key per point, equal for points of the same 8-connected piece of one orientation bin and
+    kind (a line crossing a circle stays apart from it); ``shape`` is the frame's (H, W)."""
+    b = (np.floor(points.angle / np.pi * bins + 0.5).astype(np.intp)) % bins
+    key = np.zeros(len(points.x), np.int64)
+    mask = np.zeros(shape, np.uint8)
+    by_bin = np.argsort(b, kind="stable")
+    bounds = np.searchsorted(b[by_bin], np.arange(bins + 1))
+    iy, ix = points.iy, points.ix
+    for k in range(bins):
+        sel = by_bin[bounds[k]:bounds[k + 1]]
+        if len(sel) == 0:
+            continue
+        y0, y1 = int(iy[sel].min()), int(iy[sel].max()) + 1
+        x0, x1 = int(ix[sel].min()), int(ix[sel].max()) + 1
+        roi = mask[y0:y1, x0:x1]
+        roi[:] = 0
+        roi[iy[sel] - y0, ix[sel] - x0] = 1
+        _, labels = cv2.connectedComponentsWithAlgorithm(roi, 8, cv2.CV_32S, cv2.CCL_SAUF)
+        key[sel] = (labels[iy[sel] - y0, ix[sel] - x0].astype(np.int64) * bins + k) * 2 + points.kind[sel]
+    return key
+
+
 class _Pieces:
     """Connected same-orientation, same-kind pieces: per-piece centre, unit axis, extent along it
     (``lo``, ``hi``, px), kind (0 ridge, 1 edge) and the point indices of each piece.
@@ -200,30 +238,14 @@ class _Pieces:
     Ridge and edge points never touch (edges within 2 px of a ridge were dropped), so each
     orientation bin takes one connected-components pass for both kinds."""
 
-    def __init__(self, xs, ys, angle, kind, iy, ix, bins, shape):
+    def __init__(self, points: _Points, bins: int, shape: tuple[int, int]) -> None:
         empty = np.zeros(0)
         self.centre, self.axis, self.lo, self.hi = np.zeros((0, 2)), np.zeros((0, 2)), empty, empty
         self.kind = np.zeros(0, np.intp)
         self.members: list[np.ndarray] = []
-        if len(xs) == 0:
+        if len(points.x) == 0:
             return
-        b = (np.floor(angle / np.pi * bins + 0.5).astype(np.intp)) % bins
-        # connected pieces of each orientation bin (a line crossing a circle stays apart from it)
-        key = np.zeros(len(xs), np.int64)
-        mask = np.zeros(shape, np.uint8)
-        by_bin = np.argsort(b, kind="stable")
-        bounds = np.searchsorted(b[by_bin], np.arange(bins + 1))
-        for k in range(bins):
-            sel = by_bin[bounds[k]:bounds[k + 1]]
-            if len(sel) == 0:
-                continue
-            y0, y1 = int(iy[sel].min()), int(iy[sel].max()) + 1
-            x0, x1 = int(ix[sel].min()), int(ix[sel].max()) + 1
-            roi = mask[y0:y1, x0:x1]
-            roi[:] = 0
-            roi[iy[sel] - y0, ix[sel] - x0] = 1
-            _, labels = cv2.connectedComponentsWithAlgorithm(roi, 8, cv2.CV_32S, cv2.CCL_SAUF)
-            key[sel] = (labels[iy[sel] - y0, ix[sel] - x0].astype(np.int64) * bins + k) * 2 + kind[sel]
+        key = _piece_keys(points, bins, shape)
         order = np.argsort(key, kind="stable")
         key_sorted = key[order]
         starts = np.flatnonzero(np.r_[True, key_sorted[1:] != key_sorted[:-1]])
@@ -232,10 +254,13 @@ class _Pieces:
         group = np.repeat(np.cumsum(big) - 1, counts)  # piece index per sorted point (-1..)
         keep = np.repeat(big, counts)
         order, group = order[keep], group[keep]
-        n = int(big.sum())
-        if n == 0:
-            return
-        x, y = xs[order], ys[order]
+        if int(big.sum()):
+            self._measure(points, order, group, int(big.sum()))
+
+    def _measure(self, points: _Points, order: np.ndarray, group: np.ndarray, n: int) -> None:
+        """Centre, axis (total least squares), extent and members of the ``n`` pieces; ``order``
+        lists the kept points grouped by piece, ``group`` their piece index."""
+        x, y = points.x[order], points.y[order]
         cnt = np.bincount(group, minlength=n).astype(np.float64)
         mx, my = np.bincount(group, x, n) / cnt, np.bincount(group, y, n) / cnt
         dx, dy = x - mx[group], y - my[group]
@@ -248,7 +273,7 @@ class _Pieces:
         bounds = np.r_[0, np.cumsum(cnt.astype(np.intp))[:-1]]
         self.lo, self.hi = np.minimum.reduceat(s, bounds), np.maximum.reduceat(s, bounds)
         self.members = np.split(order, bounds[1:])
-        self.kind = kind[order[bounds]]
+        self.kind = points.kind[order[bounds]]
 
     def __len__(self) -> int:
         return len(self.members)
@@ -292,6 +317,16 @@ def _link(p: _Pieces) -> list[list[int]]:
     return list(groups.values())
 
 
+def _percentiles(a: np.ndarray, quantiles: tuple[float, float]) -> tuple[float, float]:
+    """``np.percentile(a, 100 * q)`` (linear interpolation) for two quantiles, by one partial sort."""
+    h = (len(a) - 1) * np.asarray(quantiles)
+    lo = np.floor(h).astype(np.intp)
+    hi = np.minimum(lo + 1, len(a) - 1)
+    part = np.partition(a, np.unique(np.r_[lo, hi]))
+    value = part[lo] + (h - lo) * (part[hi] - part[lo])
+    return float(value[0]), float(value[1])
+
+
 def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
     """Pixel-straight, axis-aligned and off the centre row/column: broadcast graphics. Flatness is
     the 2-98 percentile range across the axis, so a corner or a crossing line at an end does not
@@ -300,7 +335,7 @@ def _is_overlay(x: np.ndarray, y: np.ndarray, shape: tuple[int, int]) -> bool:
     for across, centre, extent in ((y, (height - 1) / 2, height), (x, (width - 1) / 2, width)):
         if np.ptp(across) > 0.05 * extent:  # far from axis-aligned: skip the percentiles
             continue
-        lo, hi = np.percentile(across, [2, 98])
+        lo, hi = _percentiles(across, (0.02, 0.98))
         if hi - lo <= 2 * OVERLAY_FLATNESS and abs(np.median(across) - centre) > OVERLAY_OFF_CENTRE * extent:
             return True
     return False
@@ -344,8 +379,9 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
     xs, ys = np.concatenate([rx, ex]), np.concatenate([ry, ey])
     kinds = np.r_[np.zeros(len(rx), np.intp), np.ones(len(ex), np.intp)]
     lx, ly = _undistorted(xs, ys, (width, height), lens_hint) if lens_hint is not None else (xs, ys)
-    pieces = _Pieces(lx, ly, np.concatenate([rangle, np.mod(edir, np.pi)]), kinds,
-                     np.concatenate([riy, eiy]), np.concatenate([rix, eix]), ORIENTATION_BINS, (height, width))
+    points = _Points(lx, ly, np.concatenate([rangle, np.mod(edir, np.pi)]), kinds,
+                     np.concatenate([riy, eiy]), np.concatenate([rix, eix]))
+    pieces = _Pieces(points, ORIENTATION_BINS, (height, width))
     extent = pieces.hi - pieces.lo
     for group in _link(pieces):  # an edge may change polarity along a line (boards, chessboards)
         if len(group) == 1 and extent[group[0]] < MIN_CHAIN_LENGTH:
@@ -357,21 +393,49 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
         if np.ptp(ends @ pieces.axis[longest]) < MIN_CHAIN_LENGTH:
             continue
         idx = np.concatenate([pieces.members[k] for k in group])
-        x, y = xs[idx], ys[idx]
-        pts = np.stack([x, y], axis=1)
-        centre = pts.mean(axis=0)
-        w, v = np.linalg.eigh(np.cov((pts - centre).T))
-        s = (pts - centre) @ v[:, 1]
-        length = float(np.ptp(s))
-        if length < MIN_CHAIN_LENGTH:
-            continue
-        if _is_overlay(x, y, (height, width)):
-            overlays += 1
-            continue
-        order = np.argsort(s)
-        # back to full-frame pixel centres, then lens units
-        scale = width_full / width
-        full = (pts[order] + 0.5) * np.array([scale, height_full / height]) - 0.5
         kind = "edge" if pieces.kind[group[0]] else "ridge"
-        chains.append(Chain(pixels_to_lens(full, (width_full, height_full)), kind, length))
+        for part, axis in _one_line_parts(idx, xs, ys, lx, ly):  # a chain round a corner is cut there
+            found = _chain(part, xs, ys, kind, (height, width), (width_full, height_full), axis)
+            overlays += found is _OVERLAY
+            if isinstance(found, Chain):
+                chains.append(found)
     return LineEvidence(chains, (width_full, height_full), width, overlays, density)
+
+
+#: Returned by :func:`_chain` for a chain taken for broadcast graphics.
+_OVERLAY = object()
+
+
+def _one_line_parts(idx: np.ndarray, xs, ys, lx, ly) -> list[tuple[np.ndarray, np.ndarray | None]]:
+    """The point indices ``idx`` of one linked chain, ordered along it and cut where it turns a
+    corner (:func:`glradial.estimation.corners.split_at_corners`, on the points undistorted with
+    the hint, ``lx``, ``ly``), each with its axis when known (an uncut chain keeps the chain's)."""
+    pts = np.stack([xs[idx], ys[idx]], axis=1)
+    centre = pts.mean(axis=0)
+    _, v = np.linalg.eigh(np.cov((pts - centre).T))
+    ordered = idx[np.argsort((pts - centre) @ v[:, 1])]
+    parts = split_at_corners(np.stack([lx[ordered], ly[ordered]], axis=1))
+    return [(ordered, v[:, 1])] if len(parts) == 1 else [(ordered[s], None) for s in parts]
+
+
+def _chain(idx: np.ndarray, xs, ys, kind: str, shape: tuple[int, int], size_full: tuple[int, int],
+           axis: np.ndarray | None = None):
+    """A :class:`Chain` of the detection-copy points ``idx`` (along ``axis``, the direction of their
+    largest spread, computed when ``None``); ``None`` when shorter than :data:`MIN_CHAIN_LENGTH`,
+    :data:`_OVERLAY` when it is broadcast graphics."""
+    x, y = xs[idx], ys[idx]
+    pts = np.stack([x, y], axis=1)
+    centre = pts.mean(axis=0)
+    if axis is None:
+        axis = np.linalg.eigh(np.cov((pts - centre).T))[1][:, 1]
+    s = (pts - centre) @ axis
+    length = float(np.ptp(s))
+    if length < MIN_CHAIN_LENGTH:
+        return None
+    if _is_overlay(x, y, shape):
+        return _OVERLAY
+    order = np.argsort(s)
+    # back to full-frame pixel centres, then lens units
+    height, width = shape
+    full = (pts[order] + 0.5) * np.array([size_full[0] / width, size_full[1] / height]) - 0.5
+    return Chain(pixels_to_lens(full, size_full), kind, length)

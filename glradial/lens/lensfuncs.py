@@ -86,6 +86,22 @@ def fold_radius(k1: float, k2: float) -> float:
     return float(np.sqrt(min(positive))) if positive else LENS_RADIUS_UNBOUNDED
 
 
+def fold_radii(k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
+    """:func:`fold_radius` of many lenses at once (arrays that broadcast; same roots, same
+    ``LENS_RADIUS_UNBOUNDED`` where the map never folds)."""
+    a, b = 5.0 * np.asarray(k2, np.float64), 3.0 * np.asarray(k1, np.float64)
+    a, b = np.broadcast_arrays(a, b)
+    linear = np.abs(a) < 1e-15
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s_linear = np.where(b < 0.0, -1.0 / b, np.inf)
+        disc = b * b - 4.0 * a
+        sq = np.sqrt(np.where(disc >= 0.0, disc, np.nan))
+        roots = np.stack([(-b - sq) / (2.0 * a), (-b + sq) / (2.0 * a)])
+    roots = np.where(np.isfinite(roots) & (roots > 0.0), roots, np.inf).min(axis=0)
+    s_min = np.where(linear, s_linear, roots)
+    return np.where(np.isfinite(s_min), np.sqrt(np.where(np.isfinite(s_min), s_min, 1.0)), LENS_RADIUS_UNBOUNDED)
+
+
 def distort_point(p_u: np.ndarray, k1: float, k2: float) -> np.ndarray:
     """Forward model: undistorted lens point(s) -> distorted, ``p_u (1 + k1 r^2 + k2 r^4)``."""
     p_u = np.asarray(p_u, dtype=np.float64)
@@ -126,7 +142,7 @@ def undistort_radius_exact(r_d: np.ndarray, k1: float, k2: float) -> tuple[np.nd
     r_d = np.asarray(r_d, dtype=np.float64)
     if np.ndim(k1) or np.ndim(k2):
         k1, k2 = np.broadcast_arrays(np.asarray(k1, np.float64), np.asarray(k2, np.float64))
-        r_fold = np.vectorize(fold_radius, otypes=[np.float64])(k1, k2)
+        r_fold = fold_radii(k1, k2)
     else:
         r_fold = fold_radius(k1, k2)
     b1, b2, b3, b4 = drap_coefficients(k1, k2)

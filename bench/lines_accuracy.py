@@ -1,0 +1,117 @@
+"""Accuracy of the line fit (``method="lines"`` / ``"auto"``) per source, fast enough to iterate on.
+
+Usage: ``python bench/lines_accuracy.py [--cache /tmp/lines_accuracy.pkl] [--procedural 200]``
+
+Builds the same samples as ``glradial evaluate --frames ../shared/data/real_football --procedural N
+--remove-own-lens`` (seed 0: 12 paper + 12 extended lenses per frame at ``fit="crop"``, 48 + 48 crops
+of the panorama, N held-out procedural crops), runs the CNN once per sample and caches frames, true
+lenses and CNN readings in ``--cache`` (pickle; delete it to rebuild). Then runs the line detection
+and fit (the code of this checkout) on every sample and prints, per group, the median and 90th
+percentile of the maximum displacement error (px at 1920) of ``lines`` and ``auto``, the share of
+frames with a line fit, and the mean fit time. Groups: real frames (all lenses), real frames with
+``k1 <= -0.6``, 640x360 panorama crops, procedural test crops. Validation data only: no tuning
+should be reported on the same samples without saying so (docs/LINES.md says which were used).
+"""
+
+from __future__ import annotations
+
+import argparse
+import pickle
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
+from glradial.estimation.lens_estimate import choose, line_candidates  # noqa: E402
+from glradial.evaluation import real_eval  # noqa: E402
+from glradial.lens.metrics import max_displacement_px  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[1].parent / "shared/data/real_football"
+
+
+def _build(frames_dir: Path, procedural: int, lenses: int = 12, seed: int = 0) -> list[dict]:
+    from glradial.remapping.remap import correct
+
+    evaluator = real_eval.Evaluator(threads=1)
+    frames, panoramas = real_eval.frames_in(frames_dir)
+    sources: dict = {}
+    for i, (name, f) in enumerate(frames):
+        found = real_eval.agreed_own_lens(evaluator(f))
+        if found is not None:
+            f = correct(f, found, fit="crop")
+        sources[f"real/{name}/paper"] = real_eval._distorted(f, real_eval.paper_lenses(lenses, seed * 1000 + i))
+        sources[f"real/{name}/extended"] = real_eval._distorted(f, real_eval.extended_lenses(lenses, seed * 1000 + 500 + i))
+    for i, (name, pano) in enumerate(panoramas):
+        count = 4 * lenses
+        sources[f"pano/{name}/paper"] = real_eval._panorama_crops(pano, real_eval.paper_lenses(count, seed * 1000 + 100 + i), seed + 1)
+        sources[f"pano/{name}/extended"] = real_eval._panorama_crops(pano, real_eval.extended_lenses(count, seed * 1000 + 600 + i), seed + 2)
+    if procedural:
+        sources["procedural/test"] = real_eval.procedural_frames(procedural, seed=seed)
+    out = []
+    for name, items in sources.items():
+        for truth, frame in items:
+            k1, k2 = evaluator.estimator.run(evaluator.estimator.preprocess(frame)[None])[0]
+            out.append({"source": name, "truth": tuple(map(float, truth)), "frame": frame, "net": (float(k1), float(k2))})
+        print(f"built {name}", flush=True)
+    return out
+
+
+def _groups(samples: list[dict]) -> dict[str, list[int]]:
+    groups: dict[str, list[int]] = {"real frames": [], "real k1<=-0.6": [], "panorama crops": [], "procedural": []}
+    for i, s in enumerate(samples):
+        if s["source"].startswith("real/"):
+            groups["real frames"].append(i)
+            if s["truth"][0] <= -0.6:
+                groups["real k1<=-0.6"].append(i)
+        elif s["source"].startswith("pano/"):
+            groups["panorama crops"].append(i)
+        else:
+            groups["procedural"].append(i)
+    for s in sorted({s["source"].rsplit("/", 1)[0] for s in samples if s["source"].startswith("real/")}):
+        groups[s] = [i for i, x in enumerate(samples) if x["source"].startswith(s + "/")]
+    return groups
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--cache", default="/tmp/lines_accuracy.pkl")
+    parser.add_argument("--frames", default=str(DATA))
+    parser.add_argument("--procedural", type=int, default=200)
+    parser.add_argument("--dump", help="write per-sample results (JSON lines) here")
+    args = parser.parse_args()
+    cache = Path(args.cache)
+    if cache.is_file():
+        samples = pickle.loads(cache.read_bytes())
+    else:
+        samples = _build(Path(args.frames), args.procedural)
+        cache.write_bytes(pickle.dumps(samples))
+    errors = {"lines": [], "auto": []}
+    has_fit, times, rows = [], [], []
+    for s in samples:
+        t0 = time.perf_counter()
+        net, lines = line_candidates(s["frame"], s["net"])
+        times.append(time.perf_counter() - t0)
+        has_fit.append(lines is not None)
+        truth = np.array(s["truth"])
+        for method in errors:
+            e = choose(net, lines, method)
+            errors[method].append(float(max_displacement_px(np.array([e.k1, e.k2]), truth)))
+        rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else [lines.k1, lines.k2],
+                     "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1]})
+    print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}")
+    for name, idx in _groups(samples).items():
+        if not idx:
+            continue
+        el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
+        print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
+              f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}")
+    if args.dump:
+        import json
+
+        Path(args.dump).write_text("\n".join(json.dumps(r) for r in rows) + "\n")
+
+
+if __name__ == "__main__":
+    main()
