@@ -51,7 +51,15 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from ..estimation.line_fit import INFORMATIVE_RMS, K1_PRIOR_SIGMA, K2_PRIOR_SIGMA, MAX_CHAIN_POINTS, OUTLIER_CHI, ROBUST_T, SIGMA_FLOOR, SIGMA_POINT, STRAIGHT_RMS
+from ..estimation.line_fit import (
+    K1_PRIOR_SIGMA,
+    K2_PRIOR_SIGMA,
+    OUTLIER_CHI,
+    ROBUST_T,
+    SIGMA_FLOOR,
+    SIGMA_POINT,
+    STRAIGHT_RMS,
+)
 from ..estimation.lines import LineEvidence
 from ..lens.lens import Lens
 from ..lens.lensfuncs import drap_coefficients
@@ -70,6 +78,13 @@ MATCH_SIGMA = 0.3
 #: one pair of frames counts as at most this many independent matches (the points of one pair share
 #: the tracker's and the homography's errors)
 MATCH_CAP = 60
+#: points per chain after averaging consecutive points in groups; and the residual range (px of the
+#: detection copy, RMS) over the lenses of the manifold below which a chain says too little about
+#: the lens to enter. The shot fit's own values (the single-frame fit of
+#: :mod:`glradial.estimation.line_fit` keeps 16 points and 0.7 px): pooled over many frames, the
+#: weakly curved chains it admits add their systematic error more than their information.
+MAX_CHAIN_POINTS = 32
+INFORMATIVE_RMS = 1.0
 #: typical size of each parameter (a0, a1, a2, b0; static: a0, b0) for the solver's steps
 PARAMETER_SCALE = (0.05, 0.2, 0.5, 0.02)
 #: grid of k1 (on the manifold) for screening chains and seeding the fit
