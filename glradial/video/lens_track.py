@@ -11,6 +11,9 @@ column                  meaning
 ``time_s``              presentation time of the frame in seconds from the stream start
 ``shot``                shot id (0, 1, ...), a cut starts a new one
 ``k1``, ``k2``          the lens the frame is corrected with (width-normalised, docs/DESIGN.md) (required)
+``cx``, ``cy``          its principal point's offset from the image centre, image widths (0: centred)
+``pixel_aspect``        its ``fy / fx`` (1: square pixels); these three as in :class:`glradial.Lens`
+                        and optional on reading (defaults 0, 0, 1)
 ``uncertainty_px``      stated uncertainty of that lens (~p90 of the maximum displacement error,
                         px at 1920 wide); empty when the estimator states none
 ``doubtful``            1 when the frame's shot is doubtful (see ``reason``), else 0
@@ -59,7 +62,7 @@ __all__ = ["DOUBTFUL_PX", "LensTrack", "load_lens_track"]
 #: procedural test set; above it, correcting can easily do more harm than good.
 DOUBTFUL_PX = 10.0
 
-COLUMNS = ["frame", "time_s", "shot", "k1", "k2", "uncertainty_px", "doubtful", "reason", "applied", "method",
+COLUMNS = ["frame", "time_s", "shot", "k1", "k2", "cx", "cy", "pixel_aspect", "uncertainty_px", "doubtful", "reason", "applied", "method",
            "k1_raw", "k2_raw", "raw_uncertainty_px", "weight"]
 
 
@@ -71,7 +74,9 @@ class LensTrack:
     ``raw_uncertainty_px`` are NaN where unknown; ``raw`` and ``weight`` NaN on frames that were not
     estimated; ``method`` "" there. ``doubtful_px`` is the threshold that marks a shot doubtful
     when ``doubtful`` (bool per frame) is not given; ``reason`` (per frame) says why; ``applied``
-    (bool per frame, default all) whether the frame is corrected or passed through.
+    (bool per frame, default all) whether the frame is corrected or passed through. ``geometry``
+    (N x 3: ``cx``, ``cy``, ``pixel_aspect`` per frame, default centred and square) completes each
+    frame's :class:`~glradial.lens.lens.Lens` with ``lens`` (N x 2: k1, k2).
     """
 
     rate: Fraction
@@ -88,13 +93,12 @@ class LensTrack:
     doubtful: np.ndarray | None = None
     reason: list[str] = field(default_factory=list)
     applied: np.ndarray | None = None
+    geometry: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.shot)
-        if self.doubtful is None:
-            self.doubtful = np.isin(self.shot, [s for s in np.unique(self.shot)
-                                                if self.shot_uncertainty(int(s)) > self.doubtful_px])
-            self.reason = ["uncertain" if d else "" for d in self.doubtful]
+        if self.geometry is None:
+            self.geometry = np.tile([0.0, 0.0, 1.0], (n, 1))
         if not self.reason:
             self.reason = [""] * n
         if self.applied is None:
@@ -107,6 +111,10 @@ class LensTrack:
             self.raw_uncertainty_px = np.full(n, np.nan)
         if not self.method:
             self.method = [""] * n
+        if self.doubtful is None:
+            self.doubtful = np.isin(self.shot, [s for s in np.unique(self.shot)
+                                                if self.shot_uncertainty(int(s)) > self.doubtful_px])
+            self.reason = ["uncertain" if d else "" for d in self.doubtful]
 
     @property
     def fps(self) -> float:
@@ -124,8 +132,18 @@ class LensTrack:
 
     def lens_for(self, frame: int) -> Lens | None:
         """The lens ``frame`` is corrected with, or ``None`` when it passes through uncorrected."""
+        return self.full_lens(frame) if self.applied[frame] else None
+
+    def full_lens(self, frame: int) -> Lens:
+        """The whole :class:`~glradial.lens.lens.Lens` of ``frame`` (principal point and pixel
+        aspect included), whether or not it is applied."""
         k1, k2 = self.lens_at(frame)
-        return Lens(k1, k2) if self.applied[frame] else None
+        cx, cy, aspect = (float(v) for v in self.geometry[frame])
+        return Lens(k1, k2, cx, cy, aspect)
+
+    def lenses(self) -> list[Lens]:
+        """:meth:`full_lens` of every frame."""
+        return [self.full_lens(i) for i in range(self.n_frames)]
 
     def shot_uncertainty(self, shot: int) -> float:
         """Median stated uncertainty (px at 1920) of a shot's smoothed lenses; NaN if unknown."""
@@ -148,6 +166,9 @@ class LensTrack:
                     "shot": int(self.shot[i]),
                     "k1": float(self.lens[i, 0]),
                     "k2": float(self.lens[i, 1]),
+                    "cx": float(self.geometry[i, 0]),
+                    "cy": float(self.geometry[i, 1]),
+                    "pixel_aspect": float(self.geometry[i, 2]),
                     "uncertainty_px": _number(self.uncertainty_px[i]),
                     "doubtful": int(bool(self.doubtful[i])),
                     "reason": self.reason[i],
@@ -237,6 +258,7 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
         raise LensTrackError(f"lens track {str(path)!r} has no rows")
     n = len(rows)
     lens, shot, sure = np.empty((n, 2)), np.zeros(n, dtype=np.int64), np.full(n, np.nan)
+    geometry = np.tile([0.0, 0.0, 1.0], (n, 1))
     method, applied = [""] * n, np.ones(n, dtype=bool)
     for index, (line, row) in enumerate(rows):
         where = f"lens track {str(path)!r} line {line}"
@@ -260,13 +282,16 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
         if frame != index:
             raise LensTrackError(f"{where}: frame {row.get('frame')!r}, expected {index} (one row per frame, in order from 0)")
         k1, k2 = value("k1"), value("k2")
+        geometry[index] = [value(name, required=False) if row.get(name) not in (None, "") else default
+                           for name, default in (("cx", 0.0), ("cy", 0.0), ("pixel_aspect", 1.0))]
         flag = value("applied", required=False)
         if flag not in (None, 0, 1):
             raise ValueError(f"{where}: applied must be 0 or 1, got {row.get('applied')!r}")
         applied[index] = flag != 0
         try:
+            frame_lens = Lens(k1, k2, *geometry[index])
             if applied[index]:
-                Lens(k1, k2).check_frame(size)
+                frame_lens.check_frame(size)
         except ValueError as err:
             raise LensTrackError(f"{where}: {err}") from None
         lens[index] = (k1, k2)
@@ -282,4 +307,4 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
             sure[index] = uncertainty
         method[index] = str(row.get("method") or "")
     return LensTrack(rate, size, shot, lens, np.full((n, 2), np.nan), np.full(n, np.nan),
-                     uncertainty_px=sure, method=method, applied=applied)
+                     uncertainty_px=sure, method=method, applied=applied, geometry=geometry)
