@@ -213,8 +213,8 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
     assert "DOUBTFUL" in captured.out
     sidecar = tmp_path / "auto.mkv.lens.csv"
     lines = sidecar.read_text().splitlines()
-    assert lines[0] == ("frame,time_s,shot,k1,k2,uncertainty_px,doubtful,reason,applied,method,k1_raw,k2_raw,"
-                        "raw_uncertainty_px,weight")
+    assert lines[0] == ("frame,time_s,shot,k1,k2,cx,cy,pixel_aspect,uncertainty_px,doubtful,reason,applied,method,"
+                        "k1_raw,k2_raw,raw_uncertainty_px,weight")
     rows = [dict(zip(lines[0].split(","), line.split(","))) for line in lines[1:]]
     assert len(rows) == 24 and rows[12]["shot"] == "1" and rows[12]["doubtful"] == "1" and rows[0]["doubtful"] == "0"
     assert (rows[0]["applied"], rows[12]["applied"], rows[12]["reason"], rows[0]["reason"]) == ("1", "0", "no_geometry", "")

@@ -132,7 +132,8 @@ class LensTrack:
 
     def lens_for(self, frame: int) -> Lens | None:
         """The lens ``frame`` is corrected with, or ``None`` when it passes through uncorrected."""
-        return self.full_lens(frame) if self.applied[frame] else None
+        lens = self.full_lens(frame)  # ValueError past the end of the track
+        return lens if self.applied[frame] else None
 
     def full_lens(self, frame: int) -> Lens:
         """The whole :class:`~glradial.lens.lens.Lens` of ``frame`` (principal point and pixel
