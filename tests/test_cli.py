@@ -154,59 +154,48 @@ def test_correct_auto_checks_the_encoder_before_estimating(tmp_path, capfd, monk
     assert _names(tmp_path) == ["in.mp4"]
 
 
-def test_correct_video_auto_smooths_per_shot(tmp_path, field_panorama, monkeypatch):
-    """--auto on a video with known, slowly changing lenses and a cut, with a stand-in estimator
-    (the truth + CNN-like noise + 10 % gross outliers, keyed on the frame index stored losslessly in
-    pixel (0, 0)): the cut is found, the sidecar lists the shots, the smoothed lens is closer to the
-    truth than the raw estimates, and each frame is corrected with its smoothed lens."""
-    n, cut = 48, 30
-    k1 = np.where(np.arange(n) < cut, np.linspace(-0.30, -0.22, n), 0.12)
+def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, monkeypatch):
+    """--auto on a small lossless clip with a cut, with a stand-in estimator keyed on the frame
+    index stored in pixel (0, 0): the cut is found, the estimator runs on the shots' sampled frames
+    only (every 2nd frame, every 3rd sample), the sidecar has one row per frame with the shot, its
+    doubt, reason and whether it was applied; a doubtful shot passes through untouched (lossless:
+    identical pixels), and with --apply-doubtful every frame is corrected with its track lens."""
+    n, cut = 24, 14
+    k1 = np.where(np.arange(n) < cut, -0.3, -0.1)
     truth = np.stack([k1, 0.019 * k1 + 0.805 * k1**2], 1)
-    rng = np.random.default_rng(7)
-    noise = rng.normal(0, [0.02, 0.01], (n, 2))
-    noise[rng.random(n) < 0.1] += rng.normal(0, 0.3, 2)
     calls = []
 
     def fake_estimator(_model=None, _method=None):
         def estimate(frame):
             assert frame.dtype == np.uint8 and frame.shape == (90, 160, 3)
-            index = int(frame[0, 0, 0])
-            calls.append(index)
-            return tuple(truth[index] + noise[index])
+            calls.append(int(frame[0, 0, 0]))
+            return tuple(truth[int(frame[0, 0, 0])])
 
         return estimate
 
     monkeypatch.setattr("glradial.video.video_pipeline.default_estimator", fake_estimator)
-    source, out = tmp_path / "in.mkv", tmp_path / "out.mkv"
+    source = tmp_path / "in.mkv"
     _pan_video(source, field_panorama, n=n, fps=25, cut=cut, marker=True, lenses=truth)
-    assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--window", "0.5", "--backend", "cpu"]) == 0
-    sidecar = tmp_path / "out.mkv.lens.csv"
-    assert _names(tmp_path) == ["in.mkv", "out.mkv", "out.mkv.lens.csv"]
-    assert calls == sorted(set(range(0, cut, 2)) | set(range(cut, n, 2)))
-    rows = np.genfromtxt(sidecar, delimiter=",", names=True)
-    assert len(rows) == n
-    assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)
-    from glradial.lens.metrics import max_displacement
-
-    est = ~np.isnan(rows["k1_raw"])
-    smooth = np.stack([rows["k1"], rows["k2"]], 1)
-    raw = np.stack([rows["k1_raw"], rows["k2_raw"]], 1)
-    raw_error = max_displacement(raw[est], truth[est]).mean()
-    smooth_error = max_displacement(smooth[est], truth[est]).mean()
-    assert smooth_error < 0.5 * raw_error, (smooth_error, raw_error)
-    # the cut resets: frames right after it follow shot 1's lens, not a blend with shot 0's
-    assert max_displacement(smooth[cut : cut + 3], truth[cut : cut + 3]).max() * 1920 < 15
-    with VideoReader(source) as a, VideoReader(out) as b:
-        pairs = list(zip(a, b))
-    assert len(pairs) == n
-    for i in (3, cut + 1):
-        expected = glradial.correct(pairs[i][0], *smooth[i], backend="cpu")
-        # FFV1 is lossless, but pass 2 may keep the previous frame's lens where the two move no
-        # point by more than 1/64 px (video_pipeline.MAP_REUSE_PX), which may flip a position to the
-        # neighbouring 1/32-px step of the fixed-point maps: at most 255/32 ~ 8 levels on the steepest
-        # edge, next to nothing on average; a wrong lens (e.g. the other shot's) is off by tens
-        difference = np.abs(pairs[i][1].astype(int) - expected.astype(int))
-        assert difference.max() <= 8 and difference.mean() < 0.1, (difference.max(), difference.mean())
+    for extra in ([], ["--apply-doubtful"]):
+        out = tmp_path / f"out{len(extra)}.mkv"
+        calls.clear()
+        assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--backend", "cpu", *extra]) == 0
+        assert calls == [0, 6, 12, 14, 20]
+        rows = np.genfromtxt(f"{out}.lens.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+        assert len(rows) == n
+        assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)
+        assert np.array_equal(rows["applied"], 1 - rows["doubtful"] if not extra else np.ones(n, int))
+        assert all(bool(r) == bool(d) for r, d in zip(rows["reason"], rows["doubtful"]))
+        with VideoReader(source) as a, VideoReader(out) as b:
+            pairs = list(zip(a, b))
+        assert len(pairs) == n
+        for i in (3, cut + 1):
+            if rows["applied"][i]:
+                expected = glradial.correct(pairs[i][0], rows["k1"][i], rows["k2"][i], backend="cpu")
+                difference = np.abs(pairs[i][1].astype(int) - expected.astype(int))
+                assert difference.max() <= 8 and difference.mean() < 0.1, (difference.max(), difference.mean())
+            else:
+                assert np.array_equal(pairs[i][1], pairs[i][0])
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
@@ -331,7 +320,7 @@ def test_every_option_is_documented():
         for action in sub._actions:
             assert action.help and action.help != argparse.SUPPRESS or action.dest == "help", (name, action.dest)
     correct_help = subparsers.choices["correct"].format_help()
-    for unit in ("seconds", "frames", "width-normalised"):
+    for unit in ("frames", "width-normalised", "px at 1920"):
         assert unit in correct_help
 
 
@@ -410,8 +399,9 @@ def test_correct_auto_with_an_onnx_model(tmp_path, capsys):
 
 
 def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
-    """The video hook of 'glradial estimate' (glradial.video.video_pipeline.estimate_video): shots found, every
-    frame gets the model's lens, JSON and CSV sidecars agree."""
+    """The video hook of 'glradial estimate' (glradial.video.video_pipeline.estimate_video): shots found,
+    one lens per shot on every frame of it (the model's where the shot has no geometry of its own),
+    JSON and CSV sidecars agree."""
     from glradial.video.lens_track import load_lens_track
     from glradial.video.video_pipeline import estimate_video, track_report
 
@@ -420,16 +410,20 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     _pan_video(source, field_panorama, n=20, fps=25, cut=12)
     track = estimate_video(source, model=model, every=3)
     assert track.n_frames == 20 and track.per_shot()[1]["first_frame"] == 12
-    np.testing.assert_allclose(track.lens, np.tile([-0.21, 0.04], (20, 1)), atol=1e-6)
+    for first, end in ((0, 12), (12, 20)):
+        np.testing.assert_array_equal(track.lens[first:end], np.tile(track.lens[first], (end - first, 1)))
+        if track.reason[first] == "no_geometry":
+            np.testing.assert_allclose(track.lens[first], [-0.21, 0.04], atol=1e-6)
     text = track_report(track, "cut.mp4")
-    shots = text.splitlines()  # the constant model's lens, then the uncertainty and method it states
+    shots = text.splitlines()  # the shot's lens, then the uncertainty and the per-frame methods
     assert len(shots) == 2 and all("method=net" in line and "uncertainty=" in line for line in shots)
-    assert shots[0].startswith("cut.mp4: shot 0 frames 0-11 k1=-0.210000 k2=0.040000 ")
-    assert shots[1].startswith("cut.mp4: shot 1 frames 12-19 k1=-0.210000 k2=0.040000 ")
+    assert shots[0].startswith(f"cut.mp4: shot 0 frames 0-11 k1={track.lens[0, 0]:.6f} k2={track.lens[0, 1]:.6f} ")
+    assert shots[1].startswith(f"cut.mp4: shot 1 frames 12-19 k1={track.lens[12, 0]:.6f} k2={track.lens[12, 1]:.6f} ")
     document = json.loads(track_report(track, "cut.mp4", per_frame=True, as_json=True))
     assert len(document["frames"]) == 20 and document["fps"] == pytest.approx(25)
-    # raw estimates on frames 0, 3, 6, 9 (shot 0) and 12, 15, 18 (shot 1)
-    assert [r["frame"] for r in document["frames"] if r["k1_raw"] is not None] == [0, 3, 6, 9, 12, 15, 18]
+    # samples every 3rd frame of each shot (0, 3, 6, 9 | 12, 15, 18); the estimator runs on every
+    # 3rd sample of a shot (glradial.video.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12
+    assert [r["frame"] for r in document["frames"] if r["k1_raw"] is not None] == [0, 9, 12]
     track.save(tmp_path / "t.json")
     track.save(tmp_path / "t.csv")
     for name in ("t.csv", "t.json"):

@@ -372,7 +372,7 @@ CLI_CASES = [
     ("stadium-out-unwritable", "stadium --seed 1 --size 64x32 --out /proc/s.png", 1, "cannot write '/proc/s.png'"),
     # options of --auto on a video are refused, not ignored, where they cannot apply
     ("correct-every-without-auto", "correct {bad_video} {tmp}/o.mp4 --k1 -0.2 --every 3", 2, "--every needs --auto"),
-    ("correct-window-without-auto", "correct {bad_video} {tmp}/o.mp4 --k1 -0.2 --window 1", 2, "--window needs --auto"),
+    ("correct-apply-doubtful-without-auto", "correct {bad_video} {tmp}/o.mp4 --k1 -0.2 --apply-doubtful", 2, "--apply-doubtful needs --auto"),
     ("correct-every-on-an-image", "correct {good} {tmp}/o.png --auto --every 3", 2, "--every is for videos"),
     ("correct-max-uncertainty-on-an-image", "correct {good} {tmp}/o.png --auto --max-uncertainty 5", 2, "--max-uncertainty is for videos"),
     ("correct-sidecar-txt", "correct {bad_video} {tmp}/o.mp4 --auto --sidecar {tmp}/side.txt", 2, "--sidecar '{tmp}/side.txt' must end in .csv or .json"),

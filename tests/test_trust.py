@@ -25,7 +25,6 @@ from glradial.estimation.trust import REASONS, FrameEvidence, TrustModel, anythi
 from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
 from glradial.evaluation.real_eval import applied_lenses, self_consistent_truth
 from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
-from glradial.video.lens_track import LensTrack
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 needs_ffmpeg = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="no ffmpeg CLI")
@@ -281,30 +280,6 @@ def test_correct_leaves_a_doubtful_estimate_unapplied_unless_asked():
     np.testing.assert_array_equal(glradial.correct(frame, sure, backend="cpu"), applied)
     with pytest.raises(TypeError, match="apply_doubtful"):
         glradial.correct(frame, sure, apply_doubtful="yes")
-
-
-def test_a_doubtful_shot_is_left_uncorrected_and_recorded():
-    n = 6
-    shot = np.array([0, 0, 0, 1, 1, 1])
-    lens = np.tile([-0.2, 0.03], (n, 1))
-    raw = np.full((n, 2), np.nan)
-    raw[[0, 3]] = lens[[0, 3]]
-    reason = ["ok", "", "", "too_few_lines", "", ""]
-    track = LensTrack(glradial_fraction(), (64, 36), shot, lens, raw, np.where(np.isnan(raw[:, 0]), np.nan, 1.0),
-                      uncertainty_px=np.full(n, 5.0), reason=reason)
-    assert track.doubtful_shots() == [1]
-    left = track.uncorrected_where_doubtful()
-    assert [left.lens_at(i) for i in (0, 3)] == [(-0.2, 0.03), (0.0, 0.0)] and track.lens_at(3) == (-0.2, 0.03)
-    assert left.doubtful_shots() == [1] and left.rows()[3]["k1_raw"] == -0.2
-    rows = track.rows()
-    assert [r["reason"] for r in rows] == reason and [r["doubtful"] for r in rows] == [0, 0, 0, 1, 1, 1]
-    assert track.per_shot()[1]["reason"] == "too_few_lines"
-
-
-def glradial_fraction():
-    from fractions import Fraction
-
-    return Fraction(25)
 
 
 @needs_shipped

@@ -200,28 +200,30 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
             frame[:, : 48 if i < 12 else 10] = (200, 60, 30) if i < 12 else (30, 90, 220)  # a cut at frame 12
             frame[0, 0] = (i, 0, 0)
             writer.write(frame)
-    # shot 0 is estimated surely (2 px), shot 1 only doubtfully (40 px; four equal samples: stated
-    # 40 / 2 = 20 px, the most a shot's evidence may gain, smoothing.INDEPENDENT_SAMPLES)
+    # flat frames: no lines, no motion, so each shot rests on its per-frame estimates; shot 0's are
+    # sure (2 px), shot 1's doubtful (40 px; many equal samples of one picture gain nothing)
     monkeypatch.setattr("glradial.video.video_pipeline.default_estimator",
                         lambda model=None, method=None: lambda f: _Estimate(-0.2, 0.03, 2.0, "lines") if f[0, 0, 0] < 12 else _Estimate(-0.1, 0.01, 40.0, "net"))
     auto = tmp_path / "auto.mkv"
     assert main(["correct", str(source), str(auto), "--auto", "--every", "3", "--backend", "cpu", "-q"]) == 0
     captured = capsys.readouterr()
     warnings = [line for line in captured.err.splitlines() if "doubtful" in line]
-    assert len(warnings) == 1 and "shot 1 (frames 12-23)" in warnings[0] and "uncertainty 20.0 px > 10 px" in warnings[0]
+    assert len(warnings) == 1 and "shot 1 (frames 12-23)" in warnings[0] and "uncertainty 40.0 px" in warnings[0]
+    assert "no_geometry" in warnings[0] and "passed through uncorrected" in warnings[0]
     assert "DOUBTFUL" in captured.out
     sidecar = tmp_path / "auto.mkv.lens.csv"
     lines = sidecar.read_text().splitlines()
-    assert lines[0] == "frame,time_s,shot,k1,k2,uncertainty_px,doubtful,method,k1_raw,k2_raw,raw_uncertainty_px,weight,reason"
+    assert lines[0] == ("frame,time_s,shot,k1,k2,cx,cy,pixel_aspect,uncertainty_px,doubtful,reason,applied,method,"
+                        "k1_raw,k2_raw,raw_uncertainty_px,weight")
     rows = [dict(zip(lines[0].split(","), line.split(","))) for line in lines[1:]]
     assert len(rows) == 24 and rows[12]["shot"] == "1" and rows[12]["doubtful"] == "1" and rows[0]["doubtful"] == "0"
+    assert (rows[0]["applied"], rows[12]["applied"], rows[12]["reason"], rows[0]["reason"]) == ("1", "0", "no_geometry", "")
     assert rows[0]["method"] == "lines" and rows[12]["method"] == "net" and rows[1]["method"] == ""
     assert float(rows[3]["time_s"]) == pytest.approx(3 / 25)
     assert float(rows[0]["uncertainty_px"]) <= 2.0 and float(rows[20]["uncertainty_px"]) >= 20.0
-    # the doubtful shot is left uncorrected (its lens column says so; its raw estimates are kept)
-    assert float(rows[12]["k1"]) == 0.0 and float(rows[12]["k1_raw"]) == pytest.approx(-0.1)
-    np.testing.assert_array_equal(_frames(auto)[15], _frames(source)[15])
-    # back in: the same frames
+    originals = _frames(source)
+    np.testing.assert_array_equal(_frames(auto)[15], originals[15])  # the doubtful shot passed through
+    # back in: the same frames (the applied column honoured)
     again = tmp_path / "again.mkv"
     assert main(["correct", str(source), str(again), "--lens-track", str(sidecar), "--backend", "cpu", "-q"]) == 0
     for a, b in zip(_frames(auto), _frames(again)):
@@ -232,7 +234,6 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
     edited.write_text("\n".join(body) + "\n")
     out = tmp_path / "edited.mkv"
     assert main(["correct", str(source), str(out), "--lens-track", str(edited), "--backend", "cpu", "-q"]) == 0
-    originals = _frames(source)
     np.testing.assert_array_equal(_frames(out)[5], glradial.correct(originals[5], -0.3, float(rows[5]["k2"]), backend="cpu"))
     # bad rows: one line naming the file and the line, nothing written
     bad = [
@@ -241,6 +242,7 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
         ("frame,k1,k2\n0,-0.1,0\n2,-0.1,0\n", "line 3: frame '2', expected 1"),
         ("frame,k1,k2\n0,-3,0\n", "line 2: lens k1=-3"),
         ("frame,k1,k2,uncertainty_px\n0,-0.1,0,-1\n", "line 2: uncertainty_px must be >= 0"),
+        ("frame,k1,k2,applied\n0,-0.1,0,2\n", "line 2: applied must be 0 or 1, got '2'"),
         ("frame,k1,k2\n" + "".join(f"{i},-0.1,0\n" for i in range(30)), "the lens track has 30 frames but"),
         ("frame,k1,k2\n" + "".join(f"{i},-0.1,0\n" for i in range(20)), "the lens track has 20 frames; the video has more"),
     ]

@@ -34,16 +34,18 @@ where an encoder exists (else the container's default); --codec, --crf/--bitrate
 --pix-fmt choose another. The lens is given (--k1/--k2, width-normalised: image width = 1, origin
 at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4); negative k1 = barrel; --cx/--cy/--pixel-aspect
 for an off-centre principal point and non-square pixels; or --lens FILE, e.g. an OpenCV
-calibration), read per frame from a lens track (--lens-track) or estimated (--auto, centred model). For a video, --auto estimates every Nth frame,
-detects shot cuts, smooths the lens within each shot weighting each estimate by its stated
-confidence, warns about every shot whose lens is doubtful (uncertainty above --max-uncertainty)
-and writes the per-frame lens to a sidecar (OUTPUT.lens.csv by default; format in docs/CLI.md),
+calibration), read per frame from a lens track (--lens-track) or estimated (--auto, centred model). For a video, --auto detects shot
+cuts and fits one lens per shot from the pitch lines of every Nth frame and the frame-to-frame
+motion between them (a zooming shot's lens follows the zoom); a doubtful shot (too little geometry,
+or uncertainty above --max-uncertainty) is reported and passed through uncorrected unless
+--apply-doubtful; the per-frame lens goes to a sidecar (OUTPUT.lens.csv by default; format in docs/CLI.md),
 which can be edited and fed back with --lens-track. Outputs appear only when complete; an existing
 OUTPUT is replaced only with -y."""
 
 
-#: options only ``--auto`` on a video takes (an image or folder refuses them as video options)
-AUTO_VIDEO_OPTIONS = ("sidecar", "every", "window", "max_uncertainty")
+#: options only ``--auto`` on a video takes (an image or folder refuses them as video options;
+#: --apply-doubtful is taken by an image too)
+AUTO_VIDEO_OPTIONS = ("sidecar", "every", "max_uncertainty")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -56,9 +58,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
     lens.add_argument("--method", choices=METHODS,
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
-    lens.add_argument("--apply-doubtful", action="store_true",
-                      help="with --auto: apply an estimate (or a shot's lens) even when it is doubtful (default: a doubtful "
-                           "image or shot is left uncorrected and reported)")
     add_render_options(
         parser, "output scale: same = centre scale kept (as cv2.undistort), crop = zoom in until every "
         "output pixel has a source, full = zoom out until the whole input is visible (default: same)",
@@ -66,11 +65,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_encode_options(parser)
     video = parser.add_argument_group("video with --auto")
     video.add_argument("--every", type=positive_int, default=None, metavar="N",
-                       help="estimate every N-th frame of each shot, plus each shot's first frame (frames; default 5)")
-    video.add_argument("--window", type=positive_float, default=None, metavar="SECONDS",
-                       help="half width of the per-shot smoothing window (seconds; default 2.0)")
+                       help="read the evidence of every N-th frame of each shot, plus each shot's first frame (frames; default 10)")
     video.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
-                       help="warn about shots whose smoothed lens is less sure than this (px at 1920 wide, ~p90; default 10)")
+                       help="a shot whose lens is less sure than this is doubtful (px at 1920 wide, ~p90; default 10)")
+    video.add_argument("--apply-doubtful", action="store_const", const=True, default=None,
+                       help="correct a doubtful image or shot too (default: it passes through uncorrected and is reported)")
     video.add_argument("--sidecar", metavar="PATH",
                        help="per-frame lens file: .csv or .json (default: OUTPUT.lens.csv)")
     add_opentrackio_options(parser)
@@ -87,11 +86,9 @@ def _check_lens_options(args: argparse.Namespace) -> bool:
     if not sources:
         raise UsageError("give the lens with --k1 (and --k2, --cx, --cy, --pixel-aspect) or --lens FILE, --lens-track, "
                          "or --auto to estimate it")
-    for name in ("model", "method", "sidecar", "max_uncertainty", "every", "window"):
+    for name in ("model", "method", "sidecar", "max_uncertainty", "every", "apply_doubtful"):
         if getattr(args, name) is not None and not args.auto:
             raise UsageError(f"--{name.replace('_', '-')} needs --auto")
-    if args.apply_doubtful and not args.auto:
-        raise UsageError("--apply-doubtful needs --auto")
     if args.sidecar is not None and Path(args.sidecar).suffix.lower() not in (".csv", ".json"):
         raise UsageError(f"--sidecar {args.sidecar!r} must end in .csv or .json (its format)")
     check_encode_options(args)
@@ -144,7 +141,7 @@ def _estimate_image(args: argparse.Namespace, image):
         print(f"glradial: warning: the estimate of {args.input} is doubtful ({reason}): {action}", file=sys.stderr)
         if not args.apply_doubtful:
             return Lens(0.0, 0.0)
-    return Lens(lens.k1, lens.k2)
+    return Lens(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect)
 
 
 def _auto_sidecar(args: argparse.Namespace) -> Path:
@@ -171,31 +168,29 @@ def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
         info = reader.info
         # the encoder, its options and the container are checked before the estimation pass: open and drop
         VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
-    given_options = {name: value for name, value in (("every", args.every), ("window_s", args.window)) if value is not None}
-    track = track_video(args.input, default_estimator(args.model, args.method), progress=video["progress"],  # its defaults: every 5, window 2 s
-                        doubtful_px=args.max_uncertainty or DOUBTFUL_PX, rate=args.rate, **given_options)
-    for line in doubtful_warnings(track, args.input, left_uncorrected=not args.apply_doubtful):
+    given_options = {"every": args.every} if args.every is not None else {}
+    track = track_video(args.input, default_estimator(args.model, args.method), progress=video["progress"],
+                        doubtful_px=args.max_uncertainty or DOUBTFUL_PX, apply_doubtful=bool(args.apply_doubtful),
+                        rate=args.rate, **given_options)
+    for line in doubtful_warnings(track, args.input):
         sys.stderr.write(line + "\n")
-    if not args.apply_doubtful:
-        track = track.uncorrected_where_doubtful()
-    written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+    written = correct_video(args.input, args.output, track.lens_for, frames_expected=track.n_frames, **video)
     try:
         track.save(sidecar)
     except BaseException:
         Path(args.output).unlink(missing_ok=True)  # both outputs or neither
         raise
     summary(args.output, written, info.frame_count)
-    _print_shots(args.input, track, sidecar, args.apply_doubtful)
+    _print_shots(args.input, track, sidecar)
     if opentrackio_wanted(args):
         write_track_opentrackio(args, track, info)
     return 0
 
 
-def _print_shots(source: str, track, sidecar: Path, apply_doubtful: bool = False) -> None:
+def _print_shots(source: str, track, sidecar: Path) -> None:
     shots = track.per_shot()
     print(f"{source}: {track.n_frames} frames, {len(shots)} shot(s); per-frame lens in {sidecar}")
     for shot in shots:
         sure = f" uncertainty {shot['uncertainty_px']:.1f} px" if shot["uncertainty_px"] is not None else ""
-        flag = (" DOUBTFUL" + (f" ({shot['reason']})" if shot["reason"] not in ("", "ok") else "")
-                + ("" if apply_doubtful else ", left uncorrected")) if shot["doubtful"] else ""
+        flag = (f" DOUBTFUL ({shot['reason']}, " + ("applied)" if shot["applied"] else "not applied)")) if shot["doubtful"] else ""
         print(f"  shot {shot['shot']}: frames {shot['first_frame']}-{shot['last_frame']} k1={shot['k1']:.6f} k2={shot['k2']:.6f}{sure}{flag}")

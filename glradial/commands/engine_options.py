@@ -122,9 +122,9 @@ def check_opentrackio_output(args: argparse.Namespace) -> None:
         check_overwrite(check_output_folder(Path(args.opentrackio)), getattr(args, "overwrite", False))
 
 
-def write_opentrackio(args: argparse.Namespace, lenses: np.ndarray, camera, *, uncertainty_px=None, doubtful=None,
+def write_opentrackio(args: argparse.Namespace, lenses, camera, *, uncertainty_px=None, doubtful=None,
                       shots=None) -> None:
-    """Make the samples of ``lenses`` (N, 2), write ``--opentrackio`` and stream to ``--send``."""
+    """Make the samples of ``lenses`` (:class:`Lens` objects or (k1, k2) rows), write ``--opentrackio`` and stream to ``--send``."""
     from ..export.engines import MODEL_NAMES
     from ..export.opentrackio import encode_sample, track_samples, write_samples
     from ..export.opentrackio_udp import ENCODING_CBOR, ENCODING_JSON, parse_address, send_payloads
@@ -152,7 +152,7 @@ def write_track_opentrackio(args: argparse.Namespace, track, video_info) -> None
     camera = camera_from_args(args, track.size, video_info.rate, video_info.timecode)
     doubtful_shots = set(track.doubtful_shots())
     known = np.isfinite(track.uncertainty_px).any()
-    write_opentrackio(args, track.lens, camera, uncertainty_px=track.uncertainty_px if known else None,
+    write_opentrackio(args, track.lenses(), camera, uncertainty_px=track.uncertainty_px if known else None,
                       doubtful=[int(s) in doubtful_shots for s in track.shot] if known else None, shots=track.shot)
 
 

@@ -26,11 +26,11 @@ on the maximum displacement error, px of a 1920-wide frame), the line chains use
 verdict (doubtful=0/1 and its reason: ok, blank_frame, noise_frame, not_a_pitch, too_few_lines,
 evidence_disagrees, weak_geometry; docs/LINES.md), or with --json one JSON object per line {"path",
 "k1", "k2", "method", "uncertainty_px", "chains", "doubtful", "reason"}. Videos (anything FFmpeg reads that is not a still image; image sequences as
-frame_%04d.png): shot cuts are detected, every --every-th frame of each
-shot is estimated and the estimates are smoothed within the shot (weighted by the confidence each
-estimate states) as 'glradial correct --auto' does; prints one line per shot (first and last frame,
-median k1, k2, and where the estimator states them the uncertainty in px at 1920 wide, the methods
-and DOUBTFUL above 10 px), or per frame with --per-frame, or one JSON document per video with --json."""
+frame_%04d.png): shot cuts are detected and one lens is fitted per shot from the evidence of every
+--every-th frame, as 'glradial correct --auto' does; prints one line per shot (first and last frame,
+median k1, k2, the uncertainty in px at 1920 wide, the per-frame methods, and for a doubtful shot
+DOUBTFUL(reason) and not-applied), or per frame with --per-frame, or one JSON document per video
+with --json."""
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -42,8 +42,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--json", action="store_true", help="one JSON object per line instead of text")
     parser.add_argument("--model", metavar="ONNX", help="use this ONNX model instead of the bundled one")
     parser.add_argument("--threads", type=positive_int, help="onnxruntime threads (default: all cores)")
-    parser.add_argument("--every", type=positive_int, default=5, metavar="N",
-                        help="videos: estimate every N-th frame of each shot (frames; default 5)")
+    parser.add_argument("--every", type=positive_int, default=None, metavar="N",
+                        help="videos: read the evidence of every N-th frame of each shot (frames; default 10, as correct --auto)")
     parser.add_argument("--per-frame", action="store_true", help="videos: one line (or JSON row) per frame")
     parser.add_argument("--method", choices=METHODS, default="auto",
                         help="auto (default: the line fit when it is surer than the CNN), net (the CNN alone) or "
@@ -66,8 +66,9 @@ def run(args: argparse.Namespace) -> int:
             from ..video.video_pipeline import track_report, track_video
 
             # the estimator loaded above (its --threads), not a second one per video
-            track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method), every=args.every,
-                                progress=show_progress(args))
+            stride = {"every": args.every} if args.every is not None else {}
+            track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method),
+                                progress=show_progress(args), **stride)
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             if opentrackio_wanted(args):
                 from ..media.video_io import VideoReader

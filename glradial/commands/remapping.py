@@ -352,7 +352,7 @@ def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bo
 
         track = load_lens_track(args.lens_track, info.rate, info.size)
         hook.lens_known(info.size, track=track, info=info)
-        written = correct_video(args.input, args.output, track.lens_at, frames_expected=track.n_frames, **video)
+        written = correct_video(args.input, args.output, track.lens_for, frames_expected=track.n_frames, **video)
     else:
         lens = lens_for(info.size)
         hook.lens_known(info.size, lens, info=info)

@@ -1,4 +1,5 @@
-"""The lens of a video: cut detection and per-shot smoothing, the per-frame `LensTrack` and its
+"""The lens of a video: cut detection, one lens per shot (its frames' lines and frame-to-frame
+motion in one joint fit, following the zoom, with a doubt policy), the per-frame `LensTrack` and its
 sidecar, and `--auto`'s two passes (track, correct) on a decode/correct/encode pipeline."""
 
 from __future__ import annotations

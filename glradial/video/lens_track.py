@@ -11,21 +11,28 @@ column                  meaning
 ``time_s``              presentation time of the frame in seconds from the stream start
 ``shot``                shot id (0, 1, ...), a cut starts a new one
 ``k1``, ``k2``          the lens the frame is corrected with (width-normalised, docs/DESIGN.md) (required)
+``cx``, ``cy``          its principal point's offset from the image centre, image widths (0: centred)
+``pixel_aspect``        its ``fy / fx`` (1: square pixels); these three as in :class:`glradial.Lens`
+                        and optional on reading (defaults 0, 0, 1)
 ``uncertainty_px``      stated uncertainty of that lens (~p90 of the maximum displacement error,
                         px at 1920 wide); empty when the estimator states none
-``doubtful``            1 when the frame's shot is doubtful (median uncertainty above the
-                        threshold of the run, or most of its raw estimates doubtful), else 0
+``doubtful``            1 when the frame's shot is doubtful (see ``reason``), else 0
+``reason``              why the shot is doubtful, machine-readable (``no_geometry``,
+                        ``uncertain``, ``fold_over``; tracks without it: uncertainty above the
+                        run's threshold); empty when it is not
+``applied``             1 when the frame was corrected with ``k1``, ``k2``; 0 when it was passed
+                        through uncorrected (a doubtful shot, by default)
 ``method``              how the frame's raw estimate was made (``net``, ``lines``); empty when
                         the frame was not estimated
 ``k1_raw``, ``k2_raw``  the raw estimate on this frame (empty when not estimated)
 ``raw_uncertainty_px``  the uncertainty the estimator stated for it
-``weight``              robustness weight of the raw estimate in the smoothing (0 = rejected)
-``reason``              the raw estimate's doubt reason (``ok``, ``too_few_lines``, ...; see
-                        :mod:`glradial.estimation.trust`); empty when not estimated or not stated
+``weight``              weight of the raw estimate (1 where one was made; tracks of older
+                        versions: its robustness weight in their smoothing, 0 = rejected)
 ======================  ====================================================================
 
 Reading (:func:`load_lens_track`) needs only ``frame``, ``k1`` and ``k2``: edit those and feed
-the file back. Every row is checked (one row per frame in order, finite coefficients, a lens that
+the file back; an ``applied`` column is honoured (0 = the frame passes through uncorrected, and its
+lens is then not checked), so a track read back corrects exactly as the run that wrote it. Every row is checked (one row per frame in order, finite coefficients, a lens that
 does not fold over on the frame, non-negative uncertainties); the first bad row raises
 ``ValueError`` naming the file and the line.
 """
@@ -37,7 +44,7 @@ import io
 import json
 import math
 import os
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
 
@@ -55,10 +62,8 @@ __all__ = ["DOUBTFUL_PX", "LensTrack", "load_lens_track"]
 #: procedural test set; above it, correcting can easily do more harm than good.
 DOUBTFUL_PX = 10.0
 
-COLUMNS = ["frame", "time_s", "shot", "k1", "k2", "uncertainty_px", "doubtful", "method",
-           "k1_raw", "k2_raw", "raw_uncertainty_px", "weight", "reason"]
-#: A shot is doubtful when more than this share of its raw estimates say they are doubtful.
-DOUBTFUL_SHARE = 0.5
+COLUMNS = ["frame", "time_s", "shot", "k1", "k2", "cx", "cy", "pixel_aspect", "uncertainty_px", "doubtful", "reason", "applied", "method",
+           "k1_raw", "k2_raw", "raw_uncertainty_px", "weight"]
 
 
 @dataclass
@@ -67,8 +72,11 @@ class LensTrack:
 
     ``rate`` frames per second (exact), ``size`` (W, H); ``uncertainty_px`` and
     ``raw_uncertainty_px`` are NaN where unknown; ``raw`` and ``weight`` NaN on frames that were not
-    estimated; ``method`` "" there; ``reason`` the raw estimate's doubt reason ("" where not
-    estimated or not stated). ``doubtful_px`` is the threshold that marks a shot doubtful.
+    estimated; ``method`` "" there. ``doubtful_px`` is the threshold that marks a shot doubtful
+    when ``doubtful`` (bool per frame) is not given; ``reason`` (per frame) says why; ``applied``
+    (bool per frame, default all) whether the frame is corrected or passed through. ``geometry``
+    (N x 3: ``cx``, ``cy``, ``pixel_aspect`` per frame, default centred and square) completes each
+    frame's :class:`~glradial.lens.lens.Lens` with ``lens`` (N x 2: k1, k2).
     """
 
     rate: Fraction
@@ -82,10 +90,19 @@ class LensTrack:
     raw_uncertainty_px: np.ndarray | None = None
     method: list[str] = field(default_factory=list)
     doubtful_px: float = DOUBTFUL_PX
+    doubtful: np.ndarray | None = None
     reason: list[str] = field(default_factory=list)
+    applied: np.ndarray | None = None
+    geometry: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         n = len(self.shot)
+        if self.geometry is None:
+            self.geometry = np.tile([0.0, 0.0, 1.0], (n, 1))
+        if not self.reason:
+            self.reason = [""] * n
+        if self.applied is None:
+            self.applied = np.ones(n, dtype=bool)
         if self.time_s is None:
             self.time_s = np.arange(n) / float(self.rate)
         if self.uncertainty_px is None:
@@ -94,8 +111,10 @@ class LensTrack:
             self.raw_uncertainty_px = np.full(n, np.nan)
         if not self.method:
             self.method = [""] * n
-        if not self.reason:
-            self.reason = [""] * n
+        if self.doubtful is None:
+            self.doubtful = np.isin(self.shot, [s for s in np.unique(self.shot)
+                                                if self.shot_uncertainty(int(s)) > self.doubtful_px])
+            self.reason = ["uncertain" if d else "" for d in self.doubtful]
 
     @property
     def fps(self) -> float:
@@ -111,38 +130,33 @@ class LensTrack:
             raise ValueError(f"the lens track has {self.n_frames} frames; the video has more (frame {frame})")
         return float(self.lens[frame, 0]), float(self.lens[frame, 1])
 
+    def lens_for(self, frame: int) -> Lens | None:
+        """The lens ``frame`` is corrected with, or ``None`` when it passes through uncorrected."""
+        lens = self.full_lens(frame)  # ValueError past the end of the track
+        return lens if self.applied[frame] else None
+
+    def full_lens(self, frame: int) -> Lens:
+        """The whole :class:`~glradial.lens.lens.Lens` of ``frame`` (principal point and pixel
+        aspect included), whether or not it is applied."""
+        k1, k2 = self.lens_at(frame)
+        cx, cy, aspect = (float(v) for v in self.geometry[frame])
+        return Lens(k1, k2, cx, cy, aspect)
+
+    def lenses(self) -> list[Lens]:
+        """:meth:`full_lens` of every frame."""
+        return [self.full_lens(i) for i in range(self.n_frames)]
+
     def shot_uncertainty(self, shot: int) -> float:
         """Median stated uncertainty (px at 1920) of a shot's smoothed lenses; NaN if unknown."""
         values = self.uncertainty_px[self.shot == shot]
         values = values[np.isfinite(values)]
         return float(np.median(values)) if len(values) else math.nan
 
-    def shot_reasons(self, shot: int) -> list[str]:
-        """The doubt reasons its raw estimates stated (one per estimated frame; empty if none stated)."""
-        return [self.reason[i] for i in np.flatnonzero(self.shot == shot) if self.reason[i]]
-
-    def shot_doubtful(self, shot: int) -> bool:
-        """Median uncertainty above :attr:`doubtful_px` (unknown = not), or more than
-        :data:`DOUBTFUL_SHARE` of its raw estimates doubtful."""
-        reasons = self.shot_reasons(shot)
-        share = sum(r != "ok" for r in reasons) / len(reasons) if reasons else 0.0
-        return self.shot_uncertainty(shot) > self.doubtful_px or share > DOUBTFUL_SHARE
-
     def doubtful_shots(self) -> list[int]:
-        """Shots that are doubtful (:meth:`shot_doubtful`)."""
-        return [int(s) for s in np.unique(self.shot) if self.shot_doubtful(int(s))]
-
-    def uncorrected_where_doubtful(self) -> "LensTrack":
-        """A copy whose doubtful shots get no lens (``k1 = k2 = 0``: left uncorrected, the default of
-        ``correct --auto``); their raw estimates, uncertainties and reasons are kept, so they stay
-        doubtful and the file replays the same frames through ``--lens-track``."""
-        doubtful = np.isin(self.shot, self.doubtful_shots())
-        lens = self.lens.copy()
-        lens[doubtful] = 0.0
-        return replace(self, lens=lens, method=list(self.method), reason=list(self.reason))
+        """Shots marked doubtful (tracks without marks: median uncertainty above :attr:`doubtful_px`)."""
+        return [int(s) for s in np.unique(self.shot[self.doubtful])]
 
     def rows(self) -> list[dict]:
-        doubtful = set(self.doubtful_shots())
         out = []
         for i in range(self.n_frames):
             estimated = not math.isnan(self.raw[i, 0])
@@ -153,33 +167,37 @@ class LensTrack:
                     "shot": int(self.shot[i]),
                     "k1": float(self.lens[i, 0]),
                     "k2": float(self.lens[i, 1]),
+                    "cx": float(self.geometry[i, 0]),
+                    "cy": float(self.geometry[i, 1]),
+                    "pixel_aspect": float(self.geometry[i, 2]),
                     "uncertainty_px": _number(self.uncertainty_px[i]),
-                    "doubtful": int(int(self.shot[i]) in doubtful),
+                    "doubtful": int(bool(self.doubtful[i])),
+                    "reason": self.reason[i],
+                    "applied": int(bool(self.applied[i])),
                     "method": self.method[i],
                     "k1_raw": float(self.raw[i, 0]) if estimated else None,
                     "k2_raw": float(self.raw[i, 1]) if estimated else None,
                     "raw_uncertainty_px": _number(self.raw_uncertainty_px[i]) if estimated else None,
                     "weight": float(self.weight[i]) if estimated else None,
-                    "reason": self.reason[i],
                 }
             )
         return out
 
     def per_shot(self) -> list[dict]:
         """One row per shot: first/last frame, the median smoothed lens, its median uncertainty
-        (px at 1920, None if unknown), whether it is doubtful, and the methods used."""
+        (px at 1920, None if unknown), whether it is doubtful and why, whether its lens was applied,
+        and the methods used."""
         shots = []
         for shot in np.unique(self.shot):
             frames = np.flatnonzero(self.shot == shot)
             k = np.median(self.lens[frames], axis=0)
             sure = self.shot_uncertainty(int(shot))
             methods = sorted({self.method[i] for i in frames if self.method[i]})
-            reasons = self.shot_reasons(int(shot))
             shots.append({
                 "shot": int(shot), "first_frame": int(frames[0]), "last_frame": int(frames[-1]),
                 "k1": float(k[0]), "k2": float(k[1]), "uncertainty_px": _number(sure),
-                "doubtful": self.shot_doubtful(int(shot)), "methods": methods,
-                "reason": max(set(reasons), key=reasons.count) if reasons else "",
+                "doubtful": bool(self.doubtful[frames].any()), "reason": self.reason[frames[0]],
+                "applied": bool(self.applied[frames].all()), "methods": methods,
             })
         return shots
 
@@ -241,7 +259,8 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
         raise LensTrackError(f"lens track {str(path)!r} has no rows")
     n = len(rows)
     lens, shot, sure = np.empty((n, 2)), np.zeros(n, dtype=np.int64), np.full(n, np.nan)
-    method = [""] * n
+    geometry = np.tile([0.0, 0.0, 1.0], (n, 1))
+    method, applied = [""] * n, np.ones(n, dtype=bool)
     for index, (line, row) in enumerate(rows):
         where = f"lens track {str(path)!r} line {line}"
 
@@ -264,8 +283,16 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
         if frame != index:
             raise LensTrackError(f"{where}: frame {row.get('frame')!r}, expected {index} (one row per frame, in order from 0)")
         k1, k2 = value("k1"), value("k2")
+        geometry[index] = [value(name, required=False) if row.get(name) not in (None, "") else default
+                           for name, default in (("cx", 0.0), ("cy", 0.0), ("pixel_aspect", 1.0))]
+        flag = value("applied", required=False)
+        if flag not in (None, 0, 1):
+            raise ValueError(f"{where}: applied must be 0 or 1, got {row.get('applied')!r}")
+        applied[index] = flag != 0
         try:
-            Lens(k1, k2).check_frame(size)
+            frame_lens = Lens(k1, k2, *geometry[index])
+            if applied[index]:
+                frame_lens.check_frame(size)
         except ValueError as err:
             raise LensTrackError(f"{where}: {err}") from None
         lens[index] = (k1, k2)
@@ -281,4 +308,4 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
             sure[index] = uncertainty
         method[index] = str(row.get("method") or "")
     return LensTrack(rate, size, shot, lens, np.full((n, 2), np.nan), np.full(n, np.nan),
-                     uncertainty_px=sure, method=method)
+                     uncertainty_px=sure, method=method, applied=applied, geometry=geometry)

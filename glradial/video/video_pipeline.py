@@ -1,17 +1,13 @@
-"""Automatic lens correction of videos: estimate per frame, detect cuts, smooth per shot, correct.
+"""Automatic lens correction of videos: one lens per shot, then correct.
 
-Pipeline (two passes over the file, so memory does not grow with its length):
+Pipeline (memory does not grow with the file's length):
 
-1. :func:`track_video` decodes every frame once, feeds each (converted :data:`DETECT_WIDTH` px
-   wide) to a :class:`~glradial.video.smoothing.ShotDetector` and runs the estimator (on a copy at most
-   :data:`ESTIMATE_WIDTH` px wide: what the estimators look at) on the first frame of every shot
-   and then every ``every``-th frame of the shot. The per-shot robust smoother (:func:`~glradial.video.smoothing.smooth_track`) turns those
-   samples into a lens for every frame, weighting each sample by the confidence its estimator
-   states (``uncertainty_px`` of a :class:`glradial.Lens` subclass; equal weights for a plain lens
-   or a pair). A smoothed lens that would fold over on the frame is replaced by the nearest
-   accepted raw estimate of the same shot. Shots whose smoothed lens is doubtful (median stated
-   uncertainty above :data:`~glradial.video.lens_track.DOUBTFUL_PX`) are listed by
-   :meth:`LensTrack.doubtful_shots`.
+1. :func:`track_video` decodes every frame once, detects cuts on 64 px thumbnails and gathers a
+   cheap subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
+   then, on copies at most :data:`ESTIMATE_WIDTH` px wide); each shot gets one joint lens fit, a
+   function of its zoom when the picture zooms (:mod:`glradial.video.shot_track`,
+   :mod:`glradial.video.shot_fit`). A doubtful shot is marked and, by default, passed through
+   uncorrected.
 2. :func:`correct_video` decodes the file again, corrects each frame with its lens and encodes it
    (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags and depth kept).
    Decoding, correction and encoding overlap on three threads with at most ``depth`` frames
@@ -32,19 +28,18 @@ import os
 import queue
 import sys
 import threading
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from fractions import Fraction
-from typing import Any, Callable, Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from ..lens.lens import Lens, as_lens, corner_radius
-from ..lens.metrics import REPORT_WIDTH, max_displacement
-from ..media.frames import to_rgb8
+from ..lens.lens import Lens, as_lens
+from ..lens.metrics import max_displacement
 from ..media.progress import Progress
 from ..media.video_io import FIELD_ORDER_CODES, CopiedPacket, EncodeOptions, VideoFrame, VideoInfo, VideoReader, VideoWriter
-from .lens_track import DOUBTFUL_PX, LensTrack
-from .smoothing import ShotDetector, smooth_track
+from .lens_track import LensTrack
+from .shot_track import EVERY, track_shots
 
 __all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
@@ -54,9 +49,6 @@ EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
 #: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
 #: detector at <= 960 px, so a full-size conversion would be wasted
 ESTIMATE_WIDTH = 960
-
-#: pass 1 converts every frame this wide (px) for the shot detector, which compares 64 x 36 thumbnails
-DETECT_WIDTH = 64
 
 #: frames queued between two threads of the pipeline (bounded memory: ~3 x depth frames in flight)
 DEPTH = 4
@@ -163,113 +155,8 @@ def default_estimator(model: str | os.PathLike | None = None, method: str | None
     return lambda frame: estimator.estimate(frame, method=method)
 
 
-def _confidence(value: object) -> tuple[float, str]:
-    """``(uncertainty_px, method)`` an estimate states (a LensEstimate), NaN and "" for a plain
-    Lens or a pair."""
-    sure = getattr(value, "uncertainty_px", None)
-    method = getattr(value, "method", None)
-    try:
-        sure = float(sure) if sure is not None else np.nan
-    except (TypeError, ValueError):
-        sure = np.nan
-    return (sure if sure >= 0 else np.nan), (str(method) if method else "")
-
-
-def track_video(
-    path: str | os.PathLike,
-    estimator: EstimatorFn,
-    *,
-    every: int = 5,
-    window_s: float = 2.0,
-    detector: ShotDetector | None = None,
-    progress: bool | None = None,
-    doubtful_px: float = DOUBTFUL_PX,
-    rate: Fraction | None = None,
-) -> LensTrack:
-    """Pass 1: estimate, detect cuts and smooth; see the module docstring.
-
-    ``every`` (frames) is the estimation stride inside a shot; ``window_s`` (seconds) is the
-    smoother's half window (longer = steadier, slower to follow a zoom); ``doubtful_px`` (px at
-    1920) the median uncertainty above which a shot is doubtful; ``rate`` the frame rate of an
-    image-sequence input (default 25). Samples are weighted by their stated uncertainty where every
-    estimate states one (else all equally).
-    """
-    if every < 1:
-        raise ValueError(f"every must be >= 1 frame, got {every}")
-    if not window_s > 0:
-        raise ValueError(f"window must be > 0 seconds, got {window_s}")
-    seen = _estimate_frames(path, estimator, every, detector or ShotDetector(), progress, rate)
-    info, n = seen.info, len(seen.shots)
-    shot_array = np.asarray(seen.shots, dtype=np.int64)
-    samples = np.asarray(seen.estimates, dtype=np.float64).reshape(-1, 2)
-    time_array = np.asarray(seen.times, dtype=np.int64)
-    stated_array = np.asarray(seen.stated, dtype=np.float64)
-    known = bool(len(stated_array)) and bool(np.all(np.isfinite(stated_array)))
-    radius = corner_radius(info.size)
-    smoothed, weights, sure = smooth_track(
-        time_array, samples, shot_array, half_window=window_s * info.fps, radius=radius,
-        uncertainty=stated_array / REPORT_WIDTH if known else None,
-    )
-    # a smoothed lens must not fold over on the frame: fall back to the nearest accepted raw estimate
-    for i in range(n):
-        lens = Lens(*smoothed[i])
-        if lens.fold_radius() <= radius:
-            mine = np.flatnonzero((shot_array[time_array] == shot_array[i]) & (weights > 0))
-            mine = mine if len(mine) else np.flatnonzero(shot_array[time_array] == shot_array[i])
-            nearest = mine[np.argmin(np.abs(time_array[mine] - i))]
-            smoothed[i] = samples[nearest]
-            sure[i] = stated_array[nearest] / REPORT_WIDTH
-    raw, weight, raw_sure = np.full((n, 2), np.nan), np.full(n, np.nan), np.full(n, np.nan)
-    raw[time_array], weight[time_array], raw_sure[time_array] = samples, weights, stated_array
-    method, reason = [""] * n, [""] * n
-    for t, m, why in zip(seen.times, seen.methods, seen.reasons):
-        method[t], reason[t] = m, why
-    return LensTrack(info.rate, info.size, shot_array, smoothed, raw, weight, time_s=np.asarray(seen.stamps),
-                     uncertainty_px=sure * REPORT_WIDTH, raw_uncertainty_px=raw_sure, method=method,
-                     doubtful_px=doubtful_px, reason=reason)
-
-
-@dataclass
-class _Estimates:
-    """What pass 1 saw: per frame its shot and time stamp; per estimated frame its index, lens
-    ``(k1, k2)``, stated uncertainty (px at 1920, NaN if none), method and doubt reason ("" if none)."""
-
-    info: Any = None
-    shots: list[int] = field(default_factory=list)
-    stamps: list[float] = field(default_factory=list)
-    times: list[int] = field(default_factory=list)
-    estimates: list[tuple[float, float]] = field(default_factory=list)
-    stated: list[float] = field(default_factory=list)
-    methods: list[str] = field(default_factory=list)
-    reasons: list[str] = field(default_factory=list)
-
-
-def _estimate_frames(path: str | os.PathLike, estimator: EstimatorFn, every: int, detector: ShotDetector,
-                     progress: bool | None, rate: Fraction | None) -> _Estimates:
-    """Decode ``path`` once: cuts on every frame, the estimator on each shot's first and every ``every``-th frame."""
-    seen = _Estimates()
-    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
-        info = seen.info = reader.info
-        shot, since_start = -1, 0
-        with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
-            for item in frames:
-                index = item.index
-                seen.stamps.append(float(item.pts * info.time_base) if item.pts is not None else index / info.fps)
-                if detector.update(item.image):
-                    shot, since_start = shot + 1, 0
-                if since_start % every == 0:
-                    seen.times.append(index)
-                    value = estimator(to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
-                    lens = as_lens(value)
-                    seen.estimates.append((lens.k1, lens.k2))
-                    sure, method = _confidence(value)
-                    seen.stated.append(sure)
-                    seen.methods.append(method)
-                    seen.reasons.append(str(getattr(value, "reason", "") or ""))
-                seen.shots.append(shot)
-                since_start += 1
-                bar.update()
-    return seen
+#: pass 1: detect cuts and fit one lens per shot while decoding (:func:`glradial.video.shot_track.track_shots`)
+track_video = track_shots
 
 
 class _FrameCorrector:
@@ -339,7 +226,7 @@ def _with_fields(info: VideoInfo, field_order: str) -> VideoInfo:
 def correct_video(
     source: str | os.PathLike,
     target: str | os.PathLike,
-    lenses: Callable[[int], Lens | tuple[float, float]],
+    lenses: Callable[[int], Lens | tuple[float, float] | None],
     *,
     fit: str = "same",
     interpolation: str = "linear",
@@ -355,7 +242,8 @@ def correct_video(
     **remap_options: object,
 ) -> int:
     """Pass 2: correct (``direction="distort"``: distort) every frame of ``source`` with
-    ``lenses(frame_index)`` (a :class:`Lens` or ``(k1, k2)``) into ``target``
+    ``lenses(frame_index)`` (a :class:`Lens` or ``(k1, k2)``; ``None`` passes the frame through
+    uncorrected) into ``target``
     (atomic; size, timing, colour, depth and the other streams kept, :mod:`glradial.media.video_io`;
     encoder from ``options``). Returns the number of frames written. ``frames_expected`` (a lens
     track's length): a video with another frame count is an error and leaves no output. A header
@@ -373,8 +261,10 @@ def correct_video(
             writer.check_alpha_kept()
             def work(item):
                 if isinstance(item, VideoFrame):
-                    lens = as_lens(lenses(item.index))
-                    return writer.frame(corrector(item.image, lens), item.pts)
+                    lens = lenses(item.index)
+                    if lens is None:  # passed through uncorrected (a doubtful shot)
+                        return writer.frame(item.image, item.pts)
+                    return writer.frame(corrector(item.image, as_lens(lens)), item.pts)
                 return item
 
             with Progress(info.frame_count, label, enabled=progress) as bar, \
@@ -406,15 +296,14 @@ def estimate_video(
     path: str | os.PathLike,
     *,
     model: str | os.PathLike | None = None,
-    every: int = 5,
-    window_s: float = 2.0,
+    every: int = EVERY,
     progress: bool | None = None,
     method: str | None = None,
 ) -> LensTrack:
     """Per-frame and per-shot lens of a video with the bundled estimator (or ``model``, with
     ``method`` when given): the first pass of ``glradial correct --auto`` (:func:`track_video`)
     without the correction (what ``glradial estimate VIDEO`` prints, with the estimator it loaded)."""
-    return track_video(path, default_estimator(model, method), every=every, window_s=window_s, progress=progress)
+    return track_video(path, default_estimator(model, method), every=every, progress=progress)
 
 
 def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_json: bool = False) -> str:
@@ -436,7 +325,8 @@ def track_report(track: LensTrack, source: str, *, per_frame: bool = False, as_j
             lines.append(
                 f"{source}: shot {shot['shot']} frames {shot['first_frame']}-{shot['last_frame']} "
                 f"k1={shot['k1']:.6f} k2={shot['k2']:.6f}" + _confidence_text(shot["uncertainty_px"], shot["methods"])
-                + (" DOUBTFUL" if shot["doubtful"] else "")
+                + (f" DOUBTFUL({shot['reason']})" if shot["doubtful"] else "")
+                + ("" if shot["applied"] else " not-applied")
             )
     return "\n".join(lines)
 
@@ -446,23 +336,15 @@ def _confidence_text(uncertainty_px: float | None, methods: list[str]) -> str:
     return text + (f" method={'+'.join(methods)}" if methods else "")
 
 
-def _why(shot: dict, threshold: float) -> str:
-    """Why a shot of :meth:`LensTrack.per_shot` is doubtful: its uncertainty, or its estimates' reason."""
-    sure = shot["uncertainty_px"]
-    if sure is not None and sure > threshold:
-        return f"uncertainty {sure:.1f} px > {threshold:g} px at 1920 wide"
-    return f"most of its estimates say {shot['reason'] or 'doubtful'}"
-
-
-def doubtful_warnings(track: LensTrack, source: str, left_uncorrected: bool = False) -> list[str]:
-    """One warning line per doubtful shot of ``track`` (for ``correct --auto``); with
-    ``left_uncorrected`` each line says the shot was left uncorrected."""
+def doubtful_warnings(track: LensTrack, source: str) -> list[str]:
+    """One warning line per doubtful shot of ``track`` (for ``correct --auto``)."""
     lines = []
     for shot in track.per_shot():
         if shot["doubtful"]:
             lines.append(
                 f"glradial: warning: {source}: shot {shot['shot']} (frames {shot['first_frame']}-{shot['last_frame']}) "
-                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful: {_why(shot, track.doubtful_px)}; check the shot "
-                "or give its lens in a --lens-track file" + ("; left uncorrected (--apply-doubtful applies it)" if left_uncorrected else "")
+                f"lens k1={shot['k1']:.4f} k2={shot['k2']:.4f} is doubtful ({shot['reason']}, uncertainty "
+                f"{shot['uncertainty_px'] or float('nan'):.1f} px at 1920 wide): "
+                + ("passed through uncorrected (--apply-doubtful applies it)" if not shot["applied"] else "applied anyway")
             )
     return lines

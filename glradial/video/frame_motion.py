@@ -1,0 +1,152 @@
+"""Frame-to-frame evidence of a video shot: matched points of two frames and their homography.
+
+A broadcast camera pans, tilts and zooms about a fixed centre, so two frames of one shot are
+related by a plane homography once both are undistorted with the right lens (a rotation about the
+camera centre, and a change of focal length, move every ray, not only those of one plane). The
+matches found here feed :mod:`glradial.video.shot_fit`, which finds the lens under which one homography
+fits them.
+
+Matching: Shi-Tomasi corners of a gray copy at most :data:`MOTION_WIDTH` px wide, tracked with
+pyramidal Lucas-Kanade optical flow and checked backwards (forward-backward error at most
+:data:`FB_MAX_PX`); points that move against the camera (players, the ball) are dropped by a RANSAC
+homography on the points undistorted with a rough lens (:data:`RANSAC_PX`).
+
+Convention: points are in lens units of the frame (image width = 1, origin at the frame centre,
+:func:`glradial.lens.lens.pixels_to_lens`); ``hint`` lenses are width-normalised ``(k1, k2)``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from ..lens.lens import lens_to_pixels, pixels_to_lens
+from ..lens.lensfuncs import undistort_point_exact
+
+__all__ = ["MOTION_WIDTH", "Matches", "motion_gray", "match_frames", "zoom_of", "homography_of"]
+
+#: gray copies for matching are at most this wide (px): corners are located to ~0.1 px there, i.e.
+#: ~0.3 px of a 1920-wide frame, below the displacement errors the lens fit aims at
+MOTION_WIDTH = 640
+#: corners tracked per pair of frames
+MAX_CORNERS = 400
+#: matches kept per pair (evenly thinned): the lens fit weighs a pair as at most
+#: :data:`glradial.video.shot_fit.MATCH_CAP` points anyway, and evaluates every kept one at each step
+MAX_MATCHES = 150
+#: corners closer than this to each other (px of the gray copy) are not both taken
+MIN_CORNER_DISTANCE = 10
+#: a track whose backward track misses its start by more than this (px of the gray copy) is dropped
+FB_MAX_PX = 0.4
+#: RANSAC inlier threshold (px of the gray copy) on points undistorted with the hint lens: wide
+#: enough for a hint 10 px (at 1920) off, narrow enough to drop a running player
+RANSAC_PX = 1.5
+#: seed of OpenCV's generator before each RANSAC, so that a video gives the same lens every run
+RANSAC_SEED = 25
+#: fewer inliers than this: the pair gives no evidence (too little texture, or no overlap)
+MIN_MATCHES = 30
+#: corners this close to the border (px of the gray copy) are not used (overlays, letterbox edges)
+BORDER_PX = 8
+
+
+@dataclass(frozen=True)
+class Matches:
+    """Points of frame ``a`` and where they lie in frame ``b`` (lens units, ``N x 2`` each, N >=
+    :data:`MIN_MATCHES`), found on copies ``width`` px wide (the scale of their localisation noise)."""
+
+    a: np.ndarray
+    b: np.ndarray
+    width: int
+
+    def __len__(self) -> int:
+        return len(self.a)
+
+
+def motion_gray(frame: np.ndarray, max_width: int = MOTION_WIDTH) -> np.ndarray:
+    """uint8 ``H x W x 3`` RGB (or ``H x W`` gray) -> uint8 gray at most ``max_width`` px wide (area)."""
+    frame = np.asarray(frame)
+    if frame.dtype != np.uint8 or frame.ndim not in (2, 3):
+        raise ValueError(f"frame must be a uint8 H x W (x 3) array, got {frame.dtype} {frame.shape}")
+    gray = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY) if frame.ndim == 3 else frame
+    height, width = gray.shape
+    if width > max_width:
+        gray = cv2.resize(gray, (max_width, max(2, round(height * max_width / width))), interpolation=cv2.INTER_AREA)
+    return np.ascontiguousarray(gray)
+
+
+def _corners(gray: np.ndarray) -> np.ndarray | None:
+    mask = np.zeros_like(gray)
+    mask[BORDER_PX:-BORDER_PX, BORDER_PX:-BORDER_PX] = 255
+    corners = cv2.goodFeaturesToTrack(gray, MAX_CORNERS, 0.005, MIN_CORNER_DISTANCE, mask=mask, blockSize=7)
+    if corners is None:
+        return None
+    return cv2.cornerSubPix(gray, corners.astype(np.float32), (4, 4), (-1, -1),
+                            (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 20, 0.01))
+
+
+def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0, 0.0),
+                 guess: np.ndarray | None = None) -> Matches | None:
+    """Matched points of two gray copies (:func:`motion_gray`, same size) of frames of one shot;
+    ``None`` when fewer than :data:`MIN_MATCHES` survive (no texture, no overlap, a cut). ``hint``
+    is a rough lens, used only to reject points that move against the camera. ``guess``: a
+    homography (lens units, of points undistorted with ``hint``) predicting where the points of
+    ``a`` lie in ``b``: the tracker then starts there, so frames far apart in a pan or zoom match."""
+    if a.shape != b.shape:
+        raise ValueError(f"frames to match must have one size, got {a.shape[::-1]} and {b.shape[::-1]}")
+    start = _corners(a)
+    if start is None or len(start) < MIN_MATCHES:
+        return None
+    params = dict(winSize=(21, 21), maxLevel=4, criteria=(cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+    height, width = a.shape
+    size = (width, height)
+    if guess is None:
+        end, ok, _ = cv2.calcOpticalFlowPyrLK(a, b, start, None, **params)
+    else:
+        predicted = _predict(start.reshape(-1, 2), size, hint, guess).reshape(-1, 1, 2).astype(np.float32)
+        end, ok, _ = cv2.calcOpticalFlowPyrLK(a, b, start, predicted, flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **params)
+    back, ok_back, _ = cv2.calcOpticalFlowPyrLK(b, a, end, start.copy(), flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **params)
+    fb = np.linalg.norm((back - start).reshape(-1, 2), axis=1)
+    p, q = start.reshape(-1, 2).astype(np.float64), end.reshape(-1, 2).astype(np.float64)
+    inside = (q[:, 0] >= BORDER_PX) & (q[:, 0] < width - BORDER_PX) & (q[:, 1] >= BORDER_PX) & (q[:, 1] < height - BORDER_PX)
+    keep = (ok.ravel() == 1) & (ok_back.ravel() == 1) & (fb <= FB_MAX_PX) & inside
+    if keep.sum() < MIN_MATCHES:
+        return None
+    pa, pb = pixels_to_lens(p[keep], size), pixels_to_lens(q[keep], size)
+    ua, va = undistort_point_exact(pa, float(hint[0]), float(hint[1]))
+    ub, vb = undistort_point_exact(pb, float(hint[0]), float(hint[1]))
+    cv2.setRNGSeed(RANSAC_SEED)  # this thread's OpenCV generator: the same frames give the same matches
+    _, inliers = cv2.findHomography(lens_to_pixels(ua, size), lens_to_pixels(ub, size), cv2.RANSAC, RANSAC_PX,
+                                    maxIters=500, confidence=0.995)
+    if inliers is None:
+        return None
+    good = np.flatnonzero((inliers.ravel() == 1) & va & vb)
+    if len(good) < MIN_MATCHES:
+        return None
+    good = good[np.linspace(0, len(good) - 1, min(len(good), MAX_MATCHES)).astype(np.intp)]
+    return Matches(pa[good], pb[good], width)
+
+
+def _predict(pixels: np.ndarray, size: tuple[int, int], hint: tuple[float, float], guess: np.ndarray) -> np.ndarray:
+    """Pixels of one frame -> where ``guess`` (a homography of hint-undistorted lens units) puts them."""
+    from ..lens.lensfuncs import distort_point
+
+    p_u, _ = undistort_point_exact(pixels_to_lens(pixels, size), float(hint[0]), float(hint[1]))
+    q = np.c_[p_u, np.ones(len(p_u))] @ np.asarray(guess, np.float64).T
+    return lens_to_pixels(distort_point(q[:, :2] / q[:, 2:3], float(hint[0]), float(hint[1])), size)
+
+
+def homography_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Least-squares homography (3 x 3, ``H[2, 2] = 1``) taking points ``a`` to ``b`` (``N x 2``, N
+    >= 4, lens units): normalised direct linear transform, no outlier rejection."""
+    return cv2.findHomography(a, b, 0)[0]
+
+
+def zoom_of(homography: np.ndarray) -> float:
+    """Scale change at the frame centre of ``homography`` (lens units to lens units): the square
+    root of the determinant of its Jacobian at the origin; > 1 when the second frame is zoomed in."""
+    h = np.asarray(homography, np.float64) / homography[2, 2]
+    jacobian = h[:2, :2] - np.outer(h[:2, 2], h[2, :2])
+    det = float(np.linalg.det(jacobian))
+    return math.sqrt(det) if det > 0 else math.nan

@@ -1,0 +1,406 @@
+"""One lens per shot: a joint robust fit over the line chains of all sampled frames of a shot and
+the frame-to-frame matches between them.
+
+Model (width-normalised lens, DESIGN.md): a static or panning camera has one lens ``(k1, k2)``. When
+the picture zooms (the log scale ``z`` of each sampled frame, measured from frame-to-frame
+homographies, spans more than :data:`ZOOM_MIN`), the lens follows the zoom as a smooth function of
+it: ``k1(z) = a0 + a1 z + a2 z^2`` and ``k2(z) = m(k1(z)) + b0`` (``m`` the manifold of real
+lenses, :func:`glradial.lens.metrics.manifold_k2`; ``z`` centred on the shot's mid zoom). A quadratic in
+focal length corrects broadcast zooms as well as per-frame models (Alvarez, Gomez & Henriquez, JMIV
+2012); ``a2`` is held loosely to 0 (:data:`ZOOM_CURVE_SIGMA`).
+
+Residuals (``scipy.optimize.least_squares``, Cauchy loss of scale ``sqrt(ROBUST_T)`` chi, so a chain
+or match that no lens explains costs at most logarithmically):
+
+* **lines** -- one per chain, as in :mod:`glradial.estimation.line_fit`: the chain undistorted with its frame's
+  lens, a total-least-squares line through it, ``chi = sqrt(n e / (SIGMA_POINT^2 + n SIGMA_FLOOR^2))``
+  (``e`` the mean squared distance, px of the detection copy, scaled back to the distorted frame).
+  Chains that no lens on the manifold straightens, or that no lens choice changes, are screened out
+  first; after a first fit, chains far above the median are dropped.
+* **frame-to-frame** -- one per match: both frames undistorted with their lenses, the least-squares
+  homography of the pair (solved inside the residual: variable projection), the transfer error
+  over :data:`MATCH_SIGMA` px of the matching copy, weighted so one pair counts as at most
+  :data:`MATCH_CAP` points. Only under the right lens does one homography fit them (a camera turning
+  and zooming about its centre); a static camera gives identity pairs that say nothing.
+* **priors** -- ``k1`` loosely to the per-frame estimates' median (:data:`K1_PRIOR_SIGMA`), ``b0``
+  to 0 (:data:`K2_PRIOR_SIGMA`).
+
+Uncertainty (``uncertainty_px``, a ~90 % bound on the maximum displacement error over the 16:9
+frame, px at 1920, the meaning of :class:`glradial.LensEstimate`): the fit's covariance (Gauss-Newton,
+scaled by the chains' reduced chi^2, whatever its size: the noise level the lines show) gives a 1-sigma displacement ``s``. The frames of one shot
+are **not** independent evidence (a static camera shows the same lines in every frame), so ``s`` is
+multiplied by ``sqrt(S / V)``: ``S`` sampled frames count as ``V`` independent views, ``V = 1 +`` the
+new picture the camera brought into view (pan in frame widths plus the zoom's log range), at most
+``S``. A static shot of 100 frames is then as sure as its single best frame, not 10x surer. The bound
+is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`, calibrated on the clips of
+``scripts/make_clips.py`` (docs/eval/shots.md).
+
+Doubt (reason strings are machine-readable): ``no_geometry`` (fewer than :data:`MIN_CHAINS` chains
+pass screening and the camera did not pan :data:`PAN_MIN`: nothing but the per-frame
+estimates, i.e. the CNN, fixes the lens: the shot takes their median and their median bound,
+doubtful when that exceeds the threshold or when they say so themselves),
+``uncertain`` (bound above the run's threshold), ``fold_over`` (the lens folds over inside the
+frame).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from ..estimation.line_fit import (
+    K1_PRIOR_SIGMA,
+    K2_PRIOR_SIGMA,
+    OUTLIER_CHI,
+    ROBUST_T,
+    SIGMA_FLOOR,
+    SIGMA_POINT,
+    STRAIGHT_RMS,
+)
+from ..estimation.lines import LineEvidence
+from ..lens.lens import Lens
+from ..lens.lensfuncs import drap_coefficients
+from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
+from .frame_motion import Matches, homography_of
+from .lens_track import DOUBTFUL_PX
+
+__all__ = ["ShotSample", "ShotEvidence", "ShotLens", "fit_shot", "ZOOM_MIN", "BOUND_SCALE", "BOUND_FLOOR_PX"]
+
+#: a shot whose sampled log zoom spans more than this (about 6 % in focal length) gets the zoom model
+ZOOM_MIN = 0.06
+#: loose prior of the zoom model's curvature a2 (lens units per log-zoom^2)
+ZOOM_CURVE_SIGMA = 0.5
+#: localisation noise of a tracked corner (px of the matching copy)
+MATCH_SIGMA = 0.3
+#: one pair of frames counts as at most this many independent matches (the points of one pair share
+#: the tracker's and the homography's errors)
+MATCH_CAP = 60
+#: points per chain after averaging consecutive points in groups; and the residual range (px of the
+#: detection copy, RMS) over the lenses of the manifold below which a chain says too little about
+#: the lens to enter. The shot fit's own values (the single-frame fit of
+#: :mod:`glradial.estimation.line_fit` keeps 16 points and 0.7 px): pooled over many frames, the
+#: weakly curved chains it admits add their systematic error more than their information.
+MAX_CHAIN_POINTS = 32
+INFORMATIVE_RMS = 1.0
+#: typical size of each parameter (a0, a1, a2, b0; static: a0, b0) for the solver's steps
+PARAMETER_SCALE = (0.05, 0.2, 0.5, 0.02)
+#: grid of k1 (on the manifold) for screening chains and seeding the fit
+K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
+#: calibrated multiplier from the 1-sigma displacement (redundancy-corrected) to the 90 % bound, and
+#: the floor added to it (px at 1920): the error of a frame's own residual distortion and of the
+#: model (see the module docstring and docs/eval/shots.md)
+BOUND_SCALE = 0.6
+BOUND_FLOOR_PX = 1.0
+#: stated bound when the shot has no geometric evidence (px at 1920): the CNN's alone
+NO_GEOMETRY_PX = 16.0
+#: a shot has geometric evidence of its lens when at least this many chains pass screening...
+MIN_CHAINS = 2
+#: ...or the camera panned at least this far (frame widths). A static camera's frame pairs say
+#: nothing, and a pure zoom about the centre only ties the lens at one zoom to the lens at another
+#: (the map between the frames is radial: any lens at the first zoom has a matching one at the
+#: second), so neither reads the lens without lines.
+PAN_MIN = 0.1
+
+
+@dataclass(frozen=True)
+class ShotSample:
+    """One sampled frame of a shot: its index, its line chains (``None``: not detected) and the
+    per-frame estimate (a :class:`glradial.Lens` or a :class:`glradial.LensEstimate`; ``None``: none)."""
+
+    frame: int
+    evidence: LineEvidence | None = None
+    estimate: Lens | None = None
+
+
+@dataclass
+class ShotEvidence:
+    """What one shot shows: ``samples`` in frame order, ``pairs`` ``(i, j, Matches)`` between samples
+    ``i`` and ``j``, ``zoom`` the log scale of every sample relative to the first (0 without
+    motion evidence), ``travel`` the new picture brought into view (frame widths; pans add their
+    centre shift, zooms their |log scale| change) and ``pan`` the pans' part of it."""
+
+    samples: list[ShotSample] = field(default_factory=list)
+    pairs: list[tuple[int, int, Matches]] = field(default_factory=list)
+    zoom: list[float] = field(default_factory=list)
+    travel: float = 0.0
+    pan: float = 0.0
+
+
+@dataclass(frozen=True)
+class ShotLens:
+    """The lens of one shot (see the module docstring). ``theta`` the model's parameters
+    (``[a0, b0]`` or ``[a0, a1, a2, b0]``), ``centre`` the log zoom they are centred on, ``chains``
+    and ``matches`` the evidence that agreed with the fit, ``views`` the independent views counted."""
+
+    theta: tuple[float, ...]
+    centre: float
+    uncertainty_px: float
+    doubtful: bool
+    reason: str
+    chains: int
+    matches: int
+    views: float
+    zooming: bool
+
+    def lens_at(self, log_zoom: float | np.ndarray) -> np.ndarray:
+        """``(k1, k2)`` at the log zoom(s) given (``(..., 2)``)."""
+        return _lens(np.asarray(self.theta, np.float64), np.asarray(log_zoom, np.float64) - self.centre)
+
+
+def _lens(theta: np.ndarray, z: np.ndarray) -> np.ndarray:
+    if len(theta) == 2:
+        k1 = np.broadcast_to(theta[0], np.shape(z)).astype(np.float64)
+        return np.stack([k1, manifold_k2(k1) + theta[1]], axis=-1)
+    k1 = theta[0] + theta[1] * z + theta[2] * z * z
+    return np.stack([k1, manifold_k2(k1) + theta[3]], axis=-1)
+
+
+class _Chains:
+    """The chains of all sampled frames, compacted (as in line_fit) and grouped by sample."""
+
+    def __init__(self, samples: list[ShotSample]) -> None:
+        pts, chain, sample, counts, widths = [], [], [], [], []
+        for s, item in enumerate(samples):
+            if item.evidence is None:
+                continue
+            for c in item.evidence.chains:
+                groups = min(MAX_CHAIN_POINTS, len(c.points))
+                edges = np.linspace(0, len(c.points), groups + 1).astype(np.intp)
+                pts.append(np.add.reduceat(c.points, edges[:-1], axis=0) / np.diff(edges)[:, None])
+                chain.append(np.full(groups, len(counts)))
+                sample.append(s)
+                counts.append(len(c.points))
+                widths.append(item.evidence.width)
+        self.points = np.concatenate(pts) if pts else np.zeros((0, 2))
+        self.chain = np.concatenate(chain) if chain else np.zeros(0, np.intp)
+        self.sample = np.asarray(sample, np.intp)
+        self.counts = np.asarray(counts, np.float64)
+        self.width = np.asarray(widths, np.float64)
+
+    @property
+    def n(self) -> int:
+        return len(self.counts)
+
+    def subset(self, keep: np.ndarray) -> "_Chains":
+        out = object.__new__(_Chains)
+        index = np.flatnonzero(keep)
+        renumber = np.full(self.n, -1)
+        renumber[index] = np.arange(len(index))
+        point_keep = keep[self.chain]
+        out.points, out.chain = self.points[point_keep], renumber[self.chain[point_keep]]
+        out.sample, out.counts, out.width = self.sample[index], self.counts[index], self.width[index]
+        return out
+
+    def chi2(self, lenses: np.ndarray) -> np.ndarray:
+        """Per-chain chi^2 with sample ``s`` undistorted by ``lenses[s]`` (NaN where the lens cannot)."""
+        if self.n == 0:
+            return np.zeros(0)
+        k = lenses[self.sample[self.chain]]
+        r_d = np.hypot(self.points[:, 0], self.points[:, 1])
+        p_u, valid = _undistort(self.points, k[:, 0], k[:, 1])
+        r_u = np.hypot(p_u[:, 0], p_u[:, 1])
+        mag = np.where(r_u > 1e-9, r_d / np.maximum(r_u, 1e-9), 1.0)
+        starts = np.flatnonzero(np.r_[True, np.diff(self.chain) != 0])
+        size = np.diff(np.r_[starts, len(self.chain)]).astype(np.float64)
+        mean = np.add.reduceat(p_u, starts, axis=0) / size[:, None]
+        d = p_u - mean[self.chain]
+        sxx, syy, sxy = (np.add.reduceat(v, starts) / size for v in (d[:, 0] ** 2, d[:, 1] ** 2, d[:, 0] * d[:, 1]))
+        mse = 0.5 * (sxx + syy) - np.sqrt(0.25 * (sxx - syy) ** 2 + sxy**2)
+        gain = np.add.reduceat(mag, starts) / size
+        bad = np.add.reduceat((~valid).astype(np.float64), starts) > 0
+        mse_px = np.maximum(mse, 0.0) * (gain * self.width) ** 2
+        chi2 = self.counts * mse_px / (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2)
+        return np.where(bad, np.nan, chi2)
+
+    def rms_px(self, lenses: np.ndarray) -> np.ndarray:
+        chi2 = self.chi2(lenses)
+        return np.sqrt(chi2 * (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2) / self.counts)
+
+
+def _undistort(points: np.ndarray, k1: float | np.ndarray, k2: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N, 2) undistorted with the lens ``(k1, k2)`` (scalars, or one per point): Drap-Lefevre
+    seed and Newton steps on the radius (:func:`glradial.lens.lensfuncs.drap_coefficients`), all at once.
+    ``valid`` is False where the lens folds over before the point's radius."""
+    r_d = np.hypot(points[:, 0], points[:, 1])
+    b1, b2, b3, b4 = drap_coefficients(k1, k2)
+    rd2 = r_d * r_d
+    r = r_d * (1.0 + rd2 * (b1 + rd2 * (b2 + rd2 * (b3 + rd2 * b4))))
+    for _ in range(4):
+        r2 = r * r
+        r = r - (r * (1.0 + r2 * (k1 + k2 * r2)) - r_d) / np.maximum(1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2), 1e-6)
+    r2 = r * r
+    valid = (np.abs(r * (1.0 + r2 * (k1 + k2 * r2)) - r_d) <= 1e-7) & (1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2) > 0) & (r >= 0)
+    scale = np.where(r_d > 0, r / np.where(r_d > 0, r_d, 1.0), 1.0)
+    return points * scale[:, None], valid
+
+
+def _pair_residuals(pairs: list[tuple[int, int, Matches]], lenses: np.ndarray) -> np.ndarray:
+    out = []
+    for i, j, m in pairs:
+        ua, _ = _undistort(m.a, float(lenses[i, 0]), float(lenses[i, 1]))
+        ub, _ = _undistort(m.b, float(lenses[j, 0]), float(lenses[j, 1]))
+        h = homography_of(ua, ub)
+        if h is None:
+            out.append(np.full(2 * len(m), 1e3))
+            continue
+        q = np.c_[ua, np.ones(len(ua))] @ h.T
+        moved = q[:, :2] / q[:, 2:3]
+        weight = math.sqrt(min(1.0, MATCH_CAP / len(m))) * m.width / MATCH_SIGMA
+        out.append(((moved - ub) * weight).ravel())
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+class _Problem:
+    """The residuals of one shot for a parameter vector (see the module docstring)."""
+
+    def __init__(self, chains: _Chains, pairs: list, z: np.ndarray, prior_k1: float, redundancy: float = 1.0) -> None:
+        self.chains, self.pairs, self.z, self.prior_k1 = chains, pairs, z, prior_k1
+        self.redundancy = redundancy
+
+    def lenses(self, theta: np.ndarray) -> np.ndarray:
+        return _lens(theta, self.z)
+
+    def data(self, theta: np.ndarray) -> np.ndarray:
+        lenses = self.lenses(theta)
+        chi2 = self.chains.chi2(lenses)
+        return np.concatenate([np.sqrt(np.where(np.isfinite(chi2), chi2, 1e6)), _pair_residuals(self.pairs, lenses)])
+
+    def priors(self, theta: np.ndarray) -> np.ndarray:
+        out = [(theta[0] - self.prior_k1) / K1_PRIOR_SIGMA, theta[-1] / K2_PRIOR_SIGMA]
+        if len(theta) == 4:
+            out.append(theta[2] / ZOOM_CURVE_SIGMA)
+        return np.asarray(out)
+
+    def residuals(self, theta: np.ndarray) -> np.ndarray:
+        """Data residuals through the robust loss (``sign(r) sqrt(T log(1 + r^2 / T))``, so the
+        solver's squares are the Cauchy cost, divided by the shot's redundancy: S sampled frames
+        that show V independent views weigh as V frames against the priors) and the priors, kept
+        quadratic."""
+        data = self.data(theta)
+        robust = np.sign(data) * np.sqrt(ROBUST_T * np.log1p(data * data / ROBUST_T) / self.redundancy)
+        return np.concatenate([robust, self.priors(theta)])
+
+    def solve(self, theta: np.ndarray):
+        scale = PARAMETER_SCALE[: len(theta) - 1] + PARAMETER_SCALE[-1:]
+        return least_squares(self.residuals, theta, x_scale=np.asarray(scale), diff_step=1e-4, max_nfev=100)
+
+
+def _screen(chains: _Chains) -> np.ndarray:
+    """Chains some lens on the manifold straightens AND whose residual the lens choice changes."""
+    if chains.n == 0:
+        return np.zeros(0, bool)
+    n_samples = int(chains.sample.max()) + 1
+    rms = np.stack([chains.rms_px(np.tile([k1, manifold_k2(k1)], (n_samples, 1))) for k1 in K1_GRID])
+    best = np.nanmin(np.where(np.isfinite(rms), rms, np.inf), axis=0)
+    worst = np.nanmax(np.where(np.isfinite(rms), rms, 0.0), axis=0)
+    return (best <= STRAIGHT_RMS) & (worst >= INFORMATIVE_RMS)
+
+
+def _seed(problem: _Problem) -> np.ndarray:
+    """Best static lens on the manifold grid (robust cost + prior), as ``[a0, b0]``."""
+    costs = []
+    for k1 in K1_GRID:
+        r = problem.residuals(np.array([k1, 0.0]))
+        costs.append(float(np.sum(r * r)))
+    return np.array([K1_GRID[int(np.argmin(costs))], 0.0])
+
+
+def _solve_zoom(problem: _Problem, static: np.ndarray, evidence: ShotEvidence):
+    """The zoom model's fit, the best of several starts: the static lens, the static k1 with k2 on
+    the manifold, and the slope of the per-frame estimates' k1 over the log zoom (a static fit can
+    settle where a k2 offset mimics the zoom's average)."""
+    starts = [np.array([static[0], 0.0, 0.0, static[1]]), np.array([static[0], 0.0, 0.0, 0.0])]
+    known = [(z, s.estimate.k1) for z, s in zip(problem.z, evidence.samples) if s.estimate is not None]
+    if len(known) >= 2 and np.ptp([z for z, _ in known]) > 0:
+        slope, intercept = np.polyfit(*zip(*known), 1)
+        starts.append(np.array([intercept, slope, 0.0, 0.0]))
+    results = [problem.solve(start) for start in starts]
+    return min(results, key=lambda r: r.cost)
+
+
+def _sigma_px(problem: _Problem, result, radius: float) -> float:
+    """1-sigma of the maximum displacement over ``radius`` (px at 1920) from the fit's covariance,
+    the largest over the sampled zooms."""
+    jac = result.jac
+    chi2 = problem.chains.chi2(problem.lenses(result.x))
+    # the chains' own scatter sets the noise level (frame pairs of a still camera fit exactly and
+    # would pretend to a precision the lines do not have)
+    reduced = float(np.mean(np.minimum(np.nan_to_num(chi2, nan=4.0 * ROBUST_T), 4.0 * ROBUST_T))) if len(chi2) >= MIN_CHAINS else 1.0
+    try:
+        cov = np.linalg.inv(jac.T @ jac) * reduced
+    except np.linalg.LinAlgError:
+        return math.inf
+    r = np.linspace(0.0, radius, 64)
+    basis = np.stack([r**3, r**5], axis=1)
+    worst = 0.0
+    for z in np.unique(problem.z):
+        grad = np.empty((2, len(result.x)))
+        for p in range(len(result.x)):
+            step = np.zeros(len(result.x))
+            step[p] = 1e-6
+            grad[:, p] = (_lens(result.x + step, np.asarray(z)) - _lens(result.x - step, np.asarray(z))) / 2e-6
+        var = np.einsum("ri,ij,rj->r", basis, grad @ cov @ grad.T, basis)
+        worst = max(worst, float(np.sqrt(np.max(np.maximum(var, 0.0)))))
+    return worst * REPORT_WIDTH
+
+
+def _fallback(evidence: ShotEvidence, doubtful_px: float) -> ShotLens:
+    """No geometric evidence in the shot: the median of the per-frame estimates, stating their
+    median bound (:data:`NO_GEOMETRY_PX` where they state none; never less for being many: they
+    read the same picture). Doubtful (``no_geometry``) when that bound exceeds ``doubtful_px``, or
+    (reason theirs) when most per-frame estimates say they are doubtful."""
+    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    k = np.median([[e.k1, e.k2] for e in estimates], axis=0) if estimates else np.zeros(2)
+    stated = [float(getattr(e, "uncertainty_px", NO_GEOMETRY_PX)) for e in estimates]
+    bound = float(np.median(stated)) if stated else NO_GEOMETRY_PX
+    theirs = [str(getattr(e, "reason", "") or "doubtful") for e in estimates if getattr(e, "doubtful", False)]
+    reason = "no_geometry" if not bound <= doubtful_px else ""
+    if 2 * len(theirs) > len(estimates):
+        reason = max(set(theirs), key=theirs.count)
+    theta = (float(k[0]), float(k[1] - manifold_k2(k[0])))
+    return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False)
+
+
+def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
+    """The lens of one shot from all its evidence (see the module docstring). ``doubtful_px``: a
+    bound above it makes the shot doubtful; ``radius``: the frame's corner radius (lens units)."""
+    if not evidence.samples:
+        raise ValueError("a shot needs at least one sampled frame")
+    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    prior_k1 = float(np.median([e.k1 for e in estimates])) if estimates else 0.0
+    chains = _Chains(evidence.samples)
+    chains = chains.subset(_screen(chains)) if chains.n else chains
+    pairs = [p for p in evidence.pairs if len(p[2]) >= 4]
+    if chains.n < MIN_CHAINS and not (pairs and evidence.pan >= PAN_MIN):
+        return _fallback(evidence, doubtful_px)
+    zoom = np.asarray(evidence.zoom if len(evidence.zoom) == len(evidence.samples) else [0.0] * len(evidence.samples))
+    zooming = float(np.ptp(zoom)) > ZOOM_MIN
+    centre = float(0.5 * (zoom.min() + zoom.max())) if zooming else 0.0
+    informative = len({int(s) for s in chains.sample} | {i for i, _, _ in pairs} | {j for _, j, _ in pairs})
+    views = min(float(informative), 1.0 + float(evidence.travel))
+    problem = _Problem(chains, pairs, zoom - centre, prior_k1, informative / views)
+    result = problem.solve(_seed(problem))
+    if zooming:
+        result = _solve_zoom(problem, result.x, evidence)
+    if chains.n:
+        chi2 = chains.chi2(problem.lenses(result.x))
+        keep = chi2 <= OUTLIER_CHI**2 * max(1.0, float(np.nanmedian(chi2)))
+        if 0 < keep.sum() < chains.n:
+            problem.chains = chains = chains.subset(keep)
+            result = problem.solve(result.x)
+    return _result(problem, result, views, centre, zooming, doubtful_px, radius)
+
+
+def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, doubtful_px: float,
+            radius: float) -> ShotLens:
+    sigma = _sigma_px(problem, result, CORNER_RADIUS_16_9)
+    bound = BOUND_SCALE * sigma + BOUND_FLOOR_PX
+    lenses = problem.lenses(result.x)
+    folds = any(Lens(float(k1), float(k2)).fold_radius() <= radius for k1, k2 in lenses)
+    reason = "fold_over" if folds else "uncertain" if not bound <= doubtful_px else ""
+    matches = sum(len(m) for _, _, m in problem.pairs)
+    return ShotLens(tuple(float(v) for v in result.x), centre, float(bound), bool(reason), reason,
+                    problem.chains.n, matches, views, zooming)

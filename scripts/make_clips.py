@@ -1,0 +1,128 @@
+"""Build the shot-evaluation clips: shots of a virtual broadcast camera (static, panning, zooming
+with the lens following the zoom) over real pictures and procedural stadiums, cut together, each
+with its per-frame ground truth beside it (``CLIP.mp4.truth.csv``, :func:`glradial.video.clips.write_clip`).
+
+Real sources (validation only, never training): the three pinhole stadium views and the stadium
+panorama of ``../shared/data/real_football/`` (their own lens is nil: rendered pinhole views and an
+equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
+
+Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--frames 50]
+[--set main|check]`` (``check``: held-out clips, other lenses and paths, other stadiums);
+writes ``OUT_DIR/manifest.json`` (clip -> group, shots) and the clips.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from glradial.video.clips import ShotSpec, render_clip, write_clip
+
+SIZE = (640, 360)
+
+
+def _read(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise SystemExit(f"cannot read {path}")
+    return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+
+
+def real_clips(data: Path, n: int) -> dict[str, list[ShotSpec]]:
+    """Clips over the real pinhole views (60 deg wide) and the real stadium panorama."""
+    views = [_read(data / f"football360_cam_{i:07d}.png") for i in (0, 12000, 19000)]
+    pano = _read(data / "stadium_01_1k_tonemapped.jpg")
+    return {
+        "real_a": [
+            ShotSpec(views[0], n, k1=(-0.30, -0.30)),
+            ShotSpec(views[1], n, (-6, 0, 1.1), (6, 1.5, 1.1), (-0.20, -0.20)),
+            ShotSpec(views[2], n, (0, 0, 1.0), (0, 0, 1.4), (-0.30, -0.18)),
+        ],
+        "real_b": [
+            ShotSpec(views[1], n, (0, 0, 1.0), (0, 0, 1.35), (-0.45, -0.30)),
+            ShotSpec(views[2], n, k1=(-0.15, -0.15)),
+            ShotSpec(views[0], n, (4, 0, 1.05), (-4, -1, 1.05), (-0.60, -0.60)),
+        ],
+        "real_c": [
+            ShotSpec(views[2], n, (-3, 0, 1.05), (3, 0, 1.25), (-0.35, -0.25)),
+            ShotSpec(views[0], n, (0, 0, 1.2), (0, 0, 1.0), (-0.10, -0.22)),
+            ShotSpec(views[1], n, k1=(-0.70, -0.70), k2_offset=0.05),
+        ],
+        "real_pano": [
+            ShotSpec(pano, n, (-20, -5, 1.0), (20, -5, 1.0), (-0.25, -0.25), hfov_deg=70, panorama=True),
+            ShotSpec(pano, n, (60, -8, 1.0), (60, -8, 1.4), (-0.35, -0.22), hfov_deg=70, panorama=True),
+            ShotSpec(pano, n, (150, -10, 1.0), (150, -10, 1.0), (-0.10, -0.10), hfov_deg=70, panorama=True),
+        ],
+    }
+
+
+def check_clips(data: Path, n: int, seed: int = 1) -> dict[str, list[ShotSpec]]:
+    """The held-out set: the same real pictures under other, random lenses and camera paths."""
+    views = [_read(data / f"football360_cam_{i:07d}.png") for i in (0, 12000, 19000)]
+    rng = np.random.default_rng(seed)
+    clips = {}
+    for c in range(3):
+        shots = []
+        for kind in ("static", "pan", "zoom"):
+            view = views[int(rng.integers(3))]
+            k1 = float(rng.uniform(-0.65, -0.1))
+            if kind == "static":
+                shots.append(ShotSpec(view, n, (0, 0, 1.0), (0, 0, 1.0), (k1, k1)))
+            elif kind == "pan":
+                a = float(rng.uniform(3, 8))
+                shots.append(ShotSpec(view, n, (-a, 0, 1.1), (a, float(rng.uniform(-1, 1)), 1.1), (k1, k1)))
+            else:
+                shots.append(ShotSpec(view, n, (0, 0, 1.0), (0, 0, float(rng.uniform(1.2, 1.45))), (k1, k1 + float(rng.uniform(0.05, 0.15)))))
+        clips[f"check_{c}"] = [shots[i] for i in rng.permutation(3)]
+    return clips
+
+
+def procedural_clips(n: int, seeds: tuple[int, ...] = (3, 11)) -> dict[str, list[ShotSpec]]:
+    """Clips over glradial's procedural stadiums (pitch lines, stands, boards)."""
+    import glradial
+
+    clips = {}
+    rng = np.random.default_rng(0)
+    for seed in seeds:
+        pano = glradial.stadium_panorama(seed, (2048, 1024))
+        shots = []
+        for kind in ("pan", "zoom", "static"):
+            k1 = float(rng.uniform(-0.55, -0.1))
+            pan, tilt = float(rng.uniform(-40, 40)), float(rng.uniform(-18, -8))
+            if kind == "pan":
+                shots.append(ShotSpec(pano, n, (pan - 12, tilt, 1.0), (pan + 12, tilt - 2, 1.0), (k1, k1), hfov_deg=50, panorama=True))
+            elif kind == "zoom":
+                shots.append(ShotSpec(pano, n, (pan, tilt, 1.0), (pan + 3, tilt, 1.4), (k1, k1 + 0.12), hfov_deg=55, panorama=True))
+            else:
+                shots.append(ShotSpec(pano, n, (pan, tilt, 1.0), (pan, tilt, 1.0), (k1, k1), hfov_deg=45, panorama=True))
+        clips[f"proc_{seed}"] = shots
+    return clips
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/real_football")
+    parser.add_argument("--frames", type=int, default=50, help="frames per shot (default 50: 2 s)")
+    parser.add_argument("--set", choices=("main", "check"), default="main",
+                        help="main: the calibration and report clips; check: held-out real clips and other stadiums")
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    manifest = {}
+    sets = ((("real", real_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames)))
+            if args.set == "main" else (("real", check_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames, (5, 17)))))
+    for group, clips in sets:
+        for name, shots in clips.items():
+            frames, truth = render_clip(shots, SIZE)
+            write_clip(args.out / f"{name}.mp4", frames, truth)
+            manifest[name] = {"group": group, "shots": len(shots), "frames": len(frames)}
+            print(f"{name}: {len(shots)} shots, {len(frames)} frames", flush=True)
+    (args.out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,40 @@
+"""The lens track keeps whole lenses: principal point and pixel aspect survive save and load."""
+
+from __future__ import annotations
+
+from fractions import Fraction
+
+import numpy as np
+import pytest
+
+from glradial import Lens
+from glradial.video.lens_track import LensTrack, load_lens_track
+
+
+@pytest.mark.parametrize("suffix", [".csv", ".json"])
+def test_principal_point_and_aspect_round_trip(tmp_path, suffix):
+    n = 3
+    geometry = np.array([[0.01, -0.02, 1.0], [0.0, 0.0, 1.0], [-0.015, 0.005, 1.01]])
+    lens = np.array([[-0.2, 0.03], [-0.25, 0.05], [-0.1, 0.0]])
+    track = LensTrack(Fraction(25), (640, 360), np.zeros(n, np.int64), lens, np.full((n, 2), np.nan),
+                      np.full(n, np.nan), geometry=geometry)
+    path = track.save(tmp_path / f"track{suffix}")
+    back = load_lens_track(path, Fraction(25), (640, 360))
+    for i in range(n):
+        assert back.lens_for(i) == Lens(*lens[i], *geometry[i])
+    # maps of the read lens equal those of the written one (the principal point moves them)
+    np.testing.assert_array_equal(back.lens_for(0).maps((640, 360))[0], Lens(*lens[0], *geometry[0]).maps((640, 360))[0])
+
+
+def test_a_track_without_the_columns_reads_centred(tmp_path):
+    path = tmp_path / "old.csv"
+    path.write_text("frame,k1,k2\n0,-0.2,0.03\n1,-0.2,0.03\n")
+    track = load_lens_track(path, Fraction(25), (640, 360))
+    assert track.lens_for(1) == Lens(-0.2, 0.03)
+
+
+def test_a_bad_principal_point_names_the_line(tmp_path):
+    path = tmp_path / "bad.csv"
+    path.write_text("frame,k1,k2,cx\n0,-0.2,0.03,0\n1,-0.2,0.03,abc\n")
+    with pytest.raises(ValueError, match="line 3: cx 'abc' is not a number"):
+        load_lens_track(path, Fraction(25), (640, 360))
