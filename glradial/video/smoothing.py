@@ -130,9 +130,6 @@ INDEPENDENT_SAMPLES = 4
 #: camera then does not wobble, and its frames share one set of correction maps; a zoom whose
 #: change shows above the stated noise keeps the local-linear track.
 STATIC_CHI2 = 2.0
-#: A shot whose samples lie this many times closer to the local-linear track than to one constant
-#: (RMS) shows a real change (a zoom) and is not held (:func:`hold_static`).
-TREND_RATIO = 2.0
 #: a stated ~90 % bound read as a normal error's: u90 = 1.645 sigma
 P90_SIGMA = 1.645
 
@@ -291,23 +288,17 @@ def smooth_track(
             min_scale=min_scale, radius=radius, uncertainty=None if uncertainty is None else uncertainty[mine], floor=floor,
         )
         if uncertainty is not None:
-            out[frames] = hold_static(out[frames], lenses[mine], uncertainty[mine], weights[mine], radius, floor,
-                                      at=np.searchsorted(frames, times[mine]))
+            out[frames] = hold_static(out[frames], lenses[mine], uncertainty[mine], weights[mine], radius, floor)
     return out, weights, sure
 
 
 def hold_static(track: np.ndarray, samples: np.ndarray, uncertainty: np.ndarray, weights: np.ndarray,
-                radius: float = CORNER_RADIUS_16_9, floor: float = UNCERTAINTY_FLOOR,
-                at: np.ndarray | None = None) -> np.ndarray:
+                radius: float = CORNER_RADIUS_16_9, floor: float = UNCERTAINTY_FLOOR) -> np.ndarray:
     """One shot's smoothed ``track`` (M x 2), or the shot's constant lens for every frame when its
     estimates show no change (see :data:`STATIC_CHI2`). ``samples`` (N x 2) are the shot's estimates,
     ``uncertainty`` (N, lens units, stated ~90 % bounds, at least ``floor``) and ``weights`` (N,
     the robust weights of :func:`smooth_shot`; 0 = rejected) theirs. The constant is the
-    inverse-variance weighted mean of the accepted samples. ``at`` (N, optional): the index into
-    ``track`` of each sample; with it, a shot whose samples follow the track much more closely than
-    the constant (RMS residual more than :data:`TREND_RATIO` times the track's, plus ``floor``)
-    keeps the track: stated bounds that hold against the truth are mostly bias shared by a shot's
-    frames, and a zoom shows in the samples well below them."""
+    inverse-variance weighted mean of the accepted samples."""
     accepted = np.asarray(weights) > 0
     if accepted.sum() < 2:
         return track
@@ -316,12 +307,6 @@ def hold_static(track: np.ndarray, samples: np.ndarray, uncertainty: np.ndarray,
     w = 1.0 / sigma**2
     constant = (mine * w[:, None]).sum(axis=0) / w.sum()
     chi2 = float(np.mean((max_displacement(mine, constant, radius) / sigma) ** 2))
-    if chi2 > STATIC_CHI2:
-        return track
-    if at is not None:
-        along = np.asarray(track, dtype=np.float64)[np.asarray(at)[accepted]]
-        rms_track = float(np.sqrt(np.mean(max_displacement(mine, along, radius) ** 2)))
-        rms_constant = float(np.sqrt(np.mean(max_displacement(mine, constant, radius) ** 2)))
-        if rms_constant > TREND_RATIO * rms_track + floor:
-            return track
-    return np.broadcast_to(constant, track.shape).copy()
+    if chi2 <= STATIC_CHI2:
+        return np.broadcast_to(constant, track.shape).copy()
+    return track
