@@ -1,12 +1,13 @@
 """Accuracy of the line fit (``method="lines"`` / ``"auto"``) per source, fast enough to iterate on.
 
-Usage: ``python bench/lines_accuracy.py [--cache /tmp/lines_accuracy.pkl] [--procedural 200]``
+Usage: ``python bench/lines_accuracy.py [--cache /tmp/lines_accuracy.pkl] [--procedural 200] [--checkout DIR]``
 
 Builds the same samples as ``glradial evaluate --frames ../shared/data/real_football --procedural N
 --remove-own-lens`` (seed 0: 12 paper + 12 extended lenses per frame at ``fit="crop"``, 48 + 48 crops
 of the panorama, N held-out procedural crops), runs the CNN once per sample and caches frames, true
 lenses and CNN readings in ``--cache`` (pickle; delete it to rebuild). Then runs the line detection
-and fit (the code of this checkout) on every sample and prints, per group, the median and 90th
+and fit (the code of ``--checkout``, default this checkout: compare two checkouts on one cache) on
+every sample (``frame_evidence``, then ``judge`` per method) and prints, per group, the median and 90th
 percentile of the maximum displacement error (px at 1920) of ``lines`` and ``auto``, the share of
 frames with a line fit, and the mean fit time. Groups: real frames (all lenses), real frames with
 ``k1 <= -0.6``, 640x360 panorama crops, procedural test crops. Validation data only: no tuning
@@ -23,8 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial.estimation.lens_estimate import choose, line_candidates  # noqa: E402
+ROOT = Path(__file__).resolve().parents[1]
+if __name__ == "__main__" and "--checkout" in sys.argv[:-1]:  # the checkout under test, before any import of it
+    ROOT = Path(sys.argv[sys.argv.index("--checkout") + 1]).resolve()
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from glradial.estimation.estimator import Estimator, view_to_frame  # noqa: E402
+from glradial.estimation.lens_estimate import frame_evidence, judge  # noqa: E402
+from glradial.estimation.trust import view_features  # noqa: E402
 from glradial.evaluation import real_eval  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
 
@@ -80,6 +86,7 @@ def main() -> None:
     parser.add_argument("--frames", default=str(DATA))
     parser.add_argument("--procedural", type=int, default=200)
     parser.add_argument("--dump", help="write per-sample results (JSON lines) here")
+    parser.add_argument("--checkout", default=str(ROOT), help="the glradial checkout whose code is measured")
     args = parser.parse_args()
     cache = Path(args.cache)
     if cache.is_file():
@@ -89,16 +96,20 @@ def main() -> None:
         cache.write_bytes(pickle.dumps(samples))
     errors = {"lines": [], "auto": []}
     has_fit, times, rows = [], [], []
+    estimator = Estimator(threads=1)
     for s in samples:
+        frame = s["frame"]
+        features = view_features(estimator.preprocess(frame))
         t0 = time.perf_counter()
-        net, lines = line_candidates(s["frame"], s["net"])
+        evidence = frame_evidence(frame, view_to_frame(s["net"], (frame.shape[1], frame.shape[0])), features)
         times.append(time.perf_counter() - t0)
+        lines = evidence.lines
         has_fit.append(lines is not None)
         truth = np.array(s["truth"])
         for method in errors:
-            e = choose(net, lines, method)
+            e = judge(evidence, method)
             errors[method].append(float(max_displacement_px(np.array([e.k1, e.k2]), truth)))
-        rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else [lines.k1, lines.k2],
+        rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else list(lines),
                      "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1]})
     print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}")
     for name, idx in _groups(samples).items():

@@ -335,12 +335,24 @@ def _trim(problem: _Problem, k1: float, k2: float) -> _Problem:
         centre = q.mean(axis=0)
         _, _, vt = np.linalg.svd(q - centre, full_matrices=False)
         d = np.abs((q - centre) @ vt[1]) * scale[m]
-        robust = 1.4826 * np.median(d)
+        robust = 1.4826 * _median(d)
         keep[np.flatnonzero(m)] = d <= max(TRIM_PX, 3.0 * robust)
     counts = np.bincount(problem.chain[keep], minlength=problem.n).astype(np.float64)
     ratio = counts / np.maximum(np.bincount(problem.chain, minlength=problem.n), 1)
     return _Problem(problem.points[keep], problem.chain[keep], problem.counts * ratio, int(problem.width),
                     problem.family, problem.arcs, problem.informative)
+
+
+def _median(a: np.ndarray) -> float:
+    """``np.median`` of a 1-D float array without NaN (the same value: the middle element, or the
+    mean of the middle two), by one partial sort and without np.median's overhead (hot in :func:`_trim`)."""
+    half = len(a) // 2
+    if len(a) == 0:
+        return float("nan")
+    if len(a) % 2:
+        return np.partition(a, half)[half]
+    part = np.partition(a, (half - 1, half))
+    return (part[half - 1] + part[half]) / 2.0
 
 
 def _displacement_sigma(cov: np.ndarray) -> float:

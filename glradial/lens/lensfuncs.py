@@ -132,7 +132,8 @@ def undistort_radius_exact(r_d: np.ndarray, k1: float, k2: float) -> tuple[np.nd
     """Exact inverse of the radial map: solve ``r (1 + k1 r^2 + k2 r^4) = r_d`` for ``r >= 0``.
 
     Bounded Newton: seeded by Drap-Lefevre, each step clamped to ``[0, fold_radius]`` (the branch on
-    which the map is increasing), ``LENS_NEWTON_STEPS`` steps. Returns ``(r_u, valid)``; ``valid``
+    which the map is increasing), ``LENS_NEWTON_STEPS`` steps (fewer once a step changes
+    no radius: the same result). Returns ``(r_u, valid)``; ``valid``
     is False where ``r_d`` lies beyond the largest distorted radius the lens reaches (no undistorted
     point maps there, e.g. outside the image circle of a strong barrel lens).
 
@@ -148,13 +149,45 @@ def undistort_radius_exact(r_d: np.ndarray, k1: float, k2: float) -> tuple[np.nd
     b1, b2, b3, b4 = drap_coefficients(k1, k2)
     rd2 = r_d * r_d
     r = np.clip(r_d * (1.0 + rd2 * (b1 + rd2 * (b2 + rd2 * (b3 + rd2 * b4)))), 0.0, r_fold)
-    for _ in range(LENS_NEWTON_STEPS):
-        f = r * radial_factor(r * r, k1, k2) - r_d
-        slope = np.maximum(radial_slope(r, k1, k2), 1e-6)
-        r = np.clip(r - f / slope, 0.0, r_fold)
+    r = _newton(r, r_d, k1, k2, r_fold)
     residual = np.abs(r * radial_factor(r * r, k1, k2) - r_d)
     valid = residual <= LENS_INVERSE_TOLERANCE * np.maximum(1.0, r_d)
     return r, valid
+
+
+def _newton(r: np.ndarray, r_d: np.ndarray, k1, k2, r_fold) -> np.ndarray:
+    """The Newton steps of :func:`undistort_radius_exact` from the seed ``r``: ``r -= f / slope``
+    with ``f = r D(r) - r_d`` and the slope :func:`radial_slope` (floored at 1e-6), clamped to
+    ``[0, r_fold]``; in place on preallocated buffers (the line fit calls this on lens grids), the
+    same arithmetic, in the same order, as :func:`radial_factor` and :func:`radial_slope`."""
+    r = np.array(r, dtype=np.float64)  # a fresh (L, M) buffer, broadcast like the lens and the radii
+    k1_3, k2_5 = 3.0 * k1, 5.0 * k2
+    r2, f, slope, t, before = (np.empty_like(r) for _ in range(5))
+    for _ in range(LENS_NEWTON_STEPS):
+        np.copyto(before, r)
+        np.multiply(r, r, out=r2)
+        np.multiply(k1, r2, out=f)
+        np.add(1.0, f, out=f)
+        np.multiply(k2, r2, out=t)
+        np.multiply(t, r2, out=t)
+        np.add(f, t, out=f)
+        np.multiply(r, f, out=f)
+        np.subtract(f, r_d, out=f)  # r (1 + k1 r^2 + k2 r^4) - r_d
+        np.multiply(k1_3, r2, out=slope)
+        np.add(1.0, slope, out=slope)
+        np.multiply(k2_5, r2, out=t)
+        np.multiply(t, r2, out=t)
+        np.add(slope, t, out=slope)
+        np.maximum(slope, 1e-6, out=slope)
+        np.divide(f, slope, out=f)  # the step
+        np.subtract(r, f, out=r)
+        np.maximum(r, 0.0, out=r)
+        np.minimum(r, r_fold, out=r)
+        # every radius at a fixed point of the step (converged to the last bit, held at 0 or the fold
+        # radius, or NaN): the remaining steps would change nothing, so stopping is exact
+        if not ((r != before) & (r == r)).any():
+            break
+    return r
 
 
 def undistort_point_exact(p_d: np.ndarray, k1: float, k2: float) -> tuple[np.ndarray, np.ndarray]:
