@@ -68,17 +68,18 @@ def main() -> None:
     parser.add_argument("--checkout", default=str(ROOT))
     args = parser.parse_args()
     sys.path.insert(0, args.checkout)
-    from glradial.estimation.lens_estimate import choose, line_candidates
+    from glradial.estimation.estimator import Estimator
     from glradial.lens.metrics import max_displacement_px
+
+    estimator = Estimator(threads=1)
 
     cache = Path(args.cache)
     samples = pickle.loads(cache.read_bytes()) if cache.is_file() else _build(Path(args.frames), cache)
     own: dict = {}
     errors: dict = {}
     for sample in samples:  # each frame's unmodified reading comes first
-        net, lines = line_candidates(sample["image"], sample["net"])
         for method in ("net", "lines", "auto"):
-            e = choose(net, lines, method)
+            e = estimator.estimate(sample["image"], method=method)
             if sample["truth"] is None:
                 own[sample["frame"], method] = (e.k1, e.k2)
                 continue
