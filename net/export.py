@@ -135,20 +135,26 @@ def _add_metadata(path: Path, config: ModelConfig, metadata: dict | None) -> Non
     onnx.save(proto, str(path))
 
 
-def check_agreement(model: DistortionNet, onnx_path: str | Path, n: int = 8, seed: int = 0) -> float:
-    """Max |torch - onnxruntime| over a random uint8 batch; raises AssertionError beyond :data:`ATOL`."""
+def max_difference(model: DistortionNet, onnx_path: str | Path, images: np.ndarray) -> float:
+    """Largest |torch - onnxruntime| of ``model`` (through :class:`ExportWrapper`) and the graph at
+    ``onnx_path`` over ``images`` (uint8 N x H x W x 3), in lens units; an error head's ``error_px``
+    is compared divided by 1920, the width its pixels refer to."""
     import onnxruntime as ort
 
-    width, height = model.config.input_size
-    images = np.random.default_rng(seed).integers(0, 256, (n, height, width, 3), dtype=np.uint8)
     with torch.no_grad():
-        ref = ExportWrapper(model.eval())(torch.from_numpy(images))
+        ref = ExportWrapper(model.eval())(torch.from_numpy(np.ascontiguousarray(images)))
     ref = [t.numpy() for t in ref] if isinstance(ref, tuple) else [ref.numpy()]
     session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
-    got = session.run(None, {"image": images})
-    # k in lens units; error_px relative (px of a 1920-wide frame, so the lens-unit tolerance x 1920)
-    err = max([float(np.abs(ref[0] - got[0]).max())]
-              + [float(np.abs(r - g).max() / 1920.0) for r, g in zip(ref[1:], got[1:])])
+    got = session.run(None, {session.get_inputs()[0].name: np.ascontiguousarray(images)})
+    return max([float(np.abs(ref[0] - got[0]).max())]
+               + [float(np.abs(r - g).max() / 1920.0) for r, g in zip(ref[1:], got[1:])])
+
+
+def check_agreement(model: DistortionNet, onnx_path: str | Path, n: int = 8, seed: int = 0) -> float:
+    """:func:`max_difference` over a random uint8 batch; raises AssertionError beyond :data:`ATOL`."""
+    width, height = model.config.input_size
+    images = np.random.default_rng(seed).integers(0, 256, (n, height, width, 3), dtype=np.uint8)
+    err = max_difference(model, onnx_path, images)
     if not err <= ATOL:
         raise AssertionError(f"onnxruntime and torch disagree by {err:.3g} > {ATOL} lens units")
     return err

@@ -125,18 +125,11 @@ def calibrate_batchnorm(model: DistortionNet, images: torch.Tensor) -> None:
 
 
 def check_against_onnx(model: DistortionNet, onnx_path: str | Path, images: np.ndarray) -> float:
-    """Largest |torch - onnxruntime| over ``images`` (uint8 N x H x W x 3), lens units (an error
-    head's px divided by 1920, the width they refer to)."""
-    import onnxruntime as ort
+    """Largest |torch - onnxruntime| over ``images`` (uint8 N x H x W x 3), lens units
+    (:func:`net.export.max_difference`)."""
+    from .export import max_difference
 
-    session = ort.InferenceSession(str(onnx_path), providers=["CPUExecutionProvider"])
-    ref = session.run(None, {session.get_inputs()[0].name: images})
-    with torch.no_grad():
-        ours = model.eval()(normalise_batch(torch.from_numpy(np.ascontiguousarray(images)), model.config)).numpy()
-    err = float(np.abs(ours[:, :2] - ref[0]).max())
-    if len(ref) > 1:  # the error head's px, compared on the lens scale (px at 1920 / 1920)
-        err = max(err, float(np.abs(np.exp(ours[:, 2:3]) - ref[1]).max()) / 1920.0)
-    return err
+    return max_difference(model, onnx_path, images)
 
 
 def stadium_frames(config: ModelConfig, count: int = STAT_FRAMES, seed: int = 0) -> np.ndarray:
