@@ -18,21 +18,19 @@ import sys
 import numpy as np
 
 from glradial.estimation.estimator import Estimator
-from glradial.lens.metrics import PAPER_SIZE, max_displacement_px
+from glradial.evaluation.evaluation import EvaluationSettings, render_test_crops
+from glradial.lens.metrics import max_displacement_px
 from glradial.media.atomic import atomic_path
-from glradial.synthesis.crops import crop_labels, render_crop_set
-from glradial.synthesis.stadium import stadium_panorama_cached
-from glradial.synthesis.stadium_style import split_seeds
-
-EVAL_FRAME = (768, 432)
+from glradial.synthesis.crops import crop_labels
 
 
 def crop_errors(model: str, split: str, n: int, seed: int, panoramas: int, cache_dir: str) -> dict[str, np.ndarray]:
-    """True and predicted lenses, error and predicted scale (both px at 1920) of ``n`` crops."""
-    pans = [stadium_panorama_cached(s, (4096, 2048), cache_dir) for s in split_seeds(split, panoramas)]
-    frames, params = render_crop_set(pans, n, seed, size=PAPER_SIZE, out_size=EVAL_FRAME)
-    truth = crop_labels(params)
+    """True and predicted lenses, error and predicted scale (both px at 1920) of ``n`` crops: the
+    crops ``glradial evaluate`` renders for these settings."""
     estimator = Estimator(model)
+    settings = EvaluationSettings(n=n, panoramas=panoramas, split=split, seed=seed, cache_dir=cache_dir)
+    frames, params, _ = render_test_crops(settings, estimator.input_size)
+    truth = crop_labels(params)
     if not estimator.has_error_head:
         raise ValueError(f"model {model} has no error head (no 'error_px' output)")
     k, scale = estimator.run_with_error(np.stack([estimator.preprocess(f) for f in frames]))

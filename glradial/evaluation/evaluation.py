@@ -197,14 +197,33 @@ def _say(message: str) -> None:
     print(message, file=sys.stderr, flush=True)
 
 
+def render_test_crops(settings: EvaluationSettings, input_size: tuple[int, int]) -> tuple[np.ndarray, list, list[int]]:
+    """The held-out crops :func:`evaluate` scores: ``settings.n`` crops of the ``settings.split``
+    stadiums, rendered at twice ``input_size`` (W, H; area-resized by the predictor). Returns uint8
+    frames, their :class:`~glradial.synthesis.crops.CropParams` and the stadium seeds. Progress goes
+    to stderr."""
+    from ..synthesis.crops import render_crop_set
+    from ..synthesis.stadium import stadium_panorama_cached
+    from ..synthesis.stadium_style import split_seeds
+
+    width, height = input_size
+    frame_size = (2 * width, 2 * height)
+    seeds = split_seeds(settings.split, settings.panoramas)
+    panoramas = []
+    for i, seed in enumerate(seeds):
+        _say(f"stadium {i + 1}/{len(seeds)} (seed {seed}, {settings.split} split)")
+        panoramas.append(stadium_panorama_cached(seed, settings.panorama_size, settings.cache_dir))
+    _say(f"rendering {settings.n} crops at {frame_size[0]}x{frame_size[1]}")
+    frames, params = render_crop_set(panoramas, settings.n, settings.seed, size=PAPER_SIZE, out_size=frame_size)
+    return frames, params, seeds
+
+
 def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.PathLike,
              settings: EvaluationSettings, model_name: str) -> dict:
     """Render the test set, predict, write ``metrics.json``, ``results.md`` and the plots to ``out``
     (all atomically); returns the metrics dict. ``input_size`` (W, H) is the network input:
     crops are rendered at twice it. Progress goes to stderr."""
     from ..synthesis.crops import crop_labels, load_panorama, render_crop_set
-    from ..synthesis.stadium import stadium_panorama_cached
-    from ..synthesis.stadium_style import split_seeds
 
     field = None
     if settings.field_panorama is not None and settings.ood_n > 0:  # checked before the long work
@@ -214,17 +233,10 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
                              f"got {field.shape[1]}×{field.shape[0]}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    width, height = input_size
-    frame_size = (2 * width, 2 * height)  # rendered at twice the input, area-resized by the predictor
     t0 = time.monotonic()
-    seeds = split_seeds(settings.split, settings.panoramas)
-    panoramas = []
-    for i, seed in enumerate(seeds):
-        _say(f"stadium {i + 1}/{len(seeds)} (seed {seed}, {settings.split} split)")
-        panoramas.append(stadium_panorama_cached(seed, settings.panorama_size, settings.cache_dir))
-    _say(f"rendering {settings.n} crops at {frame_size[0]}x{frame_size[1]}")
-    frames, params = render_crop_set(panoramas, settings.n, settings.seed, size=PAPER_SIZE, out_size=frame_size)
+    frames, params, seeds = render_test_crops(settings, input_size)
     labels = crop_labels(params)
+    frame_size = (frames.shape[2], frames.shape[1])
     t_render = time.monotonic() - t0
     _say(f"predicting {len(frames)} crops")
     t1 = time.monotonic()
