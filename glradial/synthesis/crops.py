@@ -505,11 +505,12 @@ class CropRenderer:
         for i, item in enumerate(params):
             if not isinstance(item, CropParams):
                 raise TypeError(f"params[{i}] must be a CropParams, got {type(item).__name__}")
-            if lensfuncs.fold_radius(item.k1, item.k2) <= corner_radius(self.size):
+            fold = lensfuncs.fold_radius(item.k1, item.k2)
+            if fold <= self._corner:
                 raise ValueError(
-                    f"params[{i}]: lens k1={item.k1:g}, k2={item.k2:g} folds over at radius "
-                    f"{lensfuncs.fold_radius(item.k1, item.k2):.4f} inside the {self.size[0]}×{self.size[1]} "
-                    f"frame (corner radius {corner_radius(self.size):.4f}): no crop is rendered through it"
+                    f"params[{i}]: lens k1={item.k1:g}, k2={item.k2:g} folds over at radius {fold:.4f} inside "
+                    f"the {self.size[0]}×{self.size[1]} frame (corner radius {self._corner:.4f}): no crop is "
+                    "rendered through it"
                 )
             if self.inverse == "drap" and not lens_covers_frame(item.k1, item.k2, self.size):
                 raise ValueError(
