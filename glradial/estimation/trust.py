@@ -56,7 +56,7 @@ LENS_RANGE_K1 = (-1.0, 0.4)
 GREEN_HUE, GREEN_MIN_SATURATION, GREEN_MIN_VALUE = (18, 95), 50, 40
 #: Width of the hue window (OpenCV hue units of 2 degrees) that one pitch's green falls into.
 GREEN_WINDOW = 12
-#: The shipped calibration (written by ``python -m glradial.calibrate``).
+#: The shipped calibration (written by ``python -m glradial.evaluation.calibrate``).
 TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "trust.json"
 
 

@@ -331,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
 
         data = Path(args.data)
         if not (data / "broadcast_bundesliga").is_dir():
-            raise SystemExit(f"glradial.calibrate: {data}/broadcast_bundesliga not found (give --data)")
+            raise SystemExit(f"glradial.evaluation.calibrate: {data}/broadcast_bundesliga not found (give --data)")
         records = collect(data, Evaluator(threads=args.threads))
         save_records(records, records_path)
     base = shipped_trust()
