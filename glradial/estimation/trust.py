@@ -56,7 +56,7 @@ LENS_RANGE_K1 = (-1.0, 0.4)
 GREEN_HUE, GREEN_MIN_SATURATION, GREEN_MIN_VALUE = (18, 95), 50, 40
 #: Width of the hue window (OpenCV hue units of 2 degrees) that one pitch's green falls into.
 GREEN_WINDOW = 12
-#: The shipped calibration (written by ``python -m glradial.calibrate``).
+#: The shipped calibration (written by ``python -m glradial.evaluation.calibrate``).
 TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "trust.json"
 
 
@@ -154,6 +154,12 @@ def anything_bound(k: tuple[float, float]) -> float:
     return float(max_displacement_px(_range_lenses(), np.array(k, np.float64)).max())
 
 
+def line_scale(floor_px, sigma_weight, spread, disagree_weight, disagreement):
+    """``sqrt(floor² + (sigma_weight · spread)² + (disagree_weight · disagreement)²)``: the per-frame
+    scale of a line fit (px at 1920; module docstring), of floats or of NumPy arrays alike."""
+    return np.sqrt(floor_px**2 + (sigma_weight * spread) ** 2 + (disagree_weight * disagreement) ** 2)
+
+
 @dataclass(frozen=True)
 class TrustModel:
     """Calibrated constants of the bound and the doubt rules (module docstring; ``trust.json``)."""
@@ -177,9 +183,8 @@ class TrustModel:
     def lines_scale(self, evidence: FrameEvidence) -> float:
         """The per-frame scale of a line fit (px at 1920): its 1-sigma (or, with ``scale_feature =
         "difficulty"``, the fit's difficulty), the line/CNN disagreement and a floor."""
-        d = evidence.disagreement_px
         spread = evidence.difficulty if self.scale_feature == "difficulty" else evidence.sigma_px
-        return math.sqrt(self.floor_px**2 + (self.sigma_weight * spread) ** 2 + (self.disagree_weight * d) ** 2)
+        return float(line_scale(self.floor_px, self.sigma_weight, spread, self.disagree_weight, evidence.disagreement_px))
 
     def lines_bound(self, evidence: FrameEvidence) -> float:
         return self.q_lines * self.lines_scale(evidence)

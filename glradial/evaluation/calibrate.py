@@ -45,7 +45,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from ..estimation.lens_estimate import judge
-from ..estimation.trust import TRUST_FILE, FrameEvidence, TrustModel, shipped_trust
+from ..estimation.trust import TRUST_FILE, FrameEvidence, TrustModel, line_scale, shipped_trust
 from ..lens.lens import Lens
 from ..lens.metrics import max_displacement_px
 
@@ -207,7 +207,7 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
         for floor in FLOOR_GRID:
             for a in SIGMA_GRID:
                 for weight in WEIGHT_GRID:
-                    scale = np.sqrt(floor**2 + (a * spread) ** 2 + (weight * disagree) ** 2)
+                    scale = line_scale(floor, a, spread, weight, disagree)
                     bound = np.empty(len(lined))
                     for half in (0, 1):  # the shape is judged on groups its quantile did not see
                         bound[halves == half] = conformal_quantile((err / scale)[halves != half]) * scale[halves == half]
@@ -331,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
 
         data = Path(args.data)
         if not (data / "broadcast_bundesliga").is_dir():
-            raise SystemExit(f"glradial.calibrate: {data}/broadcast_bundesliga not found (give --data)")
+            raise SystemExit(f"glradial.evaluation.calibrate: {data}/broadcast_bundesliga not found (give --data)")
         records = collect(data, Evaluator(threads=args.threads))
         save_records(records, records_path)
     base = shipped_trust()
