@@ -8,7 +8,7 @@ import sys
 
 from ..lens.options import DISTORTION_MODELS
 from . import UsageError, finite_float, parse_size, positive_float
-from .engine_options import add_camera_options, camera_from_args
+from .engine_options import add_camera_options, camera_from_args, sensor_mm
 
 CONVENTIONS = ("glradial", "width", "opencv", "ffmpeg", "lensfun", "pixel", "height", "opentrackio")
 #: graphics-engine conventions (output only, except opentrackio U-D, which converts back exactly)
@@ -171,11 +171,7 @@ def from_lens(lens, target: str, size: tuple[int, int], focal: float | None) -> 
 def run(args: argparse.Namespace) -> int:
     if args.approximate and _canonical(args.source) != "opencv":
         raise UsageError("--approximate applies to --from opencv only")
-    width_mm = args.sensor_width_mm
-    if args.sensor:
-        from ..export.opentrackio import SENSOR_PRESETS
-
-        width_mm = SENSOR_PRESETS[args.sensor][0]
+    width_mm, _height_mm = sensor_mm(args)
     lens = to_lens(args.source, args.values, args.size, args.focal, args.approximate, width_mm)
     if args.target in ENGINES:
         document, text = _engine(lens, args)

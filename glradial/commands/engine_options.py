@@ -17,7 +17,7 @@ from .remapping import RemapHook
 
 __all__ = ["add_camera_options", "add_opentrackio_options", "camera_from_args", "opentrackio_wanted",
            "check_opentrackio_output", "write_opentrackio", "write_image_opentrackio", "write_track_opentrackio",
-           "OpenTrackIOHook", "opentrackio_hook", "overscan_value"]
+           "OpenTrackIOHook", "opentrackio_hook", "overscan_value", "sensor_mm"]
 
 
 def overscan_value(text: str | None) -> float | None:
@@ -63,7 +63,8 @@ def opentrackio_wanted(args: argparse.Namespace) -> bool:
     return bool(getattr(args, "opentrackio", None) or getattr(args, "send", None))
 
 
-def _sensor(args: argparse.Namespace) -> tuple[float | None, float | None]:
+def sensor_mm(args: argparse.Namespace) -> tuple[float | None, float | None]:
+    """Sensor width and height (mm) of ``--sensor``/``--sensor-width-mm``/``--sensor-height-mm`` (None where not given)."""
     if args.sensor and args.sensor_width_mm is not None:
         raise UsageError("give --sensor or --sensor-width-mm, not both")
     if args.sensor:
@@ -86,7 +87,7 @@ def camera_from_args(args: argparse.Namespace, size: tuple[int, int], rate: Frac
 
 def _camera_numbers(args: argparse.Namespace, what: str) -> tuple[float, float | None]:
     """Sensor width and height (mm) of the options; ``UsageError`` naming what is missing."""
-    width_mm, height_mm = _sensor(args)
+    width_mm, height_mm = sensor_mm(args)
     missing = []
     if width_mm is None:
         missing.append("--sensor-width-mm MM (or --sensor 2/3-inch)")
