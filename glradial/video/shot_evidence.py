@@ -63,11 +63,12 @@ class ShotCollector:
         if self._previous is not None and self._previous.shape == gray.shape:
             step = self._pair(n - 1, self._previous, n, gray, None)
             if step is not None:
-                zoom += math.log(zoom_of(step))
+                log_zoom = math.log(zoom_of(step))
+                zoom += log_zoom
                 self._moved = step @ self._moved
                 shift = _shift(step)
                 self.evidence.travel += shift
-                self.evidence.pan += shift - abs(math.log(zoom_of(step)))
+                self.evidence.pan += shift - abs(log_zoom)
                 self._since_anchor += shift
             if self._anchor is not None and self._since_anchor >= ANCHOR_TRAVEL:
                 self._pair(self._anchor[0], self._anchor[1], n, gray, self._moved)
