@@ -14,7 +14,7 @@ from typing import Callable
 import numpy as np
 
 from ..estimation.lines import detect_chains
-from ..lens.lens import Lens
+from ..lens.lens import Lens, as_lens
 from ..lens.lensfuncs import undistort_point_exact
 from .frame_motion import homography_of, match_frames, motion_gray, zoom_of
 from .shot_fit import ShotEvidence, ShotSample
@@ -53,9 +53,7 @@ class ShotCollector:
         n = len(self.evidence.samples)
         estimate = None
         if n % self.estimate_every == 0:
-            estimate = self.estimator(frame)
-            if not isinstance(estimate, Lens):  # a plain (k1, k2)
-                estimate = Lens(float(estimate[0]), float(estimate[1]))
+            estimate = as_lens(self.estimator(frame))  # a plain (k1, k2) as the centred lens
             self.estimates.append((index, estimate))
             self._hint = (estimate.k1, estimate.k2)
         chains = detect_chains(frame, lens_hint=self._hint)
@@ -65,11 +63,12 @@ class ShotCollector:
         if self._previous is not None and self._previous.shape == gray.shape:
             step = self._pair(n - 1, self._previous, n, gray, None)
             if step is not None:
-                zoom += math.log(zoom_of(step))
+                log_zoom = math.log(zoom_of(step))
+                zoom += log_zoom
                 self._moved = step @ self._moved
                 shift = _shift(step)
                 self.evidence.travel += shift
-                self.evidence.pan += shift - abs(math.log(zoom_of(step)))
+                self.evidence.pan += shift - abs(log_zoom)
                 self._since_anchor += shift
             if self._anchor is not None and self._since_anchor >= ANCHOR_TRAVEL:
                 self._pair(self._anchor[0], self._anchor[1], n, gray, self._moved)
