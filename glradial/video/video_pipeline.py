@@ -37,11 +37,21 @@ import numpy as np
 from ..lens.lens import Lens, as_lens
 from ..lens.metrics import max_displacement
 from ..media.progress import Progress
-from ..media.video_io import FIELD_ORDER_CODES, CopiedPacket, EncodeOptions, VideoFrame, VideoInfo, VideoReader, VideoWriter
+from ..media.video_io import (
+    FIELD_ORDER_CODES,
+    CopiedPacket,
+    EncodeOptions,
+    VideoFrame,
+    VideoInfo,
+    VideoReader,
+    VideoWriter,
+    frame_planes,
+    yuv_layout,
+)
 from .lens_track import LensTrack
 from .shot_track import EVERY, track_shots
 
-__all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
+__all__ = ["LensTrack", "track_video", "correct_video", "correction_space", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
 #: estimator: RGB uint8 frame -> (k1, k2) or a Lens (a LensEstimate carries uncertainty_px and method)
 EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
@@ -179,15 +189,43 @@ class _FrameCorrector:
         self._remapper = None
         self._last: Lens | None = None
 
-    def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
-        height, width = image.shape[:2]
+    def _reused(self, lens: Lens, width: int, height: int) -> Lens:
+        """``lens``, or the previous frame's when no point of the frame would move by more than
+        :data:`MAP_REUSE_PX` (the same maps, cached)."""
         last = self._last
         if (last is not None and (last.cx, last.cy, last.pixel_aspect) == (lens.cx, lens.cy, lens.pixel_aspect)
                 and max_displacement((lens.k1, lens.k2), (last.k1, last.k2), lens.frame_radius((width, height))) * width
                 <= MAP_REUSE_PX):
-            lens = last  # the same maps (cached) for a change no point of the frame can show
+            return last
+        self._last = lens
+        return lens
+
+    def use_planes(self, info: VideoInfo, full_range: bool) -> None:
+        """Correct frames of ``info`` (planar YUV, :func:`correction_space`) plane by plane."""
+        from ..remapping.planes import black, chroma_siting, yuv_planes
+
+        shift_x, shift_y, bits = yuv_layout(info.pix_fmt)
+        self.lattices = yuv_planes(info.size, (shift_x, shift_y), chroma_siting(info.codec))
+        self.black = black(bits, full_range)
+
+    def planar(self, decoded, lens: Lens | None, writer: VideoWriter, pts: int | None):
+        """The encoder-ready frame of a decoded planar YUV frame corrected with ``lens`` (None: copied)."""
+        from ..remapping.planes import remap_planes
+
+        frame, out = writer.planar_frame()
+        source = frame_planes(decoded)
+        if lens is None:
+            for plane, target in zip(source, out):
+                target[...] = plane
         else:
-            self._last = lens
+            lens = self._reused(lens, decoded.width, decoded.height)
+            remap_planes(source, lens, self.lattices, out, fill=self.black, direction=self.direction, fit=self.fit,
+                         interpolation=self.interpolation, inverse=str(self.extra.get("inverse", "exact")))
+        return writer.stamp(frame, pts)
+
+    def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
+        height, width = image.shape[:2]
+        lens = self._reused(lens, width, height)
         if not self.interlaced:
             return self._remap(image, lens, self.fit)
         from ..remapping.fields import remap_fields
@@ -210,6 +248,25 @@ class _FrameCorrector:
         if self._remapper is not None:
             self._remapper.release()
             self._remapper = None
+
+
+def correction_space(info: VideoInfo, writer: VideoWriter, backend: str, remap_options: dict) -> tuple[str, str]:
+    """Where pass 2 corrects the frames of a stream ``info`` written by ``writer``: ``("yuv", "")``
+    plane by plane in the source's own samples (:mod:`glradial.remapping.planes`: no colour
+    conversion), or ``("rgb", why)``: decoded to RGB, corrected, converted back. YUV needs the CPU
+    backend, a progressive planar YUV source without alpha (:func:`~glradial.media.video_io.yuv_layout`:
+    yuv420p, yuv422p10le ...) written in that same pix_fmt, and no ``fill`` of its own."""
+    if backend != "cpu":
+        return "rgb", f"the {backend} backend corrects RGB frames"
+    if info.fields != "progressive":
+        return "rgb", f"interlaced ({info.fields}): fields are remapped in RGB"
+    if set(remap_options) - {"inverse", "alpha"}:
+        return "rgb", f"options {sorted(set(remap_options) - {'inverse', 'alpha'})} are applied in RGB"
+    if yuv_layout(info.pix_fmt) is None:
+        return "rgb", f"{info.pix_fmt} is not planar YUV"
+    if not writer.takes_planes_of(info.pix_fmt):
+        return "rgb", f"the output is {writer.pix_fmt}, not {info.pix_fmt}"
+    return "yuv", ""
 
 
 def _with_fields(info: VideoInfo, field_order: str) -> VideoInfo:
@@ -259,13 +316,19 @@ def correct_video(
         writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
         try:
             writer.check_alpha_kept()
+            if correction_space(info, writer, corrector.backend, remap_options)[0] == "yuv":
+                corrector.use_planes(info, writer.full_range)
+                reader.planar = True
+
             def work(item):
-                if isinstance(item, VideoFrame):
-                    lens = lenses(item.index)
-                    if lens is None:  # passed through uncorrected (a doubtful shot)
-                        return writer.frame(item.image, item.pts)
-                    return writer.frame(corrector(item.image, as_lens(lens)), item.pts)
-                return item
+                if not isinstance(item, VideoFrame):
+                    return item
+                lens = lenses(item.index)
+                lens = None if lens is None else as_lens(lens)  # None: passed through uncorrected (a doubtful shot)
+                if reader.planar and item.decoded.format.name == info.pix_fmt:
+                    return corrector.planar(item.decoded, lens, writer, item.pts)
+                image = item.image if item.image is not None else reader.convert(item.decoded)
+                return writer.frame(image if lens is None else corrector(image, lens), item.pts)
 
             with Progress(info.frame_count, label, enabled=progress) as bar, \
                     Pipelined(reader.items(), work, on_worker_exit=corrector.release) as done:
