@@ -53,6 +53,7 @@ __all__ = [
     "VideoReader",
     "VideoWriter",
     "check_video_overwrite",
+    "frame_timestamps",
     "frame_planes",
     "has_alpha",
     "is_sequence",
@@ -235,6 +236,39 @@ def yuv_layout(pix_fmt: str) -> tuple[int, int, int] | None:
     return shift_x, shift_y, parts[0].bits
 
 
+#: codecs whose decoders skip non-reference frames on request and whose container packets carry
+#: one frame each (so that the packets' timestamps number the frames): :meth:`VideoReader.skip_nonreference`
+SKIPPABLE_CODECS = frozenset({"h264", "hevc", "mpeg2video", "mpeg1video", "mpeg4"})
+
+
+def frame_timestamps(path: str | os.PathLike) -> np.ndarray | None:
+    """The presentation timestamps (``VideoInfo.time_base`` ticks) of every frame of the video at
+    ``path``, in display order, read from its packets without decoding (a fraction of a second for
+    a long file); None where they cannot number the frames: an image sequence, a codec outside
+    :data:`SKIPPABLE_CODECS`, or a packet without a timestamp or with a repeated one. (An
+    interlaced stream may hold a field per packet: the caller checks ``VideoInfo.fields``.)"""
+    if is_sequence(path):
+        return None
+    stamps: list[int] = []
+    try:
+        with av.open(str(path), "r") as container:
+            stream = container.streams.video[0]
+            if stream.codec_context.name not in SKIPPABLE_CODECS:
+                return None
+            for packet in container.demux(stream):
+                if packet.size == 0:
+                    continue
+                if packet.pts is None:
+                    return None
+                stamps.append(int(packet.pts))
+    except (av.FFmpegError, IndexError, OSError, UnicodeDecodeError):
+        return None
+    order = np.sort(np.asarray(stamps, np.int64))
+    if len(order) == 0 or np.any(np.diff(order) == 0):
+        return None
+    return order
+
+
 def frame_planes(frame: av.VideoFrame) -> list[np.ndarray]:
     """The planes of a planar ``frame`` (:func:`yuv_layout`) as 2-D arrays viewing its memory
     (writable: a new frame's planes are filled in place), uint8 or uint16."""
@@ -348,6 +382,18 @@ class VideoReader:
         self._format = _rgb_format(self.info.bit_depth, self.order, self.alpha)
 
     # -- frames --------------------------------------------------------------------------------
+    def skip_nonreference(self) -> None:
+        """Have the decoder drop the frames no other frame refers to (B-frames mostly: about half
+        of a typical H.264 stream, two thirds of MPEG-2), which it then does not decode at all.
+        The frames handed out are then a subsample: number them by their ``pts``
+        (:func:`frame_timestamps`), not by ``index``, which counts the frames decoded."""
+        self.stream.codec_context.skip_frame = "NONREF"
+
+    def seek(self, pts: int) -> None:
+        """Continue from the key frame at or before ``pts`` (stream time base); ``index`` then
+        counts from there."""
+        self._container.seek(int(pts), stream=self.stream, backward=True, any_frame=False)
+
     def convert(self, frame: av.VideoFrame, max_width: int | None = None) -> np.ndarray:
         """A decoded frame as an array (module conventions), at most ``max_width`` px wide (area
         filter; None = full size)."""

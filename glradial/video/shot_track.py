@@ -18,6 +18,7 @@ uncorrected); a lens that folds over inside the frame (``fold_over``) is never a
 
 from __future__ import annotations
 
+import copy
 import os
 from fractions import Fraction
 from typing import Callable
@@ -27,13 +28,13 @@ import numpy as np
 from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
-from ..media.video_io import VideoReader
+from ..media.video_io import VideoReader, frame_timestamps
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .shot_evidence import ShotCollector
 from .shot_fit import ShotLens, fit_shot
 from .smoothing import ShotDetector
 
-__all__ = ["track_shots", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY"]
+__all__ = ["track_shots", "place_cuts", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY"]
 
 #: default stride of the sampled frames (frames): 0.4 s at 25 fps
 EVERY = 10
@@ -84,39 +85,110 @@ def track_shots(
     doubtful_px: float = DOUBTFUL_PX,
     apply_doubtful: bool = False,
     rate: Fraction | None = None,
+    sparse: bool = True,
 ) -> LensTrack:
     """Pass 1 (module docstring): the :class:`LensTrack` of the video at ``path``. ``estimator``
     maps a uint8 RGB frame to a lens; ``every`` (frames) is the sampling stride, ``estimate_every``
     (samples) how often the estimator runs; ``doubtful_px`` (px at 1920) the bound above which a
     shot is doubtful; ``apply_doubtful`` applies doubtful shots' lenses anyway; ``rate`` the frame
-    rate of an image-sequence input (default 25)."""
-    from .video_pipeline import ESTIMATE_WIDTH, Pipelined
-
+    rate of an image-sequence input (default 25); ``sparse=False`` decodes every frame even where
+    the stream allows the sparse decode."""
     for name, value in (("every", every), ("estimate_every", estimate_every)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     if not doubtful_px > 0:
         raise ValueError(f"doubtful_px must be > 0 (px at 1920), got {doubtful_px!r}")
+    if not isinstance(sparse, (bool, np.bool_)):
+        raise TypeError(f"sparse must be a bool, got {sparse!r}")
     detector = detector or ShotDetector()
-    stamps: list[float] = []
+    fresh = copy.deepcopy(detector)
     with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
         info = reader.info
+        order = frame_timestamps(path) if sparse and info.fields == "progressive" else None
         shots = _Shots(estimator, estimate_every, doubtful_px, corner_radius(info.size))
-        since = 0
-        with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
-            for item in frames:
+        try:
+            stamps, windows = _scan(reader, order, detector, shots, every, progress)
+        except _Unnumbered:  # the decoder's timestamps do not match the packets': decode every frame
+            return track_shots(path, estimator, every=every, estimate_every=estimate_every, detector=fresh,
+                               progress=progress, doubtful_px=doubtful_px, apply_doubtful=apply_doubtful, rate=rate,
+                               sparse=False)
+    if windows:
+        placed = place_cuts(path, order, windows, fresh, rate=rate)
+        shots.starts = [placed.get(start, start) for start in shots.starts]
+    return _track(info, stamps, shots, apply_doubtful, doubtful_px)
+
+
+class _Unnumbered(Exception):
+    """A decoded frame's timestamp is not one of the packets' (pass 1 then decodes every frame)."""
+
+
+def _scan(reader: VideoReader, order: np.ndarray | None, detector: ShotDetector, shots: _Shots, every: int,
+          progress: bool | None) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """Decode (every frame, or with ``order`` the frames other frames refer to, numbered by
+    ``order``), detect cuts, sample each shot; returns the frames' times (s) and the windows
+    ``(a, b)`` of the cuts seen between two decoded frames ``a`` and ``b > a + 1``."""
+    from .video_pipeline import ESTIMATE_WIDTH, Pipelined
+
+    info = reader.info
+    if order is not None:
+        reader.skip_nonreference()
+    stamps: list[float] = []
+    windows: list[tuple[int, int]] = []
+    previous = sampled = -1
+    total = len(order) if order is not None else info.frame_count
+    with Progress(total, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
+        for item in frames:
+            index = item.index if order is None else _number(order, item.pts)
+            if order is None:
                 stamps.append(float(item.pts * info.time_base) if item.pts is not None else item.index / info.fps)
-                if detector.update(item.image):
-                    shots.open(item.index)
-                    since = 0
-                stride = every * 2 ** (len(shots.collector.evidence.samples) // SAMPLES_PER_STRIDE)
-                if since % stride == 0:
-                    shots.collector.add(item.index, to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
-                    since = 0
-                since += 1
-                bar.update()
-        shots.close()
-    return _track(info, np.asarray(stamps), shots, apply_doubtful, doubtful_px)
+            if detector.update(item.image, index - previous if previous >= 0 else 1):
+                shots.open(index)
+                sampled = -1
+                if previous >= 0 and index > previous + 1:
+                    windows.append((previous, index))
+            stride = every * 2 ** (len(shots.collector.evidence.samples) // SAMPLES_PER_STRIDE)
+            if sampled < 0 or index - sampled >= stride:
+                shots.collector.add(index, to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
+                sampled = index
+            bar.update(index - previous)
+            previous = index
+    shots.close()
+    if shots.starts:
+        shots.starts[0] = 0  # frames shown before the first decoded one (skipped leading B-frames) open the video
+    if order is not None:
+        stamps = [float(pts * info.time_base) for pts in order]
+    return np.asarray(stamps, np.float64), windows
+
+
+def _number(order: np.ndarray, pts: int | None) -> int:
+    """The frame number of a decoded frame's ``pts`` among all frames' timestamps ``order``."""
+    index = int(np.searchsorted(order, pts)) if pts is not None else len(order)
+    if index >= len(order) or order[index] != pts:
+        raise _Unnumbered(pts)
+    return index
+
+
+def place_cuts(path: str | os.PathLike, order: np.ndarray, windows: list[tuple[int, int]], detector: ShotDetector,
+               *, rate: Fraction | None = None) -> dict[int, int]:
+    """The first frame of each shot whose cut pass 1 saw between decoded frames ``a`` and ``b``
+    (``windows``; frames numbered by their timestamps ``order``): every frame of ``a .. b`` is
+    decoded (from the key frame before ``a``) and the cut placed before the frame that differs most
+    from its predecessor (``detector``'s score, on the thumbnails pass 1 uses). Returns ``{b:
+    first frame}``; a window whose frames cannot all be read keeps ``b``."""
+    placed: dict[int, int] = {}
+    with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, rate=rate) as reader:
+        for a, b in windows:
+            reader.seek(int(order[a]))
+            thumbs: dict[int, np.ndarray] = {}
+            for item in reader.items():
+                if item.pts is None or item.pts > order[b]:
+                    break
+                if item.pts >= order[a]:
+                    thumbs[int(np.searchsorted(order, item.pts))] = item.image
+            scores = {j: detector.pair_score(thumbs[j - 1], thumbs[j]) for j in range(a + 1, b + 1)
+                      if j - 1 in thumbs and j in thumbs}
+            placed[b] = max(scores, key=scores.get) if len(scores) == b - a else b
+    return placed
 
 
 def _track(info, stamps: np.ndarray, shots: _Shots, apply_doubtful: bool, doubtful_px: float) -> LensTrack:
