@@ -1,8 +1,17 @@
 """Pass 1 of ``correct --auto`` and ``estimate VIDEO``: one lens per shot, read while decoding.
 
-Every frame is decoded once and reduced to a 64 px thumbnail for the cut detector
-(:class:`glradial.video.smoothing.ShotDetector`). A cheap subsample of each shot -- its first frame, then
-every ``every``-th (the stride doubles each :data:`SAMPLES_PER_STRIDE` samples, so a long shot
+The decoder hands over a subsample: where the packets' timestamps number the frames
+(:func:`glradial.media.video_io.frame_timestamps`: H.264, HEVC, MPEG-1/2/4 in a container with
+timestamps, progressive), it skips the frames no other frame refers to
+(:meth:`~glradial.media.video_io.VideoReader.skip_nonreference`: about half of an x264 stream, which
+it then never decodes) and each decoded frame is numbered by its timestamp; anything else is decoded
+whole (``sparse=False`` forces that). Each decoded frame is reduced to a 64 px thumbnail for the cut
+detector (:class:`glradial.video.smoothing.ShotDetector`). A cut seen between two decoded frames
+``a`` and ``b`` with skipped frames between them is placed exactly afterwards
+(:func:`place_cuts`): the stretch ``a .. b`` alone is decoded again (from the key frame before
+``a``) and the cut goes before the frame that differs most from its predecessor -- the same test on
+the same thumbnails. A cheap subsample of each shot -- its first decoded frame, then one every
+``every`` frames (the stride doubles each :data:`SAMPLES_PER_STRIDE` samples, so a long shot
 costs no more than a log factor) -- is converted at most
 :data:`glradial.video.video_pipeline.ESTIMATE_WIDTH` px wide and handed to a
 :class:`~glradial.video.shot_evidence.ShotCollector` (line chains, frame-to-frame matches, the per-frame

@@ -2,14 +2,19 @@
 
 Pipeline (memory does not grow with the file's length):
 
-1. :func:`track_video` decodes every frame once, detects cuts on 64 px thumbnails and gathers a
-   cheap subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
+1. :func:`track_video` decodes a subsample (the frames other frames refer to, where the stream
+   allows: :mod:`glradial.video.shot_track`), detects cuts on 64 px thumbnails, places each cut
+   seen between two decoded frames exactly by decoding that stretch again, and gathers a cheap
+   subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
    then, on copies at most :data:`ESTIMATE_WIDTH` px wide); each shot gets one joint lens fit, a
    function of its zoom when the picture zooms (:mod:`glradial.video.shot_track`,
    :mod:`glradial.video.shot_fit`). A doubtful shot is marked and, by default, passed through
    uncorrected.
-2. :func:`correct_video` decodes the file again, corrects each frame with its lens and encodes it
-   (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags and depth kept).
+2. :func:`correct_video` decodes the file (all of it, once), corrects each frame with its lens and
+   encodes it (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags
+   and depth kept). A planar YUV stream (yuv420p, yuv422p10le ...) written in its own pix_fmt is
+   corrected plane by plane in its own samples, with no conversion to RGB and back
+   (:func:`correction_space`, :mod:`glradial.remapping.planes`); anything else goes through RGB.
    Decoding, correction and encoding overlap on three threads with at most ``depth`` frames
    queued between two steps; the correction runs on one worker thread, which owns its GL context
    (released when it ends) or uses the CPU path.
@@ -18,7 +23,7 @@ The result of pass 1 is a :class:`~glradial.video.lens_track.LensTrack`, written
 (format: :mod:`glradial.video.lens_track`).
 
 Convention: frames are ``H x W x 3`` RGB (uint8, or uint16 for deeper sources) when they reach the
-corrector; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (docs/DESIGN.md).
+RGB corrector, planes of the source's own samples on the YUV path; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (docs/DESIGN.md).
 """
 
 from __future__ import annotations
@@ -308,7 +313,9 @@ def correct_video(
     ``rate``: frame rate of an image-sequence input (default 25). ``remap_options``: ``inverse``
     (distort) and ``alpha`` of :func:`glradial.distort`. ``field_order``: ``"auto"`` (the stream's,
     :attr:`VideoInfo.fields`), or ``"progressive"``, ``"tff"``, ``"bff"`` to force one; interlaced
-    frames are remapped field by field (:mod:`glradial.remapping.fields`) and written with that field order."""
+    frames are remapped field by field (:mod:`glradial.remapping.fields`) and written with that field order.
+    Planar YUV written in its own pix_fmt is corrected in YUV (:func:`correction_space`: the CPU
+    backend, progressive; source-less pixels black in the source's range), anything else in RGB."""
     corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
     with VideoReader(source, order="rgb", copy_streams=True, rate=rate, alpha=True) as reader:
         info = _with_fields(reader.info, field_order)
