@@ -131,6 +131,40 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
     return {name: float(np.median(values)) for name, values in times.items()}
 
 
+def stage_times(clip: Path, folder: Path, frames: int = 24) -> dict[str, float]:
+    """Median ms per frame of pass 2's correction stage alone (no decoding, no encoding), the two
+    ways taking turns frame by frame: RGB (convert to RGB, ``cv2.remap`` of 3 channels, convert back
+    to the encoder's YUV) and YUV (the planes remapped in place, no conversion)."""
+    import numpy as np
+
+    from glradial.lens.lens import Lens
+    from glradial.media.video_io import VideoReader, VideoWriter, frame_planes, yuv_layout
+    from glradial.remapping.planes import black, chroma_siting, remap_planes, yuv_planes
+    from glradial.remapping.remap import correct
+
+    lens = Lens(K1, K2)
+    with VideoReader(clip, keep_decoded=True) as reader:
+        info = reader.info
+        decoded = [item.decoded for _, item in zip(range(frames), reader.items())]
+    writer = VideoWriter(folder / "stage.mp4", info, overwrite=True)
+    lattices = yuv_planes(info.size, yuv_layout(info.pix_fmt)[:2], chroma_siting(info.codec))
+    fill = black(yuv_layout(info.pix_fmt)[2], writer.full_range)
+    times: dict[str, list[float]] = {"RGB": [], "YUV": []}
+    try:
+        for frame in decoded:
+            start = time.perf_counter()
+            writer.frame(correct(reader.convert(frame), lens, backend="cpu"), frame.pts)
+            middle = time.perf_counter()
+            target, planes = writer.planar_frame()
+            remap_planes(frame_planes(frame), lens, lattices, planes, fill=fill)
+            writer.stamp(target, frame.pts)
+            times["RGB"].append(middle - start)
+            times["YUV"].append(time.perf_counter() - middle)
+    finally:
+        writer.abort()
+    return {name: 1e3 * float(np.median(values[1:])) for name, values in times.items()}  # the first builds the maps
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", default="1920x1080")
@@ -196,6 +230,7 @@ def main() -> int:
             passes["pass 1"] = min(passes["pass 1"], middle - start)
             passes["pass 2"] = min(passes["pass 2"], time.perf_counter() - middle)
 
+        stages = stage_times(clip, tmp)
         paths = {"ffmpeg": ffmpeg, "pyav": pyav, "fixed lens": fixed, "--auto": auto, "fixed, RGB": fixed_rgb,
                  "pass 1, all": pass1_full}
         best = {name: float("inf") for name in paths}
@@ -214,6 +249,8 @@ def main() -> int:
           f"{1e3 * best['fixed lens'] / args.frames:.1f} ms/frame")
     print(f"  pass 1 decoding every frame {1e3 * best['pass 1, all'] / args.frames:.1f} ms/frame "
           f"(sparse / all: {passes['pass 1'] / best['pass 1, all']:.2f})")
+    print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
+          f"YUV {stages['YUV']:.1f} ms/frame (YUV / RGB time: {stages['YUV'] / stages['RGB']:.2f})")
     print(f"fixed lens / ffmpeg : {fps['fixed lens'] / fps['ffmpeg']:.2f}  (target >= 0.8)")
     print(f"fixed lens, RGB / ffmpeg : {fps['fixed, RGB'] / fps['ffmpeg']:.2f}; YUV / RGB : "
           f"{fps['fixed lens'] / fps['fixed, RGB']:.2f}; load average {os.getloadavg()[0]:.1f}")

@@ -1,6 +1,6 @@
 """Pass 1 on a subsample: the decoder skips the frames no other frame refers to, the frames it
-decodes are numbered by the packets' timestamps, and a cut seen between two decoded frames is
-placed exactly by decoding just that stretch again.
+decodes are numbered by the packets' timestamps, and a candidate cut seen between two decoded
+frames is confirmed and placed by the full decode's test on just that stretch, decoded again.
 
 Oracle: clips whose cuts are known by construction (three different scenes, each drifting a
 little so that consecutive frames differ), encoded by libx264 with B-frames (x264's defaults:
@@ -59,9 +59,16 @@ class Counting(ShotDetector):
 
 
 def _track(path, sparse: bool, monkeypatch) -> tuple[np.ndarray, list, int]:
+    """The shot of every frame, the candidate cuts checked ``(a, b, first frame or None)``, and
+    how many frames the cut detector saw."""
     windows: list = []
-    place = shot_track.place_cuts
-    monkeypatch.setattr(shot_track, "place_cuts", lambda *args, **kw: windows.extend(args[2]) or place(*args, **kw))
+    confirm = shot_track.CutCheck.confirm
+
+    def spy(self, a, b, start):
+        windows.append((a, b, confirm(self, a, b, start)))
+        return windows[-1][2]
+
+    monkeypatch.setattr(shot_track.CutCheck, "confirm", spy)
     Counting.seen = 0
     track = shot_track.track_shots(path, lambda _frame: Lens(-0.2, 0.0), every=10, progress=False, sparse=sparse,
                                    detector=Counting())
@@ -85,8 +92,8 @@ def test_cuts_are_placed_exactly_from_a_sparse_decode(tmp_path, monkeypatch, cut
     assert decoded < 0.8 * len(truth) and len(_b_frames(path)) > 0.3 * len(truth)  # a real subsample
     exact, _, everything = _track(path, False, monkeypatch)
     assert list(exact) == list(truth) and everything == len(truth)
-    for a, b in windows:  # each window holds the cut, which was placed inside it
-        assert a < cut <= b
+    assert [first for _a, _b, first in windows if first is not None] == [cut]  # confirmed, placed exactly
+    assert all(a < cut <= b for a, b, first in windows if first is not None)
 
 
 def test_a_window_is_placed_when_the_cut_falls_on_a_skipped_frame(tmp_path, monkeypatch):
@@ -97,7 +104,7 @@ def test_a_window_is_placed_when_the_cut_falls_on_a_skipped_frame(tmp_path, monk
         truth = _clip(path, [(0, cut), (2, 30 - cut)], scenecut=False)
         shots, windows, _ = _track(path, True, monkeypatch)
         assert list(shots) == list(truth)
-        placed += any(a < cut < b for a, b in windows)
+        placed += any(first == cut < b for _a, b, first in windows)
     assert placed >= 1
 
 
@@ -117,6 +124,6 @@ def test_streams_that_cannot_be_numbered_are_decoded_whole(tmp_path, monkeypatch
             writer.write(_scene(0, step))
     assert frame_timestamps(path) is None  # FFV1: every frame is a key frame, nothing to skip
     shots, windows, decoded = _track(path, True, monkeypatch)
-    assert decoded == 12 and windows == [] and list(shots) == [0] * 12
+    assert decoded == 12 and windows == [] and list(shots) == [0] * 12  # and no cut was checked
     with pytest.raises(TypeError, match="sparse must be a bool"):
         shot_track.track_shots(path, lambda _frame: Lens(0, 0), sparse="yes")
