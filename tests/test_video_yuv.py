@@ -100,19 +100,22 @@ def _correct(source: Path, target: Path, space: str, lens=(LENS.k1, LENS.k2), mo
     monkeypatch.undo()
 
 
-@pytest.mark.parametrize("pix_fmt, size", [("yuv420p", (320, 180)), ("yuv420p", (321, 181)), ("yuv422p10le", (320, 180))])
-def test_yuv_path_agrees_with_the_rgb_path_on_a_real_frame(tmp_path, monkeypatch, pix_fmt, size):
+@pytest.mark.parametrize("pix_fmt, size, direction", [("yuv420p", (320, 180), "undistort"), ("yuv420p", (321, 181), "undistort"),
+                                                      ("yuv422p10le", (320, 180), "undistort"), ("yuv420p", (320, 180), "distort")])
+def test_yuv_path_agrees_with_the_rgb_path_on_a_real_frame(tmp_path, monkeypatch, pix_fmt, size, direction):
     source = _clip(tmp_path / "in.mkv", pix_fmt, size)
     original, _ = _planes(source)
     outputs = {}
     for space in ("yuv", "rgb"):
         _correct(source, tmp_path / f"id_{space}.mkv", space, (0.0, 0.0), monkeypatch)
-        _correct(source, tmp_path / f"{space}.mkv", space, monkeypatch=monkeypatch)
+        _correct(source, tmp_path / f"{space}.mkv", space, monkeypatch=monkeypatch, direction=direction)
         outputs[space], written = _planes(tmp_path / f"{space}.mkv")
         assert written == pix_fmt
     identity_yuv, _ = _planes(tmp_path / "id_yuv.mkv")
     identity_rgb, _ = _planes(tmp_path / "id_rgb.mkv")
     assert all(np.array_equal(a, b) for a, b in zip(identity_yuv, original))  # no conversion: exact
+    _correct(source, tmp_path / "copied.mkv", "yuv", None, monkeypatch)  # a frame passed through uncorrected
+    assert all(np.array_equal(a, b) for a, b in zip(_planes(tmp_path / "copied.mkv")[0], original))
     level = 4 if pix_fmt.endswith("10le") else 1  # one 8-bit level
     for a, b, kept, lost in zip(outputs["yuv"], outputs["rgb"], original, identity_rgb):
         difference = np.abs(a.astype(float) - b)
