@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -16,8 +15,8 @@ from .remapping import (
     add_render_options,
     check_encode_options,
     check_paths,
+    refuse_same_file,
     run_with_lens,
-    same_file,
     summary,
     video_alpha,
 )
@@ -152,8 +151,7 @@ def _auto_sidecar(args: argparse.Namespace) -> Path:
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
     check_overwrite(sidecar, args.overwrite)
-    if same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
-        raise UsageError("--sidecar must differ from INPUT and OUTPUT")
+    refuse_same_file(sidecar, "--sidecar", args.input, args.output)
     return sidecar
 
 
