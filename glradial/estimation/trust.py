@@ -27,8 +27,9 @@ Bound (split conformal):
 Doubt (:attr:`glradial.LensEstimate.reason`, first match wins; :data:`REASONS`):
     ``blank_frame`` (grey std below ``blank_std``), ``noise_frame`` (no line fit and more than
     ``noise_edge_density`` of the pixels are edges), ``not_a_pitch`` (less than ``green_min`` of the
-    16:9 view is pitch green), ``too_few_lines`` (no line fit of at least two agreeing chains: the
-    answer is the CNN's alone), ``evidence_disagrees`` (the line fit and the CNN are more than
+    16:9 view is pitch green), ``too_few_lines`` (no white-line fit of at least two agreeing chains:
+    the answer is the CNN's, or a soft-edge fit's where its bound is lower; always doubtful, since on
+    the real panorama crops that have one soft fits err by 5-70 px), ``evidence_disagrees`` (the line fit and the CNN are more than
     ``disagree_max_px`` apart), ``weak_geometry`` (the bound exceeds ``doubt_px``); else ``ok``.
     With ``method="net"`` no line fit is run, so only the first, third and ``weak_geometry`` apply.
 
@@ -232,7 +233,7 @@ class TrustModel:
         empty = self.no_evidence(evidence)
         if empty is not None:
             return lens, source, max(bound, anything_bound(lens)), True, empty
-        if method != "net" and evidence.lines is None:
+        if method != "net" and not white:  # a soft-edge fit may be the better answer, never a sure one
             return lens, source, bound, True, "too_few_lines"
         if evidence.lines is not None and method != "net" and evidence.disagreement_px > self.disagree_max_px:
             return lens, source, bound, True, "evidence_disagrees"
