@@ -150,3 +150,12 @@ def test_degenerate_frames_give_no_soft_fit_and_no_exception(kind):
     fit = fit_soft_lines(frame, prior=(0.0, 0.0))
     assert not fit.ok and fit.reason
     assert np.isfinite([fit.k1, fit.k2]).all()
+
+
+def test_bad_frames_are_refused_naming_the_argument():
+    with pytest.raises(TypeError, match="frame"):
+        fit_soft_lines([[0, 1], [2, 3]])
+    with pytest.raises(ValueError, match="frame"):
+        detect_soft_chains(np.zeros((4, 4, 2), np.uint8))
+    with pytest.raises(ValueError, match="frame"):
+        soft_gray(np.full((8, 8, 3), 2.0))
