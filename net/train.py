@@ -12,8 +12,10 @@ falls as processes are added); :class:`~.data.CropProducers` interleaves their c
 proportion to shard size. Every step takes exactly ``fresh_per_step`` new crops into a
 :class:`~.data.CropPool` and samples the batch from the pool, then applies
 :func:`~.augment.augment_batch` (photometric + flips).
-Loss: :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the joint in-frame
-term). AdamW, linear warm-up then cosine decay; the
+Loss (:func:`step_loss`): :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the
+joint in-frame term; ``small_k1_weight`` > 0 weights near-zero lenses more), plus, with
+``comparator_loss_weight`` > 0, the comparator head's BCE on pairs of crops (training-only: export
+drops the head). AdamW, linear warm-up then cosine decay; the
 schedule's progress is ``step / steps`` or, with ``time_budget_s``, the training wall time spent
 over the budget (so a run ends on time on a shared machine; then the run is not bit-reproducible).
 ``stop_at_s`` ends a run early without changing its schedule.
@@ -49,7 +51,7 @@ from glradial.media.atomic import atomic_path, atomic_write_text
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
-from .loss import error_scale_loss, training_loss
+from .loss import comparator_loss, comparison_partners, error_scale_loss, small_k1_weights, training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
 
 
@@ -81,6 +83,9 @@ class TrainConfig:
     error_loss_weight: float = 0.1  # weight of the error head's Laplace likelihood (models with error_head)
     error_head_lr_scale: float = 1.0  # the error head's learning rate over lr
     error_head_only: bool = False  # train only the error head: the rest (batch-norm statistics too) stays as loaded
+    comparator_loss_weight: float = 0.0  # > 0: the comparator's BCE beside the regression (needs model.comparator_head)
+    small_k1_weight: float = 0.0  # > 0: extra loss weight at k1 = 0, 1 + w exp(-k1^2 / 2 s^2) (net.loss.small_k1_weights)
+    small_k1_scale: float = 0.1  # s of that weight, lens units
     panoramas: dict = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "train", "n": 16}, "size": [2048, 1024]})
     val_panoramas: dict | None = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "val", "n": 4}, "size": [2048, 1024]})
     val_size: int = 256
@@ -102,6 +107,13 @@ class TrainConfig:
         cfg = cls(**data)
         if cfg.producers < 1:
             raise ValueError(f"producers must be at least 1, got {cfg.producers}")
+        comparator = bool(cfg.model.get("comparator_head", False))
+        if not cfg.comparator_loss_weight >= 0 or (cfg.comparator_loss_weight > 0) != comparator:
+            raise ValueError(f"comparator_loss_weight {cfg.comparator_loss_weight} in {path} needs model.comparator_head "
+                             f"true exactly when it is > 0 (comparator_head is {comparator})")
+        if not cfg.small_k1_weight >= 0 or not cfg.small_k1_scale > 0:
+            raise ValueError(f"small_k1_weight must be >= 0 and small_k1_scale > 0 in {path}, got "
+                             f"{cfg.small_k1_weight} and {cfg.small_k1_scale}")
         if cfg.paired and (cfg.batch_size % 2 or cfg.fresh_per_step % 2 or cfg.producer_chunk % 2 or cfg.pool_capacity % 2):
             raise ValueError("paired training needs even batch_size, fresh_per_step, producer_chunk and pool_capacity")
         return cfg
@@ -225,6 +237,28 @@ def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, 
             started.close()
         raise
     return CropProducers(producers, [len(part) for _, part in shards], cfg.producer_chunk)
+
+
+def step_loss(train_model: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, cfg: TrainConfig,
+              model_cfg: ModelConfig, rng: np.random.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """One batch's loss (scalar) and the predicted ``(k1, k2)`` (``N x 2``): the regression loss
+    (:func:`~.loss.training_loss`, with ``joint_loss_weight`` and, when ``small_k1_weight`` > 0,
+    :func:`~.loss.small_k1_weights`), the error head's likelihood when the model has one, and the
+    comparator's BCE when ``comparator_loss_weight`` > 0 (pairs: :func:`~.loss.comparison_partners`;
+    ``rng`` is drawn from only for unpaired batches). With both weights 0 it is the loss of the
+    runs before them, to the bit."""
+    partner = None
+    if cfg.comparator_loss_weight > 0:
+        partner = torch.from_numpy(comparison_partners(len(y), cfg.paired, rng)).to(y.device)
+    out_all = train_model(x) if partner is None else train_model(x, partner)
+    pred = out_all[:, :2]
+    weights = small_k1_weights(y[:, 0], cfg.small_k1_weight, cfg.small_k1_scale) if cfg.small_k1_weight > 0 else None
+    loss = training_loss(y, pred, joint_weight=cfg.joint_loss_weight, sample_weight=weights)
+    if model_cfg.error_head:
+        loss = loss + cfg.error_loss_weight * error_scale_loss(y, pred, out_all[:, 2])
+    if partner is not None:
+        loss = loss + cfg.comparator_loss_weight * comparator_loss(out_all[:, -2:], y, partner)
+    return loss, pred
 
 
 def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI's option handling; complexity 33)
@@ -374,11 +408,7 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
             train_model.train()
             if cfg.error_head_only:
                 freeze_all_but_error_head(model)
-            out_all = train_model(x)
-            pred = out_all[:, :2]
-            loss = training_loss(y, pred, joint_weight=cfg.joint_loss_weight)
-            if model_cfg.error_head:
-                loss = loss + cfg.error_loss_weight * error_scale_loss(y, pred, out_all[:, 2])
+            loss, pred = step_loss(train_model, x, y, cfg, model_cfg, rng)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
