@@ -186,9 +186,9 @@ def test_export_drops_the_comparator_head(tmp_path, error_head):
 def test_stage12_config_trains_a_few_steps_on_cpu(tmp_path):
     # the GPU-ready config, shrunk to a tiny network and synthetic panoramas, everything else as it
     # is: from an init without the comparator (as runs/shipped_from_onnx.pt), 3 steps, then export
-    from net.export import export_onnx, load_checkpoint
     from dataclasses import asdict
 
+    from net.export import export_onnx, load_checkpoint
     from net.train import main
 
     config = asdict(TrainConfig.from_json(ROOT / "net/configs/stage12_multitask.json"))
