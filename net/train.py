@@ -3,6 +3,8 @@
 Usage::
 
     python -m net.train --config net/configs/stage01_128.json --out runs/stage01 [--resume]
+    python -m net.train --config net/configs/stage12_multitask.json --out runs/stage12 \
+        --init runs/shipped_from_onnx.pt --resume --stop-after-s 420   # one call of a longer run
     torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
 
 Data path per rank: ``producers`` :class:`~.data.CropProducer` processes render crops ahead of
@@ -270,6 +272,9 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
     parser.add_argument("--time-budget-s", type=float,
                         help="override the config's time budget (0: none; the schedule then follows the step count)")
     parser.add_argument("--threads", type=int, help="torch threads per process")
+    parser.add_argument("--stop-after-s", type=float,
+                        help="end this call after this many more seconds of step time (the schedule unchanged; "
+                        "--resume continues): a long run in calls of limited length")
     parser.add_argument("--init", help="start from this checkpoint's (EMA) weights; new optimizer and schedule "
                         "(fine-tuning). The config's model may be wider or deeper: net.model.load_grown grows "
                         "the weights so that training starts from the same function")
@@ -277,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
                         help="with --init: zero the k2 head's last layer (a k2_residual model then starts on the manifold)")
     args = parser.parse_args(argv)
 
+    if args.stop_after_s is not None and not args.stop_after_s > 0:
+        raise ValueError(f"--stop-after-s must be positive, got {args.stop_after_s}")
     cfg = TrainConfig.from_json(args.config)
     if args.steps is not None:
         cfg.steps = args.steps
@@ -340,6 +347,8 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
         optimizer.load_state_dict(state["optimizer"])
         step, train_time, best = state["step"], state["train_time"], state.get("best", math.inf)
         log(f"resumed from {out / 'last.pt'} at step {step} ({train_time:.0f} s trained)")
+    if args.stop_after_s is not None:
+        cfg.stop_at_s = train_time + args.stop_after_s
     if is_main:
         out.mkdir(parents=True, exist_ok=True)
         full = asdict(cfg)

@@ -201,10 +201,17 @@ def test_stage12_config_trains_a_few_steps_on_cpu(tmp_path):
     (tmp_path / "c.json").write_text(json.dumps(run))
     init = DistortionNet(ModelConfig.from_dict(dict(tiny["model"], error_head=True)))
     torch.save({"model": init.state_dict()}, tmp_path / "init.pt")
-    assert main(["--config", str(tmp_path / "c.json"), "--out", str(tmp_path / "run"),
-                 "--init", str(tmp_path / "init.pt")]) == 0
+    # in two calls, as scripts/device_session.sh train runs it: the first stops after one step
+    # (--stop-after-s), the second resumes and finishes the schedule (--init is then ignored)
+    call = ["--config", str(tmp_path / "c.json"), "--out", str(tmp_path / "run"), "--init", str(tmp_path / "init.pt"),
+            "--resume"]
+    assert main(call + ["--stop-after-s", "1e-6"]) == 0
+    assert torch.load(tmp_path / "run/last.pt", map_location="cpu", weights_only=False)["step"] == 1
+    assert main(call) == 0
     state = torch.load(tmp_path / "run/last.pt", map_location="cpu", weights_only=False)
     assert state["step"] == 3
+    with pytest.raises(ValueError, match="--stop-after-s must be positive"):
+        main(call + ["--stop-after-s", "0"])
     assert any(k.startswith("head_compare.") for k in state["model"])
     moved = [k for k, v in state["model"].items() if k in init.state_dict() and v.dtype.is_floating_point
              and not torch.equal(v, init.state_dict()[k])]
