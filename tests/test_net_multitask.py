@@ -221,3 +221,36 @@ def test_stage12_config_trains_a_few_steps_on_cpu(tmp_path):
     import onnxruntime as ort
 
     assert [o.name for o in ort.InferenceSession(str(path)).get_outputs()] == ["k", "error_px"]
+
+
+def test_paired_interval_known_answers():
+    from net.compare import paired_interval
+
+    a = np.random.default_rng(0).exponential(5.0, 200)
+    assert paired_interval(a, a.copy(), np.median) == [0.0, 0.0]
+    assert paired_interval(a, a + 1.5, np.median) == pytest.approx([1.5, 1.5])  # a shift moves every resample alike
+    lo, hi = paired_interval(a, a * 0.8, np.mean)
+    assert lo < 0 and hi < 0 and lo <= -0.2 * a.mean() * 0.8 and hi >= -0.2 * a.mean() * 1.2
+
+
+def test_compare_two_checkpoints_on_the_same_crops(tmp_path):
+    # the same network twice: every paired difference is exactly zero; a comparator model also gets
+    # its ordering accuracy, and the regression's accuracy is a fraction of the 8 pairs
+    from glradial.evaluation.evaluation import EvaluationSettings
+    from net.compare import compare
+
+    torch.manual_seed(0)
+    plain = DistortionNet(ModelConfig(**TINY))
+    torch.nn.init.normal_(plain.head_k1.net[-1].weight, std=0.5)
+    with_head = DistortionNet(ModelConfig(**TINY, comparator_head=True))
+    with_head.load_state_dict(plain.state_dict(), strict=False)  # the same network plus a comparator
+    for name, model in (("a", plain), ("b", with_head)):
+        torch.save({"model": model.state_dict(), "model_config": model.config.to_dict()}, tmp_path / f"{name}.pt")
+    chosen = EvaluationSettings(n=8, panoramas=1, split="val", panorama_size=(512, 256), ood_n=0,
+                                cache_dir=str(tmp_path / "cache"))
+    rows = compare([str(tmp_path / "a.pt"), str(tmp_path / "b.pt")], chosen, 1)
+    assert rows[0]["ordering"] is None and "d_median_px_ci95" not in rows[0]
+    assert rows[1]["d_median_px_ci95"] == [0.0, 0.0] and rows[1]["d_mean_dl_ci95"] == [0.0, 0.0]
+    assert rows[1]["median_px"] == rows[0]["median_px"] > 0
+    accuracy = rows[1]["ordering"]
+    assert all(v * 8 == round(v * 8) and 0 <= v <= 1 for v in accuracy["comparator"] + accuracy["regression"])
