@@ -254,3 +254,7 @@ def test_compare_two_checkpoints_on_the_same_crops(tmp_path):
     assert rows[1]["median_px"] == rows[0]["median_px"] > 0
     accuracy = rows[1]["ordering"]
     assert all(v * 8 == round(v * 8) and 0 <= v <= 1 for v in accuracy["comparator"] + accuracy["regression"])
+    other = DistortionNet(ModelConfig(**dict(TINY, input_size=(96, 54))))
+    torch.save({"model": other.state_dict(), "model_config": other.config.to_dict()}, tmp_path / "c.pt")
+    with pytest.raises(ValueError, match="same input size"):  # refused before anything is rendered
+        compare([str(tmp_path / "a.pt"), str(tmp_path / "c.pt")], chosen, 1)
