@@ -179,3 +179,9 @@ def test_remap_planes_refuses_mismatched_planes():
         remap_planes(planes, LENS, lattices, planes, fill=(16, 128))
     with pytest.raises(ValueError, match="siting must be one of"):
         yuv_planes((64, 36), (1, 1), "top")
+    with pytest.raises(ValueError, match="plane width must be a positive integer"):
+        Plane(0, 18)
+    with pytest.raises(ValueError, match="step_x"):
+        Plane(32, 18, step_x=0.0)
+    with pytest.raises(TypeError, match="x0 must be a real number"):
+        Plane(32, 18, x0="left")

@@ -103,6 +103,16 @@ class Plane:
     step_x: float = 1.0
     step_y: float = 1.0
 
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"plane {name} must be a positive integer (samples), got {value!r}")
+        for name in ("x0", "y0"):
+            real_number(name, getattr(self, name))
+        for name in ("step_x", "step_y"):
+            check_positive(name, getattr(self, name))
+
     @classmethod
     def full(cls, size: tuple[int, int]) -> "Plane":
         return cls(int(size[0]), int(size[1]))
