@@ -62,7 +62,7 @@ from ..estimation.line_fit import (
 )
 from ..estimation.lines import LineEvidence
 from ..lens.lens import Lens
-from ..lens.lensfuncs import drap_coefficients
+from ..lens.lensfuncs import undistort_point_exact
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
 from .frame_motion import Matches, homography_of
 from .lens_track import DOUBTFUL_PX
@@ -200,7 +200,7 @@ class _Chains:
             return np.zeros(0)
         k = lenses[self.sample[self.chain]]
         r_d = np.hypot(self.points[:, 0], self.points[:, 1])
-        p_u, valid = _undistort(self.points, k[:, 0], k[:, 1])
+        p_u, valid = undistort_point_exact(self.points, k[:, 0], k[:, 1])
         r_u = np.hypot(p_u[:, 0], p_u[:, 1])
         mag = np.where(r_u > 1e-9, r_d / np.maximum(r_u, 1e-9), 1.0)
         starts = np.flatnonzero(np.r_[True, np.diff(self.chain) != 0])
@@ -220,28 +220,11 @@ class _Chains:
         return np.sqrt(chi2 * (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2) / self.counts)
 
 
-def _undistort(points: np.ndarray, k1: float | np.ndarray, k2: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points (N, 2) undistorted with the lens ``(k1, k2)`` (scalars, or one per point): Drap-Lefevre
-    seed and Newton steps on the radius (:func:`glradial.lens.lensfuncs.drap_coefficients`), all at once.
-    ``valid`` is False where the lens folds over before the point's radius."""
-    r_d = np.hypot(points[:, 0], points[:, 1])
-    b1, b2, b3, b4 = drap_coefficients(k1, k2)
-    rd2 = r_d * r_d
-    r = r_d * (1.0 + rd2 * (b1 + rd2 * (b2 + rd2 * (b3 + rd2 * b4))))
-    for _ in range(4):
-        r2 = r * r
-        r = r - (r * (1.0 + r2 * (k1 + k2 * r2)) - r_d) / np.maximum(1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2), 1e-6)
-    r2 = r * r
-    valid = (np.abs(r * (1.0 + r2 * (k1 + k2 * r2)) - r_d) <= 1e-7) & (1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2) > 0) & (r >= 0)
-    scale = np.where(r_d > 0, r / np.where(r_d > 0, r_d, 1.0), 1.0)
-    return points * scale[:, None], valid
-
-
 def _pair_residuals(pairs: list[tuple[int, int, Matches]], lenses: np.ndarray) -> np.ndarray:
     out = []
     for i, j, m in pairs:
-        ua, _ = _undistort(m.a, float(lenses[i, 0]), float(lenses[i, 1]))
-        ub, _ = _undistort(m.b, float(lenses[j, 0]), float(lenses[j, 1]))
+        ua, _ = undistort_point_exact(m.a, float(lenses[i, 0]), float(lenses[i, 1]))
+        ub, _ = undistort_point_exact(m.b, float(lenses[j, 0]), float(lenses[j, 1]))
         h = homography_of(ua, ub)
         if h is None:
             out.append(np.full(2 * len(m), 1e3))
