@@ -36,10 +36,6 @@ MAX_CORNERS = 400
 #: matches kept per pair (evenly thinned): the lens fit weighs a pair as at most
 #: :data:`glradial.video.shot_fit.MATCH_CAP` points anyway, and evaluates every kept one at each step
 MAX_MATCHES = 150
-#: Lucas-Kanade window (px of the gray copy): it assumes one translation over the window, so a
-#: window larger than the texture needs is biased where the picture between the two frames is
-#: scaled or sheared locally (the distortion near the frame edge does this)
-LK_WINDOW = 21
 #: corners closer than this to each other (px of the gray copy) are not both taken
 MIN_CORNER_DISTANCE = 10
 #: a track whose backward track misses its start by more than this (px of the gray copy) is dropped
@@ -109,7 +105,7 @@ def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0,
     start = _corners(a)
     if start is None or len(start) < MIN_MATCHES:
         return None
-    params = dict(winSize=(LK_WINDOW, LK_WINDOW), maxLevel=4, criteria=(cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+    params = dict(winSize=(21, 21), maxLevel=4, criteria=(cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.01))
     height, width = a.shape
     size = (width, height)
     if guess is None:

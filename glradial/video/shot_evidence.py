@@ -48,7 +48,10 @@ class ShotCollector:
     """Evidence of one shot, sample by sample. ``estimator`` maps a uint8 RGB frame to a lens (a
     :class:`glradial.LensEstimate` states its uncertainty); it runs on every ``estimate_every``-th
     sample (and the first), the chains and matches on every sample: with the previous sample, and
-    with every kept anchor sample it has moved :data:`ANCHOR_TRAVEL` to :data:`ANCHOR_REACH` from."""
+    with every kept anchor sample it has moved :data:`ANCHOR_TRAVEL` to :data:`ANCHOR_REACH` from.
+    The surest per-frame estimate so far (smallest ``uncertainty_px``; the first when none states
+    one) is the hint of the line detector (chains are linked and cut at corners in the frame
+    undistorted with it) and of the matcher: a later, less sure estimate does not replace it."""
 
     def __init__(self, estimator: Callable[[np.ndarray], Lens], estimate_every: int = 1) -> None:
         if estimate_every < 1:
@@ -58,6 +61,7 @@ class ShotCollector:
         self.estimates: list[tuple[int, Lens]] = []
         self._previous: np.ndarray | None = None
         self._hint: tuple[float, float] = (0.0, 0.0)
+        self._hint_px = math.inf
         self._anchors: list[_Anchor] = []
 
     def add(self, index: int, frame: np.ndarray) -> None:
@@ -70,7 +74,9 @@ class ShotCollector:
         if n % self.estimate_every == 0:
             estimate = as_lens(self.estimator(frame))  # a plain (k1, k2) as the centred lens
             self.estimates.append((index, estimate))
-            self._hint = (estimate.k1, estimate.k2)
+            sure = float(getattr(estimate, "uncertainty_px", math.inf))
+            if sure <= self._hint_px:  # the surest estimate so far guides the detector and matcher
+                self._hint, self._hint_px = (estimate.k1, estimate.k2), sure
         chains = detect_chains(frame, lens_hint=self._hint)
         self.evidence.samples.append(ShotSample(index, chains, estimate))
         gray = motion_gray(frame)
