@@ -49,7 +49,7 @@ class ShotCollector:
     :class:`glradial.LensEstimate` states its uncertainty); it runs on every ``estimate_every``-th
     sample (and the first), the chains and matches on every sample: with the previous sample, and
     with every kept anchor sample it has moved :data:`ANCHOR_TRAVEL` to :data:`ANCHOR_REACH` from.
-    The surest per-frame estimate so far (smallest ``uncertainty_px``; the first when none states
+    The surest per-frame estimate so far (smallest ``uncertainty_px``; the latest when none states
     one) is the hint of the line detector (chains are linked and cut at corners in the frame
     undistorted with it) and of the matcher: a later, less sure estimate does not replace it."""
 
