@@ -42,7 +42,8 @@ range, or estimators that disagree), is surer than the joint fit, the shot takes
 chains stand in for no extra evidence there: the estimates read the same lines, through the
 single-frame fit's fuller model). A static shot is then as sure as its frames say, and a fit that
 few chains leave loose (a pure zoom: its frame pairs tie the lens at one zoom to the next, not the
-lens itself) does not stand.
+lens itself) does not stand. A zooming shot needs estimates :data:`ZOOM_FALLBACK_RATIO` times
+surer: their one lens cannot follow the zoom.
 
 Doubt (reason strings are machine-readable): ``no_geometry`` (fewer than :data:`MIN_CHAINS` chains
 pass screening and the camera did not pan :data:`PAN_MIN`: nothing but the per-frame
@@ -104,6 +105,10 @@ BOUND_SCALE = 0.65
 BOUND_FLOOR_PX = 1.0
 #: stated bound when the shot has no geometric evidence (px at 1920): the CNN's alone
 NO_GEOMETRY_PX = 16.0
+#: a zooming shot takes its per-frame estimates instead of the joint fit only when they state a
+#: bound this many times smaller: one lens for the whole zoom cannot follow it (their spread, in
+#: their bound, only covers that), so the zoom model stands unless the lines leave it loose
+ZOOM_FALLBACK_RATIO = 2.0
 #: a shot has geometric evidence of its lens when at least this many chains pass screening...
 MIN_CHAINS = 2
 #: ...or the camera panned at least this far (frame widths). A static camera's frame pairs say
@@ -389,7 +394,7 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
     if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
         return shot  # estimates that state no bound cannot be weighed against the fit's
     fallback = _fallback(evidence, doubtful_px, "uncertain")
-    return fallback if fallback.uncertainty_px < shot.uncertainty_px else shot
+    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if zooming else 1.0) < shot.uncertainty_px else shot
 
 
 def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, doubtful_px: float,
