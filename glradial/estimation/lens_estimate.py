@@ -69,9 +69,11 @@ class LensEstimate(Lens):
         return Lens(self.k1, self.k2)
 
     def as_dict(self) -> dict:
-        """``{"k1", "k2", "method", "uncertainty_px", "chains", "doubtful", "reason"}`` (JSON-ready)."""
-        return {"k1": self.k1, "k2": self.k2, "method": self.method, "uncertainty_px": self.uncertainty_px,
-                "chains": self.chains, "doubtful": self.doubtful, "reason": self.reason}
+        """``{"k1", "k2", "pixel_aspect", "method", "uncertainty_px", "chains", "doubtful", "reason"}``
+        (JSON-ready; ``glradial correct --lens`` reads it back, pixel aspect included)."""
+        return {"k1": self.k1, "k2": self.k2, "pixel_aspect": self.pixel_aspect, "method": self.method,
+                "uncertainty_px": self.uncertainty_px, "chains": self.chains, "doubtful": self.doubtful,
+                "reason": self.reason}
 
 
 def check_method(method: object) -> str:
