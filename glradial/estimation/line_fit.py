@@ -70,7 +70,7 @@ SIGMA_POINT, SIGMA_FLOOR = 0.25, 0.08
 #: Robust loss scale (chi² units) of one chain.
 ROBUST_T = 3.0
 #: Loose prior of k2 around the manifold, and of k1 around the CNN (lens units).
-K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.05, 0.3
+K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.1, 0.6
 #: Screening thresholds (px RMS of the detection copy).
 STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 0.7
 #: A fit needs at least this many chains that agree with it: one chain cannot be checked against
