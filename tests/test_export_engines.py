@@ -254,6 +254,25 @@ def test_cli_correct_writes_one_valid_sample_per_frame(tmp_path, schema, capsys,
     assert main(argv3) == 2 and "need(s) --opentrackio" in capsys.readouterr().err  # a camera option alone
 
 
+def test_cli_side_outputs_never_overwrite_the_input_through_a_link(tmp_path, capsys):
+    """``--opentrackio`` and ``--sidecar`` naming INPUT through a symbolic link are refused before any
+    work, as OUTPUT is: the input stays intact and nothing is written."""
+    source = _clip(tmp_path / "in.mov")
+    before = source.read_bytes()
+    link = tmp_path / "link.jsonl"
+    link.symlink_to(source)
+    out = tmp_path / "out.mov"
+    argv = ["correct", str(source), str(out), "--k1", "-0.2", "--opentrackio", str(link), "--sensor", "2/3-inch",
+            "--focal-mm", "9", "-y"]
+    assert main(argv) == 2
+    assert "--opentrackio" in capsys.readouterr().err
+    link_csv = tmp_path / "link.csv"
+    link_csv.symlink_to(source)
+    assert main(["correct", str(source), str(out), "--auto", "--sidecar", str(link_csv), "-y"]) == 2
+    assert "--sidecar" in capsys.readouterr().err
+    assert source.read_bytes() == before and not out.exists()
+
+
 def test_cli_distort_overscan_fills_the_frame_and_half_the_overscan_does_not(tmp_path, capsys):
     """``glradial distort --overscan``: a uniform overscanned render (the pixel pitch kept) comes out
     as a full distorted frame, no pixel empty, at the lens's own factor; at half its overscan the

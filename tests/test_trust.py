@@ -127,6 +127,37 @@ def test_a_squashed_frame_is_estimated_with_its_pixel_aspect():
         glradial.estimate(squashed, pixel_aspect=-1.0)
 
 
+def _squashed_pitch(k: tuple[float, float]) -> np.ndarray:
+    """Seven straight pitch lines across a 1280×720 frame, seen through lens ``k``, stored 640×640."""
+    rng = np.random.default_rng(4)
+    img = np.full((720, 1280, 3), GRASS, np.uint8)
+    for y in np.linspace(0.05, 0.95, 7) * 720:
+        a = rng.uniform(-0.15, 0.15)
+        cv2.line(img, (-100, int(y - a * 640)), (1380, int(y + a * 640)), WHITE, 3, cv2.LINE_AA)
+    return cv2.resize(apply_lens(img, *k), (640, 640), interpolation=cv2.INTER_AREA)
+
+
+@needs_shipped
+def test_cli_pixel_aspect_reads_a_squashed_frame(tmp_path, capsys):
+    """``estimate --pixel-aspect`` and ``correct --auto --pixel-aspect`` read a squashed image in its
+    own pixels (the known lens within 2 px, as the API does); a video or a bad value is refused."""
+    from glradial.cli import main
+    from glradial.media.image_io import write_image
+
+    k = (-0.3, float(manifold_k2(-0.3)))
+    path = tmp_path / "squashed.png"
+    write_image(path, _squashed_pitch(k)[..., ::-1].copy())
+    assert main(["estimate", str(path), "--json", "--pixel-aspect", str(16 / 9)]) == 0
+    row = json.loads(capsys.readouterr().out)
+    assert row["pixel_aspect"] == pytest.approx(16 / 9) and error_px(glradial.Lens(row["k1"], row["k2"]), k) < 2.0
+    assert main(["correct", str(path), str(tmp_path / "out.png"), "--auto", "--pixel-aspect", str(16 / 9)]) == 0
+    assert f"k1={row['k1']:.6f}" in capsys.readouterr().out
+    assert main(["estimate", str(path), "--pixel-aspect", "-2"]) == 2
+    assert "--pixel-aspect" in capsys.readouterr().err
+    assert main(["correct", str(path), str(tmp_path / "o2.png"), "--auto", "--k1", "-0.1", "--pixel-aspect", "2"]) == 2
+    assert "cannot be combined" in capsys.readouterr().err and not (tmp_path / "o2.png").exists()
+
+
 # -- pitch templates with too little geometry --------------------------------------------------------
 def _pitch_view(lines_m: list[np.ndarray], size=(1280, 720)) -> np.ndarray:
     """Pitch markings (polylines of (X, Y) metres on the ground plane) seen by a pinhole broadcast

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -16,8 +15,8 @@ from .remapping import (
     add_render_options,
     check_encode_options,
     check_paths,
+    refuse_same_file,
     run_with_lens,
-    same_file,
     summary,
     video_alpha,
 )
@@ -78,7 +77,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _check_lens_options(args: argparse.Namespace) -> bool:
     """The lens is given one way and the options fit it; returns whether it is given by numbers."""
-    given = lens_given(args)
+    auto_aspect = args.auto and args.pixel_aspect is not None  # --auto --pixel-aspect: the stored frame's pixels
+    given = lens_given(args) and not (auto_aspect and not _numbers_besides_aspect(args))
     sources = [name for name, used in (("--k1/--k2/--cx/--cy/--pixel-aspect/--lens", given), ("--auto", args.auto),
                                        ("--lens-track", args.lens_track)) if used]
     if len(sources) > 1:
@@ -95,11 +95,18 @@ def _check_lens_options(args: argparse.Namespace) -> bool:
     return given
 
 
+def _numbers_besides_aspect(args: argparse.Namespace) -> bool:
+    """Whether a lens option other than ``--pixel-aspect`` was given."""
+    return any(getattr(args, name) is not None for name in ("k1", "k2", "cx", "cy", "lens"))
+
+
 def run(args: argparse.Namespace) -> int:
     given = _check_lens_options(args)
     kind = check_paths(args)
     if kind == "folder" and args.auto:
         raise UsageError("--auto on a folder is not supported: estimate each image with 'glradial estimate', or give the lens")
+    if args.auto and args.pixel_aspect is not None and kind != "image":
+        raise UsageError(f"--auto --pixel-aspect is for images; {args.input!r} is a {kind}")
     hook = opentrackio_hook(args, kind)
     if kind == "image" and args.auto:
         return run_with_lens(args, "undistort", kind, _estimated_lens_for(args), video_only=AUTO_VIDEO_OPTIONS, hook=hook)
@@ -130,7 +137,13 @@ def _estimate_image(args: argparse.Namespace, image):
     from ..media.frames import to_rgb8
     from ..video.video_pipeline import default_estimator
 
-    estimate = default_estimator(args.model, args.method)(to_rgb8(image))
+    if args.pixel_aspect is None:
+        estimate = default_estimator(args.model, args.method)(to_rgb8(image))
+    else:  # the squashed frame is read in square pixels; the estimate carries the aspect to the stored frame
+        from ..estimation.estimator import Estimator
+
+        estimator = Estimator(args.model) if args.model is not None else Estimator()
+        estimate = estimator.estimate(to_rgb8(image), method=args.method or "auto", pixel_aspect=args.pixel_aspect)
     lens = as_lens(estimate)
     method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
     reason = getattr(estimate, "reason", None)
@@ -152,8 +165,7 @@ def _auto_sidecar(args: argparse.Namespace) -> Path:
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)
     check_overwrite(sidecar, args.overwrite)
-    if same_file(Path(args.input), sidecar) or os.path.abspath(sidecar) in (os.path.abspath(args.input), os.path.abspath(args.output)):
-        raise UsageError("--sidecar must differ from INPUT and OUTPUT")
+    refuse_same_file(sidecar, "--sidecar", args.input, args.output)
     return sidecar
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..lens.options import DISTORTION_MODELS, SENSORS
 from . import UsageError, positive_float
-from .remapping import RemapHook
+from .remapping import RemapHook, refuse_same_file
 
 __all__ = ["add_camera_options", "add_opentrackio_options", "camera_from_args", "opentrackio_wanted",
            "check_opentrackio_output", "write_opentrackio", "write_image_opentrackio", "write_track_opentrackio",
@@ -200,13 +200,11 @@ def opentrackio_hook(args: argparse.Namespace, kind: str) -> OpenTrackIOHook | N
     """The hook of ``correct``'s OpenTrackIO options for INPUT of ``kind`` (None when no sample is
     asked for), after checking them before any work: a folder is refused (one camera per run), the
     file must differ from INPUT and OUTPUT and may be written."""
-    import os
-
     check_opentrackio_output(args)
     if not opentrackio_wanted(args):
         return None
     if kind == "folder":
         raise UsageError("--opentrackio and --send are for an image or a video, not a folder")
-    if args.opentrackio and os.path.abspath(args.opentrackio) in (os.path.abspath(args.input), os.path.abspath(args.output)):
-        raise UsageError("--opentrackio must differ from INPUT and OUTPUT")
+    if args.opentrackio:
+        refuse_same_file(args.opentrackio, "--opentrackio", args.input, args.output)
     return OpenTrackIOHook(args)

@@ -7,7 +7,7 @@ import json
 
 from ..lens.options import METHODS
 from ..media.image_io import media_kind, read_image
-from . import UsageError, positive_int, show_progress
+from . import UsageError, positive_float, positive_int, show_progress
 from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted, write_image_opentrackio, write_track_opentrackio
 
 DESCRIPTION = """\
@@ -25,7 +25,7 @@ negative k1 = barrel), the method that produced them (net or lines), the uncerta
 on the maximum displacement error, px of a 1920-wide frame), the line chains used and the doubt
 verdict (doubtful=0/1 and its reason: ok, blank_frame, noise_frame, not_a_pitch, too_few_lines,
 evidence_disagrees, weak_geometry; docs/LINES.md), or with --json one JSON object per line {"path",
-"k1", "k2", "method", "uncertainty_px", "chains", "doubtful", "reason"}. Videos (anything FFmpeg reads that is not a still image; image sequences as
+"k1", "k2", "pixel_aspect", "method", "uncertainty_px", "chains", "doubtful", "reason"}. Videos (anything FFmpeg reads that is not a still image; image sequences as
 frame_%04d.png): shot cuts are detected and one lens is fitted per shot from the evidence of every
 --every-th frame, as 'glradial correct --auto' does; prints one line per shot (first and last frame,
 median k1, k2, the uncertainty in px at 1920 wide, the per-frame methods, and for a doubtful shot
@@ -48,6 +48,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--method", choices=METHODS, default="auto",
                         help="auto (default: the line fit when it is surer than the CNN), net (the CNN alone) or "
                              "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
+    parser.add_argument("--pixel-aspect", type=positive_float, metavar="FY/FX",
+                        help="images: the pixel aspect fy / fx of a frame stored squashed (e.g. 16/9 for a 16:9 "
+                             "picture stored 640x640; default 1: square pixels); the lens printed applies to the "
+                             "stored frame")
     parser.add_argument("-y", "--overwrite", action="store_true", help="replace the --opentrackio FILE if it exists")
     add_opentrackio_options(parser)
     return parser
@@ -60,9 +64,12 @@ def run(args: argparse.Namespace) -> int:
     if opentrackio_wanted(args) and len(args.inputs) != 1:
         raise UsageError(f"--opentrackio/--send take one INPUT (its samples), got {len(args.inputs)}")
     check_opentrackio_output(args)
+    kinds = [media_kind(path) for path in args.inputs]
+    if args.pixel_aspect is not None and "video" in kinds:
+        raise UsageError(f"--pixel-aspect is for images; {args.inputs[kinds.index('video')]!r} is a video")
     estimator = Estimator(args.model, threads=args.threads)
-    for path in args.inputs:
-        if media_kind(path) == "video":
+    for path, kind in zip(args.inputs, kinds):
+        if kind == "video":
             from ..video.video_pipeline import track_report, track_video
 
             # the estimator loaded above (its --threads), not a second one per video
@@ -78,7 +85,7 @@ def run(args: argparse.Namespace) -> int:
                 write_track_opentrackio(args, track, info)
             continue
         image = to_rgb8(read_image(path))
-        lens = estimator.estimate(image, method=args.method)
+        lens = estimator.estimate(image, method=args.method, pixel_aspect=args.pixel_aspect or 1.0)
         if args.json:
             print(json.dumps({"path": path, **lens.as_dict()}), flush=True)
         else:

@@ -144,11 +144,21 @@ def check_encode_options(args: argparse.Namespace) -> None:
 
 # -- paths --------------------------------------------------------------------------------------------
 def same_file(a: Path, b: Path) -> bool:
-    """Whether ``a`` and ``b`` both exist and are the same file (hard links, symbolic links)."""
+    """Whether ``a`` and ``b`` name the same file: the same absolute path, or both exist and are one
+    file (hard links, symbolic links)."""
+    if os.path.abspath(a) == os.path.abspath(b):
+        return True
     try:
         return a.exists() and b.exists() and os.path.samefile(a, b)
     except OSError:
         return False
+
+
+def refuse_same_file(path: str | os.PathLike, option: str, *others: str | os.PathLike) -> None:
+    """``UsageError`` when the file ``option`` names (``path``) is one of ``others`` (INPUT, OUTPUT):
+    glradial never writes a side output over its input or its main output."""
+    if any(same_file(Path(path), Path(other)) for other in others):
+        raise UsageError(f"{option} {str(path)!r} must differ from INPUT and OUTPUT")
 
 
 def _article(kind: str) -> str:
@@ -165,7 +175,7 @@ def check_paths(args: argparse.Namespace) -> str:
     source, target = Path(args.input), Path(args.output)
     if not is_sequence(source) and not source.exists():
         raise FileNotFoundError(f"input file {str(source)!r} does not exist")
-    if same_file(source, target) or os.path.abspath(source) == os.path.abspath(target):
+    if same_file(source, target):
         raise UsageError("OUTPUT must differ from INPUT (glradial never writes over its input)")
     if source.is_dir():
         return _check_folder_output(source, target)

@@ -69,9 +69,11 @@ class LensEstimate(Lens):
         return Lens(self.k1, self.k2)
 
     def as_dict(self) -> dict:
-        """``{"k1", "k2", "method", "uncertainty_px", "chains", "doubtful", "reason"}`` (JSON-ready)."""
-        return {"k1": self.k1, "k2": self.k2, "method": self.method, "uncertainty_px": self.uncertainty_px,
-                "chains": self.chains, "doubtful": self.doubtful, "reason": self.reason}
+        """``{"k1", "k2", "pixel_aspect", "method", "uncertainty_px", "chains", "doubtful", "reason"}``
+        (JSON-ready; ``glradial correct --lens`` reads it back, pixel aspect included)."""
+        return {"k1": self.k1, "k2": self.k2, "pixel_aspect": self.pixel_aspect, "method": self.method,
+                "uncertainty_px": self.uncertainty_px, "chains": self.chains, "doubtful": self.doubtful,
+                "reason": self.reason}
 
 
 def check_method(method: object) -> str:
@@ -86,24 +88,31 @@ def frame_evidence(frame: np.ndarray, net: tuple[float, float], view_features: t
     """The :class:`glradial.estimation.trust.FrameEvidence` of the uint8 RGB ``frame``: the CNN's ``net``
     ``(k1, k2)`` (frame geometry), the ``(green, gray_std)`` of its 16:9 view
     (:func:`glradial.estimation.trust.view_features`) and, with ``lines``, its line fit (pieces linked with the
-    CNN's lens as the hint, the CNN's k1 as the prior); ``net_error_px``: the network's own expected
+    CNN's lens as the hint, the CNN's k1 as the prior; where it gives no fit on a soft frame, the soft-edge
+    fit of :mod:`glradial.estimation.soft_lines`, marked ``soft``); ``net_error_px``: the network's own expected
     error, when its model has an error head."""
     green, gray_std = view_features
     net = (float(net[0]), float(net[1]))
     net_error = None if net_error_px is None else float(net_error_px)
     if not lines:
         return FrameEvidence(net, green=green, gray_std=gray_std, net_error_px=net_error)
+    from . import soft_lines
     from .line_fit import fit_lines
     from .lines import detect_chains
 
     evidence = detect_chains(frame, lens_hint=net)
     fit = fit_lines(evidence, prior=net)
+    soft = False
+    if not fit.ok and soft_lines.is_soft(evidence):  # too little for the white-line fit, and a soft frame
+        soft_fit = soft_lines.fit_soft_lines(frame, prior=net)
+        if soft_fit.ok:
+            fit, soft = soft_fit, True
     usable = fit.ok and math.isfinite(fit.k1) and math.isfinite(fit.k2) and math.isfinite(fit.sigma_px)
     return FrameEvidence(net, (float(fit.k1), float(fit.k2)) if usable else None,
                          float(fit.sigma_px) if usable else math.inf, int(fit.chains) if usable else 0,
                          int(fit.candidates), green, gray_std, float(evidence.edge_density), net_error,
                          float(fit.rms_px), int(fit.families), int(fit.conics), float(fit.reach),
-                         float(fit.difficulty) if usable else math.inf)
+                         float(fit.difficulty) if usable else math.inf, soft)
 
 
 def judge(evidence: FrameEvidence, method: str, trust: TrustModel | None = None) -> LensEstimate:

@@ -494,8 +494,9 @@ def _covariance(problem: _Problem, hessian: np.ndarray | None, chi: np.ndarray) 
     return 2.0 * np.linalg.inv(hessian) * max(1.0, reduced), float(eig.max() / eig.min())
 
 
-def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int) -> LineFit:
-    """The :class:`LineFit` of a finished fit (diagnostics, ``ok`` and ``reason``)."""
+def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int, family_counts: bool = False) -> LineFit:
+    """The :class:`LineFit` of a finished fit (diagnostics, ``ok`` and ``reason``; with
+    ``family_counts`` a vanishing-point family counts as one agreeing chain towards MIN_CHAINS)."""
     chi = problem.chi2(np.array([k1]), np.array([k2]))[0]
     used_mask = (chi <= USED_CHI**2) & problem.informative
     used = int(used_mask.sum())
@@ -505,18 +506,22 @@ def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int) -
     conics = problem.arcs.n if problem.arcs is not None else 0
     used_points = used_mask[problem.chain]
     reach = float(problem.r_d[used_points].max() / CORNER_RADIUS_16_9) if used_points.any() else 0.0
-    ok = used >= MIN_CHAINS and math.isfinite(sigma)
-    reason = "" if ok else ("too_few_chains" if used < MIN_CHAINS else "ill_conditioned")
+    agreeing = used + (families if family_counts else 0)
+    ok = agreeing >= MIN_CHAINS and math.isfinite(sigma)
+    reason = "" if ok else ("too_few_chains" if agreeing < MIN_CHAINS else "ill_conditioned")
     difficulty = sigma * (1.0 + 2.0 / max(used + families + conics, 1)) / max(reach, 0.25) if ok else math.inf
     return LineFit(float(k1), float(k2), sigma, used, candidates, ok, problem.chain_rms_px(k1, k2, used_mask),
                    None if cov is None else (tuple(map(float, cov[0])), tuple(map(float, cov[1]))),
                    condition, families, conics, reach, difficulty, reason)
 
 
-def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) -> LineFit:
+def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None, family_counts: bool = False) -> LineFit:
     """Fit ``(k1, k2)`` to the chains of ``evidence`` (see the module docstring).
 
-    ``prior``: the CNN's ``(k1, k2)`` (only k1 is used, as a weak prior). Returns a :class:`LineFit`
+    ``prior``: the CNN's ``(k1, k2)`` (only k1 is used, as a weak prior). ``family_counts``: a family
+    of lines sharing a vanishing point counts as one agreeing chain towards :data:`MIN_CHAINS` (mowing
+    stripes run towards their vanishing point, nearly radial, so few of them are bent enough to
+    count on their own; :mod:`glradial.estimation.soft_lines`). Returns a :class:`LineFit`
     with ``ok=False``, a ``reason`` (and the prior, or ``(0, 0)``, as the lens) when no fit was made.
     """
     fallback = prior if prior is not None else (0.0, 0.0)
@@ -551,4 +556,4 @@ def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None) 
         problem.family = families
         problem = problem.subset(inliers)
         k1, k2, hessian = _refine(problem, k1, k2, prior_k1, h=0.008)
-    return _result(problem, k1, k2, hessian, candidates)
+    return _result(problem, k1, k2, hessian, candidates, family_counts)

@@ -11,6 +11,9 @@ Bound (split conformal):
     * a line fit: ``scale = sqrt(floor² + (a · sigma)² + (w · disagreement)²)`` where ``sigma`` is the
       fit's own 1-sigma or, with ``scale_feature = "difficulty"``, its difficulty (:attr:`glradial.estimation.line_fit.LineFit.sigma_px`) and ``disagreement`` the displacement
       between the line fit and the CNN; bound ``= q_lines · scale``;
+    * a soft-edge fit (:mod:`glradial.estimation.soft_lines`, where the white-line fit found too
+      little): the same scale, bound ``= q_soft · scale``, ``q_soft`` calibrated on soft fits alone
+      (their residuals are in px of a 320-px copy); a model without it (``q_soft = 0``) ignores them;
     * the CNN alone: bound ``= q_net`` or, when its model has an error head and the calibration
       measured it, ``q_net_rel · net_error_px`` (the network's own expected error of the frame);
       ``q_no_lines`` / ``q_no_lines_rel`` instead when a line fit was sought and none was found (such
@@ -24,8 +27,9 @@ Bound (split conformal):
 Doubt (:attr:`glradial.LensEstimate.reason`, first match wins; :data:`REASONS`):
     ``blank_frame`` (grey std below ``blank_std``), ``noise_frame`` (no line fit and more than
     ``noise_edge_density`` of the pixels are edges), ``not_a_pitch`` (less than ``green_min`` of the
-    16:9 view is pitch green), ``too_few_lines`` (no line fit of at least two agreeing chains: the
-    answer is the CNN's alone), ``evidence_disagrees`` (the line fit and the CNN are more than
+    16:9 view is pitch green), ``too_few_lines`` (no white-line fit of at least two agreeing chains:
+    the answer is the CNN's, or a soft-edge fit's where its bound is lower; always doubtful, since on
+    the real panorama crops that have one soft fits err by 5-70 px), ``evidence_disagrees`` (the line fit and the CNN are more than
     ``disagree_max_px`` apart), ``weak_geometry`` (the bound exceeds ``doubt_px``); else ``ok``.
     With ``method="net"`` no line fit is run, so only the first, third and ``weak_geometry`` apply.
 
@@ -37,7 +41,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -72,7 +76,9 @@ class FrameEvidence:
     ``net_error_px``: the network's own expected error (its error head, px at 1920; ``None`` for a
     model without one); ``rms_px``, ``families``, ``conics``, ``reach``, ``fit_difficulty``: the line
     fit's diagnostics (:class:`glradial.estimation.line_fit.LineFit`; ``fit_difficulty`` inf without
-    a fit, ``None`` when not measured).
+    a fit, ``None`` when not measured); ``soft``: the fit is the soft-edge fit
+    (:mod:`glradial.estimation.soft_lines`, run where the white-line fit found too little), bounded
+    with its own quantile ``q_soft``.
     """
 
     net: tuple[float, float]
@@ -89,6 +95,7 @@ class FrameEvidence:
     conics: int = 0
     reach: float | None = None
     fit_difficulty: float | None = None
+    soft: bool = False
 
     @property
     def disagreement_px(self) -> float:
@@ -178,6 +185,7 @@ class TrustModel:
     q_net_rel: float = 0.0
     q_no_lines_rel: float = 0.0
     scale_feature: str = "sigma_px"
+    q_soft: float = 0.0
     note: str = ""
 
     def lines_scale(self, evidence: FrameEvidence) -> float:
@@ -187,7 +195,8 @@ class TrustModel:
         return float(line_scale(self.floor_px, self.sigma_weight, spread, self.disagree_weight, evidence.disagreement_px))
 
     def lines_bound(self, evidence: FrameEvidence) -> float:
-        return self.q_lines * self.lines_scale(evidence)
+        """``q_lines`` (``q_soft`` for a soft-edge fit) times :meth:`lines_scale` (px at 1920)."""
+        return (self.q_soft if evidence.soft else self.q_lines) * self.lines_scale(evidence)
 
     def net_bound(self, evidence: FrameEvidence, no_lines: bool) -> float:
         """The CNN's bound (px at 1920): relative to its own expected error when calibrated and
@@ -201,7 +210,8 @@ class TrustModel:
         """``blank_frame``, ``noise_frame``, ``not_a_pitch`` or ``None``."""
         if evidence.gray_std < self.blank_std:
             return "blank_frame"
-        if evidence.lines is None and evidence.edge_density is not None and evidence.edge_density > self.noise_edge_density:
+        no_fit = evidence.lines is None or evidence.soft  # contrast-equalised noise can give soft "lines"
+        if no_fit and evidence.edge_density is not None and evidence.edge_density > self.noise_edge_density:
             return "noise_frame"
         if evidence.green < self.green_min:
             return "not_a_pitch"
@@ -209,9 +219,13 @@ class TrustModel:
 
     def judge(self, evidence: FrameEvidence, method: str) -> tuple[tuple[float, float], str, float, bool, str]:
         """``(lens, source, uncertainty_px, doubtful, reason)`` for ``method`` ("auto", "net",
-        "lines"): which answer, its bound and the doubt verdict."""
+        "lines"): which answer, its bound and the doubt verdict. A soft-edge fit counts only under a
+        model calibrated for it (``q_soft > 0``)."""
+        if evidence.soft and self.q_soft <= 0.0:
+            evidence = replace(evidence, lines=None, sigma_px=math.inf, chains=0, fit_difficulty=math.inf, soft=False)
         use_lines = evidence.lines is not None and method != "net"
-        net_bound = self.net_bound(evidence, no_lines=method != "net" and evidence.lines is None)
+        white = evidence.lines is not None and not evidence.soft  # a soft fit: the white-line fit found too little
+        net_bound = self.net_bound(evidence, no_lines=method != "net" and not white)
         bound = self.lines_bound(evidence) if use_lines else net_bound
         if use_lines and method == "auto" and bound >= net_bound:
             use_lines, bound = False, net_bound
@@ -219,7 +233,7 @@ class TrustModel:
         empty = self.no_evidence(evidence)
         if empty is not None:
             return lens, source, max(bound, anything_bound(lens)), True, empty
-        if method != "net" and evidence.lines is None:
+        if method != "net" and not white:  # a soft-edge fit may be the better answer, never a sure one
             return lens, source, bound, True, "too_few_lines"
         if evidence.lines is not None and method != "net" and evidence.disagreement_px > self.disagree_max_px:
             return lens, source, bound, True, "evidence_disagrees"

@@ -20,7 +20,8 @@ Steps:
        ``floor_px``, ``sigma_weight`` and ``disagree_weight`` (a small grid: the triple that makes the median bound on line-rich frames smallest, each half of the
        fold's independence groups bounded by the quantile of the other half), then
        ``q_lines`` = the conformal 90 % quantile (``ceil((n + 1) 0.9)``-th smallest) of
-       ``|error| / scale`` over the fold's line-fit answers, ``q_net`` the same of the CNN's errors and
+       ``|error| / scale`` over the fold's white-line fit answers, ``q_soft`` the same over its
+       soft-edge fits (:mod:`glradial.estimation.soft_lines`; same scale), ``q_net`` the same of the CNN's errors and
        ``q_no_lines`` of the CNN's errors on the frames without a line fit.
        ``disagree_max_px`` is the conformal 95 % quantile of the line/CNN disagreement on the fold's
        line-rich frames.
@@ -95,7 +96,7 @@ class Record:
 
     @property
     def line_rich(self) -> bool:
-        return self.evidence.lines is not None and self.evidence.chains >= LINE_RICH_CHAINS
+        return self.evidence.lines is not None and not self.evidence.soft and self.evidence.chains >= LINE_RICH_CHAINS
 
     def as_dict(self) -> dict:
         return {"source": self.source, "group": self.group, "fold": self.fold, "applied": list(self.applied),
@@ -186,14 +187,14 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
     no-evidence rules and ``doubt_px`` are kept from ``base``."""
     net_err, _, _ = _errors(records, base, "net")
     q_net = conformal_quantile(net_err)
-    no_fit = np.array([r.evidence.lines is None for r in records])
+    no_fit = np.array([r.evidence.lines is None or r.evidence.soft for r in records])  # no white-line fit
     q_no_lines = conformal_quantile(net_err[no_fit]) if no_fit.any() else q_net
     own = np.array([r.evidence.net_error_px or np.nan for r in records], np.float64)
     q_net_rel = q_no_lines_rel = 0.0
     if USE_ERROR_HEAD and np.all(own > 0):  # the network's error head: a per-frame scale for its own answers
         q_net_rel = conformal_quantile(net_err / own)
         q_no_lines_rel = conformal_quantile(net_err[no_fit] / own[no_fit]) if no_fit.any() else q_net_rel
-    lined = [r for r in records if r.evidence.lines is not None]
+    lined = [r for r in records if r.evidence.lines is not None and not r.evidence.soft]
     err, _, _ = _errors(lined, base, "lines")  # the line fit's answer does not depend on the scale
     spreads = {"sigma_px": np.array([r.evidence.sigma_px for r in lined]),
                "difficulty": np.array([r.evidence.difficulty for r in lined])}
@@ -217,11 +218,20 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
                                                 scale_feature=feature, q_lines=conformal_quantile(err / scale),
                                                 q_net=q_net, q_no_lines=q_no_lines, q_net_rel=q_net_rel,
                                                 q_no_lines_rel=q_no_lines_rel))
-    trust = best[1]
+    trust = replace(best[1], q_soft=_soft_quantile([r for r in records if r.evidence.soft], best[1]))
     rich = [r for r in lined if r.line_rich]
     disagree = np.array([r.evidence.disagreement_px for r in (rich or lined)])
     return replace(trust, disagree_max_px=conformal_quantile(disagree, DISAGREE_QUANTILE),
                    note=f"python -m glradial.evaluation.calibrate on {len(records)} validation frames")
+
+
+def _soft_quantile(soft: list[Record], trust: TrustModel) -> float:
+    """``q_soft``: the conformal 90 % quantile of ``|error| / scale`` of the soft-edge fits (the scale
+    of ``trust``, whose shape was chosen on the white-line fits); 0 (soft fits unused) without any."""
+    if not soft:
+        return 0.0
+    err, _, _ = _errors(soft, replace(trust, q_soft=1.0), "lines")  # the answer does not depend on q_soft
+    return conformal_quantile(err / np.array([trust.lines_scale(r.evidence) for r in soft]))
 
 
 def _halves(records: list[Record]) -> np.ndarray:
@@ -300,11 +310,11 @@ def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel,
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1
     lines += ["", "Reasons: " + ", ".join(f"{k} {v}" for k, v in sorted(reasons.items())), "",
               "Models (fold = the fold they were checked on; fitted on the other):", "",
-              "| fitted | q_lines | q_net px | q_no_lines px | q_net_rel | q_no_lines_rel | spread | floor px | "
+              "| fitted | q_lines | q_soft | q_net px | q_no_lines px | q_net_rel | q_no_lines_rel | spread | floor px | "
               "spread weight | disagree weight | disagree max px |",
-              "| --- | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
+              "| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- | ---: | ---: | ---: | ---: |"]
     for name, m in [*((f"for fold {f}", m) for f, m in models.items()), ("shipped (all folds)", shipped)]:
-        lines.append(f"| {name} | {m.q_lines:.3f} | {m.q_net:.1f} | {m.q_no_lines:.1f} | {m.q_net_rel:.2f} | "
+        lines.append(f"| {name} | {m.q_lines:.3f} | {m.q_soft:.3f} | {m.q_net:.1f} | {m.q_no_lines:.1f} | {m.q_net_rel:.2f} | "
                      f"{m.q_no_lines_rel:.2f} | {m.scale_feature} | {m.floor_px:g} | {m.sigma_weight:g} | {m.disagree_weight:g} | "
                      f"{m.disagree_max_px:.1f} |")
     return "\n".join(lines) + "\n"
