@@ -44,7 +44,8 @@ class TorchPredictor:
         with torch.no_grad():
             for i in range(0, len(frames), PREDICT_BATCH):
                 batch = np.stack([cv2.resize(f, self.input_size, interpolation=cv2.INTER_AREA) for f in frames[i : i + PREDICT_BATCH]])
-                out.append(self.model(torch.from_numpy(batch)).double().numpy())
+                k = self.model(torch.from_numpy(batch))
+                out.append((k[0] if isinstance(k, tuple) else k).double().numpy())  # (k, error_px) with an error head
         return np.concatenate(out)
 
 

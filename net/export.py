@@ -37,7 +37,7 @@ from torch import nn
 from glradial.estimation.model_check import write_checksum
 from glradial.media.atomic import atomic_path
 
-from .model import DistortionNet, ModelConfig, normalise_batch
+from .model import DistortionNet, ModelConfig, inference_model, normalise_batch
 
 #: Largest |torch - onnxruntime| (lens units) accepted by :func:`check_agreement`.
 ATOL = 1e-4
@@ -82,10 +82,12 @@ def load_checkpoint(path: str | Path, which: str = "auto") -> DistortionNet:
 
 def export_onnx(model: DistortionNet, path: str | Path, metadata: dict | None = None) -> Path:
     """Write ``model`` (eval mode) as ONNX with the preprocessing graph and metadata (atomically);
-    returns the path."""
+    returns the path. Training-only parts (the comparator head) are dropped first
+    (:func:`~.model.inference_model`): the graph's outputs and its ``model_config`` are those of the
+    network without them."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    model = model.eval()
+    model = inference_model(model.eval())
     wrapper = ExportWrapper(model).eval()
     width, height = model.config.input_size
     dummy = torch.zeros(1, height, width, 3, dtype=torch.uint8)

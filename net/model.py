@@ -54,6 +54,10 @@ class ModelConfig:
     ``log`` of the network's own error scale, in px of a 1920-wide frame (the maximum displacement
     between its (k1, k2) and the true lens over the 16:9 frame, :func:`net.loss.error_scale_loss`);
     it reads detached features, so it never changes what the k1/k2 heads learn.
+    ``comparator_head``: a training-only second task (after Janos & Benesova's multi-task sequel):
+    :class:`ComparatorHead` says from the pooled features of two crops which has the larger k1 and
+    which the larger k2 (:func:`net.loss.comparator_loss`). It is never part of the exported graph
+    (:func:`inference_model` drops it).
     """
 
     input_size: tuple[int, int] = (224, 224)
@@ -68,6 +72,7 @@ class ModelConfig:
     pool_grid: int = 1
     k2_residual: bool = False
     error_head: bool = False
+    comparator_head: bool = False
     k_init: tuple[float, float] = (-0.2, 0.1)
     mean: tuple[float, ...] = (0.5, 0.5, 0.5)
     std: tuple[float, ...] = (0.25, 0.25, 0.25)
@@ -175,6 +180,22 @@ class RegressionHead(nn.Module):
         return self.net(x)
 
 
+class ComparatorHead(nn.Module):
+    """Which of two crops has the larger k1 and which the larger k2, from their pooled features.
+
+    ``forward(a, b)`` -> ``N x 2`` logits (k1, k2); positive means the first crop's coefficient is
+    the larger. Antisymmetric by construction, ``logit(a, b) = g([a, b]) - g([b, a])`` with ``g``
+    ``Linear(2F, hidden) -> LeakyReLU -> Linear(hidden, 2)``: swapping the crops flips the sign, so
+    ``p(a > b) + p(b > a) = 1`` and a crop compared with itself gets exactly 0.5."""
+
+    def __init__(self, features: int, hidden: int):
+        super().__init__()
+        self.net = nn.Sequential(nn.Linear(2 * features, hidden), nn.LeakyReLU(0.1), nn.Linear(hidden, 2))
+
+    def forward(self, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+        return self.net(torch.cat([a, b], dim=1)) - self.net(torch.cat([b, a], dim=1))
+
+
 def coordinate_grid(width: int, height: int) -> torch.Tensor:
     """``1 x 3 x H x W`` channels (x, y, r) in lens units of the 16:9 frame (x in [-0.5, 0.5])."""
     aspect = PAPER_SIZE[1] / PAPER_SIZE[0]
@@ -217,6 +238,7 @@ class DistortionNet(nn.Module):
         self.head_k1 = RegressionHead(features, config.head_hidden, config.k_init[0])
         self.head_k2 = RegressionHead(features, config.head_hidden, config.k_init[1])
         self.head_error = RegressionHead(features, config.head_hidden, ERROR_INIT_LOG_PX) if config.error_head else None
+        self.head_compare = ComparatorHead(features, config.head_hidden) if config.comparator_head else None
         for m in self.modules():
             if isinstance(m, nn.Conv2d):
                 nn.init.kaiming_normal_(m.weight, mode="fan_out")
@@ -243,8 +265,31 @@ class DistortionNet(nn.Module):
             return torch.cat([k1, k2], dim=1)
         return torch.cat([k1, k2, self.head_error(features.detach())], dim=1)
 
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.forward_head(self.forward_features(x))
+    def forward(self, x: torch.Tensor, partner: torch.Tensor | None = None) -> torch.Tensor:
+        """:meth:`forward_head` of the input; with ``partner`` (int64 ``N``: the index in the batch of
+        the crop each crop is compared with; needs ``comparator_head``) two more columns, the
+        comparator's logits ``(k1, k2)`` of crop i against crop ``partner[i]`` (one call, so that
+        DistributedDataParallel sees the comparator's parameters used)."""
+        features = self.forward_features(x)
+        out = self.forward_head(features)
+        if partner is None:
+            return out
+        if self.head_compare is None:
+            raise ValueError("partner given to a model without comparator_head")
+        return torch.cat([out, self.head_compare(features, features[partner])], dim=1)
+
+
+def inference_model(model: DistortionNet) -> DistortionNet:
+    """``model`` without its training-only parts (the comparator head): a new network, same config
+    but ``comparator_head`` off, with every other weight copied; ``model`` itself when it has none.
+    The exported graph and its ``model_config`` metadata are this network's."""
+    if model.head_compare is None:
+        return model
+    config = dataclasses.replace(model.config, comparator_head=False)
+    kept = {k: v for k, v in model.state_dict().items() if not k.startswith("head_compare.")}
+    slim = DistortionNet(config).to(next(model.parameters()).device)
+    slim.load_state_dict(kept)
+    return slim.train(model.training)
 
 
 def count_parameters(model: nn.Module) -> int:

@@ -3,6 +3,8 @@
 Usage::
 
     python -m net.train --config net/configs/stage01_128.json --out runs/stage01 [--resume]
+    python -m net.train --config net/configs/stage12_multitask.json --out runs/stage12 \
+        --init runs/shipped_from_onnx.pt --resume --stop-after-s 420   # one call of a longer run
     torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
 
 Data path per rank: ``producers`` :class:`~.data.CropProducer` processes render crops ahead of
@@ -12,8 +14,10 @@ falls as processes are added); :class:`~.data.CropProducers` interleaves their c
 proportion to shard size. Every step takes exactly ``fresh_per_step`` new crops into a
 :class:`~.data.CropPool` and samples the batch from the pool, then applies
 :func:`~.augment.augment_batch` (photometric + flips).
-Loss: :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the joint in-frame
-term). AdamW, linear warm-up then cosine decay; the
+Loss (:func:`step_loss`): :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the
+joint in-frame term; ``small_k1_weight`` > 0 weights near-zero lenses more), plus, with
+``comparator_loss_weight`` > 0, the comparator head's BCE on pairs of crops (training-only: export
+drops the head). AdamW, linear warm-up then cosine decay; the
 schedule's progress is ``step / steps`` or, with ``time_budget_s``, the training wall time spent
 over the budget (so a run ends on time on a shared machine; then the run is not bit-reproducible).
 ``stop_at_s`` ends a run early without changing its schedule.
@@ -49,7 +53,7 @@ from glradial.media.atomic import atomic_path, atomic_write_text
 
 from .augment import AugmentConfig, augment_batch, augment_pairs
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
-from .loss import error_scale_loss, training_loss
+from .loss import comparator_loss, comparison_partners, error_scale_loss, small_k1_weights, training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
 
 
@@ -81,6 +85,9 @@ class TrainConfig:
     error_loss_weight: float = 0.1  # weight of the error head's Laplace likelihood (models with error_head)
     error_head_lr_scale: float = 1.0  # the error head's learning rate over lr
     error_head_only: bool = False  # train only the error head: the rest (batch-norm statistics too) stays as loaded
+    comparator_loss_weight: float = 0.0  # > 0: the comparator's BCE beside the regression (needs model.comparator_head)
+    small_k1_weight: float = 0.0  # > 0: extra loss weight at k1 = 0, 1 + w exp(-k1^2 / 2 s^2) (net.loss.small_k1_weights)
+    small_k1_scale: float = 0.1  # s of that weight, lens units
     panoramas: dict = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "train", "n": 16}, "size": [2048, 1024]})
     val_panoramas: dict | None = field(default_factory=lambda: {"kind": "stadium", "seeds": {"split": "val", "n": 4}, "size": [2048, 1024]})
     val_size: int = 256
@@ -102,6 +109,13 @@ class TrainConfig:
         cfg = cls(**data)
         if cfg.producers < 1:
             raise ValueError(f"producers must be at least 1, got {cfg.producers}")
+        comparator = bool(cfg.model.get("comparator_head", False))
+        if not cfg.comparator_loss_weight >= 0 or (cfg.comparator_loss_weight > 0) != comparator:
+            raise ValueError(f"comparator_loss_weight {cfg.comparator_loss_weight} in {path} needs model.comparator_head "
+                             f"true exactly when it is > 0 (comparator_head is {comparator})")
+        if not cfg.small_k1_weight >= 0 or not cfg.small_k1_scale > 0:
+            raise ValueError(f"small_k1_weight must be >= 0 and small_k1_scale > 0 in {path}, got "
+                             f"{cfg.small_k1_weight} and {cfg.small_k1_scale}")
         if cfg.paired and (cfg.batch_size % 2 or cfg.fresh_per_step % 2 or cfg.producer_chunk % 2 or cfg.pool_capacity % 2):
             raise ValueError("paired training needs even batch_size, fresh_per_step, producer_chunk and pool_capacity")
         return cfg
@@ -227,6 +241,28 @@ def start_producers(shards: list[tuple[int, PanoramaSource]], cfg: TrainConfig, 
     return CropProducers(producers, [len(part) for _, part in shards], cfg.producer_chunk)
 
 
+def step_loss(train_model: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, cfg: TrainConfig,
+              model_cfg: ModelConfig, rng: np.random.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """One batch's loss (scalar) and the predicted ``(k1, k2)`` (``N x 2``): the regression loss
+    (:func:`~.loss.training_loss`, with ``joint_loss_weight`` and, when ``small_k1_weight`` > 0,
+    :func:`~.loss.small_k1_weights`), the error head's likelihood when the model has one, and the
+    comparator's BCE when ``comparator_loss_weight`` > 0 (pairs: :func:`~.loss.comparison_partners`;
+    ``rng`` is drawn from only for unpaired batches). With both weights 0 it is the loss of the
+    runs before them, to the bit."""
+    partner = None
+    if cfg.comparator_loss_weight > 0:
+        partner = torch.from_numpy(comparison_partners(len(y), cfg.paired, rng)).to(y.device)
+    out_all = train_model(x) if partner is None else train_model(x, partner)
+    pred = out_all[:, :2]
+    weights = small_k1_weights(y[:, 0], cfg.small_k1_weight, cfg.small_k1_scale) if cfg.small_k1_weight > 0 else None
+    loss = training_loss(y, pred, joint_weight=cfg.joint_loss_weight, sample_weight=weights)
+    if model_cfg.error_head:
+        loss = loss + cfg.error_loss_weight * error_scale_loss(y, pred, out_all[:, 2])
+    if partner is not None:
+        loss = loss + cfg.comparator_loss_weight * comparator_loss(out_all[:, -2:], y, partner)
+    return loss, pred
+
+
 def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI's option handling; complexity 33)
     parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
     parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig; \"base\" names the config it extends)")
@@ -236,6 +272,9 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
     parser.add_argument("--time-budget-s", type=float,
                         help="override the config's time budget (0: none; the schedule then follows the step count)")
     parser.add_argument("--threads", type=int, help="torch threads per process")
+    parser.add_argument("--stop-after-s", type=float,
+                        help="end this call after this many more seconds of step time (the schedule unchanged; "
+                        "--resume continues): a long run in calls of limited length")
     parser.add_argument("--init", help="start from this checkpoint's (EMA) weights; new optimizer and schedule "
                         "(fine-tuning). The config's model may be wider or deeper: net.model.load_grown grows "
                         "the weights so that training starts from the same function")
@@ -243,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
                         help="with --init: zero the k2 head's last layer (a k2_residual model then starts on the manifold)")
     args = parser.parse_args(argv)
 
+    if args.stop_after_s is not None and not args.stop_after_s > 0:
+        raise ValueError(f"--stop-after-s must be positive, got {args.stop_after_s}")
     cfg = TrainConfig.from_json(args.config)
     if args.steps is not None:
         cfg.steps = args.steps
@@ -306,6 +347,8 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
         optimizer.load_state_dict(state["optimizer"])
         step, train_time, best = state["step"], state["train_time"], state.get("best", math.inf)
         log(f"resumed from {out / 'last.pt'} at step {step} ({train_time:.0f} s trained)")
+    if args.stop_after_s is not None:
+        cfg.stop_at_s = train_time + args.stop_after_s
     if is_main:
         out.mkdir(parents=True, exist_ok=True)
         full = asdict(cfg)
@@ -374,11 +417,7 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
             train_model.train()
             if cfg.error_head_only:
                 freeze_all_but_error_head(model)
-            out_all = train_model(x)
-            pred = out_all[:, :2]
-            loss = training_loss(y, pred, joint_weight=cfg.joint_loss_weight)
-            if model_cfg.error_head:
-                loss = loss + cfg.error_loss_weight * error_scale_loss(y, pred, out_all[:, 2])
+            loss, pred = step_loss(train_model, x, y, cfg, model_cfg, rng)
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()

@@ -28,6 +28,9 @@ def test_ddp_two_processes_train_and_checkpoint(tmp_path):
     # the config asks for an hour; the command line's --steps 4 --time-budget-s 0 must win (make train
     # reproduces the GPU stages' schedules that way)
     config.update(steps=1000, time_budget_s=3600.0, val_size=16, log_every=1, augment_workers=2)
+    # with the multi-task recipe on: the comparator head's parameters are used in the one forward
+    # call DDP sees (net.model.DistortionNet.forward with partner), so its gradients are reduced too
+    config.update(model=dict(config["model"], comparator_head=True), comparator_loss_weight=0.01, small_k1_weight=1.0)
     (tmp_path / "tiny.json").write_text(json.dumps(config))
     out = tmp_path / "run"
     env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(ROOT))

@@ -113,6 +113,28 @@ def test_pan_over_texture_without_lines_is_read_from_the_motion(field_panorama):
     assert error.max() <= shot.uncertainty_px and error.max() < 6.0, (error.max(), shot)
 
 
+def test_a_wide_pan_is_read_from_the_motion_even_when_the_hint_is_far_off(field_panorama):
+    """The per-frame estimate (the matcher's hint) says no distortion at all, the truth is k1 -0.3
+    (some 80 px at 1920 apart): five samples of a 30 deg pan over grass without lines. Samples far
+    apart in the pan are matched too (not only neighbours), and the points near the frame edge,
+    which a homography under the wrong hint misfits most and which show the lens best, are kept:
+    the matches alone read the lens within a few px and within the bound."""
+    spec = ShotSpec(field_panorama, 5, (-15.0, -12.0, 1.0), (15.0, -13.0, 1.0), (-0.3, -0.3), hfov_deg=60, panorama=True)
+    collector = ShotCollector(lambda _frame: Lens(0.0, 0.0))
+    truth = []
+    for i, (frame, lens, _) in enumerate(render_shot(spec, SIZE)):
+        collector.add(i, frame)
+        truth.append(lens)
+    evidence = collector.evidence
+    assert any(j - i > 1 for i, j, _ in evidence.pairs), [(i, j) for i, j, _ in evidence.pairs]
+    motion_only = ShotEvidence([ShotSample(s.frame, None, s.estimate) for s in evidence.samples], evidence.pairs,
+                               evidence.zoom, evidence.travel, evidence.pan)
+    shot = fit_shot(motion_only)
+    error = errors(shot, motion_only, np.asarray(truth))
+    assert max_displacement_px((0.0, 0.0), truth[0]) > 60
+    assert error.max() <= shot.uncertainty_px and error.max() < 4.0, (error.max(), shot)
+
+
 def test_static_shot_without_lines_is_doubtful(field_panorama):
     """A static camera on grass (no lines, and still frames say nothing): doubtful, no_geometry,
     with at least the no-geometry bound, and the lens left at the per-frame estimate."""
@@ -122,6 +144,37 @@ def test_static_shot_without_lines_is_doubtful(field_panorama):
     assert shot.doubtful and shot.reason == "no_geometry", shot
     assert shot.uncertainty_px >= 16.0
     assert max_displacement_px(shot.lens_at(0.0), (GUESS.k1, GUESS.k2)) < 1.0
+
+
+def test_a_shot_takes_its_per_frame_estimates_when_they_are_surer(stadium):
+    """The joint fit and the per-frame estimates (which state their own calibrated bound) both read
+    the shot; it takes whichever states the smaller bound. Estimates stating 2 px beat the fit and
+    give the shot their lens and exactly their bound; stating 200 px, they lose to it. Estimates
+    that disagree add their spread (the distance from their median to the furthest) to the bound."""
+    from glradial.estimation.lens_estimate import LensEstimate
+
+    evidence, truth, _ = collect(pitch_view(stadium, 3))
+
+    def stating(lenses, px):
+        samples = [ShotSample(s.frame, s.evidence, LensEstimate(*k, uncertainty_px=px, method="lines"))
+                   for s, k in zip(evidence.samples, lenses)]
+        return ShotEvidence(samples, evidence.pairs, evidence.zoom, evidence.travel, evidence.pan)
+
+    fit = fit_shot(evidence)
+    assert fit.chains > 0 and fit.uncertainty_px > 2.0, fit
+    sure = fit_shot(stating([truth[0]] * 3, 2.0))
+    assert sure.chains == 0 and sure.uncertainty_px == pytest.approx(2.0) and not sure.doubtful, sure
+    assert max_displacement_px(sure.lens_at(0.0), truth[0]) < 1e-9
+    unsure = fit_shot(stating([truth[0]] * 3, 200.0))
+    assert unsure.chains > 0 and unsure.uncertainty_px < 200.0, unsure  # the fit (its prior: their median)
+    other = (-0.30, float(manifold_k2(-0.30)))
+    apart = max_displacement_px(np.asarray(other), truth[0])
+    split = fit_shot(stating([truth[0], other, other], 0.5))  # median: the other lens, spread: all of it
+    if 0.5 + apart < fit.uncertainty_px:
+        assert split.chains == 0 and split.uncertainty_px == pytest.approx(0.5 + apart, rel=1e-6), (split, apart)
+        assert max_displacement_px(split.lens_at(0.0), np.asarray(other)) < 1e-9
+    else:
+        assert split.chains > 0 and split.uncertainty_px < 0.5 + apart, (split, apart)
 
 
 def test_one_frame_shot(stadium):

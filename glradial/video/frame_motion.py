@@ -41,8 +41,12 @@ MIN_CORNER_DISTANCE = 10
 #: a track whose backward track misses its start by more than this (px of the gray copy) is dropped
 FB_MAX_PX = 0.4
 #: RANSAC inlier threshold (px of the gray copy) on points undistorted with the hint lens: wide
-#: enough for a hint 10 px (at 1920) off, narrow enough to drop a running player
-RANSAC_PX = 1.5
+#: enough to keep the points near the frame edge when the hint is far off (a wrong hint leaves a
+#: misfit there that grows with the rotation between the frames; at 1.5 px, pairs 0.4 frame widths
+#: apart under a hint of k1 ~0 against a true -0.25 lost exactly those points, the ones that show the
+#: lens, and the fit leaned 11 px towards the hint: docs/eval/shots.md), narrow enough to drop a
+#: running player (some 20 px of a 640 px copy between samples 0.4 s apart)
+RANSAC_PX = 4.0
 #: seed of OpenCV's generator before each RANSAC, so that a video gives the same lens every run
 RANSAC_SEED = 25
 #: fewer inliers than this: the pair gives no evidence (too little texture, or no overlap)
@@ -54,11 +58,14 @@ BORDER_PX = 8
 @dataclass(frozen=True)
 class Matches:
     """Points of frame ``a`` and where they lie in frame ``b`` (lens units, ``N x 2`` each, N >=
-    :data:`MIN_MATCHES`), found on copies ``width`` px wide (the scale of their localisation noise)."""
+    :data:`MIN_MATCHES`), found on copies ``width`` px wide (the scale of their localisation noise);
+    ``homography`` the least-squares homography (:func:`homography_of`, ``H[2, 2] = 1``) of the points
+    undistorted with the hint lens the matches were checked with (``None``: none fits)."""
 
     a: np.ndarray
     b: np.ndarray
     width: int
+    homography: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.a)
@@ -125,7 +132,7 @@ def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0,
     if len(good) < MIN_MATCHES:
         return None
     good = good[np.linspace(0, len(good) - 1, min(len(good), MAX_MATCHES)).astype(np.intp)]
-    return Matches(pa[good], pb[good], width)
+    return Matches(pa[good], pb[good], width, homography_of(ua[good], ub[good]))
 
 
 def _predict(pixels: np.ndarray, size: tuple[int, int], hint: tuple[float, float], guess: np.ndarray) -> np.ndarray:
@@ -137,10 +144,12 @@ def _predict(pixels: np.ndarray, size: tuple[int, int], hint: tuple[float, float
     return lens_to_pixels(distort_point(q[:, :2] / q[:, 2:3], float(hint[0]), float(hint[1])), size)
 
 
-def homography_of(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def homography_of(a: np.ndarray, b: np.ndarray) -> np.ndarray | None:
     """Least-squares homography (3 x 3, ``H[2, 2] = 1``) taking points ``a`` to ``b`` (``N x 2``, N
-    >= 4, lens units): normalised direct linear transform, no outlier rejection."""
-    return cv2.findHomography(a, b, 0)[0]
+    >= 4, lens units): normalised direct linear transform, no outlier rejection; ``None`` when the
+    points fix none (degenerate)."""
+    h = cv2.findHomography(a, b, 0)[0]
+    return None if h is None else h / h[2, 2]
 
 
 def zoom_of(homography: np.ndarray) -> float:

@@ -9,29 +9,49 @@ previous sample's small gray copy is kept.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 
 from ..estimation.lines import detect_chains
 from ..lens.lens import Lens, as_lens
-from ..lens.lensfuncs import undistort_point_exact
-from .frame_motion import homography_of, match_frames, motion_gray, zoom_of
+from .frame_motion import match_frames, motion_gray, zoom_of
 from .shot_fit import ShotEvidence, ShotSample
 
-__all__ = ["ShotCollector", "ANCHOR_TRAVEL"]
+__all__ = ["ShotCollector", "ANCHOR_TRAVEL", "ANCHOR_REACH", "MAX_ANCHORS"]
 
-#: a sample is also matched with the last anchor sample once the camera has moved this far since
-#: (frame widths of new picture, :func:`_shift`); the anchor then moves to it. A wide pair shows a
-#: wrong lens far more clearly than the small steps between consecutive samples.
+#: a sample becomes an anchor once the camera has moved this far (frame widths of new picture,
+#: :func:`_shift`) from the last anchor; every later sample is matched with every anchor it has
+#: moved at least this far from, not only with its neighbour. A wide pair shows a wrong lens far
+#: more clearly than the small steps between consecutive samples (the misfit of a wrong lens grows
+#: with the rotation between the two frames).
 ANCHOR_TRAVEL = 0.15
+#: ...and at most this far (frame widths): beyond it the two frames overlap too little to match
+ANCHOR_REACH = 0.6
+#: anchors kept (the oldest is dropped): memory and matching time stay bounded on a long shot
+MAX_ANCHORS = 4
+
+
+@dataclass
+class _Anchor:
+    """An earlier sample kept for wide pairs: its index, gray copy, the homography from it to the
+    latest sample (hint-undistorted lens units) and the picture brought into view since (frame widths)."""
+
+    sample: int
+    gray: np.ndarray
+    moved: np.ndarray = field(default_factory=lambda: np.eye(3))
+    travel: float = 0.0
 
 
 class ShotCollector:
     """Evidence of one shot, sample by sample. ``estimator`` maps a uint8 RGB frame to a lens (a
     :class:`glradial.LensEstimate` states its uncertainty); it runs on every ``estimate_every``-th
     sample (and the first), the chains and matches on every sample: with the previous sample, and
-    with an anchor sample once the camera has moved :data:`ANCHOR_TRAVEL` from it."""
+    with every kept anchor sample it has moved :data:`ANCHOR_TRAVEL` to :data:`ANCHOR_REACH` from.
+    The surest per-frame estimate so far (smallest ``uncertainty_px``; the latest when none states
+    one) is the hint of the line detector (chains are linked and cut at corners in the frame
+    undistorted with it) and of the matcher: a later, less sure estimate does not replace it."""
 
     def __init__(self, estimator: Callable[[np.ndarray], Lens], estimate_every: int = 1) -> None:
         if estimate_every < 1:
@@ -41,9 +61,8 @@ class ShotCollector:
         self.estimates: list[tuple[int, Lens]] = []
         self._previous: np.ndarray | None = None
         self._hint: tuple[float, float] = (0.0, 0.0)
-        self._anchor: tuple[int, np.ndarray] | None = None
-        self._moved = np.eye(3)
-        self._since_anchor = 0.0
+        self._hint_px = math.inf
+        self._anchors: list[_Anchor] = []
 
     def add(self, index: int, frame: np.ndarray) -> None:
         """Add the sampled frame ``index`` (uint8 RGB, any size up to the estimate width)."""
@@ -55,28 +74,37 @@ class ShotCollector:
         if n % self.estimate_every == 0:
             estimate = as_lens(self.estimator(frame))  # a plain (k1, k2) as the centred lens
             self.estimates.append((index, estimate))
-            self._hint = (estimate.k1, estimate.k2)
+            sure = float(getattr(estimate, "uncertainty_px", math.inf))
+            if sure <= self._hint_px:  # the surest estimate so far guides the detector and matcher
+                self._hint, self._hint_px = (estimate.k1, estimate.k2), sure
         chains = detect_chains(frame, lens_hint=self._hint)
         self.evidence.samples.append(ShotSample(index, chains, estimate))
         gray = motion_gray(frame)
         zoom = self.evidence.zoom[-1] if self.evidence.zoom else 0.0
         if self._previous is not None and self._previous.shape == gray.shape:
-            step = self._pair(n - 1, self._previous, n, gray, None)
-            if step is not None:
-                log_zoom = math.log(zoom_of(step))
-                zoom += log_zoom
-                self._moved = step @ self._moved
-                shift = _shift(step)
-                self.evidence.travel += shift
-                self.evidence.pan += shift - abs(log_zoom)
-                self._since_anchor += shift
-            if self._anchor is not None and self._since_anchor >= ANCHOR_TRAVEL:
-                self._pair(self._anchor[0], self._anchor[1], n, gray, self._moved)
-                self._anchor = None
-        if self._anchor is None:
-            self._anchor, self._moved, self._since_anchor = (n, gray), np.eye(3), 0.0
+            zoom += self._step(n, gray)
         self.evidence.zoom.append(zoom)
         self._previous = gray
+        if not self._anchors or self._anchors[-1].travel >= ANCHOR_TRAVEL:
+            self._anchors = (self._anchors + [_Anchor(n, gray)])[-MAX_ANCHORS:]
+
+    def _step(self, n: int, gray: np.ndarray) -> float:
+        """Match sample ``n`` with the previous sample and with its anchors; the log zoom since the
+        previous sample (0 when they do not match: the anchors are then dropped, their motion lost)."""
+        step = self._pair(n - 1, self._previous, n, gray, None)
+        if step is None:
+            self._anchors = []
+            return 0.0
+        log_zoom = math.log(zoom_of(step))
+        shift = _shift(step)
+        self.evidence.travel += shift
+        self.evidence.pan += shift - abs(log_zoom)
+        for anchor in self._anchors:
+            anchor.moved, anchor.travel = step @ anchor.moved, anchor.travel + shift
+            if anchor.sample != n - 1 and ANCHOR_TRAVEL <= anchor.travel <= ANCHOR_REACH:
+                self._pair(anchor.sample, anchor.gray, n, gray, anchor.moved)
+        self._anchors = [a for a in self._anchors if a.travel <= ANCHOR_REACH]
+        return log_zoom
 
     def _pair(self, i: int, a: np.ndarray, j: int, b: np.ndarray, guess: np.ndarray | None) -> np.ndarray | None:
         """Match samples ``i`` and ``j``, keep the pair as evidence and return its homography
@@ -84,9 +112,7 @@ class ShotCollector:
         matches = match_frames(a, b, self._hint, guess)
         if matches is None:
             return None
-        ua, _ = undistort_point_exact(matches.a, *self._hint)
-        ub, _ = undistort_point_exact(matches.b, *self._hint)
-        h = homography_of(ua, ub)
+        h = matches.homography
         if h is None or not math.isfinite(zoom_of(h)):
             return None
         self.evidence.pairs.append((i, j, matches))

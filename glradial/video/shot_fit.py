@@ -35,12 +35,21 @@ new picture the camera brought into view (pan in frame widths plus the zoom's lo
 is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`, calibrated on the clips of
 ``scripts/make_clips.py`` (docs/eval/shots.md).
 
+The per-frame estimates read the shot too: when they all state a bound (a
+:class:`glradial.LensEstimate`, calibrated per frame by the trust model) and their median, stating
+their median bound plus their spread (the furthest of them from the median: a zooming lens's
+range, or estimators that disagree), is surer than the joint fit, the shot takes it (the fit's
+chains stand in for no extra evidence there: the estimates read the same lines, through the
+single-frame fit's fuller model). A static shot is then as sure as its frames say, and a fit that
+few chains leave loose (a pure zoom: its frame pairs tie the lens at one zoom to the next, not the
+lens itself) does not stand. A zooming shot needs estimates :data:`ZOOM_FALLBACK_RATIO` times
+surer: their one lens cannot follow the zoom.
+
 Doubt (reason strings are machine-readable): ``no_geometry`` (fewer than :data:`MIN_CHAINS` chains
 pass screening and the camera did not pan :data:`PAN_MIN`: nothing but the per-frame
-estimates, i.e. the CNN, fixes the lens: the shot takes their median and their median bound,
-doubtful when that exceeds the threshold or when they say so themselves),
-``uncertain`` (bound above the run's threshold), ``fold_over`` (the lens folds over inside the
-frame).
+estimates fixes the lens: the shot takes them as above, doubtful when their bound exceeds the
+threshold or when they say so themselves), ``uncertain`` (bound above the run's threshold),
+``fold_over`` (the lens folds over inside the frame).
 """
 
 from __future__ import annotations
@@ -62,8 +71,8 @@ from ..estimation.line_fit import (
 )
 from ..estimation.lines import LineEvidence
 from ..lens.lens import Lens
-from ..lens.lensfuncs import drap_coefficients
-from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
+from ..lens.lensfuncs import undistort_point_exact
+from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
 from .frame_motion import Matches, homography_of
 from .lens_track import DOUBTFUL_PX
 
@@ -92,10 +101,14 @@ K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
 #: calibrated multiplier from the 1-sigma displacement (redundancy-corrected) to the 90 % bound, and
 #: the floor added to it (px at 1920): the error of a frame's own residual distortion and of the
 #: model (see the module docstring and docs/eval/shots.md)
-BOUND_SCALE = 0.6
+BOUND_SCALE = 0.65
 BOUND_FLOOR_PX = 1.0
 #: stated bound when the shot has no geometric evidence (px at 1920): the CNN's alone
 NO_GEOMETRY_PX = 16.0
+#: a zooming shot takes its per-frame estimates instead of the joint fit only when they state a
+#: bound this many times smaller: one lens for the whole zoom cannot follow it (their spread, in
+#: their bound, only covers that), so the zoom model stands unless the lines leave it loose
+ZOOM_FALLBACK_RATIO = 2.0
 #: a shot has geometric evidence of its lens when at least this many chains pass screening...
 MIN_CHAINS = 2
 #: ...or the camera panned at least this far (frame widths). A static camera's frame pairs say
@@ -200,7 +213,7 @@ class _Chains:
             return np.zeros(0)
         k = lenses[self.sample[self.chain]]
         r_d = np.hypot(self.points[:, 0], self.points[:, 1])
-        p_u, valid = _undistort(self.points, k[:, 0], k[:, 1])
+        p_u, valid = undistort_point_exact(self.points, k[:, 0], k[:, 1])
         r_u = np.hypot(p_u[:, 0], p_u[:, 1])
         mag = np.where(r_u > 1e-9, r_d / np.maximum(r_u, 1e-9), 1.0)
         starts = np.flatnonzero(np.r_[True, np.diff(self.chain) != 0])
@@ -220,28 +233,11 @@ class _Chains:
         return np.sqrt(chi2 * (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2) / self.counts)
 
 
-def _undistort(points: np.ndarray, k1: float | np.ndarray, k2: float | np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points (N, 2) undistorted with the lens ``(k1, k2)`` (scalars, or one per point): Drap-Lefevre
-    seed and Newton steps on the radius (:func:`glradial.lens.lensfuncs.drap_coefficients`), all at once.
-    ``valid`` is False where the lens folds over before the point's radius."""
-    r_d = np.hypot(points[:, 0], points[:, 1])
-    b1, b2, b3, b4 = drap_coefficients(k1, k2)
-    rd2 = r_d * r_d
-    r = r_d * (1.0 + rd2 * (b1 + rd2 * (b2 + rd2 * (b3 + rd2 * b4))))
-    for _ in range(4):
-        r2 = r * r
-        r = r - (r * (1.0 + r2 * (k1 + k2 * r2)) - r_d) / np.maximum(1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2), 1e-6)
-    r2 = r * r
-    valid = (np.abs(r * (1.0 + r2 * (k1 + k2 * r2)) - r_d) <= 1e-7) & (1.0 + r2 * (3.0 * k1 + 5.0 * k2 * r2) > 0) & (r >= 0)
-    scale = np.where(r_d > 0, r / np.where(r_d > 0, r_d, 1.0), 1.0)
-    return points * scale[:, None], valid
-
-
 def _pair_residuals(pairs: list[tuple[int, int, Matches]], lenses: np.ndarray) -> np.ndarray:
     out = []
     for i, j, m in pairs:
-        ua, _ = _undistort(m.a, float(lenses[i, 0]), float(lenses[i, 1]))
-        ub, _ = _undistort(m.b, float(lenses[j, 0]), float(lenses[j, 1]))
+        ua, _ = undistort_point_exact(m.a, float(lenses[i, 0]), float(lenses[i, 1]))
+        ub, _ = undistort_point_exact(m.b, float(lenses[j, 0]), float(lenses[j, 1]))
         h = homography_of(ua, ub)
         if h is None:
             out.append(np.full(2 * len(m), 1e3))
@@ -347,17 +343,20 @@ def _sigma_px(problem: _Problem, result, radius: float) -> float:
     return worst * REPORT_WIDTH
 
 
-def _fallback(evidence: ShotEvidence, doubtful_px: float) -> ShotLens:
-    """No geometric evidence in the shot: the median of the per-frame estimates, stating their
-    median bound (:data:`NO_GEOMETRY_PX` where they state none; never less for being many: they
-    read the same picture). Doubtful (``no_geometry``) when that bound exceeds ``doubtful_px``, or
-    (reason theirs) when most per-frame estimates say they are doubtful."""
+def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometry") -> ShotLens:
+    """The shot read from its per-frame estimates alone: their median, stating their median bound
+    (:data:`NO_GEOMETRY_PX` where they state none; never less for being many: they read the same
+    picture) plus their spread (the largest maximum displacement between the median and any of
+    them: a zooming lens's range, or estimators that disagree). Doubtful (reason ``why``) when that
+    bound exceeds ``doubtful_px``, or (reason theirs) when most per-frame estimates say they are
+    doubtful."""
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     k = np.median([[e.k1, e.k2] for e in estimates], axis=0) if estimates else np.zeros(2)
     stated = [float(getattr(e, "uncertainty_px", NO_GEOMETRY_PX)) for e in estimates]
-    bound = float(np.median(stated)) if stated else NO_GEOMETRY_PX
+    spread = float(np.max(max_displacement_px(np.array([[e.k1, e.k2] for e in estimates]), k))) if estimates else 0.0
+    bound = (float(np.median(stated)) if stated else NO_GEOMETRY_PX) + spread
     theirs = [str(getattr(e, "reason", "") or "doubtful") for e in estimates if getattr(e, "doubtful", False)]
-    reason = "no_geometry" if not bound <= doubtful_px else ""
+    reason = why if not bound <= doubtful_px else ""
     if 2 * len(theirs) > len(estimates):
         reason = max(set(theirs), key=theirs.count)
     theta = (float(k[0]), float(k[1] - manifold_k2(k[0])))
@@ -391,7 +390,11 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
         if 0 < keep.sum() < chains.n:
             problem.chains = chains = chains.subset(keep)
             result = problem.solve(result.x)
-    return _result(problem, result, views, centre, zooming, doubtful_px, radius)
+    shot = _result(problem, result, views, centre, zooming, doubtful_px, radius)
+    if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
+        return shot  # estimates that state no bound cannot be weighed against the fit's
+    fallback = _fallback(evidence, doubtful_px, "uncertain")
+    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if zooming else 1.0) < shot.uncertainty_px else shot
 
 
 def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, doubtful_px: float,
