@@ -99,9 +99,14 @@ def main() -> None:
     estimator = Estimator(threads=1)
     for s in samples:
         frame = s["frame"]
-        features = view_features(estimator.preprocess(frame))
+        view = estimator.preprocess(frame)
+        features = view_features(view)
+        # the network's own expected error (error head), as Estimator.estimate passes it: the CNN's bound
+        net_error = estimator.run_with_error(view[None])[1]
+        net_error = None if net_error is None else float(net_error[0])
         t0 = time.perf_counter()
-        evidence = frame_evidence(frame, view_to_frame(s["net"], (frame.shape[1], frame.shape[0])), features)
+        evidence = frame_evidence(frame, view_to_frame(s["net"], (frame.shape[1], frame.shape[0])), features,
+                                  net_error_px=net_error)
         times.append(time.perf_counter() - t0)
         lines = evidence.lines
         has_fit.append(lines is not None)

@@ -70,7 +70,10 @@ SIGMA_POINT, SIGMA_FLOOR = 0.25, 0.08
 #: Robust loss scale (chi² units) of one chain.
 ROBUST_T = 3.0
 #: Loose prior of k2 around the manifold, and of k1 around the CNN (lens units).
-K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.05, 0.3
+K2_PRIOR_SIGMA, K1_PRIOR_SIGMA = 0.1, 0.6
+#: The refinement stops once an accepted step lowers the cost by less than this (chi² units: a change
+#: of 1 is one standard deviation, so 0.01 moves the lens by about a tenth of its own 1-sigma).
+REFINE_COST_TOL = 0.01
 #: Screening thresholds (px RMS of the detection copy).
 STRAIGHT_RMS, INFORMATIVE_RMS = 0.4, 0.7
 #: A fit needs at least this many chains that agree with it: one chain cannot be checked against
@@ -366,7 +369,8 @@ def _displacement_sigma(cov: np.ndarray) -> float:
 def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None,
             h: float = 0.02) -> tuple[float, float, np.ndarray | None]:
     """Newton steps on a quadratic fitted to a 3 x 3 stencil (half-width ``h``, shrinking to 0.004)
-    of the cost -> (k1, k2, Hessian); stops once a step is below 1e-4 on the smallest stencil."""
+    of the cost -> (k1, k2, Hessian); stops once a step is below 1e-4 on the smallest stencil or
+    lowers the cost by less than REFINE_COST_TOL."""
     h1, h2 = h, h
     hessian = None
     for _ in range(6):
@@ -396,6 +400,8 @@ def _refine(problem: _Problem, k1: float, k2: float, prior_k1: float | None,
         step = steps[falls[0]] if accepted else steps[-1] / 4
         if accepted:
             k1, k2 = k1 + float(step[0]), k2 + float(step[1])
+            if c[1, 1] - trial[falls[0]] < REFINE_COST_TOL:  # converged: the step changed the cost by a trifle
+                break
         if not accepted or np.abs(step).max() < 1e-4:
             if not accepted or max(h1, h2) <= 0.004:
                 break
