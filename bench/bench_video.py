@@ -12,9 +12,12 @@ from other processes on a shared machine falls on all alike), keeping the best r
 * ``pyav``         the same transcode in this process through PyAV (decode + encode, no RGB)
 * ``fixed lens``   :func:`glradial.video.video_pipeline.correct_video` with one lens (k1 -0.25, k2 0.05)
 * ``--auto``       pass 1 (:func:`~glradial.video.video_pipeline.track_video` with the bundled
-                   estimator: cuts on every frame, the shot evidence on every 10th, one lens fit
-                   per shot) + pass 2 with the per-frame lens (doubtful shots applied too, so both
-                   runs correct every frame)
+                   estimator: the frames other frames refer to decoded, cuts on them, the shot
+                   evidence on every 10th frame, one lens fit per shot) + pass 2 with the per-frame
+                   lens (doubtful shots applied too, so both runs correct every frame)
+* ``fixed, RGB``   the fixed lens forced through RGB (decode to RGB, correct, convert back), the
+                   path pass 2 takes for anything but planar YUV (``correction_space``)
+* ``pass 1, all``  pass 1 decoding every frame (``sparse=False``)
 
 and prints frames per second and the ratios the issue sets targets for: fixed lens / ffmpeg
 (>= 0.8) and --auto / fixed lens (>= 0.8). First it times the maps of a new lens at the clip's
@@ -39,6 +42,7 @@ from pathlib import Path
 import av
 
 from glradial.media.video_io import EncodeOptions
+from glradial.video import video_pipeline
 from glradial.video.video_pipeline import correct_video, default_estimator, track_video
 
 K1, K2 = -0.25, 0.05
@@ -127,6 +131,40 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
     return {name: float(np.median(values)) for name, values in times.items()}
 
 
+def stage_times(clip: Path, folder: Path, frames: int = 24) -> dict[str, float]:
+    """Median ms per frame of pass 2's correction stage alone (no decoding, no encoding), the two
+    ways taking turns frame by frame: RGB (convert to RGB, ``cv2.remap`` of 3 channels, convert back
+    to the encoder's YUV) and YUV (the planes remapped in place, no conversion)."""
+    import numpy as np
+
+    from glradial.lens.lens import Lens
+    from glradial.media.video_io import VideoReader, VideoWriter, frame_planes, yuv_layout
+    from glradial.remapping.planes import black, chroma_siting, remap_planes, yuv_planes
+    from glradial.remapping.remap import correct
+
+    lens = Lens(K1, K2)
+    with VideoReader(clip, keep_decoded=True) as reader:
+        info = reader.info
+        decoded = [item.decoded for _, item in zip(range(frames), reader.items())]
+    writer = VideoWriter(folder / "stage.mp4", info, overwrite=True)
+    lattices = yuv_planes(info.size, yuv_layout(info.pix_fmt)[:2], chroma_siting(info.codec))
+    fill = black(yuv_layout(info.pix_fmt)[2], writer.full_range)
+    times: dict[str, list[float]] = {"RGB": [], "YUV": []}
+    try:
+        for frame in decoded:
+            start = time.perf_counter()
+            writer.frame(correct(reader.convert(frame), lens, backend="cpu"), frame.pts)
+            middle = time.perf_counter()
+            target, planes = writer.planar_frame()
+            remap_planes(frame_planes(frame), lens, lattices, planes, fill=fill)
+            writer.stamp(target, frame.pts)
+            times["RGB"].append(middle - start)
+            times["YUV"].append(time.perf_counter() - middle)
+    finally:
+        writer.abort()
+    return {name: 1e3 * float(np.median(values[1:])) for name, values in times.items()}  # the first builds the maps
+
+
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", default="1920x1080")
@@ -169,6 +207,17 @@ def main() -> int:
             correct_video(clip, tmp / "fixed.mp4", lambda _i: (K1, K2), backend=args.backend, progress=False,
                           options=options, overwrite=True)
 
+        def fixed_rgb() -> None:  # the same, forced through RGB (the path before pass 2 worked in YUV)
+            space = video_pipeline.correction_space
+            video_pipeline.correction_space = lambda *_args: ("rgb", "forced by the bench")
+            try:
+                fixed()
+            finally:
+                video_pipeline.correction_space = space
+
+        def pass1_full() -> None:  # pass 1 decoding every frame (as before the sparse decode)
+            track_video(clip, estimator, progress=False, apply_doubtful=True, sparse=False)
+
         passes: dict[str, float] = {"pass 1": float("inf"), "pass 2": float("inf")}
 
         def auto() -> None:
@@ -181,7 +230,9 @@ def main() -> int:
             passes["pass 1"] = min(passes["pass 1"], middle - start)
             passes["pass 2"] = min(passes["pass 2"], time.perf_counter() - middle)
 
-        paths = {"ffmpeg": ffmpeg, "pyav": pyav, "fixed lens": fixed, "--auto": auto}
+        stages = stage_times(clip, tmp)
+        paths = {"ffmpeg": ffmpeg, "pyav": pyav, "fixed lens": fixed, "--auto": auto, "fixed, RGB": fixed_rgb,
+                 "pass 1, all": pass1_full}
         best = {name: float("inf") for name in paths}
         for _ in range(args.repeats):
             for name, run in paths.items():
@@ -196,7 +247,13 @@ def main() -> int:
     print(f"  --auto pass 1 (decode, cuts, shot evidence and fit) {1e3 * passes['pass 1'] / args.frames:.1f} ms/frame, "
           f"pass 2 (correct + encode) {1e3 * passes['pass 2'] / args.frames:.1f} ms/frame; fixed lens "
           f"{1e3 * best['fixed lens'] / args.frames:.1f} ms/frame")
+    print(f"  pass 1 decoding every frame {1e3 * best['pass 1, all'] / args.frames:.1f} ms/frame "
+          f"(sparse / all: {passes['pass 1'] / best['pass 1, all']:.2f})")
+    print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
+          f"YUV {stages['YUV']:.1f} ms/frame (YUV / RGB time: {stages['YUV'] / stages['RGB']:.2f})")
     print(f"fixed lens / ffmpeg : {fps['fixed lens'] / fps['ffmpeg']:.2f}  (target >= 0.8)")
+    print(f"fixed lens, RGB / ffmpeg : {fps['fixed, RGB'] / fps['ffmpeg']:.2f}; YUV / RGB : "
+          f"{fps['fixed lens'] / fps['fixed, RGB']:.2f}; load average {os.getloadavg()[0]:.1f}")
     print(f"fixed lens / pyav   : {fps['fixed lens'] / fps['pyav']:.2f}")
     print(f"--auto / fixed lens : {fps['--auto'] / fps['fixed lens']:.2f}  (target >= 0.8)")
     return 0

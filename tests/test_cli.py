@@ -210,16 +210,21 @@ def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
 def test_ctrl_c_leaves_no_output(tmp_path, field_panorama, monkeypatch):
     source, out = tmp_path / "in.mp4", tmp_path / "out.mp4"
     _pan_video(source, field_panorama, n=12)
-    real = glradial.remapping.remap.correct
+    import glradial.remapping.planes
+
     count = {"n": 0}
 
-    def interrupted(*args, **kwargs):
-        count["n"] += 1
-        if count["n"] == 5:
-            raise KeyboardInterrupt
-        return real(*args, **kwargs)
+    def interrupting(real):
+        def interrupted(*args, **kwargs):
+            count["n"] += 1
+            if count["n"] == 5:
+                raise KeyboardInterrupt
+            return real(*args, **kwargs)
+        return interrupted
 
-    monkeypatch.setattr("glradial.remapping.remap.correct", interrupted)
+    # the 5th frame corrected, in RGB or (yuv420p here) plane by plane
+    monkeypatch.setattr("glradial.remapping.remap.correct", interrupting(glradial.remapping.remap.correct))
+    monkeypatch.setattr("glradial.remapping.planes.remap_planes", interrupting(glradial.remapping.planes.remap_planes))
     assert main(["correct", str(source), str(out), "--k1", "-0.1", "--backend", "cpu"]) == 130
     assert _names(tmp_path) == ["in.mp4"]
 

@@ -99,22 +99,29 @@ def test_round_trip_keeps_audio_depth_rate_timecode_and_count(tmp_path, kind):
     assert _audio_md5(out) == _audio_md5(source)  # audio packets copied untouched
     assert _stream(after, "audio")["codec_name"] == _stream(before, "audio")["codec_name"]
     # frames: the decoded input corrected in memory; the output went through the lossy codec (and
-    # its chroma subsampling) once more. The codec's own loss is measured by the same pipeline with
-    # the identity lens (k = 0 is an exact copy in memory): the corrected output may lose as much
-    # again, not more (x2 + 0.2 % of full scale for the resampled edges).
-    identity = tmp_path / f"identity{out.suffix}"
-    assert main(["correct", str(source), str(identity), "--k1", "0", "--backend", "cpu", "-q"]) == 0
-    frames_in, frames_out, frames_id = _frames(source), _frames(out), _frames(identity)
+    # its chroma subsampling) once more. The codec's own loss on that content is measured by writing
+    # the in-memory correction itself with the same encoder (VideoWriter, the source's settings) and
+    # reading it back: the output may lose that much, plus 25 % and 0.2 % of full scale for pass 2
+    # resampling the source's own YUV samples instead of RGB (glradial.remapping.planes; measured:
+    # the YUV output is closer, 0.0152 against 0.0161 of full scale for the 4:4:4 H.264 clip).
+    frames_in, frames_out = _frames(source), _frames(out)
+    expected = [glradial.correct(a, K1, K2, backend="cpu") for a in frames_in]
+    reference = tmp_path / f"reference{out.suffix}"
+    with VideoReader(source) as reader:
+        info = reader.info
+    with VideoWriter(reference, info) as writer:
+        for frame in expected:
+            writer.write(frame)
     assert len(frames_out) == 10
     deep = kind == "prores10_pcm"
     assert frames_out[0].dtype == (np.uint16 if deep else np.uint8)
     scale = 65535.0 if deep else 255.0
-    codec_loss = max(np.abs(a.astype(float) - b).mean() / scale for a, b in zip(frames_in, frames_id))
-    errors = [np.abs(glradial.correct(a, K1, K2, backend="cpu").astype(float) - b).mean() / scale for a, b in zip(frames_in, frames_out)]
-    assert max(errors) < 2 * codec_loss + 0.002, (errors, codec_loss)
+    codec_loss = max(np.abs(a.astype(float) - b).mean() / scale for a, b in zip(expected, _frames(reference)))
+    errors = [np.abs(a.astype(float) - b).mean() / scale for a, b in zip(expected, frames_out)]
+    assert max(errors) < 1.25 * codec_loss + 0.002, (errors, codec_loss)
     wrong = np.abs(frames_in[5].astype(float) - frames_out[5]).mean() / scale  # no correction at all
     assert wrong > 3 * max(errors)
-    assert _names(tmp_path) == sorted([source.name, out.name, identity.name])
+    assert _names(tmp_path) == sorted([source.name, out.name, reference.name])
 
 
 def test_ten_bit_stays_ten_bit_and_lossless_is_exact(tmp_path):

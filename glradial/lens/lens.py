@@ -89,6 +89,35 @@ def lens_to_pixels(
     )
 
 
+@dataclass(frozen=True)
+class Plane:
+    """A sampling lattice of a ``W x H`` frame: sample ``(i, j)`` of the plane (``width x height``
+    samples) lies at the frame's pixel position ``(x0 + step_x i, y0 + step_y j)`` (pixel centres at
+    integers). :meth:`full` is the frame itself; a chroma plane of subsampled YUV is coarser and
+    offset by its siting (:func:`glradial.remapping.planes.yuv_planes`)."""
+
+    width: int
+    height: int
+    x0: float = 0.0
+    y0: float = 0.0
+    step_x: float = 1.0
+    step_y: float = 1.0
+
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"plane {name} must be a positive integer (samples), got {value!r}")
+        for name in ("x0", "y0"):
+            real_number(name, getattr(self, name))
+        for name in ("step_x", "step_y"):
+            check_positive(name, getattr(self, name))
+
+    @classmethod
+    def full(cls, size: tuple[int, int]) -> "Plane":
+        return cls(int(size[0]), int(size[1]))
+
+
 def _points(xy: object) -> np.ndarray:
     array = np.asarray(xy)
     if array.dtype.kind not in "iuf":
@@ -306,6 +335,7 @@ class Lens:
         inverse: InverseMethod = "exact",
         dtype: type = np.float32,
         scale: float | None = None,
+        plane: "Plane | None" = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(map_x, map_y)`` of shape ``(H, W)`` for ``cv2.remap`` (pixel centres at integers).
 
@@ -315,8 +345,14 @@ class Lens:
         :data:`NO_SOURCE`, far outside any frame, so ``cv2.remap(..., borderMode=BORDER_CONSTANT)``
         fills them with the border value. ``inverse`` (distort only): ``"exact"`` or ``"drap"``.
         Raises ``ValueError`` if the lens folds over on the frame (:meth:`check_frame`).
+
+        ``plane`` (a :class:`Plane`, e.g. the chroma plane of a 4:2:0 frame): the maps of that plane
+        instead, shape ``(plane.height, plane.width)``: its sample ``(i, j)`` lies at the frame's pixel
+        position ``(x0 + step_x i, y0 + step_y j)`` and the maps are in the plane's own pixel
+        coordinates (``i = (x - x0) / step_x``), so the plane is remapped on its own.
         """
         width, height = frame_size(size)
+        plane = plane or Plane.full((width, height))
         direction = check_choice("direction", direction, DIRECTIONS)
         inverse = check_choice("inverse", inverse, INVERSES)
         if np.dtype(dtype) not in (np.dtype(np.float32), np.dtype(np.float64)):
@@ -324,9 +360,10 @@ class Lens:
         s = self.fit_scale((width, height), fit, direction) if scale is None else check_positive("scale", scale)
         self.check_frame((width, height), s)
         if direction == "undistort" and np.dtype(dtype) == np.dtype(np.float32):
-            return self._undistort_maps_opencv((width, height), s)
-        xs = (np.arange(width, dtype=np.float64) + 0.5 - width / 2) / width - self.cx
-        ys = ((np.arange(height, dtype=np.float64) + 0.5 - height / 2) / width - self.cy) / self.pixel_aspect
+            return self._undistort_maps_opencv((width, height), s, plane)
+        xs = (plane.x0 + plane.step_x * np.arange(plane.width, dtype=np.float64) + 0.5 - width / 2) / width - self.cx
+        ys = ((plane.y0 + plane.step_y * np.arange(plane.height, dtype=np.float64) + 0.5 - height / 2) / width
+              - self.cy) / self.pixel_aspect
         q = np.stack(np.meshgrid(xs, ys), axis=-1)
         valid = None
         if direction == "undistort":
@@ -336,27 +373,30 @@ class Lens:
             source = p_u / s
         else:
             source = lensfuncs.undistort_point_drap(q, self.k1, self.k2) / s
-        map_x = (source[..., 0] + self.cx) * width + width / 2 - 0.5
-        map_y = (source[..., 1] * self.pixel_aspect + self.cy) * width + height / 2 - 0.5
+        map_x = ((source[..., 0] + self.cx) * width + width / 2 - 0.5 - plane.x0) / plane.step_x
+        map_y = ((source[..., 1] * self.pixel_aspect + self.cy) * width + height / 2 - 0.5 - plane.y0) / plane.step_y
         if valid is not None:
             map_x = np.where(valid, map_x, NO_SOURCE)
             map_y = np.where(valid, map_y, NO_SOURCE)
         return map_x.astype(dtype), map_y.astype(dtype)
 
-    def _undistort_maps_opencv(self, size: tuple[int, int], s: float) -> tuple[np.ndarray, np.ndarray]:
+    def _undistort_maps_opencv(self, size: tuple[int, int], s: float, plane: "Plane") -> tuple[np.ndarray, np.ndarray]:
         """float32 correction maps from ``cv2.initUndistortRectifyMap`` (~5 ms at 1080p against
         ~70 ms for the float64 NumPy path, which stays the reference and agrees within float32
         rounding): with ``K, dist = to_opencv(size)`` (``K = [[W, 0, cx], [0, W a, cy], [0, 0, 1]]``,
         principal point ``cx, cy`` in pixels, ``a`` the pixel aspect, ``dist = (k1, k2, 0, 0, 0)``)
         and the new camera matrix ``K`` with focal lengths divided by ``s``, OpenCV maps an output pixel to ``p_u = s q`` and samples
-        ``P(p_u)``, exactly the convention above."""
+        ``P(p_u)``, exactly the convention above. A ``plane`` is a frame of its own whose camera
+        matrix has the focal lengths divided by the steps and the principal point moved by the origin."""
         import cv2
 
         camera, distortion = self.to_opencv(size)
+        camera[0] = (camera[0] - [0.0, 0.0, plane.x0]) / plane.step_x
+        camera[1] = (camera[1] - [0.0, 0.0, plane.y0]) / plane.step_y
         output = camera.copy()
         output[0, 0] /= s
         output[1, 1] /= s
-        return cv2.initUndistortRectifyMap(camera, distortion, None, output, size, cv2.CV_32FC1)
+        return cv2.initUndistortRectifyMap(camera, distortion, None, output, (plane.width, plane.height), cv2.CV_32FC1)
 
     # -- converters ----------------------------------------------------------------------------
     def rescale(self, s: float) -> "Lens":

@@ -20,6 +20,7 @@ FieldOrder = Literal["auto", "progressive", "tff", "bff"]
 Layout = Literal["nuke", "unreal"]
 Origin = Literal["bottom-left", "top-left"]
 DistortionModel = Literal["U-D", "D-U"]
+ChromaSiting = Literal["left", "center"]
 
 #: how an inverse radial map is computed: bounded Newton ("exact") or the paper's series ("drap")
 INVERSES: tuple[str, ...] = ("exact", "drap")
@@ -48,6 +49,9 @@ SENSORS: tuple[str, ...] = ("2/3-inch",)
 #: directions of an OpenLensIO Brown-Conrady model: U-D (undistorted to distorted, glradial's own,
 #: exact) or D-U (distorted to undistorted, fitted); the model strings are glradial.export.engines.MODEL_NAMES
 DISTORTION_MODELS: tuple[str, ...] = ("U-D", "D-U")
+#: horizontal siting of subsampled chroma samples: co-sited with the even luma columns ("left":
+#: MPEG-2, H.264, HEVC, BT.601/709 4:2:2) or midway between two ("center": JPEG/MJPEG)
+CHROMA_SITINGS: tuple[str, ...] = ("left", "center")
 
 
 def real_number(name: str, value: object) -> float:

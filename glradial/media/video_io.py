@@ -53,10 +53,13 @@ __all__ = [
     "VideoReader",
     "VideoWriter",
     "check_video_overwrite",
+    "frame_timestamps",
+    "frame_planes",
     "has_alpha",
     "is_sequence",
     "probe_video",
     "sequence_files",
+    "yuv_layout",
 ]
 
 ChannelOrder = Literal["rgb", "bgr"]
@@ -214,6 +217,70 @@ def has_alpha(pix_fmt: str) -> bool:
         return False
 
 
+def yuv_layout(pix_fmt: str) -> tuple[int, int, int] | None:
+    """``(shift_x, shift_y, bits)`` of a planar YUV pixel format with three planes and no alpha
+    (chroma subsampled by ``2^shift`` across and down; ``bits`` per sample, stored in uint8 up to 8
+    bits, else in native-endian uint16), e.g. ``(1, 1, 8)`` for yuv420p, ``(1, 0, 10)`` for
+    yuv422p10le; None for anything else (RGB, packed, semi-planar NV12/P010, alpha, big-endian)."""
+    try:
+        fmt = av.VideoFormat(pix_fmt, 64, 64)
+    except (ValueError, av.FFmpegError):
+        return None
+    parts = fmt.components
+    if (fmt.is_rgb or not fmt.is_planar or fmt.is_bit_stream or fmt.has_palette or len(parts) != 3
+            or [c.plane for c in parts] != [0, 1, 2] or any(c.is_alpha for c in parts) or not parts[0].is_luma
+            or len({c.bits for c in parts}) != 1 or parts[0].bits > 16
+            or (parts[0].bits > 8 and fmt.is_big_endian != (np.dtype(np.uint16).byteorder == ">"))):
+        return None
+    shift_x, shift_y = (64 // parts[1].width).bit_length() - 1, (64 // parts[1].height).bit_length() - 1
+    return shift_x, shift_y, parts[0].bits
+
+
+#: codecs whose decoders skip non-reference frames on request and whose container packets carry
+#: one frame each (so that the packets' timestamps number the frames): :meth:`VideoReader.skip_nonreference`
+SKIPPABLE_CODECS = frozenset({"h264", "hevc", "mpeg2video", "mpeg1video", "mpeg4"})
+
+
+def frame_timestamps(path: str | os.PathLike) -> np.ndarray | None:
+    """The presentation timestamps (``VideoInfo.time_base`` ticks) of every frame of the video at
+    ``path``, in display order, read from its packets without decoding (a fraction of a second for
+    a long file); None where they cannot number the frames: an image sequence, a codec outside
+    :data:`SKIPPABLE_CODECS`, or a packet without a timestamp or with a repeated one. (An
+    interlaced stream may hold a field per packet: the caller checks ``VideoInfo.fields``.)"""
+    if is_sequence(path):
+        return None
+    stamps: list[int] = []
+    try:
+        with av.open(str(path), "r") as container:
+            stream = container.streams.video[0]
+            if stream.codec_context.name not in SKIPPABLE_CODECS:
+                return None
+            for packet in container.demux(stream):
+                if packet.size == 0:
+                    continue
+                if packet.pts is None:
+                    return None
+                stamps.append(int(packet.pts))
+    except (av.FFmpegError, IndexError, OSError, UnicodeDecodeError):
+        return None
+    order = np.sort(np.asarray(stamps, np.int64))
+    if len(order) == 0 or np.any(np.diff(order) == 0):
+        return None
+    return order
+
+
+def frame_planes(frame: av.VideoFrame) -> list[np.ndarray]:
+    """The planes of a planar ``frame`` (:func:`yuv_layout`) as 2-D arrays viewing its memory
+    (writable: a new frame's planes are filled in place), uint8 or uint16."""
+    dtype = np.dtype(np.uint8) if frame.format.components[0].bits <= 8 else np.dtype(np.uint16)
+    views = []
+    for plane in frame.planes:
+        data = np.frombuffer(plane, dtype)
+        views.append(data[: plane.height * (plane.line_size // dtype.itemsize)]
+                     .reshape(plane.height, plane.line_size // dtype.itemsize)[:, : plane.width])
+    return views
+
+
 def _matrix(colorspace: int, height: int) -> int:
     return _SWS_MATRIX.get(colorspace, 1 if height >= 720 else 5)
 
@@ -297,6 +364,9 @@ class VideoReader:
         self.copied = [s for s in self._container.streams if s is not stream and copy_streams and _copyable(s)]
         self.max_width = max_width
         self.keep_decoded = keep_decoded
+        #: set True before :meth:`items` to get frames as decoded (``image`` None, ``decoded`` the
+        #: frame in the source's pix_fmt), for a caller that works on its planes (no conversion)
+        self.planar = False
         self.frames_read = 0
         self._last_pts: int | None = None
         self._take_alpha(alpha)
@@ -312,6 +382,18 @@ class VideoReader:
         self._format = _rgb_format(self.info.bit_depth, self.order, self.alpha)
 
     # -- frames --------------------------------------------------------------------------------
+    def skip_nonreference(self) -> None:
+        """Have the decoder drop the frames no other frame refers to (B-frames mostly: about half
+        of a typical H.264 stream, two thirds of MPEG-2), which it then does not decode at all.
+        The frames handed out are then a subsample: number them by their ``pts``
+        (:func:`frame_timestamps`), not by ``index``, which counts the frames decoded."""
+        self.stream.codec_context.skip_frame = "NONREF"
+
+    def seek(self, pts: int) -> None:
+        """Continue from the key frame at or before ``pts`` (stream time base); ``index`` then
+        counts from there."""
+        self._container.seek(int(pts), stream=self.stream, backward=True, any_frame=False)
+
     def convert(self, frame: av.VideoFrame, max_width: int | None = None) -> np.ndarray:
         """A decoded frame as an array (module conventions), at most ``max_width`` px wide (area
         filter; None = full size)."""
@@ -335,11 +417,12 @@ class VideoReader:
                         yield CopiedPacket(packet)
                     continue
                 for frame in (self._decoder.decode(packet) if self._decoder is not None else packet.decode()):
-                    image = self.convert(frame, self.max_width)
+                    image = None if self.planar else self.convert(frame, self.max_width)
                     self.frames_read += 1
                     if frame.pts is not None:
                         self._last_pts = frame.pts
-                    yield VideoFrame(self.frames_read - 1, image, frame.pts, frame if self.keep_decoded else None)
+                    yield VideoFrame(self.frames_read - 1, image, frame.pts,
+                                     frame if self.keep_decoded or self.planar else None)
         except av.FFmpegError as err:
             raise ValueError(
                 f"input {_error(self.path, err)} (truncated or corrupt after {self.frames_read} decoded frames)"
@@ -710,12 +793,37 @@ class VideoWriter:
         frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order, image.shape[2] == 4))
         frame = frame.reformat(format=self._pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
                                dst_color_range=self._range, interpolation="BILINEAR")
+        return self._stamp(frame, pts)
+
+    def _stamp(self, frame: av.VideoFrame, pts: int | None) -> av.VideoFrame:
         # the source's tags, not those of the conversion (which names its matrix even when untagged)
         frame.colorspace, frame.color_range = self.info.colorspace, self.info.color_range
         frame.color_primaries, frame.color_trc = self.info.color_primaries, self.info.color_trc
         frame.pts = pts
         frame.time_base = self.info.time_base  # the muxer may give the stream another time base
         return self._fields(frame) if self._fields is not None else frame
+
+    @property
+    def full_range(self) -> bool:
+        """Whether the output's YUV samples are full range (JPEG) rather than limited (video)."""
+        return self._range == 2
+
+    def takes_planes_of(self, source_pix_fmt: str) -> bool:
+        """Whether frames in ``source_pix_fmt`` can be written plane for plane (:meth:`planar_frame`):
+        the output is that same planar YUV format (:func:`yuv_layout`), progressive."""
+        return source_pix_fmt == self._pix_fmt and yuv_layout(self._pix_fmt) is not None and self._fields is None
+
+    def planar_frame(self) -> tuple[av.VideoFrame, list[np.ndarray]]:
+        """A new frame in the output pix_fmt (planar YUV: :meth:`takes_planes_of`) and writable
+        views of its planes (:func:`frame_planes`); fill them, then :meth:`stamp` it."""
+        width, height = self.info.size
+        frame = av.VideoFrame(width, height, self._pix_fmt)
+        return frame, frame_planes(frame)
+
+    def stamp(self, frame: av.VideoFrame, pts: int | None) -> av.VideoFrame:
+        """A frame of :meth:`planar_frame`, filled, made ready to encode: the source's colour tags,
+        ``pts`` (in ``info.time_base``) and time base."""
+        return self._stamp(frame, pts)
 
     def check_alpha_kept(self) -> None:
         """``ValueError`` when the source has alpha (``info.pix_fmt``) and the output format has none,

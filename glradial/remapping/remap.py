@@ -66,7 +66,7 @@ from ..gl import egl
 from ..gl.shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES
 from ..gl.shaderlib import build_program
 from ..lens import lensfuncs
-from ..lens.lens import Lens, frame_size
+from ..lens.lens import Lens, Plane, frame_size
 from ..lens.options import (
     BACKENDS,
     DIRECTIONS,
@@ -86,7 +86,8 @@ _CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "
 _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}
 #: cv2.remap writes at most SHRT_MAX - 1 pixels per side.
 CPU_MAX_SIDE = 32766
-#: fixed-point maps kept by the CPU backend (each 1080p entry is ~12 MB).
+#: fixed-point maps kept by the CPU backend (each 1080p entry is ~12 MB; a YUV frame's lens takes
+#: one entry per distinct plane lattice: 2 for 4:2:0).
 CPU_MAP_CACHE_SIZE = 8
 #: the shaders compute in float32: the largest finite value and the smallest normal one
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -570,21 +571,26 @@ _map_lock = threading.Lock()
 
 
 def cpu_maps(
-    lens: Lens, size: tuple[int, int], direction: str, scale: float, inverse: str, nearest: bool
+    lens: Lens, size: tuple[int, int], direction: str, scale: float, inverse: str, nearest: bool,
+    plane: Plane | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """OpenCV fixed-point maps (``CV_16SC2`` + ``CV_16UC1``) of :meth:`Lens.maps` and the flat
     indices of the output pixels with no source (outside the input's area, or no inverse), cached
-    (LRU of :data:`CPU_MAP_CACHE_SIZE`) by lens, size, direction, scale, inverse and nearest."""
+    (LRU of :data:`CPU_MAP_CACHE_SIZE`) by lens, size, direction, scale, inverse, nearest and
+    ``plane`` (a :class:`~glradial.lens.lens.Plane` of the ``size`` frame, e.g. a chroma plane: its
+    maps, in its own pixels; a sample has no source when its source lies outside the frame's area)."""
     key = (lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, size, direction, scale,
-           inverse if direction == "distort" else "", nearest)
+           inverse if direction == "distort" else "", nearest, plane)
     with _map_lock:
         maps = _map_cache.get(key)
         if maps is not None:
             _map_cache.move_to_end(key)
             return maps
-    map_x, map_y = lens.maps(size, direction, inverse=inverse, scale=scale)
+    map_x, map_y = lens.maps(size, direction, inverse=inverse, scale=scale, plane=plane)
     width, height = size
-    outside = (map_x < -0.5) | (map_x > width - 0.5) | (map_y < -0.5) | (map_y > height - 0.5)
+    plane = plane or Plane.full(size)
+    frame_x, frame_y = plane.x0 + plane.step_x * map_x, plane.y0 + plane.step_y * map_y
+    outside = (frame_x < -0.5) | (frame_x > width - 0.5) | (frame_y < -0.5) | (frame_y > height - 0.5)
     map1, map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2, nninterpolation=nearest)
     maps = (map1, map2, np.flatnonzero(outside))
     with _map_lock:

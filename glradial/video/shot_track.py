@@ -1,8 +1,18 @@
 """Pass 1 of ``correct --auto`` and ``estimate VIDEO``: one lens per shot, read while decoding.
 
-Every frame is decoded once and reduced to a 64 px thumbnail for the cut detector
-(:class:`glradial.video.smoothing.ShotDetector`). A cheap subsample of each shot -- its first frame, then
-every ``every``-th (the stride doubles each :data:`SAMPLES_PER_STRIDE` samples, so a long shot
+The decoder hands over a subsample: where the packets' timestamps number the frames
+(:func:`glradial.media.video_io.frame_timestamps`: H.264, HEVC, MPEG-1/2/4 in a container with
+timestamps, progressive), it skips the frames no other frame refers to
+(:meth:`~glradial.media.video_io.VideoReader.skip_nonreference`: about half of an x264 stream, which
+it then never decodes) and each decoded frame is numbered by its timestamp; anything else is decoded
+whole (``sparse=False`` forces that). Each decoded frame is reduced to a 64 px thumbnail for the cut
+detector (:class:`glradial.video.smoothing.ShotDetector`). On a sparse decode the detector only
+proposes candidates (at :data:`CANDIDATE_RATIO` of its ratio: frames 1-3 apart differ more than
+consecutive ones); :class:`CutCheck` then decodes every frame of the stretch before each candidate
+(from the key frame before it: its cost is bounded by the stream's key-frame interval) and applies
+the detector's own test frame by frame, so that the cuts found, and where they are placed, are
+those of a decode of every frame. A cheap subsample of each shot -- its first decoded frame, then one every
+``every`` frames (the stride doubles each :data:`SAMPLES_PER_STRIDE` samples, so a long shot
 costs no more than a log factor) -- is converted at most
 :data:`glradial.video.video_pipeline.ESTIMATE_WIDTH` px wide and handed to a
 :class:`~glradial.video.shot_evidence.ShotCollector` (line chains, frame-to-frame matches, the per-frame
@@ -18,7 +28,9 @@ uncorrected); a lens that folds over inside the frame (``fold_over``) is never a
 
 from __future__ import annotations
 
+import copy
 import os
+from dataclasses import replace
 from fractions import Fraction
 from typing import Callable
 
@@ -27,13 +39,13 @@ import numpy as np
 from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
-from ..media.video_io import VideoReader
+from ..media.video_io import VideoReader, frame_timestamps
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .shot_evidence import ShotCollector
 from .shot_fit import ShotLens, fit_shot
 from .smoothing import ShotDetector
 
-__all__ = ["track_shots", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY"]
+__all__ = ["track_shots", "CutCheck", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO"]
 
 #: default stride of the sampled frames (frames): 0.4 s at 25 fps
 EVERY = 10
@@ -44,6 +56,10 @@ ESTIMATE_EVERY = 3
 SAMPLES_PER_STRIDE = 32
 #: frames of the decoded stream converted for the cut detector (px wide)
 DETECT_WIDTH = 64
+#: the sparse decode flags a candidate cut at this fraction of the detector's ratio (its frames lie
+#: 1-3 apart, so a camera's own motion scores higher than from frame to frame: 1.3x on a panning
+#: held-out clip, proc_5 of scripts/make_clips.py --set check), then :class:`CutCheck` decides
+CANDIDATE_RATIO = 0.5
 
 
 class _Shots:
@@ -84,39 +100,136 @@ def track_shots(
     doubtful_px: float = DOUBTFUL_PX,
     apply_doubtful: bool = False,
     rate: Fraction | None = None,
+    sparse: bool = True,
 ) -> LensTrack:
     """Pass 1 (module docstring): the :class:`LensTrack` of the video at ``path``. ``estimator``
     maps a uint8 RGB frame to a lens; ``every`` (frames) is the sampling stride, ``estimate_every``
     (samples) how often the estimator runs; ``doubtful_px`` (px at 1920) the bound above which a
     shot is doubtful; ``apply_doubtful`` applies doubtful shots' lenses anyway; ``rate`` the frame
-    rate of an image-sequence input (default 25)."""
-    from .video_pipeline import ESTIMATE_WIDTH, Pipelined
-
+    rate of an image-sequence input (default 25); ``sparse=False`` decodes every frame even where
+    the stream allows the sparse decode."""
     for name, value in (("every", every), ("estimate_every", estimate_every)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     if not doubtful_px > 0:
         raise ValueError(f"doubtful_px must be > 0 (px at 1920), got {doubtful_px!r}")
+    if not isinstance(sparse, (bool, np.bool_)):
+        raise TypeError(f"sparse must be a bool, got {sparse!r}")
     detector = detector or ShotDetector()
-    stamps: list[float] = []
+    fresh = copy.deepcopy(detector)
     with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
         info = reader.info
+        order = frame_timestamps(path) if sparse and info.fields == "progressive" else None
         shots = _Shots(estimator, estimate_every, doubtful_px, corner_radius(info.size))
-        since = 0
-        with Progress(info.frame_count, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
-            for item in frames:
+        check = CutCheck(path, order, detector, rate=rate) if order is not None else None
+        try:
+            stamps = _scan(reader, order, detector, shots, every, progress, check)
+        except _Unnumbered:  # the decoder's timestamps do not match the packets': decode every frame
+            return track_shots(path, estimator, every=every, estimate_every=estimate_every, detector=fresh,
+                               progress=progress, doubtful_px=doubtful_px, apply_doubtful=apply_doubtful, rate=rate,
+                               sparse=False)
+        finally:
+            if check is not None:
+                check.close()
+    return _track(info, stamps, shots, apply_doubtful, doubtful_px)
+
+
+class _Unnumbered(Exception):
+    """A decoded frame's timestamp is not one of the packets' (pass 1 then decodes every frame)."""
+
+
+def _scan(reader: VideoReader, order: np.ndarray | None, detector: ShotDetector, shots: _Shots, every: int,
+          progress: bool | None, check: "CutCheck | None") -> np.ndarray:
+    """Decode (every frame, or with ``order`` the frames other frames refer to, numbered by
+    ``order``), detect cuts (with ``order``: candidates, confirmed and placed by ``check``), sample
+    each shot; returns the frames' times (s)."""
+    from .video_pipeline import ESTIMATE_WIDTH, Pipelined
+
+    info = reader.info
+    candidates = detector if check is None else replace(copy.deepcopy(detector), ratio=detector.ratio * CANDIDATE_RATIO)
+    if order is not None:
+        reader.skip_nonreference()
+    stamps: list[float] = []
+    previous = sampled = -1
+    total = len(order) if order is not None else info.frame_count
+    with Progress(total, "estimate", enabled=progress) as bar, Pipelined(reader.items()) as frames:
+        for item in frames:
+            index = item.index if order is None else _number(order, item.pts)
+            if order is None:
                 stamps.append(float(item.pts * info.time_base) if item.pts is not None else item.index / info.fps)
-                if detector.update(item.image):
-                    shots.open(item.index)
-                    since = 0
-                stride = every * 2 ** (len(shots.collector.evidence.samples) // SAMPLES_PER_STRIDE)
-                if since % stride == 0:
-                    shots.collector.add(item.index, to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
-                    since = 0
-                since += 1
-                bar.update()
-        shots.close()
-    return _track(info, np.asarray(stamps), shots, apply_doubtful, doubtful_px)
+            if candidates.update(item.image, index - previous if previous >= 0 else 1):
+                start = index if check is None or previous < 0 else check.confirm(previous, index, shots.starts[-1])
+                if start is not None:
+                    shots.open(start)
+                    sampled = -1
+            stride = every * 2 ** (len(shots.collector.evidence.samples) // SAMPLES_PER_STRIDE)
+            if sampled < 0 or index - sampled >= stride:
+                shots.collector.add(index, to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
+                sampled = index
+            bar.update(index - previous)
+            previous = index
+    shots.close()
+    if shots.starts:
+        shots.starts[0] = 0  # frames shown before the first decoded one (skipped leading B-frames) open the video
+    if order is not None:
+        stamps = [float(pts * info.time_base) for pts in order]
+    return np.asarray(stamps, np.float64)
+
+
+def _number(order: np.ndarray, pts: int | None) -> int:
+    """The frame number of a decoded frame's ``pts`` among all frames' timestamps ``order``."""
+    index = int(np.searchsorted(order, pts)) if pts is not None else len(order)
+    if index >= len(order) or order[index] != pts:
+        raise _Unnumbered(pts)
+    return index
+
+
+class CutCheck:
+    """The full decode's cut test for a candidate cut of the sparse decode: :meth:`confirm` decodes
+    every frame of the stretch before it (from the key frame at or before the first frame it needs)
+    and runs ``detector``'s test frame by frame, as a decode of every frame would."""
+
+    def __init__(self, path: str | os.PathLike, order: np.ndarray, detector: ShotDetector, *,
+                 rate: Fraction | None = None) -> None:
+        self.path, self.order, self.detector, self.rate = path, order, copy.deepcopy(detector), rate
+        self._reader: VideoReader | None = None
+
+    def confirm(self, a: int, b: int, start: int) -> int | None:
+        """The first frame of a new shot in ``a + 1 .. b`` (``a``, ``b``: consecutive decoded frames
+        whose difference was a candidate cut; ``start``: the first frame of the current shot), or
+        None when a decode of every frame finds no cut there. The test: a frame's score against its
+        predecessor above ``threshold`` and ``ratio`` x the median of the last ``window`` scores
+        of its shot, at least ``min_shot`` frames into the shot (:class:`ShotDetector`)."""
+        test = self.detector
+        first = max(start, a - test.window)
+        thumbs = self._thumbnails(first, b)
+        if sorted(thumbs) != list(range(first, b + 1)):
+            return b  # the stretch could not be read whole: the sparse decode's answer
+        scores = [test.pair_score(thumbs[j - 1], thumbs[j]) for j in range(first + 1, b + 1)]  # frame j: scores[j - first - 1]
+        for j in range(a + 1, b + 1):
+            value, recent = scores[j - first - 1], scores[max(0, j - first - 1 - test.window): j - first - 1]
+            baseline = float(np.median(recent)) if recent else 0.0
+            if value > test.threshold and value > test.ratio * baseline and j - start >= test.min_shot:
+                return j
+        return None
+
+    def _thumbnails(self, first: int, last: int) -> dict[int, np.ndarray]:
+        if self._reader is None:
+            self._reader = VideoReader(self.path, order="rgb", max_width=DETECT_WIDTH, rate=self.rate)
+        order = self.order
+        self._reader.seek(int(order[first]))
+        thumbs: dict[int, np.ndarray] = {}
+        for item in self._reader.items():
+            if item.pts is None or item.pts > order[last]:
+                break
+            if item.pts >= order[first]:
+                thumbs[int(np.searchsorted(order, item.pts))] = item.image
+        return thumbs
+
+    def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
 
 
 def _track(info, stamps: np.ndarray, shots: _Shots, apply_doubtful: bool, doubtful_px: float) -> LensTrack:

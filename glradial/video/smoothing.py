@@ -61,8 +61,14 @@ class ShotDetector:
         thumb = float(np.mean(np.abs(a[1] - b[1]))) * self.thumb_gain
         return max(hist, thumb)
 
-    def update(self, frame: np.ndarray) -> bool:
-        """Feed the next frame; True when it starts a new shot (always True for the first frame)."""
+    def pair_score(self, first: np.ndarray, second: np.ndarray) -> float:
+        """The score of ``second`` following ``first`` (frames as :meth:`update` takes them)."""
+        return self.score(self._features(first), self._features(second))
+
+    def update(self, frame: np.ndarray, advance: int = 1) -> bool:
+        """Feed the next frame; True when it starts a new shot (always True for the first frame).
+        ``advance``: how many frames on from the previous one it is (a sparse decode skips some);
+        ``min_shot`` counts frames."""
         features = self._features(frame)
         previous, self._previous = self._previous, features
         if previous is None:
@@ -72,12 +78,12 @@ class ShotDetector:
         self.scores.append(value)
         recent = list(self._recent)[-self.window :]
         baseline = float(np.median(recent)) if recent else 0.0
-        cut = value > self.threshold and value > self.ratio * baseline and self._since_cut >= self.min_shot
+        cut = value > self.threshold and value > self.ratio * baseline and self._since_cut + advance - 1 >= self.min_shot
         if cut:
             self._since_cut = 1
             self._recent.clear()
         else:
-            self._since_cut += 1
+            self._since_cut += advance
             self._recent.append(value)
         return cut
 

@@ -2,14 +2,19 @@
 
 Pipeline (memory does not grow with the file's length):
 
-1. :func:`track_video` decodes every frame once, detects cuts on 64 px thumbnails and gathers a
-   cheap subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
+1. :func:`track_video` decodes a subsample (the frames other frames refer to, where the stream
+   allows: :mod:`glradial.video.shot_track`), detects cuts on 64 px thumbnails, places each cut
+   seen between two decoded frames exactly by decoding that stretch again, and gathers a cheap
+   subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
    then, on copies at most :data:`ESTIMATE_WIDTH` px wide); each shot gets one joint lens fit, a
    function of its zoom when the picture zooms (:mod:`glradial.video.shot_track`,
    :mod:`glradial.video.shot_fit`). A doubtful shot is marked and, by default, passed through
    uncorrected.
-2. :func:`correct_video` decodes the file again, corrects each frame with its lens and encodes it
-   (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags and depth kept).
+2. :func:`correct_video` decodes the file (all of it, once), corrects each frame with its lens and
+   encodes it (:mod:`glradial.media.video_io`: audio and other streams copied, timing, colour tags
+   and depth kept). A planar YUV stream (yuv420p, yuv422p10le ...) written in its own pix_fmt is
+   corrected plane by plane in its own samples, with no conversion to RGB and back
+   (:func:`correction_space`, :mod:`glradial.remapping.planes`); anything else goes through RGB.
    Decoding, correction and encoding overlap on three threads with at most ``depth`` frames
    queued between two steps; the correction runs on one worker thread, which owns its GL context
    (released when it ends) or uses the CPU path.
@@ -18,7 +23,7 @@ The result of pass 1 is a :class:`~glradial.video.lens_track.LensTrack`, written
 (format: :mod:`glradial.video.lens_track`).
 
 Convention: frames are ``H x W x 3`` RGB (uint8, or uint16 for deeper sources) when they reach the
-corrector; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (docs/DESIGN.md).
+RGB corrector, planes of the source's own samples on the YUV path; the estimator gets uint8 RGB; the lens is width-normalised ``(k1, k2)`` (docs/DESIGN.md).
 """
 
 from __future__ import annotations
@@ -37,11 +42,21 @@ import numpy as np
 from ..lens.lens import Lens, as_lens
 from ..lens.metrics import max_displacement
 from ..media.progress import Progress
-from ..media.video_io import FIELD_ORDER_CODES, CopiedPacket, EncodeOptions, VideoFrame, VideoInfo, VideoReader, VideoWriter
+from ..media.video_io import (
+    FIELD_ORDER_CODES,
+    CopiedPacket,
+    EncodeOptions,
+    VideoFrame,
+    VideoInfo,
+    VideoReader,
+    VideoWriter,
+    frame_planes,
+    yuv_layout,
+)
 from .lens_track import LensTrack
 from .shot_track import EVERY, track_shots
 
-__all__ = ["LensTrack", "track_video", "correct_video", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
+__all__ = ["LensTrack", "track_video", "correct_video", "correction_space", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
 #: estimator: RGB uint8 frame -> (k1, k2) or a Lens (a LensEstimate carries uncertainty_px and method)
 EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
@@ -179,15 +194,43 @@ class _FrameCorrector:
         self._remapper = None
         self._last: Lens | None = None
 
-    def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
-        height, width = image.shape[:2]
+    def _reused(self, lens: Lens, width: int, height: int) -> Lens:
+        """``lens``, or the previous frame's when no point of the frame would move by more than
+        :data:`MAP_REUSE_PX` (the same maps, cached)."""
         last = self._last
         if (last is not None and (last.cx, last.cy, last.pixel_aspect) == (lens.cx, lens.cy, lens.pixel_aspect)
                 and max_displacement((lens.k1, lens.k2), (last.k1, last.k2), lens.frame_radius((width, height))) * width
                 <= MAP_REUSE_PX):
-            lens = last  # the same maps (cached) for a change no point of the frame can show
+            return last
+        self._last = lens
+        return lens
+
+    def use_planes(self, info: VideoInfo, full_range: bool) -> None:
+        """Correct frames of ``info`` (planar YUV, :func:`correction_space`) plane by plane."""
+        from ..remapping.planes import black, chroma_siting, yuv_planes
+
+        shift_x, shift_y, bits = yuv_layout(info.pix_fmt)
+        self.lattices = yuv_planes(info.size, (shift_x, shift_y), chroma_siting(info.codec))
+        self.black = black(bits, full_range)
+
+    def planar(self, decoded, lens: Lens | None, writer: VideoWriter, pts: int | None):
+        """The encoder-ready frame of a decoded planar YUV frame corrected with ``lens`` (None: copied)."""
+        from ..remapping.planes import remap_planes
+
+        frame, out = writer.planar_frame()
+        source = frame_planes(decoded)
+        if lens is None:
+            for plane, target in zip(source, out):
+                target[...] = plane
         else:
-            self._last = lens
+            lens = self._reused(lens, decoded.width, decoded.height)
+            remap_planes(source, lens, self.lattices, out, fill=self.black, direction=self.direction, fit=self.fit,
+                         interpolation=self.interpolation, inverse=str(self.extra.get("inverse", "exact")))
+        return writer.stamp(frame, pts)
+
+    def __call__(self, image: np.ndarray, lens: Lens) -> np.ndarray:
+        height, width = image.shape[:2]
+        lens = self._reused(lens, width, height)
         if not self.interlaced:
             return self._remap(image, lens, self.fit)
         from ..remapping.fields import remap_fields
@@ -210,6 +253,25 @@ class _FrameCorrector:
         if self._remapper is not None:
             self._remapper.release()
             self._remapper = None
+
+
+def correction_space(info: VideoInfo, writer: VideoWriter, backend: str, remap_options: dict) -> tuple[str, str]:
+    """Where pass 2 corrects the frames of a stream ``info`` written by ``writer``: ``("yuv", "")``
+    plane by plane in the source's own samples (:mod:`glradial.remapping.planes`: no colour
+    conversion), or ``("rgb", why)``: decoded to RGB, corrected, converted back. YUV needs the CPU
+    backend, a progressive planar YUV source without alpha (:func:`~glradial.media.video_io.yuv_layout`:
+    yuv420p, yuv422p10le ...) written in that same pix_fmt, and no ``fill`` of its own."""
+    if backend != "cpu":
+        return "rgb", f"the {backend} backend corrects RGB frames"
+    if info.fields != "progressive":
+        return "rgb", f"interlaced ({info.fields}): fields are remapped in RGB"
+    if set(remap_options) - {"inverse", "alpha"}:
+        return "rgb", f"options {sorted(set(remap_options) - {'inverse', 'alpha'})} are applied in RGB"
+    if yuv_layout(info.pix_fmt) is None:
+        return "rgb", f"{info.pix_fmt} is not planar YUV"
+    if not writer.takes_planes_of(info.pix_fmt):
+        return "rgb", f"the output is {writer.pix_fmt}, not {info.pix_fmt}"
+    return "yuv", ""
 
 
 def _with_fields(info: VideoInfo, field_order: str) -> VideoInfo:
@@ -251,7 +313,9 @@ def correct_video(
     ``rate``: frame rate of an image-sequence input (default 25). ``remap_options``: ``inverse``
     (distort) and ``alpha`` of :func:`glradial.distort`. ``field_order``: ``"auto"`` (the stream's,
     :attr:`VideoInfo.fields`), or ``"progressive"``, ``"tff"``, ``"bff"`` to force one; interlaced
-    frames are remapped field by field (:mod:`glradial.remapping.fields`) and written with that field order."""
+    frames are remapped field by field (:mod:`glradial.remapping.fields`) and written with that field order.
+    Planar YUV written in its own pix_fmt is corrected in YUV (:func:`correction_space`: the CPU
+    backend, progressive; source-less pixels black in the source's range), anything else in RGB."""
     corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
     with VideoReader(source, order="rgb", copy_streams=True, rate=rate, alpha=True) as reader:
         info = _with_fields(reader.info, field_order)
@@ -259,13 +323,19 @@ def correct_video(
         writer = VideoWriter(target, info, options=options, streams=reader.copied, overwrite=overwrite)
         try:
             writer.check_alpha_kept()
+            if correction_space(info, writer, corrector.backend, remap_options)[0] == "yuv":
+                corrector.use_planes(info, writer.full_range)
+                reader.planar = True
+
             def work(item):
-                if isinstance(item, VideoFrame):
-                    lens = lenses(item.index)
-                    if lens is None:  # passed through uncorrected (a doubtful shot)
-                        return writer.frame(item.image, item.pts)
-                    return writer.frame(corrector(item.image, as_lens(lens)), item.pts)
-                return item
+                if not isinstance(item, VideoFrame):
+                    return item
+                lens = lenses(item.index)
+                lens = None if lens is None else as_lens(lens)  # None: passed through uncorrected (a doubtful shot)
+                if reader.planar and item.decoded.format.name == info.pix_fmt:
+                    return corrector.planar(item.decoded, lens, writer, item.pts)
+                image = item.image if item.image is not None else reader.convert(item.decoded)
+                return writer.frame(image if lens is None else corrector(image, lens), item.pts)
 
             with Progress(info.frame_count, label, enabled=progress) as bar, \
                     Pipelined(reader.items(), work, on_worker_exit=corrector.release) as done:
