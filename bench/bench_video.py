@@ -114,12 +114,15 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
     import numpy as np
 
     from glradial.lens.lens import Lens
+    from glradial.remapping.planes import yuv_planes
     from glradial.remapping.remap import cpu_maps
 
+    chroma = yuv_planes(size, (1, 1))[1]
     ways = {
         "Lens.maps (float32)": lambda lens: lens.maps(size),
         "Lens.maps (float64 reference)": lambda lens: lens.maps(size, dtype=np.float64),
         "cpu_maps (all of it)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False),
+        "cpu_maps (4:2:0 chroma plane)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False, chroma),
     }
     times: dict[str, list[float]] = {name: [] for name in ways}
     for i in range(calls):
