@@ -612,7 +612,7 @@ def _no_source(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int], plan
     along every row: ``d/dx [x f(r)] = f + (x^2 / r) f' >= min(f, R') > 0`` (``f = R / r > 0``).
     So the extreme sources of x lie in the first and last columns, those of y in the first and last
     rows, and inside them (by :data:`_INSIDE_MARGIN`) all lie inside. Otherwise (and for ``distort``
-    maps, which hold :data:`NO_SOURCE`) every sample is tested."""
+    maps, which hold :data:`~glradial.lens.lens.NO_SOURCE`) every sample is tested."""
     width, height = size
     if direction == "undistort":
         low_x, high_x = (-0.5 - plane.x0) / plane.step_x, (width - 0.5 - plane.x0) / plane.step_x
