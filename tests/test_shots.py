@@ -225,3 +225,43 @@ def test_shot_fit_input_errors(tmp_path):
         ShotCollector(guess, estimate_every=0)
     with pytest.raises(ValueError, match="at least one frame"):
         next(render_shot(ShotSpec(np.zeros((8, 16, 3), np.uint8), 0), SIZE))
+
+
+def test_batched_evaluation_equals_the_per_pair_definition():
+    """The shot fit's residuals undistort every sample's points in one call and reuse what does not
+    depend on the lens (a speed-up): they must equal, bit for bit, the definition evaluated pair by
+    pair through the public lens functions (undistort_point_exact with the sample's lens, the
+    pair's least-squares homography, the weighted transfer error), and undistorting must invert
+    the forward model. Lenses include one that folds inside the points (``valid`` False there)."""
+    from glradial.lens.lensfuncs import distort_point, undistort_point_exact
+    from glradial.video.frame_motion import Matches, homography_of
+    from glradial.video.shot_fit import MATCH_CAP, MATCH_SIGMA, _Pairs, _Undistort
+
+    rng = np.random.default_rng(7)
+    lenses = np.array([[-0.30, 0.05], [-0.22, 0.03], [0.05, -0.01], [-0.12, 0.0], [-1.6, 0.0]])
+    sample = rng.integers(0, 5, 400)
+    points = rng.uniform(-0.55, 0.55, (400, 2)) * [1.0, 0.6]
+    p_u, valid = _Undistort(points, sample)(lenses)
+    for s, (k1, k2) in enumerate(lenses):
+        ref, ref_valid = undistort_point_exact(points[sample == s], k1, k2)
+        assert np.array_equal(p_u[sample == s], ref) and np.array_equal(valid[sample == s], ref_valid)
+    assert not valid[sample == 4].all() and valid[sample < 4].all()
+    for s, (k1, k2) in enumerate(lenses[:4]):
+        assert np.allclose(distort_point(p_u[sample == s], k1, k2), points[sample == s], rtol=0, atol=1e-12)
+
+    truth = np.array([[1.02, 0.01, 0.03], [-0.01, 1.02, -0.01], [0.02, -0.01, 1.0]])
+    pairs = []
+    for i, j, n in ((0, 1, 40), (1, 2, 90), (0, 3, 12)):
+        a = rng.uniform(-0.45, 0.45, (n, 2)) * [1.0, 0.5]
+        q = np.c_[a, np.ones(n)] @ truth.T
+        pairs.append((i, j, Matches(a, q[:, :2] / q[:, 2:3] + rng.normal(0, 1e-3, (n, 2)), 640)))
+    expected = []
+    for i, j, m in pairs:
+        ua, _ = undistort_point_exact(m.a, *lenses[i])
+        ub, _ = undistort_point_exact(m.b, *lenses[j])
+        q = np.c_[ua, np.ones(len(ua))] @ homography_of(ua, ub).T
+        weight = math.sqrt(min(1.0, MATCH_CAP / len(m))) * m.width / MATCH_SIGMA
+        expected.append(((q[:, :2] / q[:, 2:3] - ub) * weight).ravel())
+    got = _Pairs(pairs).residuals(lenses)
+    assert np.array_equal(got, np.concatenate(expected))
+    assert len(_Pairs([]).residuals(lenses)) == 0

@@ -71,7 +71,7 @@ from ..estimation.line_fit import (
 )
 from ..estimation.lines import LineEvidence
 from ..lens.lens import Lens
-from ..lens.lensfuncs import undistort_point_exact
+from ..lens.lensfuncs import undistort_radius_exact
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
 from .frame_motion import Matches, homography_of
 from .lens_track import DOUBTFUL_PX
@@ -171,6 +171,33 @@ def _lens(theta: np.ndarray, z: np.ndarray) -> np.ndarray:
     return np.stack([k1, manifold_k2(k1) + theta[3]], axis=-1)
 
 
+class _Undistort:
+    """Undistorts a fixed set of points, each with the lens of its sample, for one lens array after
+    another: :func:`glradial.lens.lensfuncs.undistort_radius_exact` on the radii laid out one row per
+    sample (padded with 0, a fixed point of its Newton steps), so the per-lens work is done once
+    per sample instead of once per point. The same arithmetic, element by element, as
+    :func:`~glradial.lens.lensfuncs.undistort_point_exact` with that sample's lens."""
+
+    def __init__(self, points: np.ndarray, sample: np.ndarray) -> None:
+        self.points = np.asarray(points, np.float64)
+        self.r_d = np.sqrt(np.sum(self.points * self.points, axis=-1))
+        self.rows = np.asarray(sample, np.intp)
+        counts = np.bincount(self.rows, minlength=1)
+        order = np.argsort(self.rows, kind="stable")
+        self.cols = np.empty_like(self.rows)
+        self.cols[order] = np.arange(len(order)) - (np.cumsum(counts) - counts)[self.rows[order]]
+        self.padded = np.zeros((len(counts), int(counts.max())))
+        self.padded[self.rows, self.cols] = self.r_d
+
+    def __call__(self, lenses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(p_u, valid)`` of the points, point ``n`` undistorted with ``lenses[sample[n]]``."""
+        rows = len(self.padded)
+        r_u, valid = undistort_radius_exact(self.padded, lenses[:rows, 0:1], lenses[:rows, 1:2])
+        r_u, valid = r_u[self.rows, self.cols], valid[self.rows, self.cols]
+        scale = np.where(self.r_d > 0.0, r_u / np.where(self.r_d > 0.0, self.r_d, 1.0), 1.0)
+        return self.points * scale[:, None], valid
+
+
 class _Chains:
     """The chains of all sampled frames, compacted (as in line_fit) and grouped by sample."""
 
@@ -211,9 +238,10 @@ class _Chains:
         """Per-chain chi^2 with sample ``s`` undistorted by ``lenses[s]`` (NaN where the lens cannot)."""
         if self.n == 0:
             return np.zeros(0)
-        k = lenses[self.sample[self.chain]]
+        if getattr(self, "_undistort", None) is None:
+            self._undistort = _Undistort(self.points, self.sample[self.chain])
         r_d = np.hypot(self.points[:, 0], self.points[:, 1])
-        p_u, valid = undistort_point_exact(self.points, k[:, 0], k[:, 1])
+        p_u, valid = self._undistort(lenses)
         r_u = np.hypot(p_u[:, 0], p_u[:, 1])
         mag = np.where(r_u > 1e-9, r_d / np.maximum(r_u, 1e-9), 1.0)
         starts = np.flatnonzero(np.r_[True, np.diff(self.chain) != 0])
@@ -233,20 +261,39 @@ class _Chains:
         return np.sqrt(chi2 * (SIGMA_POINT**2 + self.counts * SIGMA_FLOOR**2) / self.counts)
 
 
-def _pair_residuals(pairs: list[tuple[int, int, Matches]], lenses: np.ndarray) -> np.ndarray:
-    out = []
-    for i, j, m in pairs:
-        ua, _ = undistort_point_exact(m.a, float(lenses[i, 0]), float(lenses[i, 1]))
-        ub, _ = undistort_point_exact(m.b, float(lenses[j, 0]), float(lenses[j, 1]))
-        h = homography_of(ua, ub)
-        if h is None:
-            out.append(np.full(2 * len(m), 1e3))
-            continue
-        q = np.c_[ua, np.ones(len(ua))] @ h.T
-        moved = q[:, :2] / q[:, 2:3]
-        weight = math.sqrt(min(1.0, MATCH_CAP / len(m))) * m.width / MATCH_SIGMA
-        out.append(((moved - ub) * weight).ravel())
-    return np.concatenate(out) if out else np.zeros(0)
+class _Pairs:
+    """The frame-to-frame matches of a shot, compacted once: every pair's points of both frames in one
+    array (undistorted in one call per evaluation, each point with its own sample's lens), the
+    slices that hold each pair's ``a`` and ``b`` points, and each pair's residual weight."""
+
+    def __init__(self, pairs: list[tuple[int, int, Matches]]) -> None:
+        pts = [p for _, _, m in pairs for p in (m.a, m.b)]
+        sizes = [len(m) for _, _, m in pairs]
+        if pts:
+            sample = np.repeat(np.ravel([(i, j) for i, j, _ in pairs]).astype(np.intp), np.repeat(sizes, 2))
+            self.undistort = _Undistort(np.concatenate(pts), sample)
+        edges = np.cumsum([0] + [n for n in sizes for _ in range(2)])
+        self.slices = [(slice(edges[2 * p], edges[2 * p + 1]), slice(edges[2 * p + 1], edges[2 * p + 2]))
+                       for p in range(len(pairs))]
+        self.weight = [math.sqrt(min(1.0, MATCH_CAP / len(m))) * m.width / MATCH_SIGMA for _, _, m in pairs]
+
+    def residuals(self, lenses: np.ndarray) -> np.ndarray:
+        """Transfer residuals of every match, pairs in order (see the module docstring)."""
+        if not self.slices:
+            return np.zeros(0)
+        undistorted, _ = self.undistort(lenses)
+        homogeneous = np.ones((len(undistorted), 3))
+        homogeneous[:, :2] = undistorted
+        out = []
+        for (sa, sb), weight in zip(self.slices, self.weight):
+            ua, ub = undistorted[sa], undistorted[sb]
+            h = homography_of(ua, ub)
+            if h is None:
+                out.append(np.full(2 * len(ua), 1e3))
+                continue
+            q = homogeneous[sa] @ h.T
+            out.append(((q[:, :2] / q[:, 2:3] - ub) * weight).ravel())
+        return np.concatenate(out)
 
 
 class _Problem:
@@ -254,6 +301,7 @@ class _Problem:
 
     def __init__(self, chains: _Chains, pairs: list, z: np.ndarray, prior_k1: float, redundancy: float = 1.0) -> None:
         self.chains, self.pairs, self.z, self.prior_k1 = chains, pairs, z, prior_k1
+        self.matches = _Pairs(pairs)
         self.redundancy = redundancy
 
     def lenses(self, theta: np.ndarray) -> np.ndarray:
@@ -262,7 +310,7 @@ class _Problem:
     def data(self, theta: np.ndarray) -> np.ndarray:
         lenses = self.lenses(theta)
         chi2 = self.chains.chi2(lenses)
-        return np.concatenate([np.sqrt(np.where(np.isfinite(chi2), chi2, 1e6)), _pair_residuals(self.pairs, lenses)])
+        return np.concatenate([np.sqrt(np.where(np.isfinite(chi2), chi2, 1e6)), self.matches.residuals(lenses)])
 
     def priors(self, theta: np.ndarray) -> np.ndarray:
         out = [(theta[0] - self.prior_k1) / K1_PRIOR_SIGMA, theta[-1] / K2_PRIOR_SIGMA]
