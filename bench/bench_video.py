@@ -22,7 +22,8 @@ from other processes on a shared machine falls on all alike), keeping the best r
 and prints frames per second and the ratios the issue sets targets for: fixed lens / ffmpeg
 (>= 0.8) and --auto / fixed lens (>= 0.8). First it times the maps of a new lens at the clip's
 size: ``Lens.maps`` (float32, OpenCV) against the float64 NumPy reference, and the CPU path's whole
-``cpu_maps`` (maps + fixed-point conversion + source-less pixels), each a new lens every call.
+``cpu_maps`` (maps + fixed-point conversion + source-less pixels) of the frame and of a 4:2:0
+chroma plane, each a new lens every call.
 
 Run: ``python3 bench/bench_video.py [--size 1920x1080] [--frames 150] [--preset medium] [--crf 23]
 [--backend auto] [--repeats 2]``.
@@ -114,12 +115,15 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
     import numpy as np
 
     from glradial.lens.lens import Lens
+    from glradial.remapping.planes import yuv_planes
     from glradial.remapping.remap import cpu_maps
 
+    chroma = yuv_planes(size, (1, 1))[1]
     ways = {
         "Lens.maps (float32)": lambda lens: lens.maps(size),
         "Lens.maps (float64 reference)": lambda lens: lens.maps(size, dtype=np.float64),
         "cpu_maps (all of it)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False),
+        "cpu_maps (4:2:0 chroma plane)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False, chroma),
     }
     times: dict[str, list[float]] = {name: [] for name in ways}
     for i in range(calls):

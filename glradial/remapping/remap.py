@@ -587,17 +587,41 @@ def cpu_maps(
             _map_cache.move_to_end(key)
             return maps
     map_x, map_y = lens.maps(size, direction, inverse=inverse, scale=scale, plane=plane)
-    width, height = size
-    plane = plane or Plane.full(size)
-    frame_x, frame_y = plane.x0 + plane.step_x * map_x, plane.y0 + plane.step_y * map_y
-    outside = (frame_x < -0.5) | (frame_x > width - 0.5) | (frame_y < -0.5) | (frame_y > height - 0.5)
     map1, map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2, nninterpolation=nearest)
-    maps = (map1, map2, np.flatnonzero(outside))
+    maps = (map1, map2, _no_source(map_x, map_y, size, plane or Plane.full(size), direction))
     with _map_lock:
         _map_cache[key] = maps
         while len(_map_cache) > CPU_MAP_CACHE_SIZE:
             _map_cache.popitem(last=False)
     return maps
+
+
+#: margin (plane pixels) by which the border samples' sources must lie inside the frame's area for
+#: :func:`_no_source` to skip the per-sample test: well above the float32 maps' error (~1e-4 px)
+_INSIDE_MARGIN = 1e-3
+
+
+def _no_source(map_x: np.ndarray, map_y: np.ndarray, size: tuple[int, int], plane: Plane, direction: str) -> np.ndarray:
+    """Flat indices of the samples of ``plane`` (maps in its pixels) whose source lies outside the
+    ``size`` frame's area (pixel coordinates outside ``[-0.5, W-0.5] x [-0.5, H-0.5]``).
+
+    Correction maps skip the per-sample test when the border samples' sources lie inside: the
+    source is ``c + p (1 + k1 |p|^2 + k2 |p|^4)`` (``p`` the output point, scaled), and where the
+    radial map ``R(r) = r (1 + k1 r^2 + k2 r^4)`` is increasing (``R' > 0``, which
+    :meth:`Lens.check_frame` guarantees over the frame) the source's x grows with the output's x
+    along every row: ``d/dx [x f(r)] = f + (x^2 / r) f' >= min(f, R') > 0`` (``f = R / r > 0``).
+    So the extreme sources of x lie in the first and last columns, those of y in the first and last
+    rows, and inside them (by :data:`_INSIDE_MARGIN`) all lie inside. Otherwise (and for ``distort``
+    maps, which hold :data:`~glradial.lens.lens.NO_SOURCE`) every sample is tested."""
+    width, height = size
+    if direction == "undistort":
+        low_x, high_x = (-0.5 - plane.x0) / plane.step_x, (width - 0.5 - plane.x0) / plane.step_x
+        low_y, high_y = (-0.5 - plane.y0) / plane.step_y, (height - 0.5 - plane.y0) / plane.step_y
+        if (map_x[:, 0].min() >= low_x + _INSIDE_MARGIN and map_x[:, -1].max() <= high_x - _INSIDE_MARGIN
+                and map_y[0].min() >= low_y + _INSIDE_MARGIN and map_y[-1].max() <= high_y - _INSIDE_MARGIN):
+            return np.empty(0, dtype=np.intp)
+    frame_x, frame_y = plane.x0 + plane.step_x * map_x, plane.y0 + plane.step_y * map_y
+    return np.flatnonzero((frame_x < -0.5) | (frame_x > width - 0.5) | (frame_y < -0.5) | (frame_y > height - 0.5))
 
 
 def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpolation: str, fill: object, inverse: str) -> np.ndarray:
