@@ -197,9 +197,7 @@ class CutCheck:
     def confirm(self, a: int, b: int, start: int) -> int | None:
         """The first frame of a new shot in ``a + 1 .. b`` (``a``, ``b``: consecutive decoded frames
         whose difference was a candidate cut; ``start``: the first frame of the current shot), or
-        None when a decode of every frame finds no cut there. The test: a frame's score against its
-        predecessor above ``threshold`` and ``ratio`` x the median of the last ``window`` scores
-        of its shot, at least ``min_shot`` frames into the shot (:class:`ShotDetector`)."""
+        None when a decode of every frame finds no cut there (the test: :meth:`ShotDetector.is_cut`)."""
         test = self.detector
         first = max(start, a - test.window)
         thumbs = self._thumbnails(first, b)
@@ -207,9 +205,7 @@ class CutCheck:
             return b  # the stretch could not be read whole: the sparse decode's answer
         scores = [test.pair_score(thumbs[j - 1], thumbs[j]) for j in range(first + 1, b + 1)]  # frame j: scores[j - first - 1]
         for j in range(a + 1, b + 1):
-            value, recent = scores[j - first - 1], scores[max(0, j - first - 1 - test.window): j - first - 1]
-            baseline = float(np.median(recent)) if recent else 0.0
-            if value > test.threshold and value > test.ratio * baseline and j - start >= test.min_shot:
+            if test.is_cut(scores[j - first - 1], scores[: j - first - 1], j - start):
                 return j
         return None
 

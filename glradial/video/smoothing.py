@@ -65,6 +65,14 @@ class ShotDetector:
         """The score of ``second`` following ``first`` (frames as :meth:`update` takes them)."""
         return self.score(self._features(first), self._features(second))
 
+    def is_cut(self, value: float, recent: list[float], frames_on: int) -> bool:
+        """The cut test: a frame's ``value`` (its score against its predecessor) exceeds ``threshold``
+        and ``ratio`` times the median of ``recent`` (the earlier scores of its shot; the last
+        ``window`` count), and the frame is ``frames_on`` >= ``min_shot`` frames after the shot's first."""
+        recent = recent[-self.window:]
+        baseline = float(np.median(recent)) if recent else 0.0
+        return value > self.threshold and value > self.ratio * baseline and frames_on >= self.min_shot
+
     def update(self, frame: np.ndarray, advance: int = 1) -> bool:
         """Feed the next frame; True when it starts a new shot (always True for the first frame).
         ``advance``: how many frames on from the previous one it is (a sparse decode skips some);
@@ -76,9 +84,7 @@ class ShotDetector:
             return True
         value = self.score(previous, features)
         self.scores.append(value)
-        recent = list(self._recent)[-self.window :]
-        baseline = float(np.median(recent)) if recent else 0.0
-        cut = value > self.threshold and value > self.ratio * baseline and self._since_cut + advance - 1 >= self.min_shot
+        cut = self.is_cut(value, list(self._recent), self._since_cut + advance - 1)
         if cut:
             self._since_cut = 1
             self._recent.clear()
