@@ -21,7 +21,7 @@ import pytest
 import glradial.video.shot_track as shot_track
 from glradial.lens.lens import Lens
 from glradial.media.video_io import VideoInfo, VideoWriter, frame_timestamps
-from glradial.video.smoothing import ShotDetector
+from glradial.video.cuts import ShotDetector
 
 pytestmark = pytest.mark.skipif(shutil.which("ffprobe") is None, reason="needs ffprobe (make setup installs it)")
 SIZE = (160, 90)

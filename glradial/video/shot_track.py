@@ -6,7 +6,7 @@ timestamps, progressive), it skips the frames no other frame refers to
 (:meth:`~glradial.media.video_io.VideoReader.skip_nonreference`: about half of an x264 stream, which
 it then never decodes) and each decoded frame is numbered by its timestamp; anything else is decoded
 whole (``sparse=False`` forces that). Each decoded frame is reduced to a 64 px thumbnail for the cut
-detector (:class:`glradial.video.smoothing.ShotDetector`). On a sparse decode the detector only
+detector (:class:`glradial.video.cuts.ShotDetector`). On a sparse decode the detector only
 proposes candidates (at :data:`CANDIDATE_RATIO` of its ratio: frames 1-3 apart differ more than
 consecutive ones); :class:`CutCheck` then decodes every frame of the stretch before each candidate
 (from the key frame before it: its cost is bounded by the stream's key-frame interval) and applies
@@ -40,10 +40,10 @@ from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
 from ..media.video_io import VideoReader, frame_timestamps
+from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .shot_evidence import ShotCollector
 from .shot_fit import ShotLens, fit_shot
-from .smoothing import ShotDetector
 
 __all__ = ["track_shots", "CutCheck", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO"]
 

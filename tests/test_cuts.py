@@ -1,11 +1,11 @@
-"""Shot-cut detection (glradial.video.smoothing.ShotDetector)."""
+"""Shot-cut detection (glradial.video.cuts.ShotDetector)."""
 
 from __future__ import annotations
 
 import cv2
 import numpy as np
 
-from glradial.video.smoothing import ShotDetector, detect_cuts
+from glradial.video.cuts import ShotDetector, detect_cuts
 
 
 def _pan_frames(panorama: np.ndarray, x0: int, y0: int, n: int, step: int, window=(480, 270), out=(160, 90)):
