@@ -192,7 +192,7 @@ def load_calibrated(path: str | Path) -> tuple[str, list[np.ndarray], Lens]:
         raise ValueError(f"calibrated camera file {path} needs 'k1'/'k2' or 'camera_matrix'/'dist_coeffs'")
     for i, frame in enumerate(frames):
         height, width = frame.shape[:2]
-        if abs(width / height / (16 / 9) - 1) > 0.01:
+        if view_box((width, height)) != (0, 0, width, height):  # not taken whole as the 16:9 view
             raise ValueError(f"calibrated frame {spec['frames'][i]} is {width}×{height}, not 16:9 (the lens refers to the whole frame)")
     return str(spec.get("name", path.stem)), frames, lens
 
