@@ -42,6 +42,7 @@ from glradial.evaluation.real_eval import applied_lenses, broadcast_frames, fold
 from glradial.lens.metrics import max_displacement_px
 from glradial.lens.options import check_positive
 from glradial.media.atomic import atomic_path
+from glradial.media.progress import Progress
 from glradial.synthesis.crops import crop_labels
 
 #: The procedural validation split's 90 % quantile of error / error_px for the shipped model (docs/MODEL.md).
@@ -95,14 +96,17 @@ def real_errors(model: str, data: str | Path, lenses: int = 12, broadcast_lenses
             k, scale = _read(evaluator.estimator, list(frames))
             rows.append(("real_frames", key.rsplit("/", 1)[0], np.array(truth, np.float64), k, scale))
     progress(f"real_frames: {len(own)} frames x {2 * lenses} lenses")
-    for clip, items in broadcast_frames(data / "broadcast_bundesliga").items():
-        for i, (_name, frame) in enumerate(items):  # the lenses and seeds of real_eval.broadcast_samples
-            reading = _read(evaluator.estimator, [frame])[0][0]
-            found = list(self_consistent_items(frame, applied_lenses(broadcast_lenses, seed * 1000 + i)))
-            truth = np.array([self_consistent_truth(a, (reading[0], reading[1]), s) for a, s, _ in found], np.float64)
-            k, scale = _read(evaluator.estimator, [d for _, _, d in found])
-            rows.append(("broadcast", clip, truth, k, scale))
-        progress(f"broadcast/{clip}: {len(items)} frames x {broadcast_lenses} lenses")
+    clips = broadcast_frames(data / "broadcast_bundesliga")
+    with Progress(sum(len(items) for items in clips.values()), "broadcast frames") as bar:
+        for clip, items in clips.items():
+            for i, (_name, frame) in enumerate(items):  # the lenses and seeds of real_eval.broadcast_samples
+                reading = _read(evaluator.estimator, [frame])[0][0]
+                found = list(self_consistent_items(frame, applied_lenses(broadcast_lenses, seed * 1000 + i)))
+                truth = np.array([self_consistent_truth(a, (reading[0], reading[1]), s) for a, s, _ in found], np.float64)
+                k, scale = _read(evaluator.estimator, [d for _, _, d in found])
+                rows.append(("broadcast", clip, truth, k, scale))
+                bar.update(1)
+            progress(f"broadcast/{clip}: {len(items)} frames x {broadcast_lenses} lenses")
     truth, pred, scale = (np.concatenate([r[j] for r in rows]) for j in (2, 3, 4))
     counts = [len(r[2]) for r in rows]
     return {"source": np.repeat([r[0] for r in rows], counts), "group": np.repeat([r[1] for r in rows], counts),
@@ -165,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             check_positive("--q", args.q)  # before the long run
             result = real_errors(args.model, args.real, args.lenses, args.broadcast_lenses, remove_own_lens=args.remove_own_lens)
-        except ValueError as err:
+        except (ValueError, OSError) as err:  # bad arguments, a missing model or folder: one line, status 2
             parser.error(str(err))
         _save(result, args.out)
         print(coverage_report(result, args.q))

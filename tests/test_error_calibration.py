@@ -78,4 +78,7 @@ def test_real_errors_bad_input(tmp_path, capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["--model", "m.onnx", "--real", str(tmp_path), "--q", "-2", "--out", str(tmp_path / "x.npz")])
     assert exit_info.value.code == 2 and "--q must be positive" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--model", str(tmp_path / "none.onnx"), "--real", str(tmp_path), "--out", str(tmp_path / "x.npz")])
+    assert exit_info.value.code == 2 and "model file not found" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()
