@@ -63,7 +63,7 @@ def exact_error_px(k: tuple[float, float], applied: tuple[float, float], own: tu
     from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, radial_map
 
     s = Lens(*applied).fit_scale(size, "crop", "distort")
-    r = np.linspace(0.0, 1.5 * CORNER_RADIUS_16_9, 1537)
+    r = np.linspace(0.0, 2.0 * CORNER_RADIUS_16_9, 2049)  # a barrel lens at k1 = -1 shows ideal radii to 1.6 R
     q = self_consistent_map(r, applied, own, s)
     d = REPORT_WIDTH * np.abs(radial_map(r, np.array(k)) - q)
     inside = np.cumprod(q <= CORNER_RADIUS_16_9).astype(bool)  # up to the radius that reaches the corner
