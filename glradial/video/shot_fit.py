@@ -76,7 +76,8 @@ from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_di
 from .frame_motion import Matches, homography_of
 from .lens_track import DOUBTFUL_PX
 
-__all__ = ["ShotSample", "ShotEvidence", "ShotLens", "fit_shot", "ZOOM_MIN", "BOUND_SCALE", "BOUND_FLOOR_PX"]
+__all__ = ["ShotSample", "ShotEvidence", "ShotLens", "fit_shot", "joint_fit", "ZOOM_MIN", "BOUND_SCALE",
+           "STATIC_BOUND_SCALE", "BOUND_FLOOR_PX"]
 
 #: a shot whose sampled log zoom spans more than this (about 6 % in focal length) gets the zoom model
 ZOOM_MIN = 0.06
@@ -103,6 +104,11 @@ K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
 #: model (see the module docstring and docs/eval/shots.md)
 BOUND_SCALE = 0.65
 BOUND_FLOOR_PX = 1.0
+#: the same multiplier for a static shot (not zooming, panned less than :data:`PAN_MIN`), calibrated
+#: apart: its lens rests on the lines of one view alone, whose 1-sigma (the chains' scatter, each
+#: chain already down-weighted by the robust loss) relates to its error otherwise than a moving
+#: shot's, whose 1-sigma the frame pairs set (docs/eval/shots.md, "The bound")
+STATIC_BOUND_SCALE = 0.22
 #: stated bound when the shot has no geometric evidence (px at 1920): the CNN's alone
 NO_GEOMETRY_PX = 16.0
 #: a zooming shot takes its per-frame estimates instead of the joint fit only when they state a
@@ -157,6 +163,9 @@ class ShotLens:
     matches: int
     views: float
     zooming: bool
+    source: str = "joint"
+    sigma_px: float = math.nan
+    static: bool = False
 
     def lens_at(self, log_zoom: float | np.ndarray) -> np.ndarray:
         """``(k1, k2)`` at the log zoom(s) given (``(..., 2)``)."""
@@ -408,7 +417,7 @@ def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometr
     if 2 * len(theirs) > len(estimates):
         reason = max(set(theirs), key=theirs.count)
     theta = (float(k[0]), float(k[1] - manifold_k2(k[0])))
-    return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False)
+    return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False, "frames")
 
 
 def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
@@ -416,13 +425,27 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
     bound above it makes the shot doubtful; ``radius``: the frame's corner radius (lens units)."""
     if not evidence.samples:
         raise ValueError("a shot needs at least one sampled frame")
+    shot = joint_fit(evidence, doubtful_px=doubtful_px, radius=radius)
+    if shot is None:
+        return _fallback(evidence, doubtful_px)
+    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
+        return shot  # estimates that state no bound cannot be weighed against the fit's
+    fallback = _fallback(evidence, doubtful_px, "uncertain")
+    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if shot.zooming else 1.0) < shot.uncertainty_px else shot
+
+
+def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
+              radius: float = CORNER_RADIUS_16_9) -> ShotLens | None:
+    """The joint fit of the shot's chains and matches alone (``None``: no geometric evidence, see
+    the module docstring); :func:`fit_shot` weighs it against the per-frame estimates."""
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     prior_k1 = float(np.median([e.k1 for e in estimates])) if estimates else 0.0
     chains = _Chains(evidence.samples)
     chains = chains.subset(_screen(chains)) if chains.n else chains
     pairs = [p for p in evidence.pairs if len(p[2]) >= 4]
     if chains.n < MIN_CHAINS and not (pairs and evidence.pan >= PAN_MIN):
-        return _fallback(evidence, doubtful_px)
+        return None
     zoom = np.asarray(evidence.zoom if len(evidence.zoom) == len(evidence.samples) else [0.0] * len(evidence.samples))
     zooming = float(np.ptp(zoom)) > ZOOM_MIN
     centre = float(0.5 * (zoom.min() + zoom.max())) if zooming else 0.0
@@ -438,20 +461,17 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
         if 0 < keep.sum() < chains.n:
             problem.chains = chains = chains.subset(keep)
             result = problem.solve(result.x)
-    shot = _result(problem, result, views, centre, zooming, doubtful_px, radius)
-    if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
-        return shot  # estimates that state no bound cannot be weighed against the fit's
-    fallback = _fallback(evidence, doubtful_px, "uncertain")
-    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if zooming else 1.0) < shot.uncertainty_px else shot
+    static = not zooming and evidence.pan < PAN_MIN
+    return _result(problem, result, views, centre, zooming, static, doubtful_px, radius)
 
 
-def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, doubtful_px: float,
-            radius: float) -> ShotLens:
+def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, static: bool,
+            doubtful_px: float, radius: float) -> ShotLens:
     sigma = _sigma_px(problem, result, CORNER_RADIUS_16_9)
-    bound = BOUND_SCALE * sigma + BOUND_FLOOR_PX
+    bound = (STATIC_BOUND_SCALE if static else BOUND_SCALE) * sigma + BOUND_FLOOR_PX
     lenses = problem.lenses(result.x)
     folds = any(Lens(float(k1), float(k2)).fold_radius() <= radius for k1, k2 in lenses)
     reason = "fold_over" if folds else "uncertain" if not bound <= doubtful_px else ""
     matches = sum(len(m) for _, _, m in problem.pairs)
     return ShotLens(tuple(float(v) for v in result.x), centre, float(bound), bool(reason), reason,
-                    problem.chains.n, matches, views, zooming)
+                    problem.chains.n, matches, views, zooming, "joint", float(sigma), static)
