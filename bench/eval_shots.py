@@ -73,9 +73,11 @@ def _recording(fits: list):
     return fit
 
 
-def evaluate(clip: Path, estimator, sources: list[str] | None = None) -> list[dict]:
+def evaluate(clip: Path, estimator, sources: list[str] | None = None, own: dict[str, float] | None = None) -> list[dict]:
     """One row per true shot of ``clip``: errors, stated bound, doubt, and the joint fit's error and
-    1-sigma (for the calibration)."""
+    1-sigma (for the calibration). ``own``: the k1 a source picture reads as by itself (a real
+    view that is not exactly pinhole); its shots are also scored against the true lens with that
+    reading added, at the shot's zoom (``k1_own / zoom^2``, to first order), beside the truth."""
     truth = read_truth(f"{clip}.truth.csv")
     fits: list = []
     start = time.perf_counter()
@@ -86,6 +88,8 @@ def evaluate(clip: Path, estimator, sources: list[str] | None = None) -> list[di
     rows = []
     for shot in np.unique(truth.shot):
         frames = np.flatnonzero(truth.shot == shot)
+        picture = sources[int(shot)] if sources else ""
+        with_own = truth.lens[frames] + np.outer((own or {}).get(picture, math.nan) / truth.zoom[frames] ** 2, [1.0, 0.0])
         found = np.unique(track.shot[frames])
         read, joint, sampled, zoom, kind = fits[int(np.bincount(track.shot[frames]).argmax())]
         joint_px = math.nan
@@ -95,7 +99,7 @@ def evaluate(clip: Path, estimator, sources: list[str] | None = None) -> list[di
         reasons = sorted({track.reason[i] for i in frames if track.reason[i]})
         rows.append({
             "clip": clip.stem, "shot": int(shot), "after_cut": bool(shot > 0), "frames": len(frames),
-            "picture": sources[int(shot)] if sources else "", "kind": kind, "read_by": read.source,
+            "picture": picture, "kind": kind, "read_by": read.source,
             "cut_found": bool(len(found) == 1 and (shot == 0 or track.shot[frames[0]] != track.shot[frames[0] - 1])),
             "median_px": float(np.median(error[frames])), "max_px": float(np.max(error[frames])),
             "stated_px": stated, "covered": bool(np.max(error[frames]) <= stated),
@@ -103,7 +107,7 @@ def evaluate(clip: Path, estimator, sources: list[str] | None = None) -> list[di
             "k1_offset": float(np.median(track.lens[frames, 0] - truth.lens[frames, 0])),
             "joint_max_px": joint_px, "joint_sigma_px": joint.sigma_px if joint is not None else math.nan,
             "joint_stated_px": joint.uncertainty_px if joint is not None else math.nan,
-            "errors": error[frames].tolist(), "seconds_per_frame": seconds / len(truth.shot),
+            "errors": error[frames].tolist(), "errors_own": max_displacement_px(track.lens[frames], with_own).tolist(), "seconds_per_frame": seconds / len(truth.shot),
         })
     return rows
 
@@ -120,6 +124,20 @@ def summary(rows: list[dict]) -> dict:
         "doubtful": float(np.mean([r["doubtful"] for r in rows])),
         "median_stated_px": float(np.median([r["stated_px"] for r in rows])),
     }
+
+
+def by_picture(rows: list[dict], own: dict[str, float]) -> list[dict]:
+    """Per source picture: shots, median error against the truth, median k1 read minus true, the
+    picture's own reading and the median error against the truth with it added."""
+    out = []
+    for picture in sorted({r["picture"] for r in rows if r["picture"]}):
+        mine = [r for r in rows if r["picture"] == picture]
+        errors = np.concatenate([r["errors"] for r in mine])
+        with_own = np.concatenate([r["errors_own"] for r in mine])
+        out.append({"picture": picture, "shots": len(mine), "median_px": float(np.median(errors)),
+                    "k1_offset": float(np.median([r["k1_offset"] for r in mine])), "own_k1": own.get(picture),
+                    "median_with_own_px": float(np.median(with_own)) if np.isfinite(with_own).all() else None})
+    return out
 
 
 def conformal_scale(rows: list[dict], coverage: float = COVERAGE) -> dict:
@@ -140,13 +158,22 @@ def main() -> None:
                         help="clips the bound's scales are calibrated on: 'all', 'none' or clip names, comma-separated")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--md", type=Path, help="write the per-shot table (markdown) here")
+    parser.add_argument("--own", action="append", default=[], metavar="PICTURE=K1",
+                        help="a source picture's own reading (k1), scored beside the truth (repeatable)")
     args = parser.parse_args()
+    own = {}
+    for item in args.own:
+        picture, _, k1 = item.partition("=")
+        try:
+            own[picture] = float(k1)
+        except ValueError:
+            parser.error(f"--own must be PICTURE=K1, got {item!r}")
     estimator = default_estimator()
     rows = []
     for folder in args.clips:
         manifest = json.loads((folder / "manifest.json").read_text())
         for name, entry in manifest.items():
-            for row in evaluate(folder / f"{name}.mp4", estimator, entry.get("sources")):
+            for row in evaluate(folder / f"{name}.mp4", estimator, entry.get("sources"), own):
                 row["group"] = entry["group"]
                 rows.append(row)
                 print(f"{row['clip']:>10} shot {row['shot']} {row['kind']:>6}: median {row['median_px']:5.1f} max {row['max_px']:5.1f} px, "
@@ -163,10 +190,13 @@ def main() -> None:
         "calibrated_on": sorted(calibrate),
         "bound_scale_needed": conformal_scale([r for r in used if r["kind"] != "static"]) if used else None,
         "static_bound_scale_needed": conformal_scale([r for r in used if r["kind"] == "static"]) if used else None,
-        "shots": [{k: v for k, v in r.items() if k != "errors"} for r in rows],
+        "pictures": by_picture(rows, own),
+        "shots": [{k: v for k, v in r.items() if k not in ("errors", "errors_own")} for r in rows],
     }
     for key in ("all", "real", "procedural", "confident"):
         print(key, json.dumps(report[key]))
+    for entry in report["pictures"]:
+        print(json.dumps(entry))
     if used:
         print(f"BOUND_SCALE (pans, zooms): in use {BOUND_SCALE}, needed {report['bound_scale_needed']}")
         print(f"STATIC_BOUND_SCALE: in use {STATIC_BOUND_SCALE}, needed {report['static_bound_scale_needed']}")
