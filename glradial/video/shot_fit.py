@@ -32,8 +32,12 @@ are **not** independent evidence (a static camera shows the same lines in every 
 multiplied by ``sqrt(S / V)``: ``S`` sampled frames count as ``V`` independent views, ``V = 1 +`` the
 new picture the camera brought into view (pan in frame widths plus the zoom's log range), at most
 ``S``. A static shot of 100 frames is then as sure as its single best frame, not 10x surer. The bound
-is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`, calibrated on the clips of
-``scripts/make_clips.py`` (docs/eval/shots.md).
+is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`; for a static shot (no zoom, a pan
+under :data:`PAN_MIN`) :data:`STATIC_BOUND_SCALE` instead. The two are calibrated apart (split
+conformal, ``bench/eval_shots.py --calibrate``, on the clips of ``scripts/make_clips.py``; docs/eval/shots.md,
+"The bound"): a moving shot's 1-sigma is mostly its frame pairs', a static shot's its lines' alone,
+which one view leaves loose along the k1-k2 trade-off at the frame's corners (the direction that
+real lenses, near the manifold, seldom take), so it overstates the error about three times more.
 
 The per-frame estimates read the shot too: when they all state a bound (a
 :class:`glradial.LensEstimate`, calibrated per frame by the trust model) and their median, stating
@@ -97,6 +101,8 @@ MAX_CHAIN_POINTS = 32
 INFORMATIVE_RMS = 1.0
 #: typical size of each parameter (a0, a1, a2, b0; static: a0, b0) for the solver's steps
 PARAMETER_SCALE = (0.05, 0.2, 0.5, 0.02)
+#: finite-difference step of the cost's curvature (:func:`_hessian`), in units of PARAMETER_SCALE
+HESSIAN_STEP = 0.02
 #: grid of k1 (on the manifold) for screening chains and seeding the fit
 K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
 #: calibrated multiplier from the 1-sigma displacement (redundancy-corrected) to the 90 % bound, and
@@ -374,18 +380,38 @@ def _solve_zoom(problem: _Problem, static: np.ndarray, evidence: ShotEvidence):
     return min(results, key=lambda r: r.cost)
 
 
+def _hessian(problem: _Problem, theta: np.ndarray) -> np.ndarray:
+    """The curvature of the fit's cost (half the sum of its squared residuals) at ``theta``, by
+    central differences of steps :data:`HESSIAN_STEP` x the parameters' typical size. Not the
+    Gauss-Newton ``J^T J``: a chain's residual is the square root of its chi^2, whose slope vanishes
+    at the chain's own best lens, so ``J^T J`` misses the information of every chain that no lens
+    straightens exactly (real lines, most of them) and overstates a line fit's spread many times."""
+    def cost(t: np.ndarray) -> float:
+        r = problem.residuals(t)
+        return 0.5 * float(r @ r)
+
+    n = len(theta)
+    step = HESSIAN_STEP * np.asarray(PARAMETER_SCALE[: n - 1] + PARAMETER_SCALE[-1:])
+    hessian = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            a, b = np.eye(n)[i] * step[i], np.eye(n)[j] * step[j]
+            hessian[i, j] = hessian[j, i] = (cost(theta + a + b) - cost(theta + a - b) - cost(theta - a + b)
+                                             + cost(theta - a - b)) / (4.0 * step[i] * step[j])
+    return hessian
+
+
 def _sigma_px(problem: _Problem, result, radius: float) -> float:
-    """1-sigma of the maximum displacement over ``radius`` (px at 1920) from the fit's covariance,
-    the largest over the sampled zooms."""
-    jac = result.jac
+    """1-sigma of the maximum displacement over ``radius`` (px at 1920) from the fit's covariance
+    (the inverse curvature of its cost, :func:`_hessian`), the largest over the sampled zooms."""
     chi2 = problem.chains.chi2(problem.lenses(result.x))
     # the chains' own scatter sets the noise level (frame pairs of a still camera fit exactly and
     # would pretend to a precision the lines do not have)
     reduced = float(np.mean(np.minimum(np.nan_to_num(chi2, nan=4.0 * ROBUST_T), 4.0 * ROBUST_T))) if len(chi2) >= MIN_CHAINS else 1.0
-    try:
-        cov = np.linalg.inv(jac.T @ jac) * reduced
-    except np.linalg.LinAlgError:
+    values, vectors = np.linalg.eigh(_hessian(problem, np.asarray(result.x, np.float64)))
+    if not values.max() > 0:
         return math.inf
+    cov = (vectors / np.maximum(values, 1e-12 * values.max())) @ vectors.T * reduced
     r = np.linspace(0.0, radius, 64)
     basis = np.stack([r**3, r**5], axis=1)
     worst = 0.0
