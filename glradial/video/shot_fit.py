@@ -26,8 +26,9 @@ or match that no lens explains costs at most logarithmically):
   to 0 (:data:`K2_PRIOR_SIGMA`).
 
 Uncertainty (``uncertainty_px``, a ~90 % bound on the maximum displacement error over the 16:9
-frame, px at 1920, the meaning of :class:`glradial.LensEstimate`): the fit's covariance (Gauss-Newton,
-scaled by the chains' reduced chi^2, whatever its size: the noise level the lines show) gives a 1-sigma displacement ``s``. The frames of one shot
+frame, px at 1920, the meaning of :class:`glradial.LensEstimate`): the fit's covariance (the inverse
+curvature of its cost, :func:`_hessian`, scaled by the chains' reduced chi^2, whatever its size: the
+noise level the lines show) gives a 1-sigma displacement ``s``. The frames of one shot
 are **not** independent evidence (a static camera shows the same lines in every frame), so ``s`` is
 multiplied by ``sqrt(S / V)``: ``S`` sampled frames count as ``V`` independent views, ``V = 1 +`` the
 new picture the camera brought into view (pan in frame widths plus the zoom's log range), at most
@@ -35,9 +36,8 @@ new picture the camera brought into view (pan in frame widths plus the zoom's lo
 is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`; for a static shot (no zoom, a pan
 under :data:`PAN_MIN`) :data:`STATIC_BOUND_SCALE` instead. The two are calibrated apart (split
 conformal, ``bench/eval_shots.py --calibrate``, on the clips of ``scripts/make_clips.py``; docs/eval/shots.md,
-"The bound"): a moving shot's 1-sigma is mostly its frame pairs', a static shot's its lines' alone,
-which one view leaves loose along the k1-k2 trade-off at the frame's corners (the direction that
-real lenses, near the manifold, seldom take), so it overstates the error about three times more.
+"The bound"): a static shot's lens rests on the lines of one view alone, a moving shot's also
+on its frame pairs and, zooming, on a lens interpolated between its samples.
 
 The per-frame estimates read the shot too: when they all state a bound (a
 :class:`glradial.LensEstimate`, calibrated per frame by the trust model) and their median, stating
@@ -108,13 +108,13 @@ K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
 #: calibrated multiplier from the 1-sigma displacement (redundancy-corrected) to the 90 % bound, and
 #: the floor added to it (px at 1920): the error of a frame's own residual distortion and of the
 #: model (see the module docstring and docs/eval/shots.md)
-BOUND_SCALE = 0.65
+BOUND_SCALE = 0.98
 BOUND_FLOOR_PX = 1.0
 #: the same multiplier for a static shot (not zooming, panned less than :data:`PAN_MIN`), calibrated
-#: apart: its lens rests on the lines of one view alone, whose 1-sigma (the chains' scatter, each
-#: chain already down-weighted by the robust loss) relates to its error otherwise than a moving
-#: shot's, whose 1-sigma the frame pairs set (docs/eval/shots.md, "The bound")
-STATIC_BOUND_SCALE = 0.22
+#: apart (docs/eval/shots.md, "The bound"): its lens rests on the lines of one view alone, a
+#: moving shot's also on its frame pairs and, zooming, on a lens that follows the zoom between samples
+#: (the bound covers every frame, the fit sees only the samples)
+STATIC_BOUND_SCALE = 0.59
 #: stated bound when the shot has no geometric evidence (px at 1920): the CNN's alone
 NO_GEOMETRY_PX = 16.0
 #: a zooming shot takes its per-frame estimates instead of the joint fit only when they state a
