@@ -3,8 +3,8 @@ with the lens following the zoom) over real pictures and procedural stadiums, cu
 with its per-frame ground truth beside it (``CLIP.mp4.truth.csv``, :func:`glradial.video.clips.write_clip`).
 
 Real sources (validation only, never training): the three pinhole stadium views and the stadium
-panorama of ``../shared/data/real_football/`` (their own lens is nil: rendered pinhole views and an
-equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
+panorama of ``../shared/data/real_football/`` (rendered pinhole views, though the line fit reads them
+at k1 -0.025/+0.028/+0.012, docs/eval/shots.md, and an equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
 
 Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--frames 50]
 [--set main|check|static]`` (``check``: held-out clips, other lenses and paths, other stadiums;
