@@ -44,7 +44,7 @@ The per-frame estimates read the shot too: when they all state a bound (a
 their median bound plus their spread (the furthest of them from the median: a zooming lens's
 range, or estimators that disagree), is surer than the joint fit, the shot takes it (the fit's
 chains stand in for no extra evidence there: the estimates read the same lines, through the
-single-frame fit's fuller model). A static shot is then as sure as its frames say, and a fit that
+single-frame fit's fuller model). A static shot takes whichever of the two states less, and a fit that
 few chains leave loose (a pure zoom: its frame pairs tie the lens at one zoom to the next, not the
 lens itself) does not stand. A zooming shot needs estimates :data:`ZOOM_FALLBACK_RATIO` times
 surer: their one lens cannot follow the zoom.
@@ -158,7 +158,10 @@ class ShotEvidence:
 class ShotLens:
     """The lens of one shot (see the module docstring). ``theta`` the model's parameters
     (``[a0, b0]`` or ``[a0, a1, a2, b0]``), ``centre`` the log zoom they are centred on, ``chains``
-    and ``matches`` the evidence that agreed with the fit, ``views`` the independent views counted."""
+    and ``matches`` the evidence that agreed with the fit, ``views`` the independent views counted;
+    ``source`` "joint" (the joint fit) or "frames" (the per-frame estimates), ``sigma_px`` the joint
+    fit's 1-sigma displacement (px at 1920; NaN for "frames") and ``static`` whether its bound is a
+    static shot's (:data:`STATIC_BOUND_SCALE`)."""
 
     theta: tuple[float, ...]
     centre: float
