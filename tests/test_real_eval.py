@@ -14,8 +14,10 @@ import pytest
 
 from glradial.estimation.estimator import default_model_path
 from glradial.estimation.lens_estimate import LensEstimate
-from glradial.evaluation.real_eval import Sample, centre_16_9, extended_lenses, frames_in, load_calibrated, markdown, summarise
+from glradial.evaluation.real_eval import Sample, centre_16_9, extended_lenses, frames_in, load_calibrated, markdown, self_consistent_items, self_consistent_truth, summarise
+from glradial.lens.lens import Lens, lens_to_pixels, pixels_to_lens
 from glradial.lens.metrics import manifold_k2, max_displacement_px
+from glradial.remapping.remap import distort
 
 ROOT = Path(__file__).resolve().parents[1]
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
@@ -130,3 +132,30 @@ def test_agreed_own_lens_needs_both_readings_far_from_no_lens_and_close_to_each_
     assert agreed_own_lens({"lines": small, "net": LensEstimate(-0.03, 0.0, uncertainty_px=16.0)}) is None
     fallback = LensEstimate(-0.248, 0.051, uncertainty_px=16.0, method="net")  # 'lines' fell back to the net
     assert agreed_own_lens({"lines": fallback, "net": net}) is None
+
+
+def test_self_consistent_items_scale_is_the_one_distort_applies():
+    """Known answer through the real remap: dots of an ideal frame, moved by the frame's own lens
+    (``distort``, fit "same"), then by a known lens as ``self_consistent_items`` applies it (fit
+    "crop", scale s); each dot lands where the refitted composite
+    (``self_consistent_truth(applied, own, s)``) puts it, ``T(s x)`` for an ideal point ``x``,
+    within 0.6 px at 1280 (blob centroids; a scale of 1 instead of s would be off by tens of px)."""
+    size, own, applied = (1280, 720), (-0.12, 0.02), (-0.45, 0.17)
+    ideal_px = np.array([[640 + dx, 360 + dy] for dx in (-420, -210, 0, 210, 420) for dy in (-220, 0, 220)], np.float64)
+    yy, xx = np.mgrid[0:size[1], 0:size[0]]
+    ideal = np.zeros(size[::-1], np.float32)
+    for x, y in ideal_px:
+        ideal += np.exp(-((xx - x) ** 2 + (yy - y) ** 2) / (2 * 2.5**2))
+    frame = distort(np.dstack([ideal] * 3), *own, fit="same", backend="cpu")
+    (lens, scale, out), = self_consistent_items(frame, [applied])
+    assert lens == applied and scale == pytest.approx(Lens(*applied).fit_scale(size, "crop", "distort"))
+    k = np.array(self_consistent_truth(applied, own, scale))
+    u = scale * pixels_to_lens(ideal_px, size)
+    r2 = np.sum(u**2, axis=1, keepdims=True)
+    expected = lens_to_pixels(u * (1 + k[0] * r2 + k[1] * r2**2), size)
+    gray = out[..., 0].astype(np.float64)
+    for ex, ey in expected:
+        x0, y0 = int(round(ex)) - 9, int(round(ey)) - 9
+        w = gray[y0:y0 + 19, x0:x0 + 19]
+        cy, cx = np.mgrid[y0:y0 + 19, x0:x0 + 19]
+        assert np.hypot((w * cx).sum() / w.sum() - ex, (w * cy).sum() / w.sum() - ey) < 0.6

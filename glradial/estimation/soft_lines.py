@@ -84,7 +84,14 @@ def soft_gray(frame: np.ndarray, width: int = SOFT_WIDTH) -> np.ndarray:
 
 def _to_frame(points: np.ndarray, small: tuple[int, int], size: tuple[int, int]) -> np.ndarray:
     """Lens units of the reduced copy (``small`` ``(w, h)``) -> lens units of the frame (``size``
-    ``(W, H)``), through pixel centres (exact when the copy's height was rounded)."""
+    ``(W, H)``), through pixel centres (exact when the copy's height was rounded).
+
+    Why not let :func:`~glradial.estimation.lines.detect_chains` reduce (it maps its own copy back):
+    the stretch would then see the full frame, not the reduced copy, and its output changes. Tried
+    (stretched full frame, ``max_width=SOFT_WIDTH``; ``bench/lines_accuracy.py --cache``, 2026-11-25):
+    on the 48 held-out "extended" panorama crops ``auto`` went from 24.6 to 29.4 px median (the 48
+    tuning crops 26.4 -> 21.1; 27 crops worse by over 0.5 px, 22 better; mean +1.5 px), procedural
+    and real frames unchanged, so the stretch stays on the reduced copy and this mapping stays."""
     px = lens_to_pixels(points, small)
     full = (px + 0.5) * np.array([size[0] / small[0], size[1] / small[1]]) - 0.5
     return pixels_to_lens(full, size)

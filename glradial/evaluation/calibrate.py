@@ -47,7 +47,6 @@ import numpy as np
 
 from ..estimation.lens_estimate import judge
 from ..estimation.trust import TRUST_FILE, FrameEvidence, TrustModel, line_scale, shipped_trust
-from ..lens.lens import Lens
 from ..lens.metrics import max_displacement_px
 
 #: The 90 % target of the bound, and the share of disagreements that are not doubtful.
@@ -113,12 +112,10 @@ class Record:
 # -- collection -----------------------------------------------------------------------------------
 def _self_consistent(evaluator, frame: np.ndarray, source: str, group: str, fold: int,
                      lenses: list[tuple[float, float]]) -> Iterator[Record]:
-    from .real_eval import _distorted
+    from .real_eval import self_consistent_items
 
     own = evaluator.evidence(frame)
-    size = (frame.shape[1], frame.shape[0])
-    for applied, distorted in _distorted(frame, lenses):
-        scale = Lens(*applied).fit_scale(size, "crop", "distort")
+    for applied, scale, distorted in self_consistent_items(frame, lenses):
         yield Record(source, group, fold, applied, evaluator.evidence(distorted), own, scale)
 
 

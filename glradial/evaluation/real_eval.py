@@ -29,10 +29,11 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
+from ..estimation.estimator import view_box
 from ..estimation.lens_estimate import LensEstimate, judge
 from ..estimation.trust import FrameEvidence
 from ..lens.lens import Lens
@@ -112,17 +113,12 @@ def read_broadcast(path: str | Path) -> np.ndarray:
 
 
 def centre_16_9(frame: np.ndarray) -> np.ndarray:
-    """Centre crop to 16:9 (unchanged if already within 1 %)."""
-    height, width = frame.shape[:2]
-    if abs(width / height / (16 / 9) - 1) <= 0.01:
+    """The frame's centred 16:9 view, the one the network sees
+    (:func:`glradial.estimation.estimator.view_box`; the whole frame if within 1 % of 16:9)."""
+    x0, y0, w, h = view_box((frame.shape[1], frame.shape[0]))
+    if (w, h) == (frame.shape[1], frame.shape[0]):
         return frame
-    if width / height > 16 / 9:
-        new_w = int(round(height * 16 / 9))
-        x0 = (width - new_w) // 2
-        return np.ascontiguousarray(frame[:, x0:x0 + new_w])
-    new_h = int(round(width * 9 / 16))
-    y0 = (height - new_h) // 2
-    return np.ascontiguousarray(frame[y0:y0 + new_h])
+    return np.ascontiguousarray(frame[y0:y0 + h, x0:x0 + w])
 
 
 def extended_lenses(n: int, seed: int, size: tuple[int, int] = PAPER_SIZE) -> list[tuple[float, float]]:
@@ -196,7 +192,7 @@ def load_calibrated(path: str | Path) -> tuple[str, list[np.ndarray], Lens]:
         raise ValueError(f"calibrated camera file {path} needs 'k1'/'k2' or 'camera_matrix'/'dist_coeffs'")
     for i, frame in enumerate(frames):
         height, width = frame.shape[:2]
-        if abs(width / height / (16 / 9) - 1) > 0.01:
+        if view_box((width, height)) != (0, 0, width, height):  # not taken whole as the 16:9 view
             raise ValueError(f"calibrated frame {spec['frames'][i]} is {width}×{height}, not 16:9 (the lens refers to the whole frame)")
     return str(spec.get("name", path.stem)), frames, lens
 
@@ -275,14 +271,14 @@ def applied_lenses(n: int, seed: int) -> list[tuple[float, float]]:
     return [paper[i] if i % 2 == 0 else extended[i] for i in range(n)]
 
 
-def self_consistent_items(frame: np.ndarray, own: dict, lenses: Iterable[tuple[float, float]]):
-    """``(applied, truths, distorted frame)`` for each applied lens: ``truths`` per method is the
-    applied lens composed with that method's reading ``own[method]`` of the unmodified frame."""
+def self_consistent_items(frame: np.ndarray, lenses: Iterable[tuple[float, float]]
+                          ) -> Iterator[tuple[tuple[float, float], float, np.ndarray]]:
+    """``(applied, scale, distorted frame)`` for each applied lens (``distort`` at ``fit="crop"``,
+    ``scale`` its fit scale): a method's reading ``own`` of the unmodified frame makes its truth
+    ``self_consistent_truth(applied, own, scale)``, the one scoring of frames whose lens is unknown."""
     size = (frame.shape[1], frame.shape[0])
     for applied, distorted in _distorted(frame, lenses):
-        scale = Lens(*applied).fit_scale(size, "crop", "distort")
-        truths = {m: self_consistent_truth(applied, (e.k1, e.k2), scale) for m, e in own.items()}
-        yield applied, truths, distorted
+        yield applied, Lens(*applied).fit_scale(size, "crop", "distort"), distorted
 
 
 def broadcast_samples(evaluator: "Evaluator", folder: str | Path, lenses: int = 3, seed: int = 0,
@@ -294,7 +290,8 @@ def broadcast_samples(evaluator: "Evaluator", folder: str | Path, lenses: int = 
     for clip, frames in broadcast_frames(folder).items():
         for i, (_name, frame) in enumerate(frames):
             own = evaluator(frame)
-            for applied, truths, distorted in self_consistent_items(frame, own, applied_lenses(lenses, seed * 1000 + i)):
+            for applied, scale, distorted in self_consistent_items(frame, applied_lenses(lenses, seed * 1000 + i)):
+                truths = {m: self_consistent_truth(applied, (e.k1, e.k2), scale) for m, e in own.items()}
                 samples.append(Sample(f"broadcast/{clip}", applied, evaluator(distorted), truths))
         if progress is not None:
             progress(f"broadcast/{clip}: {len(frames)} frames × {lenses} lenses")
@@ -426,7 +423,7 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     removed: dict[str, Lens] = {}
     evaluator = None
     if frames_dir is not None:
-        evaluator = _folder_sources(frames_dir, model, threads, lenses, seed, remove_own_lens, sources, own, removed)
+        evaluator = folder_sources(frames_dir, model, threads, lenses, seed, remove_own_lens, sources, own, removed)
     for name, cam_frames, lens in cams:
         sources[f"calibrated/{name}"] = (((lens.k1, lens.k2), f) for f in cam_frames)
     if procedural:
@@ -459,9 +456,9 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     return summary
 
 
-def _folder_sources(frames_dir: str | Path, model: str | None, threads: int | None, lenses: int, seed: int,
-                    remove_own_lens: bool, sources: dict[str, Iterable], own: dict[str, dict],
-                    removed: dict[str, Lens]) -> Evaluator:
+def folder_sources(frames_dir: str | Path, model: str | None, threads: int | None, lenses: int, seed: int,
+                   remove_own_lens: bool, sources: dict[str, Iterable], own: dict[str, dict],
+                   removed: dict[str, Lens]) -> Evaluator:
     """The sources of a frames folder (each frame with paper and extended lenses applied, crops of
     each panorama) into ``sources``; each frame's own estimates into ``own``, the own lenses
     removed first into ``removed``. Returns the evaluator it loaded."""
