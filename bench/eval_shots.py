@@ -1,51 +1,113 @@
 """Per-shot evaluation of ``correct --auto``'s first pass on clips with a known lens per frame
 (``scripts/make_clips.py``): per-frame error, error on the shots right after a cut, the stated
-bound's coverage per shot, doubt; and the calibration of the bound's scale (split conformal:
-calibrate on ``--calibrate`` clips, check on the others).
+bound's coverage per shot, doubt; and the calibration of the shot fit's bound (split conformal:
+the scales are read off the ``--calibrate`` clips, the others check them).
 
 Error = maximum displacement between the lens read and the true one over the 16:9 frame, px at
 1920 wide (:func:`glradial.lens.metrics.max_displacement_px`). A shot is covered when its worst frame's
 error is within the stated ``uncertainty_px``.
 
-Run: ``python bench/eval_shots.py CLIP_DIR [--calibrate proc_3,proc_11,real_a] [--json OUT.json]``.
+Calibration (docs/eval/shots.md, "The bound"): every shot with a joint fit (lines or frame pairs,
+:func:`glradial.video.shot_fit.joint_fit`), whichever reading the shot then takes, gives the scale
+its joint fit would have needed, ``(worst frame's error of the joint fit - BOUND_FLOOR_PX) / sigma``;
+the static shots' and the moving shots' (pans, zooms) are pooled apart, and each scale is the
+split-conformal 90 % quantile of its pool (the ``ceil((n + 1) 0.9)``-th smallest of ``n``): the
+values for ``shot_fit.STATIC_BOUND_SCALE`` and ``shot_fit.BOUND_SCALE``. Re-run it whenever the
+line fit or the trust model changes (the per-frame estimates seed the fit and compete with it)::
+
+    python scripts/make_clips.py CLIPS                       # the main set
+    python scripts/make_clips.py STATIC --set static         # more static shots
+    python bench/eval_shots.py CLIPS STATIC --calibrate all  # prints the two scales needed
+
+Run: ``python bench/eval_shots.py CLIP_DIR [CLIP_DIR ...] [--calibrate all|none|clip,clip]
+[--json OUT.json] [--md OUT.md]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 
 from glradial.lens.metrics import max_displacement_px
+from glradial.video import shot_track
 from glradial.video.clips import read_truth
-from glradial.video.shot_fit import BOUND_FLOOR_PX, BOUND_SCALE
+from glradial.video.shot_fit import (
+    BOUND_FLOOR_PX,
+    BOUND_SCALE,
+    PAN_MIN,
+    STATIC_BOUND_SCALE,
+    ZOOM_MIN,
+    fit_shot,
+    joint_fit,
+)
 from glradial.video.video_pipeline import default_estimator, track_video
 
+#: the bound's target coverage (per shot)
+COVERAGE = 0.9
 
-def evaluate(clip: Path, estimator) -> list[dict]:
-    """One row per true shot of ``clip``: errors, stated bound, doubt, and the raw sigma."""
+
+def _kind(evidence) -> str:
+    """"zoom", "pan" or "static", as :func:`glradial.video.shot_fit.fit_shot` tells them apart."""
+    zoom = np.asarray(evidence.zoom, np.float64)
+    if len(zoom) == len(evidence.samples) and float(np.ptp(zoom)) > ZOOM_MIN:
+        return "zoom"
+    return "pan" if evidence.pan >= PAN_MIN else "static"
+
+
+def _recording(fits: list):
+    """``fit_shot`` that also keeps, per shot, the joint fit it was weighed against."""
+
+    def fit(evidence, **kwargs):
+        shot = fit_shot(evidence, **kwargs)
+        joint = shot if shot.source == "joint" else joint_fit(evidence, **kwargs)
+        frames = np.array([s.frame for s in evidence.samples])
+        fits.append((shot, joint, frames, np.asarray(evidence.zoom, np.float64), _kind(evidence)))
+        return shot
+
+    return fit
+
+
+def evaluate(clip: Path, estimator, sources: list[str] | None = None, own: dict[str, float] | None = None) -> list[dict]:
+    """One row per true shot of ``clip``: errors, stated bound, doubt, and the joint fit's error and
+    1-sigma (for the calibration). ``own``: the k1 a source picture reads as by itself (a real
+    view that is not exactly pinhole); its shots are also scored against the true lens with that
+    reading added, at the shot's zoom (``k1_own / zoom^2``, to first order), beside the truth."""
     truth = read_truth(f"{clip}.truth.csv")
+    fits: list = []
     start = time.perf_counter()
-    track = track_video(clip, estimator, progress=False)
+    with mock.patch.object(shot_track, "fit_shot", _recording(fits)):
+        track = track_video(clip, estimator, progress=False)
     seconds = time.perf_counter() - start
     error = max_displacement_px(track.lens, truth.lens)
     rows = []
     for shot in np.unique(truth.shot):
         frames = np.flatnonzero(truth.shot == shot)
+        picture = sources[int(shot)] if sources else ""
+        with_own = truth.lens[frames] + np.outer((own or {}).get(picture, math.nan) / truth.zoom[frames] ** 2, [1.0, 0.0])
         found = np.unique(track.shot[frames])
+        read, joint, sampled, zoom, kind = fits[int(np.bincount(track.shot[frames]).argmax())]
+        joint_px = math.nan
+        if joint is not None:
+            joint_px = float(np.max(max_displacement_px(joint.lens_at(np.interp(frames, sampled, zoom)), truth.lens[frames])))
         stated = float(np.max(track.uncertainty_px[frames]))
         reasons = sorted({track.reason[i] for i in frames if track.reason[i]})
         rows.append({
             "clip": clip.stem, "shot": int(shot), "after_cut": bool(shot > 0), "frames": len(frames),
+            "picture": picture, "kind": kind, "read_by": read.source,
             "cut_found": bool(len(found) == 1 and (shot == 0 or track.shot[frames[0]] != track.shot[frames[0] - 1])),
             "median_px": float(np.median(error[frames])), "max_px": float(np.max(error[frames])),
             "stated_px": stated, "covered": bool(np.max(error[frames]) <= stated),
             "doubtful": bool(track.doubtful[frames].any()), "reason": ",".join(reasons),
-            "sigma_px": (stated - BOUND_FLOOR_PX) / BOUND_SCALE, "errors": error[frames].tolist(),
-            "seconds_per_frame": seconds / len(truth.shot),
+            "k1_offset": float(np.median(track.lens[frames, 0] - truth.lens[frames, 0])),
+            "joint_max_px": joint_px, "joint_sigma_px": joint.sigma_px if joint is not None else math.nan,
+            "joint_stated_px": joint.uncertainty_px if joint is not None else math.nan,
+            "errors": error[frames].tolist(), "errors_own": max_displacement_px(track.lens[frames], with_own).tolist(), "seconds_per_frame": seconds / len(truth.shot),
         })
     return rows
 
@@ -64,51 +126,94 @@ def summary(rows: list[dict]) -> dict:
     }
 
 
+def by_picture(rows: list[dict], own: dict[str, float]) -> list[dict]:
+    """Per source picture: shots, median error against the truth, median k1 read minus true, the
+    picture's own reading and the median error against the truth with it added."""
+    out = []
+    for picture in sorted({r["picture"] for r in rows if r["picture"]}):
+        mine = [r for r in rows if r["picture"] == picture]
+        errors = np.concatenate([r["errors"] for r in mine])
+        with_own = np.concatenate([r["errors_own"] for r in mine])
+        out.append({"picture": picture, "shots": len(mine), "median_px": float(np.median(errors)),
+                    "k1_offset": float(np.median([r["k1_offset"] for r in mine])), "own_k1": own.get(picture),
+                    "median_with_own_px": float(np.median(with_own)) if np.isfinite(with_own).all() else None})
+    return out
+
+
+def conformal_scale(rows: list[dict], coverage: float = COVERAGE) -> dict:
+    """The split-conformal scale of the joint fit's bound on ``rows`` (module docstring): the
+    ``ceil((n + 1) coverage)``-th smallest needed scale of the ``n`` shots with a joint fit
+    (``inf`` when ``n`` is too small for that coverage), and ``n``."""
+    needed = np.sort([(r["joint_max_px"] - BOUND_FLOOR_PX) / r["joint_sigma_px"] for r in rows
+                      if math.isfinite(r["joint_max_px"]) and r["joint_sigma_px"] > 0])
+    rank = math.ceil((len(needed) + 1) * coverage)
+    return {"shots": int(len(needed)), "scale": float(needed[rank - 1]) if rank <= len(needed) else math.inf,
+            "largest": float(needed[-1]) if len(needed) else None}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("clips", type=Path)
-    parser.add_argument("--calibrate", default="proc_3,proc_11,real_a", help="clips the bound's scale is calibrated on")
+    parser.add_argument("clips", type=Path, nargs="+", help="clip folders made by scripts/make_clips.py")
+    parser.add_argument("--calibrate", default="none",
+                        help="clips the bound's scales are calibrated on: 'all', 'none' or clip names, comma-separated")
     parser.add_argument("--json", type=Path)
     parser.add_argument("--md", type=Path, help="write the per-shot table (markdown) here")
+    parser.add_argument("--own", action="append", default=[], metavar="PICTURE=K1",
+                        help="a source picture's own reading (k1), scored beside the truth (repeatable)")
     args = parser.parse_args()
-    manifest = json.loads((args.clips / "manifest.json").read_text())
+    own = {}
+    for item in args.own:
+        picture, _, k1 = item.partition("=")
+        try:
+            own[picture] = float(k1)
+        except ValueError:
+            parser.error(f"--own must be PICTURE=K1, got {item!r}")
     estimator = default_estimator()
     rows = []
-    for name, entry in manifest.items():
-        for row in evaluate(args.clips / f"{name}.mp4", estimator):
-            row["group"] = entry["group"]
-            rows.append(row)
-            print(f"{row['clip']:>10} shot {row['shot']}: median {row['median_px']:5.1f} max {row['max_px']:5.1f} px, "
-                  f"stated {row['stated_px']:5.1f} {'covered' if row['covered'] else 'MISSED '} "
-                  f"{'doubtful(' + row['reason'] + ')' if row['doubtful'] else ''}", flush=True)
-    calibrate = set(args.calibrate.split(","))
-    needed = [(r["max_px"] - BOUND_FLOOR_PX) / max(r["sigma_px"], 1e-9) for r in rows if r["clip"] in calibrate]
+    for folder in args.clips:
+        manifest = json.loads((folder / "manifest.json").read_text())
+        for name, entry in manifest.items():
+            for row in evaluate(folder / f"{name}.mp4", estimator, entry.get("sources"), own):
+                row["group"] = entry["group"]
+                rows.append(row)
+                print(f"{row['clip']:>10} shot {row['shot']} {row['kind']:>6}: median {row['median_px']:5.1f} max {row['max_px']:5.1f} px, "
+                      f"stated {row['stated_px']:5.1f} {'covered' if row['covered'] else 'MISSED '} ({row['read_by']}) "
+                      f"{'doubtful(' + row['reason'] + ')' if row['doubtful'] else ''}", flush=True)
+    calibrate = {r["clip"] for r in rows} if args.calibrate == "all" else set(args.calibrate.split(",")) - {"none"}
+    used = [r for r in rows if r["clip"] in calibrate]
     report = {
         "all": summary(rows),
         "real": summary([r for r in rows if r["group"] == "real"]),
         "procedural": summary([r for r in rows if r["group"] == "procedural"]),
-        "held_out": summary([r for r in rows if r["clip"] not in calibrate]),
         "confident": summary([r for r in rows if not r["doubtful"]]) if any(not r["doubtful"] for r in rows) else None,
-        "bound_scale_in_use": BOUND_SCALE,
-        "bound_scale_p90_on_calibration": float(np.quantile(needed, 0.9)) if needed else None,
-        "shots": [{k: v for k, v in r.items() if k != "errors"} for r in rows],
+        "bound_scale_in_use": BOUND_SCALE, "static_bound_scale_in_use": STATIC_BOUND_SCALE,
+        "calibrated_on": sorted(calibrate),
+        "bound_scale_needed": conformal_scale([r for r in used if r["kind"] != "static"]) if used else None,
+        "static_bound_scale_needed": conformal_scale([r for r in used if r["kind"] == "static"]) if used else None,
+        "pictures": by_picture(rows, own),
+        "shots": [{k: v for k, v in r.items() if k not in ("errors", "errors_own")} for r in rows],
     }
-    for key in ("all", "real", "procedural", "held_out", "confident"):
+    for key in ("all", "real", "procedural", "confident"):
         print(key, json.dumps(report[key]))
-    print("bound scale: in use", BOUND_SCALE, "p90 needed on the calibration clips", report["bound_scale_p90_on_calibration"])
+    for entry in report["pictures"]:
+        print(json.dumps(entry))
+    if used:
+        print(f"BOUND_SCALE (pans, zooms): in use {BOUND_SCALE}, needed {report['bound_scale_needed']}")
+        print(f"STATIC_BOUND_SCALE: in use {STATIC_BOUND_SCALE}, needed {report['static_bound_scale_needed']}")
     if args.json:
         args.json.write_text(json.dumps(report, indent=1) + "\n")
     if args.md:
-        args.md.write_text(markdown(report, args.clips.name))
+        args.md.write_text(markdown(report, ", ".join(folder.name for folder in args.clips)))
 
 
 def markdown(report: dict, name: str) -> str:
     """The per-shot table and the summaries of ``report``."""
     lines = [f"Clip set `{name}`: per shot (error = max displacement vs the true lens, px at 1920)", "",
-             "| clip | shot | median px | max px | stated px | covered | doubtful |", "| --- | --- | --- | --- | --- | --- | --- |"]
+             "| clip | shot | camera | read by | median px | max px | stated px | covered | doubtful |",
+             "| --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
     for r in report["shots"]:
-        lines.append(f"| {r['clip']} | {r['shot']} | {r['median_px']:.1f} | {r['max_px']:.1f} | {r['stated_px']:.1f} | "
-                     f"{'yes' if r['covered'] else '**no**'} | {r['reason'] if r['doubtful'] else ''} |")
+        lines.append(f"| {r['clip']} | {r['shot']} | {r['kind']} | {r['read_by']} | {r['median_px']:.1f} | {r['max_px']:.1f} | "
+                     f"{r['stated_px']:.1f} | {'yes' if r['covered'] else '**no**'} | {r['reason'] if r['doubtful'] else ''} |")
     lines += ["", "| set | shots | median px | p90 px | after a cut: median / p90 px | coverage | doubtful | median stated px |",
               "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for key in ("all", "real", "procedural", "confident"):

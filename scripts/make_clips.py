@@ -3,17 +3,20 @@ with the lens following the zoom) over real pictures and procedural stadiums, cu
 with its per-frame ground truth beside it (``CLIP.mp4.truth.csv``, :func:`glradial.video.clips.write_clip`).
 
 Real sources (validation only, never training): the three pinhole stadium views and the stadium
-panorama of ``../shared/data/real_football/`` (their own lens is nil: rendered pinhole views and an
-equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
+panorama of ``../shared/data/real_football/`` (rendered pinhole views, though the line fit reads them
+at k1 -0.025/+0.028/+0.012, docs/eval/shots.md, and an equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
 
 Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--frames 50]
-[--set main|check]`` (``check``: held-out clips, other lenses and paths, other stadiums);
-writes ``OUT_DIR/manifest.json`` (clip -> group, shots) and the clips.
+[--set main|check|static]`` (``check``: held-out clips, other lenses and paths, other stadiums;
+``static``: static shots only, more calibration shots for the static shots' bound, see
+``bench/eval_shots.py``); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
+of each shot) and the clips.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import json
 from pathlib import Path
 
@@ -32,10 +35,15 @@ def _read(path: Path) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
 
 
+#: the real pictures: the three pinhole stadium views and the stadium panorama
+VIEWS = tuple(f"football360_cam_{i:07d}.png" for i in (0, 12000, 19000))
+PANORAMA = "stadium_01_1k_tonemapped.jpg"
+
+
 def real_clips(data: Path, n: int) -> dict[str, list[ShotSpec]]:
     """Clips over the real pinhole views (60 deg wide) and the real stadium panorama."""
-    views = [_read(data / f"football360_cam_{i:07d}.png") for i in (0, 12000, 19000)]
-    pano = _read(data / "stadium_01_1k_tonemapped.jpg")
+    views = [_read(data / name) for name in VIEWS]
+    pano = _read(data / PANORAMA)
     return {
         "real_a": [
             ShotSpec(views[0], n, k1=(-0.30, -0.30)),
@@ -62,7 +70,7 @@ def real_clips(data: Path, n: int) -> dict[str, list[ShotSpec]]:
 
 def check_clips(data: Path, n: int, seed: int = 1) -> dict[str, list[ShotSpec]]:
     """The held-out set: the same real pictures under other, random lenses and camera paths."""
-    views = [_read(data / f"football360_cam_{i:07d}.png") for i in (0, 12000, 19000)]
+    views = [_read(data / name) for name in VIEWS]
     rng = np.random.default_rng(seed)
     clips = {}
     for c in range(3):
@@ -103,23 +111,62 @@ def procedural_clips(n: int, seeds: tuple[int, ...] = (3, 11)) -> dict[str, list
     return clips
 
 
+def static_clips(data: Path, n: int, seed: int = 2, seeds: tuple[int, ...] = (23, 29, 31)) -> dict[str, list[ShotSpec]]:
+    """Static shots only (calibration of the static shots' bound): the real views under other
+    lenses, zooms and directions, and procedural stadiums not used elsewhere."""
+    import glradial
+
+    views = [_read(data / name) for name in VIEWS]
+    rng = np.random.default_rng(seed)
+    clips = {}
+    for c in range(2):
+        shots = []
+        for v in rng.permutation(3):
+            k1 = float(rng.uniform(-0.7, -0.1))
+            camera = (float(rng.uniform(-5, 5)), float(rng.uniform(-2, 2)), float(rng.uniform(1.0, 1.3)))
+            shots.append(ShotSpec(views[int(v)], n, camera, camera, (k1, k1)))
+        clips[f"static_r{c}"] = shots
+    for seed_ in seeds:
+        pano = glradial.stadium_panorama(seed_, (2048, 1024))
+        shots = []
+        for _ in range(3):
+            k1 = float(rng.uniform(-0.6, -0.1))
+            camera = (float(rng.uniform(-60, 60)), float(rng.uniform(-18, -8)), 1.0)
+            shots.append(ShotSpec(pano, n, camera, camera, (k1, k1), hfov_deg=float(rng.uniform(45, 55)), panorama=True))
+        clips[f"static_p{seed_}"] = shots
+    return clips
+
+
+def _digest(picture: np.ndarray) -> str:
+    return hashlib.sha1(np.ascontiguousarray(picture).tobytes()).hexdigest()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", type=Path)
     parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/real_football")
     parser.add_argument("--frames", type=int, default=50, help="frames per shot (default 50: 2 s)")
-    parser.add_argument("--set", choices=("main", "check"), default="main",
-                        help="main: the calibration and report clips; check: held-out real clips and other stadiums")
+    parser.add_argument("--set", choices=("main", "check", "static"), default="main",
+                        help="main: the calibration and report clips; check: held-out real clips and other stadiums; "
+                             "static: static shots only, more calibration shots for the static shots' bound")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     manifest = {}
-    sets = ((("real", real_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames)))
-            if args.set == "main" else (("real", check_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames, (5, 17)))))
+    if args.set == "main":
+        sets = (("real", real_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames)))
+    elif args.set == "check":
+        sets = (("real", check_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames, (5, 17))))
+    else:
+        clips = static_clips(args.data, args.frames)
+        sets = (("real", {k: v for k, v in clips.items() if k.startswith("static_r")}),
+                ("procedural", {k: v for k, v in clips.items() if k.startswith("static_p")}))
+    names = {_digest(_read(args.data / name)): name for name in VIEWS + (PANORAMA,)}
     for group, clips in sets:
         for name, shots in clips.items():
             frames, truth = render_clip(shots, SIZE)
             write_clip(args.out / f"{name}.mp4", frames, truth)
-            manifest[name] = {"group": group, "shots": len(shots), "frames": len(frames)}
+            sources = [names.get(_digest(shot.source), "procedural") for shot in shots]
+            manifest[name] = {"group": group, "shots": len(shots), "frames": len(frames), "sources": sources}
             print(f"{name}: {len(shots)} shots, {len(frames)} frames", flush=True)
     (args.out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")
 

@@ -84,6 +84,63 @@ def test_static_shot_converges_to_one_lens_within_its_bound(stadium):
     assert shot.uncertainty_px >= 0.9 * two.uncertainty_px, (shot.uncertainty_px, two.uncertainty_px)
 
 
+def central(evidence: ShotEvidence, radius: float) -> ShotEvidence:
+    """The same shot with every chain cut to its points within ``radius`` (lens units) of the
+    centre: the lines of a shot that shows little near its edges, where the lens shows most."""
+    from glradial.estimation.lines import Chain, LineEvidence
+
+    samples = []
+    for s in evidence.samples:
+        chains = [Chain(c.points[keep], c.kind, c.length * float(keep.mean())) for c in s.evidence.chains
+                  for keep in [np.hypot(c.points[:, 0], c.points[:, 1]) <= radius] if keep.sum() >= 8]
+        samples.append(ShotSample(s.frame, LineEvidence(chains, s.evidence.size, s.evidence.width), s.estimate))
+    return ShotEvidence(samples, evidence.pairs, evidence.zoom, evidence.travel, evidence.pan)
+
+
+def test_static_bound_stays_honest_when_the_lines_lie_near_the_centre(stadium):
+    """A static shot whose chains all lie within 0.3 of the centre (the frame's corner is at 0.57):
+    poorly constrained where the lens matters most. Its joint fit states the static shots' bound
+    (``STATIC_BOUND_SCALE`` x its 1-sigma + the floor, exactly), and that bound covers its error; cut
+    to 0.2, too few chains say anything about the lens and the shot is doubtful (no_geometry)."""
+    from glradial.video.shot_fit import BOUND_FLOOR_PX, STATIC_BOUND_SCALE
+
+    evidence, truth, _ = collect(pitch_view(stadium, 3))
+    near = central(evidence, 0.3)
+    assert all(np.hypot(*c.points.T).max() <= 0.3 for s in near.samples for c in s.evidence.chains)
+    shot = fit_shot(near)
+    assert shot.static and shot.source == "joint" and shot.chains >= 2, shot
+    assert shot.uncertainty_px == pytest.approx(STATIC_BOUND_SCALE * shot.sigma_px + BOUND_FLOOR_PX)
+    assert errors(shot, near, truth).max() <= shot.uncertainty_px, (errors(shot, near, truth), shot)
+    blind = fit_shot(central(evidence, 0.2))
+    assert blind.doubtful and blind.reason == "no_geometry", blind
+
+
+def test_a_static_shot_takes_the_joint_fit_when_it_is_surer(stadium):
+    """Known answer of the choice rule on a static shot: per-frame estimates (a lens 5-15 px off the
+    truth) stating just more than the joint fit's bound lose to it (the shot takes the joint lens and
+    bound); stating just less, they win (their lens, their bound)."""
+    from glradial.estimation.lens_estimate import LensEstimate
+    from glradial.video.shot_fit import joint_fit
+
+    evidence, truth, _ = collect(pitch_view(stadium, 3))
+    near = central(evidence, 0.3)
+    off = (-0.32, float(manifold_k2(-0.32)))
+    assert 5.0 < max_displacement_px(np.asarray(off), truth[0]) < 15.0
+
+    def stating(px):
+        samples = [ShotSample(s.frame, s.evidence, LensEstimate(*off, uncertainty_px=px, method="lines")) for s in near.samples]
+        return ShotEvidence(samples, near.pairs, near.zoom, near.travel, near.pan)
+
+    joint = joint_fit(stating(1.0))  # the estimates' k1 is the fit's loose prior; their bound plays no part
+
+    above = fit_shot(stating(joint.uncertainty_px * 1.01))
+    assert above.source == "joint" and above.uncertainty_px == pytest.approx(joint.uncertainty_px), above
+    assert max_displacement_px(above.lens_at(0.0), joint.lens_at(0.0)) < 0.5
+    below = fit_shot(stating(joint.uncertainty_px * 0.99))
+    assert below.source == "frames" and below.uncertainty_px == pytest.approx(joint.uncertainty_px * 0.99), below
+    assert max_displacement_px(below.lens_at(0.0), np.asarray(off)) < 1e-9
+
+
 def test_zoom_clip_follows_the_zoom(stadium):
     """The picture zooms in 40 % while k1 goes -0.35 -> -0.20 (53 px of change at the corner at
     1920): the shot gets the zoom model, its zoom is measured from the frames, and every frame's

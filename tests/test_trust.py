@@ -23,7 +23,7 @@ from glradial.estimation.estimator import Estimator, default_model_path, view_bo
 from glradial.estimation.lens_estimate import LensEstimate, judge
 from glradial.estimation.trust import REASONS, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
 from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
-from glradial.evaluation.real_eval import applied_lenses, self_consistent_truth
+from glradial.evaluation.real_eval import applied_lenses, self_consistent_map, self_consistent_truth
 from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
@@ -363,6 +363,40 @@ def test_self_consistent_truth_composes_the_two_lenses():
     assert np.abs(fitted - q)[inside].max() * REPORT_WIDTH < 0.3
     assert self_consistent_truth(applied, (0.0, 0.0), 0.7) == pytest.approx(applied, abs=1e-9)
 
+
+
+def _blob_centre(image: np.ndarray) -> np.ndarray:
+    """Intensity-weighted centre (x, y) of the one bright blob of a grey float image."""
+    weight = np.where(image > 5.0, image, 0.0)
+    yy, xx = np.mgrid[0:image.shape[0], 0:image.shape[1]]
+    return np.array([(weight * xx).sum(), (weight * yy).sum()]) / weight.sum()
+
+
+def test_self_consistent_scoring_follows_the_pixels():
+    """Oracle: the remapper itself. A blob at ideal pixel u is given the frame's own lens
+    (``distort(fit="same")``) and then a known lens at ``fit="crop"``; its centre lands where
+    :func:`self_consistent_map` puts radius s·|u| (within 0.1 px), and the two-coefficient minimax refit
+    of that map is no farther from it than a least-squares refit (the scoring's own floor)."""
+    from glradial.lens.lens import Lens
+
+    size, own, applied = (640, 360), (-0.18, 0.05), (-0.7, 0.45)
+    scale = Lens(*applied).fit_scale(size, "crop", "distort")
+    centre = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2])
+    yy, xx = np.mgrid[0:size[1], 0:size[0]]
+    r = np.linspace(0.0, CORNER_RADIUS_16_9, 512)
+    for u in ([560.3, 300.7], [90.2, 40.9], [400.0, 200.0]):
+        blob = 250.0 * np.exp(-((xx - u[0]) ** 2 + (yy - u[1]) ** 2) / (2 * 2.0**2))
+        image = np.repeat(blob[:, :, None], 3, axis=2).astype(np.float32)
+        twice = glradial.distort(glradial.distort(image, *own, fit="same", backend="cpu"), *applied, fit="crop", backend="cpu")
+        ideal = (np.array(u) - centre) * scale / size[0]  # lens units of the output's ideal picture
+        radius = float(np.hypot(*ideal))
+        expected = centre + ideal / radius * np.interp(radius, r, self_consistent_map(r, applied, own, scale)) * size[0]
+        assert np.hypot(*(_blob_centre(twice[:, :, 0].astype(np.float64)) - expected)) < 0.1
+    target = self_consistent_map(r, applied, own, scale)
+    minimax = np.abs(r * (1 + self_consistent_truth(applied, own, scale)[0] * r**2
+                          + self_consistent_truth(applied, own, scale)[1] * r**4) - target).max()
+    lsq = np.linalg.lstsq(np.stack([r**3, r**5], 1), target - r, rcond=None)[0]
+    assert minimax <= np.abs(r * (1 + lsq[0] * r**2 + lsq[1] * r**4) - target).max() + 1e-12
 
 def _records(n: int, seed: int) -> list[Record]:
     """Synthetic records whose line error is Gaussian with 1-sigma = the fit's sigma (two folds)."""

@@ -26,21 +26,25 @@ or match that no lens explains costs at most logarithmically):
   to 0 (:data:`K2_PRIOR_SIGMA`).
 
 Uncertainty (``uncertainty_px``, a ~90 % bound on the maximum displacement error over the 16:9
-frame, px at 1920, the meaning of :class:`glradial.LensEstimate`): the fit's covariance (Gauss-Newton,
-scaled by the chains' reduced chi^2, whatever its size: the noise level the lines show) gives a 1-sigma displacement ``s``. The frames of one shot
+frame, px at 1920, the meaning of :class:`glradial.LensEstimate`): the fit's covariance (the inverse
+curvature of its cost, :func:`_hessian`, scaled by the chains' reduced chi^2, whatever its size: the
+noise level the lines show) gives a 1-sigma displacement ``s``. The frames of one shot
 are **not** independent evidence (a static camera shows the same lines in every frame), so ``s`` is
 multiplied by ``sqrt(S / V)``: ``S`` sampled frames count as ``V`` independent views, ``V = 1 +`` the
 new picture the camera brought into view (pan in frame widths plus the zoom's log range), at most
 ``S``. A static shot of 100 frames is then as sure as its single best frame, not 10x surer. The bound
-is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`, calibrated on the clips of
-``scripts/make_clips.py`` (docs/eval/shots.md).
+is :data:`BOUND_SCALE` ``x`` that plus :data:`BOUND_FLOOR_PX`; for a static shot (no zoom, a pan
+under :data:`PAN_MIN`) :data:`STATIC_BOUND_SCALE` instead. The two are calibrated apart (split
+conformal, ``bench/eval_shots.py --calibrate``, on the clips of ``scripts/make_clips.py``; docs/eval/shots.md,
+"The bound"): a static shot's lens rests on the lines of one view alone, a moving shot's also
+on its frame pairs and, zooming, on a lens interpolated between its samples.
 
 The per-frame estimates read the shot too: when they all state a bound (a
 :class:`glradial.LensEstimate`, calibrated per frame by the trust model) and their median, stating
 their median bound plus their spread (the furthest of them from the median: a zooming lens's
 range, or estimators that disagree), is surer than the joint fit, the shot takes it (the fit's
 chains stand in for no extra evidence there: the estimates read the same lines, through the
-single-frame fit's fuller model). A static shot is then as sure as its frames say, and a fit that
+single-frame fit's fuller model). A static shot takes whichever of the two states less, and a fit that
 few chains leave loose (a pure zoom: its frame pairs tie the lens at one zoom to the next, not the
 lens itself) does not stand. A zooming shot needs estimates :data:`ZOOM_FALLBACK_RATIO` times
 surer: their one lens cannot follow the zoom.
@@ -76,7 +80,8 @@ from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_di
 from .frame_motion import Matches, homography_of
 from .lens_track import DOUBTFUL_PX
 
-__all__ = ["ShotSample", "ShotEvidence", "ShotLens", "fit_shot", "ZOOM_MIN", "BOUND_SCALE", "BOUND_FLOOR_PX"]
+__all__ = ["ShotSample", "ShotEvidence", "ShotLens", "fit_shot", "joint_fit", "ZOOM_MIN", "BOUND_SCALE",
+           "STATIC_BOUND_SCALE", "BOUND_FLOOR_PX"]
 
 #: a shot whose sampled log zoom spans more than this (about 6 % in focal length) gets the zoom model
 ZOOM_MIN = 0.06
@@ -96,13 +101,20 @@ MAX_CHAIN_POINTS = 32
 INFORMATIVE_RMS = 1.0
 #: typical size of each parameter (a0, a1, a2, b0; static: a0, b0) for the solver's steps
 PARAMETER_SCALE = (0.05, 0.2, 0.5, 0.02)
+#: finite-difference step of the cost's curvature (:func:`_hessian`), in units of PARAMETER_SCALE
+HESSIAN_STEP = 0.02
 #: grid of k1 (on the manifold) for screening chains and seeding the fit
 K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
 #: calibrated multiplier from the 1-sigma displacement (redundancy-corrected) to the 90 % bound, and
 #: the floor added to it (px at 1920): the error of a frame's own residual distortion and of the
 #: model (see the module docstring and docs/eval/shots.md)
-BOUND_SCALE = 0.65
+BOUND_SCALE = 0.98
 BOUND_FLOOR_PX = 1.0
+#: the same multiplier for a static shot (not zooming, panned less than :data:`PAN_MIN`), calibrated
+#: apart (docs/eval/shots.md, "The bound"): its lens rests on the lines of one view alone, a
+#: moving shot's also on its frame pairs and, zooming, on a lens that follows the zoom between samples
+#: (the bound covers every frame, the fit sees only the samples)
+STATIC_BOUND_SCALE = 0.59
 #: stated bound when the shot has no geometric evidence (px at 1920): the CNN's alone
 NO_GEOMETRY_PX = 16.0
 #: a zooming shot takes its per-frame estimates instead of the joint fit only when they state a
@@ -146,7 +158,10 @@ class ShotEvidence:
 class ShotLens:
     """The lens of one shot (see the module docstring). ``theta`` the model's parameters
     (``[a0, b0]`` or ``[a0, a1, a2, b0]``), ``centre`` the log zoom they are centred on, ``chains``
-    and ``matches`` the evidence that agreed with the fit, ``views`` the independent views counted."""
+    and ``matches`` the evidence that agreed with the fit, ``views`` the independent views counted;
+    ``source`` "joint" (the joint fit) or "frames" (the per-frame estimates), ``sigma_px`` the joint
+    fit's 1-sigma displacement (px at 1920; NaN for "frames") and ``static`` whether its bound is a
+    static shot's (:data:`STATIC_BOUND_SCALE`)."""
 
     theta: tuple[float, ...]
     centre: float
@@ -157,6 +172,9 @@ class ShotLens:
     matches: int
     views: float
     zooming: bool
+    source: str = "joint"
+    sigma_px: float = math.nan
+    static: bool = False
 
     def lens_at(self, log_zoom: float | np.ndarray) -> np.ndarray:
         """``(k1, k2)`` at the log zoom(s) given (``(..., 2)``)."""
@@ -365,18 +383,38 @@ def _solve_zoom(problem: _Problem, static: np.ndarray, evidence: ShotEvidence):
     return min(results, key=lambda r: r.cost)
 
 
+def _hessian(problem: _Problem, theta: np.ndarray) -> np.ndarray:
+    """The curvature of the fit's cost (half the sum of its squared residuals) at ``theta``, by
+    central differences of steps :data:`HESSIAN_STEP` x the parameters' typical size. Not the
+    Gauss-Newton ``J^T J``: a chain's residual is the square root of its chi^2, whose slope vanishes
+    at the chain's own best lens, so ``J^T J`` misses the information of every chain that no lens
+    straightens exactly (real lines, most of them) and overstates a line fit's spread many times."""
+    def cost(t: np.ndarray) -> float:
+        r = problem.residuals(t)
+        return 0.5 * float(r @ r)
+
+    n = len(theta)
+    step = HESSIAN_STEP * np.asarray(PARAMETER_SCALE[: n - 1] + PARAMETER_SCALE[-1:])
+    hessian = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            a, b = np.eye(n)[i] * step[i], np.eye(n)[j] * step[j]
+            hessian[i, j] = hessian[j, i] = (cost(theta + a + b) - cost(theta + a - b) - cost(theta - a + b)
+                                             + cost(theta - a - b)) / (4.0 * step[i] * step[j])
+    return hessian
+
+
 def _sigma_px(problem: _Problem, result, radius: float) -> float:
-    """1-sigma of the maximum displacement over ``radius`` (px at 1920) from the fit's covariance,
-    the largest over the sampled zooms."""
-    jac = result.jac
+    """1-sigma of the maximum displacement over ``radius`` (px at 1920) from the fit's covariance
+    (the inverse curvature of its cost, :func:`_hessian`), the largest over the sampled zooms."""
     chi2 = problem.chains.chi2(problem.lenses(result.x))
     # the chains' own scatter sets the noise level (frame pairs of a still camera fit exactly and
     # would pretend to a precision the lines do not have)
     reduced = float(np.mean(np.minimum(np.nan_to_num(chi2, nan=4.0 * ROBUST_T), 4.0 * ROBUST_T))) if len(chi2) >= MIN_CHAINS else 1.0
-    try:
-        cov = np.linalg.inv(jac.T @ jac) * reduced
-    except np.linalg.LinAlgError:
+    values, vectors = np.linalg.eigh(_hessian(problem, np.asarray(result.x, np.float64)))
+    if not values.max() > 0:
         return math.inf
+    cov = (vectors / np.maximum(values, 1e-12 * values.max())) @ vectors.T * reduced
     r = np.linspace(0.0, radius, 64)
     basis = np.stack([r**3, r**5], axis=1)
     worst = 0.0
@@ -408,7 +446,7 @@ def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometr
     if 2 * len(theirs) > len(estimates):
         reason = max(set(theirs), key=theirs.count)
     theta = (float(k[0]), float(k[1] - manifold_k2(k[0])))
-    return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False)
+    return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False, "frames")
 
 
 def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
@@ -416,13 +454,27 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
     bound above it makes the shot doubtful; ``radius``: the frame's corner radius (lens units)."""
     if not evidence.samples:
         raise ValueError("a shot needs at least one sampled frame")
+    shot = joint_fit(evidence, doubtful_px=doubtful_px, radius=radius)
+    if shot is None:
+        return _fallback(evidence, doubtful_px)
+    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
+        return shot  # estimates that state no bound cannot be weighed against the fit's
+    fallback = _fallback(evidence, doubtful_px, "uncertain")
+    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if shot.zooming else 1.0) < shot.uncertainty_px else shot
+
+
+def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
+              radius: float = CORNER_RADIUS_16_9) -> ShotLens | None:
+    """The joint fit of the shot's chains and matches alone (``None``: no geometric evidence, see
+    the module docstring); :func:`fit_shot` weighs it against the per-frame estimates."""
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     prior_k1 = float(np.median([e.k1 for e in estimates])) if estimates else 0.0
     chains = _Chains(evidence.samples)
     chains = chains.subset(_screen(chains)) if chains.n else chains
     pairs = [p for p in evidence.pairs if len(p[2]) >= 4]
     if chains.n < MIN_CHAINS and not (pairs and evidence.pan >= PAN_MIN):
-        return _fallback(evidence, doubtful_px)
+        return None
     zoom = np.asarray(evidence.zoom if len(evidence.zoom) == len(evidence.samples) else [0.0] * len(evidence.samples))
     zooming = float(np.ptp(zoom)) > ZOOM_MIN
     centre = float(0.5 * (zoom.min() + zoom.max())) if zooming else 0.0
@@ -438,20 +490,17 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
         if 0 < keep.sum() < chains.n:
             problem.chains = chains = chains.subset(keep)
             result = problem.solve(result.x)
-    shot = _result(problem, result, views, centre, zooming, doubtful_px, radius)
-    if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
-        return shot  # estimates that state no bound cannot be weighed against the fit's
-    fallback = _fallback(evidence, doubtful_px, "uncertain")
-    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if zooming else 1.0) < shot.uncertainty_px else shot
+    static = not zooming and evidence.pan < PAN_MIN
+    return _result(problem, result, views, centre, zooming, static, doubtful_px, radius)
 
 
-def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, doubtful_px: float,
-            radius: float) -> ShotLens:
+def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, static: bool,
+            doubtful_px: float, radius: float) -> ShotLens:
     sigma = _sigma_px(problem, result, CORNER_RADIUS_16_9)
-    bound = BOUND_SCALE * sigma + BOUND_FLOOR_PX
+    bound = (STATIC_BOUND_SCALE if static else BOUND_SCALE) * sigma + BOUND_FLOOR_PX
     lenses = problem.lenses(result.x)
     folds = any(Lens(float(k1), float(k2)).fold_radius() <= radius for k1, k2 in lenses)
     reason = "fold_over" if folds else "uncertain" if not bound <= doubtful_px else ""
     matches = sum(len(m) for _, _, m in problem.pairs)
     return ShotLens(tuple(float(v) for v in result.x), centre, float(bound), bool(reason), reason,
-                    problem.chains.n, matches, views, zooming)
+                    problem.chains.n, matches, views, zooming, "joint", float(sigma), static)
