@@ -18,12 +18,16 @@ from other processes on a shared machine falls on all alike), keeping the best r
 * ``fixed, RGB``   the fixed lens forced through RGB (decode to RGB, correct, convert back), the
                    path pass 2 takes for anything but planar YUV (``correction_space``)
 * ``pass 1, all``  pass 1 decoding every frame (``sparse=False``)
+* ``pass 2``       pass 2 alone with the lens track of one earlier pass 1 (taking turns with the
+                   fixed lens: what the per-frame lens costs against one lens)
+* ``fixed, 1/32-px maps``  the fixed lens with the planes remapped from OpenCV's fixed-point maps
+                   (``cpu_maps(..., float_maps=False)``, as before 2026-11-25's float maps)
 
 and prints frames per second and the ratios the issue sets targets for: fixed lens / ffmpeg
 (>= 0.8) and --auto / fixed lens (>= 0.8). First it times the maps of a new lens at the clip's
 size: ``Lens.maps`` (float32, OpenCV) against the float64 NumPy reference, and the CPU path's whole
-``cpu_maps`` (maps + fixed-point conversion + source-less pixels) of the frame and of a 4:2:0
-chroma plane, each a new lens every call.
+``cpu_maps`` (maps + fixed-point conversion + source-less pixels; or float maps, the planar
+YUV path's) of the frame and of a 4:2:0 chroma plane, each a new lens every call.
 
 Run: ``python3 bench/bench_video.py [--size 1920x1080] [--frames 150] [--preset medium] [--crf 23]
 [--backend auto] [--repeats 2]``.
@@ -124,6 +128,9 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
         "Lens.maps (float64 reference)": lambda lens: lens.maps(size, dtype=np.float64),
         "cpu_maps (all of it)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False),
         "cpu_maps (4:2:0 chroma plane)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False, chroma),
+        "cpu_maps float (all of it)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False, float_maps=True),
+        "cpu_maps float (4:2:0 chroma)": lambda lens: cpu_maps(lens, size, "undistort", 1.0, "exact", False, chroma,
+                                                               float_maps=True),
     }
     times: dict[str, list[float]] = {name: [] for name in ways}
     for i in range(calls):
@@ -135,10 +142,30 @@ def map_times(size: tuple[int, int], calls: int = 20) -> dict[str, float]:
     return {name: float(np.median(values)) for name, values in times.items()}
 
 
+def fixed_point_maps():
+    """A context in which :func:`glradial.remapping.planes.remap_planes` remaps from OpenCV's
+    fixed-point maps (1/32 px), as before the float maps."""
+    import contextlib
+
+    from glradial.remapping import planes
+
+    @contextlib.contextmanager
+    def forced():
+        maps = planes.cpu_maps
+        planes.cpu_maps = lambda *args, **kwargs: maps(*args, **{**kwargs, "float_maps": False})
+        try:
+            yield
+        finally:
+            planes.cpu_maps = maps
+
+    return forced()
+
+
 def stage_times(clip: Path, folder: Path, frames: int = 24) -> dict[str, float]:
-    """Median ms per frame of pass 2's correction stage alone (no decoding, no encoding), the two
+    """Median ms per frame of pass 2's correction stage alone (no decoding, no encoding), the three
     ways taking turns frame by frame: RGB (convert to RGB, ``cv2.remap`` of 3 channels, convert back
-    to the encoder's YUV) and YUV (the planes remapped in place, no conversion)."""
+    to the encoder's YUV), YUV (the planes remapped in place from float maps, no conversion) and
+    YUV from fixed-point maps."""
     import numpy as np
 
     from glradial.lens.lens import Lens
@@ -153,7 +180,7 @@ def stage_times(clip: Path, folder: Path, frames: int = 24) -> dict[str, float]:
     writer = VideoWriter(folder / "stage.mp4", info, overwrite=True)
     lattices = yuv_planes(info.size, yuv_layout(info.pix_fmt)[:2], chroma_siting(info.codec))
     fill = black(yuv_layout(info.pix_fmt)[2], writer.full_range)
-    times: dict[str, list[float]] = {"RGB": [], "YUV": []}
+    times: dict[str, list[float]] = {"RGB": [], "YUV": [], "YUV 1/32": []}
     try:
         for frame in decoded:
             start = time.perf_counter()
@@ -162,8 +189,14 @@ def stage_times(clip: Path, folder: Path, frames: int = 24) -> dict[str, float]:
             target, planes = writer.planar_frame()
             remap_planes(frame_planes(frame), lens, lattices, planes, fill=fill)
             writer.stamp(target, frame.pts)
+            end = time.perf_counter()
+            with fixed_point_maps():
+                target, planes = writer.planar_frame()
+                remap_planes(frame_planes(frame), lens, lattices, planes, fill=fill)
+                writer.stamp(target, frame.pts)
             times["RGB"].append(middle - start)
-            times["YUV"].append(time.perf_counter() - middle)
+            times["YUV"].append(end - middle)
+            times["YUV 1/32"].append(time.perf_counter() - end)
     finally:
         writer.abort()
     return {name: 1e3 * float(np.median(values[1:])) for name, values in times.items()}  # the first builds the maps
@@ -234,9 +267,19 @@ def main() -> int:
             passes["pass 1"] = min(passes["pass 1"], middle - start)
             passes["pass 2"] = min(passes["pass 2"], time.perf_counter() - middle)
 
+        def fixed_32() -> None:  # the planes from fixed-point maps (as before the float maps)
+            with fixed_point_maps():
+                fixed()
+
+        track = track_video(clip, estimator, progress=False, apply_doubtful=True)
+
+        def pass2() -> None:  # pass 2 alone, the per-frame lens of one earlier pass 1
+            correct_video(clip, tmp / "pass2.mp4", track.lens_for, backend=args.backend, progress=False,
+                          options=options, overwrite=True, frames_expected=track.n_frames)
+
         stages = stage_times(clip, tmp)
         paths = {"ffmpeg": ffmpeg, "pyav": pyav, "fixed lens": fixed, "--auto": auto, "fixed, RGB": fixed_rgb,
-                 "pass 1, all": pass1_full}
+                 "pass 1, all": pass1_full, "pass 2": pass2, "fixed, 1/32-px maps": fixed_32}
         best = {name: float("inf") for name in paths}
         for _ in range(args.repeats):
             for name, run in paths.items():
@@ -247,14 +290,19 @@ def main() -> int:
     print(f"clip: {args.clip} over {args.frame.name}, {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
           f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}")
     for name, value in fps.items():
-        print(f"  {name:12s} {value:6.1f} frames/s")
+        print(f"  {name:19s} {value:6.1f} frames/s")
     print(f"  --auto pass 1 (decode, cuts, shot evidence and fit) {1e3 * passes['pass 1'] / args.frames:.1f} ms/frame, "
           f"pass 2 (correct + encode) {1e3 * passes['pass 2'] / args.frames:.1f} ms/frame; fixed lens "
           f"{1e3 * best['fixed lens'] / args.frames:.1f} ms/frame")
     print(f"  pass 1 decoding every frame {1e3 * best['pass 1, all'] / args.frames:.1f} ms/frame "
           f"(sparse / all: {passes['pass 1'] / best['pass 1, all']:.2f})")
+    print(f"  pass 2 alone {1e3 * best['pass 2'] / args.frames:.1f} ms/frame against the fixed lens's "
+          f"{1e3 * best['fixed lens'] / args.frames:.1f} (taking turns; pass 2 / fixed time "
+          f"{best['pass 2'] / best['fixed lens']:.2f})")
     print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
-          f"YUV {stages['YUV']:.1f} ms/frame (YUV / RGB time: {stages['YUV'] / stages['RGB']:.2f})")
+          f"YUV {stages['YUV']:.1f} ms/frame (YUV / RGB time: {stages['YUV'] / stages['RGB']:.2f}), "
+          f"YUV from 1/32-px maps {stages['YUV 1/32']:.1f} ms/frame")
+    print(f"fixed lens / fixed with 1/32-px maps (time): {best['fixed lens'] / best['fixed, 1/32-px maps']:.2f}")
     print(f"fixed lens / ffmpeg : {fps['fixed lens'] / fps['ffmpeg']:.2f}  (target >= 0.8)")
     print(f"fixed lens, RGB / ffmpeg : {fps['fixed, RGB'] / fps['ffmpeg']:.2f}; YUV / RGB : "
           f"{fps['fixed lens'] / fps['fixed, RGB']:.2f}; load average {os.getloadavg()[0]:.1f}")

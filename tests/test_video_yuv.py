@@ -3,8 +3,12 @@
 Oracles:
 * the lens model itself, evaluated by hand at each chroma sample's position in the frame (not
   through Lens.maps): planes holding a linear ramp must come out as the ramp at the source
-  position of each sample within 4 levels (fixed-point maps: 1/32 px steps); chroma taken as
-  sited half a luma pixel off misses by more than twice as much;
+  position of each sample within 0.55 levels (bilinear from float32 maps: exact on a ramp, up to
+  rounding to the integer sample); chroma taken as sited half a luma pixel off misses by more
+  than twice as much;
+* scipy.ndimage.map_coordinates (order 1, float64) at the positions of the float64 reference maps,
+  on a textured plane where bilinear interpolation is not exact: within rounding, where the
+  RGB path's fixed-point maps (1/32 px) miss by more;
 * the RGB path (decode to RGB, correct with glradial.correct, convert back): on a real frame in a
   lossless codec both outputs differ by no more than the RGB round trip itself loses with the
   identity lens (measured: mean 1.07 levels of luma bias at 1280x720 and chroma p99 up to 5 levels,
@@ -57,18 +61,19 @@ def test_planes_follow_the_lens_at_their_sited_positions(size, shift, siting):
     for lattice in lattices:
         i, j = np.meshgrid(np.arange(lattice.width), np.arange(lattice.height))
         x, y = lattice.x0 + lattice.step_x * i, lattice.y0 + lattice.step_y * j
-        planes.append((2000 + slope * x + 0.3 * slope * y).astype(np.uint16))
+        planes.append((2000 + slope * x + 0.4 * slope * y).astype(np.uint16))  # integers on every lattice: an exact ramp
         sx, sy = _source_position(LENS, size, x, y, SCALE)
         # where the plane's samples surround the source (beyond them the edge sample is repeated)
         inside = (sx >= lattice.x0) & (sx <= x.max()) & (sy >= lattice.y0) & (sy <= y.max())
-        expected.append((2000 + slope * sx + 0.3 * slope * sy, inside))
+        expected.append((2000 + slope * sx + 0.4 * slope * sy, inside))
     out = [np.zeros_like(p) for p in planes]
     remap_planes(planes, LENS, lattices, out, fill=(0, 0, 0), fit=SCALE)
     errors = []
     for plane, (value, inside) in zip(out, expected):
         errors.append(np.abs(plane.astype(float) - value)[inside])
-        # the maps' fixed-point step (1/32 of a plane pixel, <= 1/16 luma px: 3.1 levels) + rounding
-        assert errors[-1].max() < 4.0, errors[-1].max()
+        # bilinear from float32 maps is exact on a ramp: rounding to an integer (0.5) plus the
+        # maps' float32 error (~1e-4 px at this size: 0.005 levels of the ramp)
+        assert errors[-1].max() < 0.55, errors[-1].max()
     # the chroma taken as sited half a luma pixel across: off by (P' - 1) / 2 luma px, P' the
     # map's stretch (~SCALE): 0.25 px or 12 levels of the ramp
     if shift[0]:
@@ -78,6 +83,33 @@ def test_planes_follow_the_lens_at_their_sited_positions(size, shift, siting):
         value, inside = expected[1]
         miss = np.abs(shifted[1].astype(float) - value)[inside]
         assert np.percentile(miss, 90) > 2 * np.percentile(errors[1], 90)
+
+
+@pytest.mark.parametrize("dtype, top", [(np.uint8, 255), (np.uint16, 1023)])
+def test_planes_are_bilinear_at_the_exact_source_positions(dtype, top):
+    """Against scipy's order-1 interpolation (float64) at the float64 reference maps, on blurred
+    noise: within rounding (0.5) plus the float32 maps' position error (<= 1e-4 px here) times the
+    steepest gradient; OpenCV's fixed-point maps (the RGB path's, 1/32 px) miss that bound."""
+    cv2 = pytest.importorskip("cv2")
+    ndimage = pytest.importorskip("scipy.ndimage")
+    size, lens = (480, 270), Lens(-0.3, 0.04)
+    lattices = yuv_planes(size, (1, 1), "left")
+    rng = np.random.default_rng(7)
+    planes = []
+    for lattice in lattices:
+        noise = cv2.GaussianBlur(rng.random((lattice.height, lattice.width)), (0, 0), 1.2)
+        planes.append(np.rint(top * (noise - noise.min()) / np.ptp(noise)).astype(dtype))
+    out = [np.zeros_like(p) for p in planes]
+    remap_planes(planes, lens, lattices, out, fill=(0, 0, 0))
+    for plane, lattice, result in zip(planes, lattices, out):
+        map_x, map_y = lens.maps(size, plane=lattice, dtype=np.float64)
+        reference = ndimage.map_coordinates(plane.astype(np.float64), [map_y, map_x], order=1, mode="nearest")
+        gradient = max(np.abs(np.diff(plane.astype(float), axis=a)).max() for a in (0, 1))
+        bound = 0.5 + 2e-4 * gradient + 1e-6
+        assert np.abs(result - reference).max() <= bound
+        fixed = cv2.remap(plane, *cv2.convertMaps(map_x.astype(np.float32), map_y.astype(np.float32), cv2.CV_16SC2),
+                          cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        assert np.abs(fixed - reference).max() > bound  # the test tells the two apart
 
 
 def _clip(path: Path, pix_fmt: str, size: tuple[int, int], codec: str = "ffv1", extra: tuple[str, ...] = ()) -> Path:

@@ -142,6 +142,10 @@ class Estimator:
             options.intra_op_num_threads = threads
             options.inter_op_num_threads = 1
         options.log_severity_level = 3
+        # worker threads sleep between runs instead of busy-waiting: a spinning pool takes a core
+        # from the decoder, the line fit and other processes (video pass 1 calls the network between
+        # frames), and on a busy 2-core machine it doubled a call's time (docs/BENCH.md)
+        options.add_session_config_entry("session.intra_op.allow_spinning", "0")
         check_checksum(path)
         try:
             self._session = ort.InferenceSession(str(path), sess_options=options, providers=["CPUExecutionProvider"])

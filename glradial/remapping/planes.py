@@ -75,7 +75,10 @@ def remap_planes(
     e.g. views of a decoded frame's planes; the first is the full frame, :class:`Plane.full`) with
     ``lens`` into ``out`` (arrays of the same shapes and dtype, e.g. views of a new frame's planes),
     on the CPU (``cv2.remap``, maps cached per lens and lattice). ``fit``, ``interpolation``,
-    ``inverse`` as in :func:`glradial.correct`, for the whole frame; ``fill`` one value per plane."""
+    ``inverse`` as in :func:`glradial.correct`, for the whole frame; ``fill`` one value per plane.
+    Linear interpolation remaps from float32 maps (:func:`~glradial.remapping.remap.cpu_maps`
+    ``float_maps``): bilinear at the exact float32 position, where the RGB path rounds positions
+    to 1/32 px; the two differ by at most a level plus that rounding (docs/CORE.md)."""
     if len(planes) != len(lattices) or len(out) != len(planes) or len(fill) != len(planes):
         raise ValueError(f"give one lattice, output and fill per plane: {len(planes)} planes, {len(lattices)} "
                          f"lattices, {len(out)} outputs, {len(fill)} fills")
@@ -92,7 +95,7 @@ def remap_planes(
     for plane, lattice, target, value in zip(planes, lattices, out, fill):
         full = lattice == Plane.full(size)  # the RGB path's cache entry
         map1, map2, outside = cpu_maps(lens, size, direction, scale, inverse, interpolation == "nearest",
-                                       None if full else lattice)
+                                       None if full else lattice, float_maps=interpolation == "linear")
         result = cv2.remap(plane, map1, map2, _CV_INTERPOLATION[interpolation], dst=target,
                            borderMode=cv2.BORDER_REPLICATE)
         if not np.may_share_memory(result, target):  # OpenCV wrote a new array instead

@@ -86,8 +86,8 @@ _CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "
 _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}
 #: cv2.remap writes at most SHRT_MAX - 1 pixels per side.
 CPU_MAX_SIDE = 32766
-#: fixed-point maps kept by the CPU backend (each 1080p entry is ~12 MB; a YUV frame's lens takes
-#: one entry per distinct plane lattice: 2 for 4:2:0).
+#: maps kept by the CPU backend (a 1080p entry is ~12 MB with fixed-point maps, ~17 MB with float
+#: maps; a YUV frame's lens takes one entry per distinct plane lattice: 2 for 4:2:0).
 CPU_MAP_CACHE_SIZE = 8
 #: the shaders compute in float32: the largest finite value and the smallest normal one
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -572,22 +572,30 @@ _map_lock = threading.Lock()
 
 def cpu_maps(
     lens: Lens, size: tuple[int, int], direction: str, scale: float, inverse: str, nearest: bool,
-    plane: Plane | None = None,
+    plane: Plane | None = None, *, float_maps: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """OpenCV fixed-point maps (``CV_16SC2`` + ``CV_16UC1``) of :meth:`Lens.maps` and the flat
-    indices of the output pixels with no source (outside the input's area, or no inverse), cached
-    (LRU of :data:`CPU_MAP_CACHE_SIZE`) by lens, size, direction, scale, inverse, nearest and
-    ``plane`` (a :class:`~glradial.lens.lens.Plane` of the ``size`` frame, e.g. a chroma plane: its
-    maps, in its own pixels; a sample has no source when its source lies outside the frame's area)."""
+    """Maps for ``cv2.remap`` of :meth:`Lens.maps` and the flat indices of the output pixels with
+    no source (outside the input's area, or no inverse), cached (LRU of :data:`CPU_MAP_CACHE_SIZE`)
+    by lens, size, direction, scale, inverse, nearest, ``plane`` (a
+    :class:`~glradial.lens.lens.Plane` of the ``size`` frame, e.g. a chroma plane: its maps, in its
+    own pixels; a sample has no source when its source lies outside the frame's area) and
+    ``float_maps``. The maps are OpenCV's fixed-point ``CV_16SC2`` + ``CV_16UC1`` (positions
+    rounded to 1/32 px, 6 bytes a sample), or with ``float_maps`` the float32 maps themselves
+    (x, y; 8 bytes a sample): OpenCV 5 then interpolates a single-channel plane bilinearly at the
+    float32 position, about twice as fast as from fixed-point maps, but it is slower for
+    multi-channel images (docs/BENCH.md, "Float maps for the planes")."""
     key = (lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, size, direction, scale,
-           inverse if direction == "distort" else "", nearest, plane)
+           inverse if direction == "distort" else "", nearest, plane, bool(float_maps))
     with _map_lock:
         maps = _map_cache.get(key)
         if maps is not None:
             _map_cache.move_to_end(key)
             return maps
     map_x, map_y = lens.maps(size, direction, inverse=inverse, scale=scale, plane=plane)
-    map1, map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2, nninterpolation=nearest)
+    if float_maps:
+        map1, map2 = map_x, map_y
+    else:
+        map1, map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2, nninterpolation=nearest)
     maps = (map1, map2, _no_source(map_x, map_y, size, plane or Plane.full(size), direction))
     with _map_lock:
         _map_cache[key] = maps

@@ -70,7 +70,9 @@ DEPTH = 4
 
 #: pass 2 keeps the previous frame's lens (and so its cached maps) while the next frame's lens
 #: would move no point of the frame by more than this (px of the frame): half the 1/32-px step of
-#: the CPU path's fixed-point maps, which cannot resolve a smaller change anyway. A static or panning
+#: the CPU path's fixed-point maps (RGB frames), which cannot resolve a smaller change anyway; the
+#: planar YUV path's float maps could, but a 1/64-px shift moves a sample by at most 4 levels at
+#: the sharpest 8-bit edge (255 levels a pixel), far less on smooth picture. A static or panning
 #: camera then builds its maps once per shot instead of once per frame; a zoom still rebuilds them.
 MAP_REUSE_PX = 1.0 / 64.0
 
