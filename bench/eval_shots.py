@@ -40,9 +40,7 @@ from glradial.video.clips import read_truth
 from glradial.video.shot_fit import (
     BOUND_FLOOR_PX,
     BOUND_SCALE,
-    PAN_MIN,
     STATIC_BOUND_SCALE,
-    ZOOM_MIN,
     fit_shot,
     joint_fit,
 )
@@ -52,14 +50,6 @@ from glradial.video.video_pipeline import default_estimator, track_video
 COVERAGE = 0.9
 
 
-def _kind(evidence) -> str:
-    """"zoom", "pan" or "static", as :func:`glradial.video.shot_fit.fit_shot` tells them apart."""
-    zoom = np.asarray(evidence.zoom, np.float64)
-    if len(zoom) == len(evidence.samples) and float(np.ptp(zoom)) > ZOOM_MIN:
-        return "zoom"
-    return "pan" if evidence.pan >= PAN_MIN else "static"
-
-
 def _recording(fits: list):
     """``fit_shot`` that also keeps, per shot, the joint fit it was weighed against."""
 
@@ -67,7 +57,7 @@ def _recording(fits: list):
         shot = fit_shot(evidence, **kwargs)
         joint = shot if shot.source == "joint" else joint_fit(evidence, **kwargs)
         frames = np.array([s.frame for s in evidence.samples])
-        fits.append((shot, joint, frames, np.asarray(evidence.zoom, np.float64), _kind(evidence)))
+        fits.append((shot, joint, frames, evidence.log_zooms(), evidence.camera()))
         return shot
 
     return fit

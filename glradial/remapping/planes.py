@@ -93,7 +93,7 @@ def remap_planes(
     inverse = check_choice("inverse", inverse, INVERSES)
     scale = _checked_scale(lens, size, direction, fit)
     for plane, lattice, target, value in zip(planes, lattices, out, fill):
-        full = lattice == Plane.full(size)  # the RGB path's cache entry
+        full = lattice == Plane.full(size)  # keyed as the RGB path's maps (shared with it unless linear: float maps)
         map1, map2, outside = cpu_maps(lens, size, direction, scale, inverse, interpolation == "nearest",
                                        None if full else lattice, float_maps=interpolation == "linear")
         result = cv2.remap(plane, map1, map2, _CV_INTERPOLATION[interpolation], dst=target,

@@ -153,6 +153,20 @@ class ShotEvidence:
     travel: float = 0.0
     pan: float = 0.0
 
+    def log_zooms(self) -> np.ndarray:
+        """``zoom`` as an array, one per sample (zeros when the motion evidence does not cover
+        every sample)."""
+        n = len(self.samples)
+        return np.asarray(self.zoom if len(self.zoom) == n else [0.0] * n, np.float64)
+
+    def camera(self) -> str:
+        """How the camera moved: "zoom" (the sampled log zoom spans more than :data:`ZOOM_MIN`: the
+        lens follows the zoom), "pan" (panned at least :data:`PAN_MIN` frame widths) or "static"
+        (its bound is calibrated apart, :data:`STATIC_BOUND_SCALE`)."""
+        if float(np.ptp(self.log_zooms())) > ZOOM_MIN:
+            return "zoom"
+        return "pan" if self.pan >= PAN_MIN else "static"
+
 
 @dataclass(frozen=True)
 class ShotLens:
@@ -475,8 +489,8 @@ def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
     pairs = [p for p in evidence.pairs if len(p[2]) >= 4]
     if chains.n < MIN_CHAINS and not (pairs and evidence.pan >= PAN_MIN):
         return None
-    zoom = np.asarray(evidence.zoom if len(evidence.zoom) == len(evidence.samples) else [0.0] * len(evidence.samples))
-    zooming = float(np.ptp(zoom)) > ZOOM_MIN
+    zoom, camera = evidence.log_zooms(), evidence.camera()
+    zooming = camera == "zoom"
     centre = float(0.5 * (zoom.min() + zoom.max())) if zooming else 0.0
     informative = len({int(s) for s in chains.sample} | {i for i, _, _ in pairs} | {j for _, j, _ in pairs})
     views = min(float(informative), 1.0 + float(evidence.travel))
@@ -490,8 +504,7 @@ def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
         if 0 < keep.sum() < chains.n:
             problem.chains = chains = chains.subset(keep)
             result = problem.solve(result.x)
-    static = not zooming and evidence.pan < PAN_MIN
-    return _result(problem, result, views, centre, zooming, static, doubtful_px, radius)
+    return _result(problem, result, views, centre, zooming, camera == "static", doubtful_px, radius)
 
 
 def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, static: bool,
