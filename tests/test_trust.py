@@ -24,7 +24,7 @@ from glradial.estimation.lens_estimate import LensEstimate, judge
 from glradial.estimation.trust import REASONS, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
 from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
 from glradial.evaluation.real_eval import applied_lenses, self_consistent_map, self_consistent_truth
-from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
+from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px, radial_map
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 needs_ffmpeg = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="no ffmpeg CLI")
@@ -364,7 +364,6 @@ def test_self_consistent_truth_composes_the_two_lenses():
     assert self_consistent_truth(applied, (0.0, 0.0), 0.7) == pytest.approx(applied, abs=1e-9)
 
 
-
 def _blob_centre(image: np.ndarray) -> np.ndarray:
     """Intensity-weighted centre (x, y) of the one bright blob of a grey float image."""
     weight = np.where(image > 5.0, image, 0.0)
@@ -393,10 +392,10 @@ def test_self_consistent_scoring_follows_the_pixels():
         expected = centre + ideal / radius * np.interp(radius, r, self_consistent_map(r, applied, own, scale)) * size[0]
         assert np.hypot(*(_blob_centre(twice[:, :, 0].astype(np.float64)) - expected)) < 0.1
     target = self_consistent_map(r, applied, own, scale)
-    minimax = np.abs(r * (1 + self_consistent_truth(applied, own, scale)[0] * r**2
-                          + self_consistent_truth(applied, own, scale)[1] * r**4) - target).max()
+    minimax = np.abs(radial_map(r, np.array(self_consistent_truth(applied, own, scale))) - target).max()
     lsq = np.linalg.lstsq(np.stack([r**3, r**5], 1), target - r, rcond=None)[0]
-    assert minimax <= np.abs(r * (1 + lsq[0] * r**2 + lsq[1] * r**4) - target).max() + 1e-12
+    assert minimax <= np.abs(radial_map(r, lsq) - target).max() + 1e-12
+
 
 def _records(n: int, seed: int) -> list[Record]:
     """Synthetic records whose line error is Gaussian with 1-sigma = the fit's sigma (two folds)."""
