@@ -1,7 +1,8 @@
 # glradial: two commands do all set-up on a fresh Debian/Ubuntu machine: `make demo` and `make test`.
 # Everything goes into the project's own virtual environment (.venv), so a system Python that is
 # externally managed (PEP 668) is never touched. `make demo` installs the runtime dependencies only;
-# `make test` adds the test tools and torch (CPU build, for the training tests).
+# `make test` adds the test tools and torch 2.13.0 (the registry's default build; CUDA with triton on
+# Linux x86_64, which runs on the CPU; glradial keeps triton's LLVM apart from Mesa's: gl/llvm_guard.py).
 SYSPY ?= python3
 VENV := .venv
 PY := $(VENV)/bin/python

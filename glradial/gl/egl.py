@@ -32,6 +32,7 @@ from typing import Callable, TypeVar
 import moderngl
 
 from ..errors import GLUnavailableError
+from .llvm_guard import guard_bundled_llvm
 
 #: The Debian packages that provide headless EGL with Mesa's software rasteriser.
 EGL_PACKAGES = "libegl1 libegl-mesa0 libgl1-mesa-dri"
@@ -142,10 +143,12 @@ def create_context(*, libegl: str | None = None, device_index: int | None = None
     ``libegl`` names the EGL library to load (default: the system's ``libEGL.so.1``);
     ``device_index`` picks an EGL device (GPU) where several exist. In a process forked from one
     that used GL the context is made on the surfaceless platform instead (module docstring;
-    ``device_index`` is then ignored). Raises :class:`GLUnavailableError` naming the missing
+    ``device_index`` is then ignored). Before the process's first context, libraries that carry their
+    own LLVM (triton) are preloaded so that they keep it (:mod:`.llvm_guard`). Raises :class:`GLUnavailableError` naming the missing
     library and the packages that provide it.
     """
     wanted = libegl or "libEGL.so.1"
+    guard_bundled_llvm()  # before Mesa's LLVM becomes global (llvm_guard's docstring)
     kind = _claim_display()
     if kind == "surfaceless":
         loader = _SurfacelessContext(wanted)
