@@ -51,8 +51,8 @@ def _build(frames_dir: Path, procedural: int, lenses: int = 12, seed: int = 0) -
         sources[f"real/{name}/extended"] = real_eval._distorted(f, real_eval.extended_lenses(lenses, seed * 1000 + 500 + i))
     for i, (name, pano) in enumerate(panoramas):
         count = 4 * lenses
-        sources[f"pano/{name}/paper"] = real_eval._panorama_crops(pano, real_eval.paper_lenses(count, seed * 1000 + 100 + i), seed + 1)
-        sources[f"pano/{name}/extended"] = real_eval._panorama_crops(pano, real_eval.extended_lenses(count, seed * 1000 + 600 + i), seed + 2)
+        sources[f"pano/{name}/paper"] = real_eval.panorama_crops(pano, real_eval.paper_lenses(count, seed * 1000 + 100 + i), seed + 1)
+        sources[f"pano/{name}/extended"] = real_eval.panorama_crops(pano, real_eval.extended_lenses(count, seed * 1000 + 600 + i), seed + 2)
     if procedural:
         sources["procedural/test"] = real_eval.procedural_frames(procedural, seed=seed)
     out = []

@@ -1,7 +1,8 @@
 """The package's shape holds: sub-packages in a declared layer order (no import runs upward, none
-in a circle), no private name imported across sub-packages, no function over 60 lines of code, the
-public names the README and docs use import, and ruff finds nothing. All read the source with
-``ast`` (nothing is imported except in the public-names test)."""
+in a circle), no circle between modules (imports inside functions included) in glradial/ or net/,
+no private name imported from another module, no function over 60 lines of code in glradial/ or
+net/, the public names the README and docs use import, and ruff finds nothing. All read the source
+with ``ast`` (nothing is imported except in the public-names test)."""
 
 from __future__ import annotations
 
@@ -15,6 +16,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "glradial"
+#: the training package (a source checkout's, not the wheel's): the module rules hold there too
+NET = ROOT / "net"
 
 #: The layers, lowest first: a unit may import from its own layer and the ones before it. Units are
 #: the top-level modules and the sub-packages; ``__init__`` (the lazy public API) is the top.
@@ -28,7 +31,7 @@ MAX_MODULES_PER_PACKAGE = 12
 
 
 def _sources() -> list[Path]:
-    return sorted(p for p in PACKAGE.rglob("*.py") if p.relative_to(PACKAGE).parts[0] not in DATA)
+    return _modules(PACKAGE)
 
 
 def _unit(path: Path) -> str:
@@ -141,9 +144,9 @@ def _code_lines(node: ast.AST, lines: list[str]) -> int:
                if i not in skip and lines[i - 1].strip() and not lines[i - 1].strip().startswith("#"))
 
 
-def test_no_function_over_60_lines():
+def _long_functions(paths: list[Path]) -> list[str]:
     long = []
-    for path in _sources():
+    for path in paths:
         text = path.read_text(encoding="utf-8")
         lines = text.splitlines()
         for node in ast.walk(ast.parse(text)):
@@ -151,7 +154,102 @@ def test_no_function_over_60_lines():
                 n = _code_lines(node, lines)
                 if n > MAX_FUNCTION_LINES:
                     long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name}: {n} lines")
+    return long
+
+
+@pytest.mark.parametrize("package", [PACKAGE, NET], ids=["glradial", "net"])
+def test_no_function_over_60_lines(package: Path):
+    long = _long_functions(_modules(package))
     assert not long, f"functions over {MAX_FUNCTION_LINES} lines of code:\n" + "\n".join(long)
+
+
+# -- modules ------------------------------------------------------------------------------------
+def _modules(package: Path) -> list[Path]:
+    """The Python files of ``package`` (glradial/ or net/), data folders left out."""
+    return sorted(p for p in package.rglob("*.py") if p.relative_to(package).parts[0] not in DATA)
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _runtime_nodes(tree: ast.AST):
+    """Every node of ``tree`` that runs (in functions too), less the bodies of ``if TYPE_CHECKING:``."""
+    stack = [tree]
+    while stack:
+        for child in ast.iter_child_nodes(stack.pop()):
+            if isinstance(child, ast.If) and getattr(child.test, "id", "") == "TYPE_CHECKING":
+                stack.extend(child.orelse)
+                continue
+            yield child
+            stack.append(child)
+
+
+def _module_imports(package: Path) -> list[tuple[str, str, list[str], int]]:
+    """``(importing module, imported module, imported names, line)`` of every import inside
+    ``package``, resolved to the module that defines what is imported: ``from pkg import mod`` reaches
+    ``pkg.mod``, and a package's lazy export (``glradial.lazy``) reaches the module it names."""
+    paths = {_module_name(p): p for p in _modules(package)}
+    lazy = {}
+    for name, path in paths.items():
+        if path.name == "__init__.py":
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            for node in ast.walk(tree):
+                if isinstance(node, ast.If) and getattr(node.test, "id", "") == "TYPE_CHECKING":
+                    for statement in node.body:
+                        if isinstance(statement, ast.ImportFrom) and statement.level == 1:
+                            for alias in statement.names:
+                                lazy[(name, alias.asname or alias.name)] = f"{name}.{statement.module}"
+    found = []
+    for mine, path in paths.items():
+        here = mine.split(".") if path.name == "__init__.py" else mine.split(".")[:-1]
+        for node in _runtime_nodes(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom):
+                base = here[: len(here) - node.level + 1] if node.level else []
+                module = ".".join(base + ([node.module] if node.module else []))
+                if module.split(".")[0] != package.name:
+                    continue
+                for alias in node.names:
+                    target = f"{module}.{alias.name}"
+                    target = target if target in paths else lazy.get((module, alias.name), module)
+                    found.append((mine, target, [alias.name], node.lineno))
+            elif isinstance(node, ast.Import):
+                found += [(mine, alias.name, [], node.lineno) for alias in node.names if alias.name.split(".")[0] == package.name]
+    return found
+
+
+@pytest.mark.parametrize("package", [PACKAGE, NET], ids=["glradial", "net"])
+def test_no_circle_between_modules(package: Path):
+    """No module imports, directly or through others, a module that imports it (function-level
+    imports count: they only hide a circle until the function runs)."""
+    graph: dict[str, set[str]] = {}
+    for mine, target, _, _ in _module_imports(package):
+        if target != mine:
+            graph.setdefault(mine, set()).add(target)
+    state: dict[str, int] = {}
+    circles = []
+
+    def visit(node: str, trail: list[str]) -> None:
+        state[node] = 1
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                circles.append(" -> ".join(trail[trail.index(nxt):] + [nxt]))
+            elif nxt not in state:
+                visit(nxt, trail + [nxt])
+        state[node] = 2
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
+    assert not circles, "import circles between modules:\n" + "\n".join(circles)
+
+
+@pytest.mark.parametrize("package", [PACKAGE, NET], ids=["glradial", "net"])
+def test_no_private_name_imported_across_modules(package: Path):
+    leaks = [f"{mine}:{line} imports {name} from {target}" for mine, target, names, line in _module_imports(package)
+             for name in names if name.startswith("_") and not name.startswith("__") and target != mine]
+    assert not leaks, "private names used outside their module (make a shared name public):\n" + "\n".join(leaks)
 
 
 #: Public names the README and docs use, beyond those found by pattern below.

@@ -159,8 +159,7 @@ def _estimate_image(args: argparse.Namespace, image):
 
 def _auto_sidecar(args: argparse.Namespace) -> Path:
     """The sidecar ``--auto`` writes, checked before anything runs."""
-    from ..media.atomic import check_output_folder
-    from ..media.image_io import check_overwrite
+    from ..media.atomic import check_output_folder, check_overwrite
 
     sidecar = Path(args.sidecar) if args.sidecar else Path(f"{args.output}.lens.csv")
     check_output_folder(sidecar)

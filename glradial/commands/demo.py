@@ -1,31 +1,42 @@
 """``glradial demo``: the whole pipeline on a real broadcast frame or a procedural stadium.
 
 By default (--source real) a real broadcast frame shipped with glradial gets a known lens, the
-lens is estimated from the distorted frame, and the frame is corrected with the estimate
-(glradial/commands/demo_real.py). With --source stadium it renders a stadium panorama and a
-broadcast-like 16:9 frame from it with a known lens instead. Both write DIR/demo.png: the distorted frame with
+lens is estimated from the distorted frame, and the frame is corrected with the estimate. With
+--source stadium it renders a stadium panorama and a broadcast-like 16:9 frame from it with a known
+lens instead. Both write DIR/demo.png: the distorted frame with
 the straight chords between the ends of each visible pitch line (the painted lines bow away from
 them), the corrected frame with the pitch lines' true straight positions (the painted lines lie on
 them when the estimate is right), and close-ups of the four corners of both. Prints the true and
 estimated coefficients and the maximum displacement error in pixels of a 1920-wide frame.
+
+The real frame (``glradial/data/``, BSD-2-Clause, see the README there) is made the undistorted
+picture: its camera's own barrel lens (measured once from its pitch lines and recorded beside it,
+``own_lens``) is removed with :func:`glradial.correct` at ``fit="crop"``; the reference lines were
+measured on that undistorted picture. The known lens is applied with :func:`glradial.distort` at
+``fit="crop"`` (every pixel of the distorted frame has a source, so it looks like a real camera's
+frame). A point ``p`` of the original frame (lens coordinates, docs/DESIGN.md) appears in the
+distorted frame at ``P(s p)`` (``s`` the distortion's crop scale) and, after a correction with the
+true lens, at ``s p``: a straight line of the original stays straight there. The figure and the
+report are :mod:`glradial.commands.demo_figure`.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
-import time
+from importlib import resources
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from ..lens.lens import Lens
-from ..lens.metrics import PAPER_SIZE, manifold_k2, max_displacement_px
+from ..lens.metrics import PAPER_SIZE, manifold_k2
 from ..lens.options import METHODS
 from . import finite_float, parse_size, positive_float, positive_int
+from .demo_figure import distance_to_chord, estimate_and_report, timed_log, write_outputs
 
-DESCRIPTION = __doc__.split("\n\n", 1)[1]
+DESCRIPTION = __doc__.split("\n\n")[1]
 
 #: the demo's default camera (degrees) and lens; k2 near the Lopez-Antequera manifold of k1
 DEFAULT_K1 = -0.32
@@ -125,157 +136,12 @@ def _visible_run(px: np.ndarray, size: tuple[int, int], margin: float = 2.0) -> 
     return run
 
 
-# -- figure -------------------------------------------------------------------------------------
-def _draw_segments(image: np.ndarray, segments: list[np.ndarray], scale: float, offset: tuple[float, float] = (0.0, 0.0),
-                   color=(255, 40, 40), thickness: int = 1) -> np.ndarray:
-    """Draw straight segments (first to last point of each, frame pixels) on a resized view of the
-    frame: view pixel = (frame pixel + 0.5 - offset) * scale - 0.5."""
-    import cv2
-
-    out = image.copy()
-    for seg in segments:
-        a, b = ((np.asarray(point) + 0.5 - np.asarray(offset)) * scale - 0.5 for point in (seg[0], seg[-1]))
-        cv2.line(out, tuple(int(round(v * 16)) for v in a), tuple(int(round(v * 16)) for v in b), color, thickness,
-                 cv2.LINE_AA, shift=4)
-    return out
-
-
-def _label(panel: np.ndarray, text: str, height: int = 28) -> np.ndarray:
-    import cv2
-
-    bar = np.full((height, panel.shape[1], 3), 24, np.uint8)
-    cv2.putText(bar, text, (8, height - 9), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (240, 240, 240), 1, cv2.LINE_AA)
-    return np.vstack([bar, panel])
-
-
-def closeup_regions(segments: list[np.ndarray], size: tuple[int, int], fraction: float) -> list[tuple[int, int]]:
-    """Top-left corners (x0, y0) of four close-up windows (``fraction`` of the frame each way).
-
-    Candidates are the four frame corners and the four edge midpoints; the four showing the most
-    reference-line length win (corners first on ties: they show the strongest distortion), in
-    reading order."""
-    width, height = size
-    cw, ch = int(round(width * fraction)), int(round(height * fraction))
-    corners = [(0, 0), (width - cw, 0), (0, height - ch), (width - cw, height - ch)]
-    edges = [((width - cw) // 2, 0), (0, (height - ch) // 2), (width - cw, (height - ch) // 2), ((width - cw) // 2, height - ch)]
-
-    def length_inside(x0: int, y0: int) -> float:
-        total = 0.0
-        for seg in segments:
-            t = np.linspace(0.0, 1.0, 200)[:, None]
-            points = seg[0] + t * (seg[-1] - seg[0])
-            inside = (points[:, 0] >= x0) & (points[:, 0] < x0 + cw) & (points[:, 1] >= y0) & (points[:, 1] < y0 + ch)
-            total += inside.mean() * float(np.hypot(*(seg[-1] - seg[0])))
-        return total
-
-    scored = [(length_inside(*c) + 1e-3 * (i < 4), c) for i, c in enumerate(corners + edges)]
-    best = [c for _, c in sorted(scored, key=lambda item: -item[0])[:4]]
-    return sorted(best, key=lambda c: (c[1], c[0]))
-
-
-def _closeups(image: np.ndarray, segments: list[np.ndarray], regions: list[tuple[int, int]], fraction: float,
-              tile_width: int) -> np.ndarray:
-    """The ``regions`` (``fraction`` of the width and height each), enlarged to ``tile_width``, with
-    the segments drawn at the enlarged scale."""
-    import cv2
-
-    height, width = image.shape[:2]
-    cw, ch = int(round(width * fraction)), int(round(height * fraction))
-    scale = tile_width / cw
-    tiles = []
-    for x0, y0 in regions:
-        crop = cv2.resize(image[y0 : y0 + ch, x0 : x0 + cw], (tile_width, int(round(ch * scale))), interpolation=cv2.INTER_CUBIC)
-        crop = _draw_segments(crop, segments, scale, (x0, y0), thickness=1)
-        crop[:, -2:] = 24
-        tiles.append(crop)
-    return np.hstack(tiles)
-
-
-def compose_figure(distorted: np.ndarray, corrected: np.ndarray, chords: list[np.ndarray], straight: list[np.ndarray],
-                   labels: tuple[str, str, str, str], panel_width: int = 960) -> np.ndarray:
-    """Figure (RGB uint8): both frames with their reference lines, then the corner close-ups of each."""
-    import cv2
-
-    height, width = distorted.shape[:2]
-    scale = panel_width / width
-    panel = (panel_width, int(round(height * scale)))
-    top = np.hstack([
-        _label(_draw_segments(cv2.resize(distorted, panel, interpolation=cv2.INTER_AREA), chords, scale), labels[0]),
-        _label(_draw_segments(cv2.resize(corrected, panel, interpolation=cv2.INTER_AREA), straight, scale), labels[1]),
-    ])
-    regions = closeup_regions(chords + straight, (width, height), 0.25)
-    close_a = _label(_closeups(distorted, chords, regions, 0.25, panel_width // 2), labels[2])
-    close_b = _label(_closeups(corrected, straight, regions, 0.25, panel_width // 2), labels[3])
-    return np.vstack([top, close_a, close_b])
-
-
-# -- run ----------------------------------------------------------------------------------------
-def timed_log() -> Callable[[str], None]:
-    """A printer that prefixes each line with the seconds since it was made (both demo sources)."""
-    start = time.monotonic()
-
-    def log(text: str) -> None:
-        print(f"[{time.monotonic() - start:5.1f}s] {text}", flush=True)
-
-    return log
-
-
-def write_outputs(out: Path, frame: np.ndarray, corrected: np.ndarray, chords: list[np.ndarray],
-                  straight: list[np.ndarray], labels: tuple[str, str, str, str], log: Callable[[str], None]) -> None:
-    """Compose the figure (:func:`compose_figure`) and write ``demo.png``, ``distorted.png`` and
-    ``corrected.png`` to ``out`` (both demo sources)."""
-    from ..media.image_io import write_image
-
-    figure = compose_figure(frame, corrected, chords, straight, labels)
-    write_image(out / "distorted.png", frame)
-    write_image(out / "corrected.png", corrected)
-    write_image(out / "demo.png", figure)
-    log(f"wrote {out / 'demo.png'} ({len(chords)} reference lines), {out / 'distorted.png'}, {out / 'corrected.png'}")
-
-
-def estimate_and_report(frame: np.ndarray, true_lens, args: argparse.Namespace, log) -> Lens:
-    """The lens the demo corrects with: the estimate of ``frame`` by ``args.method`` with the
-    bundled model (or ``args.model``), printed beside the true lens with its maximum displacement
-    error (px at 1920) and the uncertainty it states; the true lens when no model is shipped."""
-    from ..lens.lens import corner_radius
-
-    model = _find_model(args.model)
-    if model is None:
-        print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
-              "correcting with the true lens", flush=True)
-        return true_lens
-    from ..estimation.estimator import Estimator
-
-    estimate = Estimator(model).estimate(frame, method=args.method)
-    size = (frame.shape[1], frame.shape[0])
-    error = float(max_displacement_px((true_lens.k1, true_lens.k2), (estimate.k1, estimate.k2), radius=corner_radius(size)))
-    log(f"estimated with {model.name} (method {args.method} -> {estimate.method}, {estimate.chains} line chains)")
-    print(f"true      k1={true_lens.k1:+.4f} k2={true_lens.k2:+.4f}")
-    print(f"estimated k1={estimate.k1:+.4f} k2={estimate.k2:+.4f} ({estimate.method}, stated uncertainty "
-          f"{estimate.uncertainty_px:.1f} px)")
-    print(f"max displacement error: {error:.1f} px of a 1920-wide frame")
-    return estimate
-
-
-def _find_model(explicit: str | None) -> Path | None:
-    if explicit:
-        path = Path(explicit)
-        if not path.is_file():
-            raise FileNotFoundError(f"model file {explicit!r} does not exist")
-        return path
-    from ..estimation.estimator import default_model_path
-
-    path = default_model_path()
-    return path if path.is_file() else None
-
-
+# -- run ---------------------------------------------------------------------------------------
 def run(args: argparse.Namespace) -> int:
     from ..media.progress import Progress
     from . import show_progress
 
     if args.source == "real":
-        from .demo_real import run_real
-
         return run_real(args)  # about a second: no progress bar
     bar = Progress(5, "demo", unit="steps", enabled=show_progress(args))
     try:
@@ -361,7 +227,7 @@ def _reference_lines(frame: np.ndarray, params, style, true_lens: Lens, used_len
         # how far the painted line is from straight: before (distance of the distorted points from
         # their chord) and after correction (where the corrected frame shows each point, against
         # where a perfect lens would put it)
-        bow = max(bow, _distance_to_chord(run_d))
+        bow = max(bow, distance_to_chord(run_d))
         visible = np.all(np.isfinite(px_u), axis=1)
         shown = used_lens.undistort_points(p_d[visible], size)
         residual = max(residual, float(np.nanmax(np.hypot(*(shown - px_u[visible]).T))) if visible.any() else 0.0)
@@ -391,15 +257,85 @@ def painted_fraction(frame: np.ndarray, px: np.ndarray, offset: float = 5.0, con
     return float(np.mean(on - off > contrast))
 
 
-def _distance_to_chord(points: np.ndarray) -> float:
-    """Largest distance (pixels) of a polyline's points from the straight line through its ends."""
-    a, b = points[0], points[-1]
-    direction = (b - a) / max(float(np.hypot(*(b - a))), 1e-9)
-    offset = points - a
-    return float(np.max(np.abs(offset[:, 0] * direction[1] - offset[:, 1] * direction[0])))
-
-
 def _inside(px: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     width, height = size
     with np.errstate(invalid="ignore"):
         return (px[:, 0] >= 0) & (px[:, 0] <= width - 1) & (px[:, 1] >= 0) & (px[:, 1] <= height - 1)
+
+
+# -- real frame (--source real) ------------------------------------------------------------------
+#: the bundled real frame and its reference lines (package ``glradial.data``)
+FRAME_NAME = "usl_broadcast_0195.jpg"
+LINES_NAME = "usl_broadcast_0195.json"
+
+
+def bundled_frame() -> tuple[np.ndarray, dict[str, np.ndarray], Lens]:
+    """The shipped real frame made undistorted (H x W x 3 uint8 RGB: its own lens removed with
+    ``correct(fit="crop")``), its reference lines ``{name: 2 x 2 end points in pixels of that
+    undistorted frame}``, and the frame's own lens (both measured; see ``glradial/data/README.md``)."""
+    from ..media.image_io import read_image
+    from ..remapping.remap import correct
+
+    data = resources.files("glradial.data")
+    shipped = read_image(Path(str(data.joinpath(FRAME_NAME))))
+    spec = json.loads(data.joinpath(LINES_NAME).read_text(encoding="utf-8"))
+    size = (shipped.shape[1], shipped.shape[0])
+    if tuple(spec["size"]) != size:
+        raise ValueError(f"{LINES_NAME} describes a {spec['size']} frame, {FRAME_NAME} is {size[0]}x{size[1]}")
+    own = Lens(spec["own_lens"]["k1"], spec["own_lens"]["k2"])
+    frame = correct(shipped, own, fit="crop")
+    lines = {name: np.asarray(ends, dtype=np.float64) for name, ends in spec["lines_after_removing_own_lens"].items()}
+    return frame, lines, own
+
+
+def line_positions(ends: np.ndarray, true_lens, scale: float, size: tuple[int, int], samples: int = 400):
+    """Pixel positions of the points of one reference line (``ends`` 2 x 2, original pixels):
+    ``(distorted, corrected)``, each ``samples x 2``: where the distorted frame shows them
+    (``P(s p)``) and where a correction with the true lens shows them (``s p``)."""
+    from ..lens.lens import lens_to_pixels, pixels_to_lens
+
+    t = np.linspace(0.0, 1.0, samples)[:, None]
+    p = pixels_to_lens(ends[0] + t * (ends[1] - ends[0]), size) * scale
+    return true_lens.distort_points(lens_to_pixels(p, size), size), lens_to_pixels(p, size)
+
+
+def run_real(args: argparse.Namespace) -> int:
+    """``glradial demo --source real``: see the module docstring."""
+    from ..remapping.remap import correct, distort
+
+    log = timed_log()
+    original, lines, own = bundled_frame()
+    size = (original.shape[1], original.shape[0])
+    true_lens = Lens(args.k1, args.k2)
+    true_lens.check_frame(size)
+    scale = true_lens.fit_scale(size, "crop", "distort")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    frame = distort(original, true_lens.k1, true_lens.k2, fit=scale)
+    log(f"real broadcast frame {FRAME_NAME} ({size[0]}x{size[1]}): its own lens k1={own.k1:.4f} k2={own.k2:.4f} "
+        f"removed, the known lens k1={true_lens.k1:.4f} k2={true_lens.k2:.4f} applied (fit=crop, scale {scale:.4f})")
+
+    estimate = estimate_and_report(frame, true_lens, args, log)
+    source = "estimated" if estimate is not true_lens else "true"
+    used = Lens(float(estimate.k1), float(estimate.k2))
+    corrected = correct(frame, used.k1, used.k2, fit="same")
+
+    chords, straight = [], []
+    bow, residual = 0.0, 0.0
+    for ends in lines.values():
+        distorted_px, true_px = line_positions(ends, true_lens, scale, size)
+        chords.append(distorted_px)
+        straight.append(true_px)
+        bow = max(bow, distance_to_chord(distorted_px))
+        shown = used.undistort_points(distorted_px, size)  # where the corrected frame shows each point
+        residual = max(residual, float(np.nanmax(np.hypot(*(shown - true_px).T))))
+    print(f"reference lines: up to {bow:.1f} px from straight in the distorted frame, "
+          f"{residual:.1f} px after correction ({size[0]}x{size[1]} pixels)")
+    labels = (
+        f"real frame, known lens k1={true_lens.k1:.3f} k2={true_lens.k2:.3f} applied; red: chords between line ends",
+        f"corrected ({source} k1={used.k1:.3f} k2={used.k2:.3f}); red: the lines' true straight positions",
+        "distorted: enlarged close-ups where the reference lines run",
+        "corrected: the same close-ups",
+    )
+    write_outputs(out, frame, corrected, chords, straight, labels, log)
+    return 0

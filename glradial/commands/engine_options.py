@@ -100,8 +100,7 @@ def _camera_numbers(args: argparse.Namespace, what: str) -> tuple[float, float |
 
 def check_opentrackio_output(args: argparse.Namespace) -> None:
     """Before any work: the options fit together, the file can be written (``-y`` to replace)."""
-    from ..media.atomic import check_output_folder
-    from ..media.image_io import check_overwrite
+    from ..media.atomic import check_output_folder, check_overwrite
 
     given = [name for name in ("distortion_model", "cbor") if getattr(args, name) not in (None, False, "U-D")]
     if not opentrackio_wanted(args):

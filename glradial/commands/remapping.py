@@ -256,7 +256,8 @@ def remap_image_file(source: Path, target: Path, lens_for: Callable[[tuple[int, 
     """Read ``source``, apply ``transform`` with ``lens_for((W, H))`` and write ``target`` (atomic,
     depth kept). EXR to EXR goes channel by channel (:func:`glradial.media.exr_io.channel_groups`), every
     channel and its HALF/FLOAT type kept."""
-    from ..media.image_io import check_overwrite, read_image, write_image
+    from ..media.atomic import check_overwrite
+    from ..media.image_io import read_image, write_image
 
     check_overwrite(target, overwrite)
     convention = _alpha_for(alpha, source)
@@ -284,7 +285,7 @@ def _remap_exr(source: Path, target: Path, lens_for, transform: Transform, alpha
 def remap_folder(args: argparse.Namespace, lens_for, transform: Transform, progress: bool | None, label: str) -> int:
     """Every still image of the folder INPUT into the folder OUTPUT (made if missing), same names;
     existing outputs are refused before any work unless ``-y``. Returns the number written."""
-    from ..media.image_io import check_overwrite
+    from ..media.atomic import check_overwrite
     from ..media.progress import Progress
 
     source, target = Path(args.input), Path(args.output)

@@ -36,8 +36,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def run(args: argparse.Namespace) -> int:
     import numpy as np
 
-    from ..media.atomic import atomic_path, check_output_folder
-    from ..media.image_io import IMAGE_EXTENSIONS, check_overwrite, is_image_path, write_image
+    from ..media.atomic import atomic_path, check_output_folder, check_overwrite
+    from ..media.image_io import IMAGE_EXTENSIONS, is_image_path, write_image
     from ..synthesis.stadium import stadium_panorama
     from ..synthesis.stadium_style import sample_style, stadium_split
 

@@ -77,8 +77,7 @@ def _jobs(args: argparse.Namespace) -> list[tuple[str, object, str]]:
 
 def run(args: argparse.Namespace) -> int:
     from ..export.stmap import check_stmap_path, lens_stmap, unreal_stmap, write_stmap
-    from ..media.atomic import check_output_folder
-    from ..media.image_io import check_overwrite
+    from ..media.atomic import check_output_folder, check_overwrite
 
     if args.origin is not None and args.layout != "unreal":
         raise UsageError("--origin is for --layout unreal (Nuke's layout has its origin at the bottom left)")

@@ -121,7 +121,7 @@ def _self_consistent(evaluator, frame: np.ndarray, source: str, group: str, fold
 
 def collect(data: Path, evaluator, progress: Callable[[str], None] = print, seed: int = 0) -> list[Record]:
     """Evidence of every validation frame (see the module docstring, step 1)."""
-    from .real_eval import _panorama_crops, applied_lenses, broadcast_frames, centre_16_9, procedural_frames, read_rgb
+    from .real_eval import applied_lenses, broadcast_frames, centre_16_9, panorama_crops, procedural_frames, read_rgb
 
     records: list[Record] = []
     for clip, frames in broadcast_frames(data / "broadcast_bundesliga").items():
@@ -140,7 +140,7 @@ def collect(data: Path, evaluator, progress: Callable[[str], None] = print, seed
     if pano_path.is_file():
         pano = read_rgb(pano_path)
         for fold in (0, 1):
-            for truth, frame in _panorama_crops(pano, applied_lenses(PANORAMA_CROPS, 700 + fold), seed + 11 + fold):
+            for truth, frame in panorama_crops(pano, applied_lenses(PANORAMA_CROPS, 700 + fold), seed + 11 + fold):
                 records.append(Record("real_panorama", f"stadium_01/poses{fold}", fold, truth, evaluator.evidence(frame)))
         progress("real panorama crops done")
     stadiums = 4

@@ -240,7 +240,10 @@ def _distorted(frame: np.ndarray, lenses: Iterable[tuple[float, float]]):
         yield (k1, k2), distort(frame, k1, k2, fit="crop", backend="cpu")
 
 
-def _panorama_crops(panorama: np.ndarray, lenses: list[tuple[float, float]], seed: int):
+def panorama_crops(panorama: np.ndarray, lenses: list[tuple[float, float]], seed: int):
+    """``((k1, k2), frame)`` for each lens of ``lenses``: a :data:`PAPER_SIZE` crop of ``panorama`` (RGB
+    uint8, 2x supersampled) at a pose drawn from ``seed`` with :data:`PANORAMA_HFOV` and
+    :data:`PANORAMA_TILT`, distorted by that lens."""
     from ..synthesis.crops import CropParams, CropRenderer, sample_crop_params
 
     poses = sample_crop_params(len(lenses), seed, hfov=PANORAMA_HFOV, tilt=PANORAMA_TILT)
@@ -495,8 +498,8 @@ def folder_sources(frames_dir: str | Path, model: str | None, threads: int | Non
         sources[f"{name}/extended"] = _distorted(f, extended_lenses(lenses, seed * 1000 + 500 + i))
     for i, (name, pano) in enumerate(panoramas):
         count = 4 * lenses
-        sources[f"{name}/paper"] = _panorama_crops(pano, paper_lenses(count, seed * 1000 + 100 + i), seed + 1)
-        sources[f"{name}/extended"] = _panorama_crops(pano, extended_lenses(count, seed * 1000 + 600 + i), seed + 2)
+        sources[f"{name}/paper"] = panorama_crops(pano, paper_lenses(count, seed * 1000 + 100 + i), seed + 1)
+        sources[f"{name}/extended"] = panorama_crops(pano, extended_lenses(count, seed * 1000 + 600 + i), seed + 2)
     return evaluator
 
 

@@ -16,7 +16,8 @@ import tempfile
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_folder", "temporary_folder"]
+__all__ = ["atomic_path", "atomic_write_bytes", "atomic_write_text", "check_output_folder", "check_overwrite",
+           "temporary_folder"]
 
 
 def check_output_folder(path: str | os.PathLike) -> Path:
@@ -34,6 +35,12 @@ def check_output_folder(path: str | os.PathLike) -> Path:
     if target.is_dir():
         raise IsADirectoryError(f"output {str(target)!r} is a folder, expected a file name")
     return target
+
+
+def check_overwrite(path: str | os.PathLike, overwrite: bool) -> None:
+    """``FileExistsError`` naming ``path`` when it exists and ``overwrite`` is false."""
+    if not overwrite and os.path.lexists(path):
+        raise FileExistsError(f"output {str(path)!r} already exists (overwrite it with -y/--overwrite)")
 
 
 def _final_mode(target: Path) -> int:

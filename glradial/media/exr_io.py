@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .atomic import atomic_path, check_output_folder
+from .atomic import atomic_path, check_output_folder, check_overwrite
 
 __all__ = ["ExrImage", "read_exr", "write_exr", "channel_groups", "HALF_MAX"]
 
@@ -94,8 +94,6 @@ def write_exr(path: str | os.PathLike, image: ExrImage, *, overwrite: bool = Tru
     """Write ``image`` atomically (its header's compression and attributes, ZIP when it names none);
     ``ValueError`` for non-finite values or values beyond HALF's range in a HALF channel."""
     import OpenEXR
-
-    from .image_io import check_overwrite
 
     target = check_output_folder(path)
     check_overwrite(target, overwrite)

@@ -28,12 +28,12 @@ from typing import Literal
 import cv2
 import numpy as np
 
-from .atomic import atomic_write_bytes, check_output_folder
+from .atomic import atomic_write_bytes, check_output_folder, check_overwrite
 from .native_stderr import silenced
 
 __all__ = [
     "IMAGE_EXTENSIONS",
-    "check_overwrite",
+    "check_input_file",
     "is_image_path",
     "media_kind",
     "read_image",
@@ -70,13 +70,9 @@ def media_kind(path: str | os.PathLike) -> Literal["image", "video"]:
     return "image" if is_image_path(path) else "video"
 
 
-def check_overwrite(path: str | os.PathLike, overwrite: bool) -> None:
-    """``FileExistsError`` naming ``path`` when it exists and ``overwrite`` is false."""
-    if not overwrite and os.path.lexists(path):
-        raise FileExistsError(f"output {str(path)!r} already exists (overwrite it with -y/--overwrite)")
-
-
-def _check_input(path: str | os.PathLike) -> Path:
+def check_input_file(path: str | os.PathLike) -> Path:
+    """``path`` as a ``Path`` after checking that it names an existing file (``FileNotFoundError`` or
+    ``IsADirectoryError`` naming it otherwise)."""
     source = Path(path)
     if not source.exists():
         raise FileNotFoundError(f"input file {str(source)!r} does not exist")
@@ -105,7 +101,7 @@ def _swap_rb(array: np.ndarray) -> np.ndarray:
 def read_image(path: str | os.PathLike, order: ChannelOrder = "rgb") -> np.ndarray:
     """Read a PNG, JPEG or TIFF keeping its bit depth and alpha; channels in ``order``."""
     _check_order(order)
-    source = _check_input(path)
+    source = check_input_file(path)
     if not is_image_path(source):
         known = ", ".join(sorted(IMAGE_EXTENSIONS))
         raise ValueError(f"{str(source)!r} is not a still image ({known}); videos: glradial.media.video_io")

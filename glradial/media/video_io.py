@@ -41,9 +41,8 @@ from typing import Iterator, Literal, Union
 import av
 import numpy as np
 
-from .atomic import atomic_path, check_output_folder, temporary_folder
-from .image_io import _check_input as _check_file
-from .image_io import check_overwrite
+from .atomic import atomic_path, check_output_folder, check_overwrite, temporary_folder
+from .image_io import check_input_file
 from .native_stderr import silenced
 
 __all__ = [
@@ -101,7 +100,7 @@ def sequence_files(pattern: str | os.PathLike) -> list[Path]:
 
 
 def check_video_overwrite(path: str | os.PathLike, overwrite: bool) -> None:
-    """:func:`~glradial.media.image_io.check_overwrite` for an output file or an image-sequence pattern
+    """:func:`~glradial.media.atomic.check_overwrite` for an output file or an image-sequence pattern
     (``FileExistsError`` when any file of the sequence exists and ``overwrite`` is false)."""
     if not is_sequence(path):
         check_overwrite(path, overwrite)
@@ -291,7 +290,7 @@ def _check_input(path: str | os.PathLike) -> str:
         if not sequence_files(source):
             raise FileNotFoundError(f"input image sequence {str(source)!r} matches no file")
         return str(source)
-    return str(_check_file(source))
+    return str(check_input_file(source))
 
 
 class VideoReader:

@@ -30,7 +30,7 @@ import numpy as np
 
 from ..lens.lens import Lens, Plane
 from ..lens.options import CHROMA_SITINGS, DIRECTIONS, INTERPOLATIONS, INVERSES, check_choice
-from .remap import _CV_INTERPOLATION, _checked_scale, cpu_maps
+from .remap import CV_INTERPOLATION, checked_scale, cpu_maps
 
 __all__ = ["yuv_planes", "chroma_siting", "black", "remap_planes", "CENTRED_CHROMA_CODECS"]
 
@@ -91,12 +91,12 @@ def remap_planes(
     direction = check_choice("direction", direction, DIRECTIONS)
     interpolation = check_choice("interpolation", interpolation, INTERPOLATIONS)
     inverse = check_choice("inverse", inverse, INVERSES)
-    scale = _checked_scale(lens, size, direction, fit)
+    scale = checked_scale(lens, size, direction, fit)
     for plane, lattice, target, value in zip(planes, lattices, out, fill):
         full = lattice == Plane.full(size)  # keyed as the RGB path's maps (shared with it unless linear: float maps)
         map1, map2, outside = cpu_maps(lens, size, direction, scale, inverse, interpolation == "nearest",
                                        None if full else lattice, float_maps=interpolation == "linear")
-        result = cv2.remap(plane, map1, map2, _CV_INTERPOLATION[interpolation], dst=target,
+        result = cv2.remap(plane, map1, map2, CV_INTERPOLATION[interpolation], dst=target,
                            borderMode=cv2.BORDER_REPLICATE)
         if not np.may_share_memory(result, target):  # OpenCV wrote a new array instead
             target[...] = result

@@ -82,7 +82,8 @@ from ..lens.options import (
 )
 from .alpha import Alpha, remap_with_alpha
 
-_CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
+#: OpenCV's interpolation flag of each ``interpolation`` name (the CPU paths of RGB frames and planes)
+CV_INTERPOLATION = {"nearest": cv2.INTER_NEAREST, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
 _GLSL_INTERPOLATION = {"nearest": "SAMPLING_NEAREST", "linear": "SAMPLING_LINEAR", "cubic": "SAMPLING_CUBIC"}
 #: cv2.remap writes at most SHRT_MAX - 1 pixels per side.
 CPU_MAX_SIDE = 32766
@@ -215,7 +216,7 @@ def _check_numbers(lens: Lens, corner: float, size: tuple[int, int], direction: 
         )
 
 
-def _checked_scale(lens: Lens, size: tuple[int, int], direction: str, fit: Fit, scale: float | None = None) -> float:
+def checked_scale(lens: Lens, size: tuple[int, int], direction: str, fit: Fit, scale: float | None = None) -> float:
     """The scale a remap of a ``size`` frame uses (``lens.fit_scale`` of ``fit``, or ``scale`` when
     given), after the checks every backend makes: :func:`check_numeric_policy` and the fold-over
     (:meth:`Lens.check_frame`)."""
@@ -410,7 +411,7 @@ class Remapper:
                 raise TypeError(f"viewport {name} must be an integer, got {value!r}")
         size = frame_size((width, height))
         x0, y0, width, height = int(x0), int(y0), size[0], size[1]
-        s = _checked_scale(lens, size, direction, fit, scale)
+        s = checked_scale(lens, size, direction, fit, scale)
         rgba = _check_fill(fill, 4, np.dtype(np.float32))
         self._draw(source, target, (x0, y0, width, height), lens, direction, s, interpolation, inverse, rgba, texture_unit)
 
@@ -550,7 +551,7 @@ class Remapper:
                 f"frame {width}×{height} exceeds this GL driver's texture limit of {self.max_texture_size} "
                 f"pixels per side (GL_MAX_TEXTURE_SIZE); use backend='cpu' for it"
             )
-        scale = _checked_scale(lens, (width, height), direction, fit)
+        scale = checked_scale(lens, (width, height), direction, fit)
         if out is None:
             out = np.empty(frame.shape, frame.dtype)
         elif not (isinstance(out, np.ndarray) and out.shape == frame.shape and out.dtype == frame.dtype and out.flags.c_contiguous):
@@ -639,9 +640,9 @@ def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpol
     fill_values = _check_fill(fill, channels, frame.dtype)
     if max(width, height) > CPU_MAX_SIDE:
         raise ValueError(f"frame {width}×{height} exceeds cv2.remap's limit of {CPU_MAX_SIDE} pixels per side")
-    scale = _checked_scale(lens, (width, height), direction, fit)
+    scale = checked_scale(lens, (width, height), direction, fit)
     map1, map2, outside = cpu_maps(lens, (width, height), direction, scale, inverse, interpolation == "nearest")
-    result = cv2.remap(frame, map1, map2, _CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
+    result = cv2.remap(frame, map1, map2, CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
     result = result.reshape(frame.shape)
     if outside.size:
         fill_array = np.asarray(fill_values)

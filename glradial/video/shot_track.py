@@ -14,7 +14,7 @@ the detector's own test frame by frame, so that the cuts found, and where they a
 those of a decode of every frame. A cheap subsample of each shot -- its first decoded frame, then one every
 ``every`` frames (the stride doubles each :data:`SAMPLES_PER_STRIDE` samples, so a long shot
 costs no more than a log factor) -- is converted at most
-:data:`glradial.video.video_pipeline.ESTIMATE_WIDTH` px wide and handed to a
+:data:`ESTIMATE_WIDTH` px wide and handed to a
 :class:`~glradial.video.shot_evidence.ShotCollector` (line chains, frame-to-frame matches, the per-frame
 estimate on every ``estimate_every``-th sample). When a cut (or the end) closes the shot, its
 evidence is fitted jointly (:func:`glradial.video.shot_fit.fit_shot`) and dropped: memory holds one
@@ -42,10 +42,16 @@ from ..media.progress import Progress
 from ..media.video_io import VideoReader, frame_timestamps
 from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX, LensTrack
+from .pipelined import Pipelined
 from .shot_evidence import ShotCollector
 from .shot_fit import ShotLens, fit_shot
 
-__all__ = ["track_shots", "CutCheck", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO"]
+__all__ = ["track_shots", "CutCheck", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO",
+           "ESTIMATE_WIDTH"]
+
+#: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
+#: detector at <= 960 px, so a full-size conversion would be wasted
+ESTIMATE_WIDTH = 960
 
 #: default stride of the sampled frames (frames): 0.4 s at 25 fps
 EVERY = 10
@@ -143,7 +149,6 @@ def _scan(reader: VideoReader, order: np.ndarray | None, detector: ShotDetector,
     """Decode (every frame, or with ``order`` the frames other frames refer to, numbered by
     ``order``), detect cuts (with ``order``: candidates, confirmed and placed by ``check``), sample
     each shot; returns the frames' times (s)."""
-    from .video_pipeline import ESTIMATE_WIDTH, Pipelined
 
     info = reader.info
     candidates = detector if check is None else replace(copy.deepcopy(detector), ratio=detector.ratio * CANDIDATE_RATIO)

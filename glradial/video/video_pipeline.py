@@ -6,7 +6,7 @@ Pipeline (memory does not grow with the file's length):
    allows: :mod:`glradial.video.shot_track`), detects cuts on 64 px thumbnails, places each cut
    seen between two decoded frames exactly by decoding that stretch again, and gathers a cheap
    subsample's evidence (line chains, frame-to-frame matches, a per-frame estimate now and
-   then, on copies at most :data:`ESTIMATE_WIDTH` px wide); each shot gets one joint lens fit, a
+   then, on copies at most :data:`~glradial.video.shot_track.ESTIMATE_WIDTH` px wide); each shot gets one joint lens fit, a
    function of its zoom when the picture zooms (:mod:`glradial.video.shot_track`,
    :mod:`glradial.video.shot_fit`). A doubtful shot is marked and, by default, passed through
    uncorrected.
@@ -30,12 +30,10 @@ from __future__ import annotations
 
 import json
 import os
-import queue
 import sys
-import threading
 from dataclasses import replace
 from fractions import Fraction
-from typing import Callable, Iterable, Iterator
+from typing import Callable
 
 import numpy as np
 
@@ -54,19 +52,13 @@ from ..media.video_io import (
     yuv_layout,
 )
 from .lens_track import LensTrack
-from .shot_track import EVERY, track_shots
+from .pipelined import Pipelined
+from .shot_track import ESTIMATE_WIDTH, EVERY, track_shots
 
 __all__ = ["LensTrack", "track_video", "correct_video", "correction_space", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
 
 #: estimator: RGB uint8 frame -> (k1, k2) or a Lens (a LensEstimate carries uncertainty_px and method)
 EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
-
-#: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
-#: detector at <= 960 px, so a full-size conversion would be wasted
-ESTIMATE_WIDTH = 960
-
-#: frames queued between two threads of the pipeline (bounded memory: ~3 x depth frames in flight)
-DEPTH = 4
 
 #: pass 2 keeps the previous frame's lens (and so its cached maps) while the next frame's lens
 #: would move no point of the frame by more than this (px of the frame): half the 1/32-px step of
@@ -75,90 +67,6 @@ DEPTH = 4
 #: the sharpest 8-bit edge (255 levels a pixel), far less on smooth picture. A static or panning
 #: camera then builds its maps once per shot instead of once per frame; a zoom still rebuilds them.
 MAP_REUSE_PX = 1.0 / 64.0
-
-
-class Pipelined:
-    """Run ``items`` (an iterator: e.g. a decoder) on one thread and ``work`` on a second, with
-    bounded queues (``depth`` items) between them and the consumer; iterate to get ``work(item)`` in
-    order. ``work=None`` passes items through (decode-ahead only). ``on_worker_exit`` runs on the
-    worker thread when it ends (release what it owns, e.g. a GL context). An exception on either
-    thread is raised in the consumer; leaving the ``with`` block (normally, by an exception or a
-    signal) stops and joins both threads."""
-
-    _END = object()
-
-    def __init__(
-        self,
-        items: Iterable,
-        work: Callable | None = None,
-        *,
-        depth: int = DEPTH,
-        on_worker_exit: Callable[[], None] | None = None,
-    ) -> None:
-        self._items, self._work, self._exit = iter(items), work, on_worker_exit
-        self._decoded: queue.Queue = queue.Queue(depth)
-        self._done: queue.Queue = queue.Queue(depth)
-        self._stop = threading.Event()
-        self._threads = [threading.Thread(target=self._produce, name="glradial-decode", daemon=True)]
-        if work is not None:
-            self._threads.append(threading.Thread(target=self._transform, name="glradial-correct", daemon=True))
-        else:
-            self._decoded = self._done
-
-    def _put(self, target: queue.Queue, entry: tuple) -> bool:
-        while not self._stop.is_set():
-            try:
-                target.put(entry, timeout=0.05)
-                return True
-            except queue.Full:
-                continue
-        return False
-
-    def _produce(self) -> None:
-        try:
-            for item in self._items:
-                if not self._put(self._decoded, (True, item)):
-                    return
-            self._put(self._decoded, (True, self._END))
-        except BaseException as err:  # handed to the consumer
-            self._put(self._decoded, (False, err))
-
-    def _transform(self) -> None:
-        try:
-            while not self._stop.is_set():
-                try:
-                    ok, item = self._decoded.get(timeout=0.05)
-                except queue.Empty:
-                    continue
-                if not ok or item is self._END:
-                    self._put(self._done, (ok, item))
-                    return
-                if not self._put(self._done, (True, self._work(item))):
-                    return
-        except BaseException as err:
-            self._put(self._done, (False, err))
-        finally:
-            if self._exit is not None:
-                self._exit()
-
-    def __enter__(self) -> "Pipelined":
-        for thread in self._threads:
-            thread.start()
-        return self
-
-    def __iter__(self) -> Iterator:
-        while True:
-            ok, item = self._done.get()
-            if not ok:
-                raise item
-            if item is self._END:
-                return
-            yield item
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        for thread in self._threads:
-            thread.join()
 
 
 def default_estimator(model: str | os.PathLike | None = None, method: str | None = None) -> EstimatorFn:
