@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from glradial.cli import main
-from glradial.commands import demo
+from glradial.commands import demo, demo_figure
 from glradial.lens.lens import corner_radius, lens_to_pixels
 from glradial.lens.metrics import max_displacement_px
 from glradial.media.image_io import read_image
@@ -35,7 +35,7 @@ def test_demo_small_end_to_end(tmp_path, capsys):
 
 
 def test_demo_without_model_says_so(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(demo, "_find_model", lambda explicit: None)
+    monkeypatch.setattr(demo_figure, "_find_model", lambda explicit: None)
     assert main(["demo", "--source", "stadium", "--out", str(tmp_path), "--size", "320x180", "--panorama-width", "1024"]) == 0
     printed = capsys.readouterr().out
     assert "no model shipped" in printed
@@ -117,7 +117,7 @@ def test_distorted_reference_lines_follow_the_distorted_paint():
 
 
 def test_real_demo_without_model_straightens_exactly(tmp_path, capsys, monkeypatch):
-    monkeypatch.setattr(demo, "_find_model", lambda explicit: None)
+    monkeypatch.setattr(demo_figure, "_find_model", lambda explicit: None)
     assert main(["demo", "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "no model shipped" in printed and "real broadcast frame" in printed and "own lens" in printed

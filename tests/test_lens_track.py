@@ -7,7 +7,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from glradial import Lens
+from glradial import Lens, LensTrackError
 from glradial.video.lens_track import LensTrack, load_lens_track
 
 
@@ -38,3 +38,26 @@ def test_a_bad_principal_point_names_the_line(tmp_path):
     path.write_text("frame,k1,k2,cx\n0,-0.2,0.03,0\n1,-0.2,0.03,abc\n")
     with pytest.raises(ValueError, match="line 3: cx 'abc' is not a number"):
         load_lens_track(path, Fraction(25), (640, 360))
+
+
+@pytest.mark.parametrize("text, message", [
+    ("frame,k1\n0,0.1\n", "line 1: the header lacks the column(s) k2"),
+    ("frame,k1,k2\n0,-0.1,0\n1,abc,0\n", "line 3: k1 'abc' is not a number"),
+    ("frame,k1,k2,applied\n0,-0.1,0,2\n", "line 2: applied must be 0 or 1, got '2'"),
+    ("frame,k1,k2\n0,-3,0\n", "line 2: lens k1=-3"),
+])
+def test_every_bad_track_raises_the_promised_type(tmp_path, text, message):
+    """The module promises :class:`LensTrackError` (still a ``ValueError``) for any bad row."""
+    path = tmp_path / "bad.csv"
+    path.write_text(text)
+    with pytest.raises(LensTrackError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        load_lens_track(path, Fraction(25), (640, 360))
+
+
+def test_a_track_shorter_than_the_video_raises_the_promised_type(tmp_path):
+    path = tmp_path / "short.csv"
+    path.write_text("frame,k1,k2\n0,-0.1,0\n")
+    track = load_lens_track(path, Fraction(25), (640, 360))
+    with pytest.raises(LensTrackError, match="the lens track has 1 frames; the video has more"):
+        track.lens_for(1)
+    assert issubclass(LensTrackError, ValueError)

@@ -34,7 +34,7 @@ Reading (:func:`load_lens_track`) needs only ``frame``, ``k1`` and ``k2``: edit 
 the file back; an ``applied`` column is honoured (0 = the frame passes through uncorrected, and its
 lens is then not checked), so a track read back corrects exactly as the run that wrote it. Every row is checked (one row per frame in order, finite coefficients, a lens that
 does not fold over on the frame, non-negative uncertainties); the first bad row raises
-``ValueError`` naming the file and the line.
+:class:`~glradial.errors.LensTrackError` (a ``ValueError``) naming the file and the line.
 """
 
 from __future__ import annotations
@@ -125,14 +125,15 @@ class LensTrack:
         return len(self.shot)
 
     def lens_at(self, frame: int) -> tuple[float, float]:
-        """The lens of ``frame``; ``ValueError`` past the end of the track (the video is longer)."""
+        """The lens of ``frame``; :class:`~glradial.errors.LensTrackError` (a ``ValueError``) past the
+        end of the track (the video is longer)."""
         if not 0 <= frame < self.n_frames:
-            raise ValueError(f"the lens track has {self.n_frames} frames; the video has more (frame {frame})")
+            raise LensTrackError(f"the lens track has {self.n_frames} frames; the video has more (frame {frame})")
         return float(self.lens[frame, 0]), float(self.lens[frame, 1])
 
     def lens_for(self, frame: int) -> Lens | None:
         """The lens ``frame`` is corrected with, or ``None`` when it passes through uncorrected."""
-        lens = self.full_lens(frame)  # ValueError past the end of the track
+        lens = self.full_lens(frame)  # LensTrackError past the end of the track
         return lens if self.applied[frame] else None
 
     def full_lens(self, frame: int) -> Lens:
@@ -250,7 +251,8 @@ def _rows(path: Path) -> list[tuple[int, dict]]:
 
 def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, int]) -> LensTrack:
     """Read and check a lens track (module docstring) for a video of frame ``size`` (W, H) and
-    ``rate``; ``ValueError`` naming the file and the line of the first bad row."""
+    ``rate``; :class:`~glradial.errors.LensTrackError` (a ``ValueError``) naming the file and the
+    line of the first bad row."""
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(f"lens track {str(path)!r} does not exist")
@@ -287,7 +289,7 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
                            for name, default in (("cx", 0.0), ("cy", 0.0), ("pixel_aspect", 1.0))]
         flag = value("applied", required=False)
         if flag not in (None, 0, 1):
-            raise ValueError(f"{where}: applied must be 0 or 1, got {row.get('applied')!r}")
+            raise LensTrackError(f"{where}: applied must be 0 or 1, got {row.get('applied')!r}")
         applied[index] = flag != 0
         try:
             frame_lens = Lens(k1, k2, *geometry[index])
