@@ -42,8 +42,9 @@ frame centre ``((W-1)/2, (H-1)/2)``, forward model ``p_d = p_u (1 + k1 r_u² + k
 * ``interpolation``: ``"nearest"``, ``"linear"`` (bilinear) or ``"cubic"`` (Keys, a = -0.75, the
   kernel of OpenCV's ``INTER_CUBIC``).
 * ``backend``: ``"gl"`` (the shaders, through :class:`Remapper` on the thread's EGL context),
-  ``"cpu"`` (:meth:`glradial.Lens.maps` converted to OpenCV's fixed-point maps, cached, then
-  ``cv2.remap``), ``"auto"``: ``"cpu"`` when the GL renderer is a software rasteriser (Mesa llvmpipe,
+  ``"cpu"`` (:meth:`glradial.Lens.maps`, cached, then ``cv2.remap``: integer frames from OpenCV's
+  fixed-point maps, positions rounded to 1/32 px; float frames with ``"linear"`` from the float32
+  maps themselves, exact bilinear at the float32 position), ``"auto"``: ``"cpu"`` when the GL renderer is a software rasteriser (Mesa llvmpipe,
   softpipe, ...), when no EGL context can be made, or when the frame exceeds the GL texture limit;
   ``"gl"`` otherwise. A CPU round trip through llvmpipe is slower than ``cv2.remap`` on the same cores.
 """
@@ -55,7 +56,6 @@ import math
 import numbers
 import os
 import threading
-from collections import OrderedDict
 from typing import Sequence
 
 import cv2
@@ -567,42 +567,37 @@ class Remapper:
 
 
 # -- CPU backend ----------------------------------------------------------------------------------
-_map_cache: "OrderedDict[tuple, tuple[np.ndarray, np.ndarray, np.ndarray]]" = OrderedDict()
-_map_lock = threading.Lock()
-
-
 def cpu_maps(
     lens: Lens, size: tuple[int, int], direction: str, scale: float, inverse: str, nearest: bool,
     plane: Plane | None = None, *, float_maps: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Maps for ``cv2.remap`` of :meth:`Lens.maps` and the flat indices of the output pixels with
-    no source (outside the input's area, or no inverse), cached (LRU of :data:`CPU_MAP_CACHE_SIZE`)
-    by lens, size, direction, scale, inverse, nearest, ``plane`` (a
+    no source (outside the input's area, or no inverse), cached (``functools.lru_cache`` of
+    :data:`CPU_MAP_CACHE_SIZE` entries) by lens, size, direction, scale, inverse, nearest, ``plane`` (a
     :class:`~glradial.lens.lens.Plane` of the ``size`` frame, e.g. a chroma plane: its maps, in its
     own pixels; a sample has no source when its source lies outside the frame's area) and
     ``float_maps``. The maps are OpenCV's fixed-point ``CV_16SC2`` + ``CV_16UC1`` (positions
     rounded to 1/32 px, 6 bytes a sample), or with ``float_maps`` the float32 maps themselves
-    (x, y; 8 bytes a sample): OpenCV 5 then interpolates a single-channel plane bilinearly at the
-    float32 position, about twice as fast as from fixed-point maps, but it is slower for
-    multi-channel images (docs/BENCH.md, "Float maps for the planes")."""
-    key = (lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, size, direction, scale,
-           inverse if direction == "distort" else "", nearest, plane, bool(float_maps))
-    with _map_lock:
-        maps = _map_cache.get(key)
-        if maps is not None:
-            _map_cache.move_to_end(key)
-            return maps
-    map_x, map_y = lens.maps(size, direction, inverse=inverse, scale=scale, plane=plane)
+    (x, y; 8 bytes a sample): OpenCV 5 then interpolates bilinearly at the float32 position (exact
+    bilinear), about twice as fast as from fixed-point maps for a single-channel plane, but slower
+    for multi-channel integer images (docs/BENCH.md, "Float maps for the planes"). The arrays are
+    shared between callers: read them, never write them."""
+    return _cached_maps(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, tuple(size), direction, scale,
+                        inverse if direction == "distort" else "", bool(nearest), plane, bool(float_maps))
+
+
+@functools.lru_cache(maxsize=CPU_MAP_CACHE_SIZE)
+def _cached_maps(k1: float, k2: float, cx: float, cy: float, pixel_aspect: float, size: tuple[int, int], direction: str,
+                 scale: float, inverse: str, nearest: bool, plane: Plane | None,
+                 float_maps: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`cpu_maps` of the lens ``(k1, k2, cx, cy, pixel_aspect)``, computed once per key."""
+    lens = Lens(k1, k2, cx, cy, pixel_aspect)
+    map_x, map_y = lens.maps(size, direction, inverse=inverse or "exact", scale=scale, plane=plane)
     if float_maps:
         map1, map2 = map_x, map_y
     else:
         map1, map2 = cv2.convertMaps(map_x, map_y, cv2.CV_16SC2, nninterpolation=nearest)
-    maps = (map1, map2, _no_source(map_x, map_y, size, plane or Plane.full(size), direction))
-    with _map_lock:
-        _map_cache[key] = maps
-        while len(_map_cache) > CPU_MAP_CACHE_SIZE:
-            _map_cache.popitem(last=False)
-    return maps
+    return map1, map2, _no_source(map_x, map_y, size, plane or Plane.full(size), direction)
 
 
 #: margin (plane pixels) by which the border samples' sources must lie inside the frame's area for
@@ -641,7 +636,11 @@ def _remap_cpu(frame: np.ndarray, lens: Lens, direction: str, fit: str, interpol
     if max(width, height) > CPU_MAX_SIDE:
         raise ValueError(f"frame {width}×{height} exceeds cv2.remap's limit of {CPU_MAX_SIDE} pixels per side")
     scale = checked_scale(lens, (width, height), direction, fit)
-    map1, map2, outside = cpu_maps(lens, (width, height), direction, scale, inverse, interpolation == "nearest")
+    # float frames (float32 and float64: computed in float32, OpenEXR HALF/FLOAT read as float32) are
+    # interpolated bilinearly at the exact float32 positions; integer frames from fixed-point maps
+    exact = interpolation == "linear" and frame.dtype.kind == "f"
+    map1, map2, outside = cpu_maps(lens, (width, height), direction, scale, inverse, interpolation == "nearest",
+                                   float_maps=exact)
     result = cv2.remap(frame, map1, map2, CV_INTERPOLATION[interpolation], borderMode=cv2.BORDER_REPLICATE)
     result = result.reshape(frame.shape)
     if outside.size:
