@@ -93,9 +93,10 @@ def test_correct_matches_cv2_undistort(ctx, photos, k, dtype, channels, backend)
         reference = cv2.undistort(image, camera(SIZE), np.array([k[0], k[1], 0.0, 0.0])).reshape(image.shape)
         errors = level_errors(result, reference, dtype, mask)
         assert errors.max() <= 5.0, (name, errors.max())
-        if backend == "cpu":
+        if backend == "cpu" and dtype != np.float32:
+            # integer frames: the same 1/32-px fixed-point maps as cv2.undistort, so nearly identical
             assert errors.mean() <= 0.01, (name, errors.mean())
-        else:
+        else:  # exact float positions (the shader; float frames on the CPU: tests/test_float_maps.py)
             assert errors.mean() <= 0.25, (name, errors.mean())
             assert np.percentile(errors, 99) <= 2.5, (name, np.percentile(errors, 99))
 

@@ -275,3 +275,23 @@ def test_command_names_an_unknown_image_extension(tmp_path, capsys, name):
     suffix = repr(Path(name).suffix or "(none)")
     assert f"unknown image extension {suffix}; use .exr, .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
     assert "video" not in err and list(tmp_path.iterdir()) == []
+
+
+def test_the_panorama_cache_key_follows_the_shader_source(tmp_path, monkeypatch):
+    """A changed stadium shader (here an included file) names another cache file, so a panorama
+    rendered by the old shader is never served; the same sources name the same file."""
+    import shutil
+
+    from glradial.gl import shaderlib
+    from glradial.synthesis.stadium import stadium_cache_path
+
+    before = stadium_cache_path(3, (64, 32), tmp_path)
+    copy = tmp_path / "shaders"
+    shutil.copytree(shaderlib.shader_dir(), copy)
+    monkeypatch.setattr(shaderlib, "shader_dir", lambda: copy)
+    assert stadium_cache_path(3, (64, 32), tmp_path) == before
+    noise = copy / "stadium_noise.glsl"
+    noise.write_text(noise.read_text() + "\n// a changed shader\n")
+    after = stadium_cache_path(3, (64, 32), tmp_path)
+    assert after != before and after.parent == before.parent and after.name.startswith("stadium_3_64x32_")
+    assert stadium_cache_path(4, (64, 32), tmp_path) != after and stadium_cache_path(3, (64, 64), tmp_path) != after

@@ -16,6 +16,7 @@ train / val / test is ``seed % 10`` (0-7 / 8 / 9), see :func:`stadium_split` and
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from pathlib import Path
@@ -25,7 +26,8 @@ import moderngl
 import numpy as np
 
 from ..gl.egl import GLOwner, check_gl_error, max_texture_size, release_objects, thread_context, thread_resource
-from ..gl.shaderlib import build_program
+from ..gl.shaderlib import build_program, preprocess
+from . import stadium_style
 from .stadium_style import (
     HALF_LENGTH,
     HALF_WIDTH,
@@ -43,6 +45,7 @@ __all__ = [
     "stadium_panorama",
     "stadium_panorama_cached",
     "stadium_cache_path",
+    "stadium_code_digest",
     "sample_style",
     "stadium_split",
     "split_seeds",
@@ -356,17 +359,35 @@ def stadium_panorama(seed: int, size: tuple[int, int] = (8192, 4096), **style: A
     return thread_resource("stadium_renderer", StadiumRenderer).render(st, size)
 
 
+#: the shader files a panorama is drawn with (both passes; their includes are followed)
+STADIUM_SHADERS = ("fullscreen.vert", "stadium.frag")
+
+
+def stadium_code_digest() -> str:
+    """12 hex digits of SHA-256 over what a panorama's pixels depend on besides its seed and size:
+    the stadium shaders with their includes expanded (:data:`STADIUM_SHADERS`) and the Python source
+    that turns a seed into the shaders' uniforms (``stadium_style.py``, this module). Part of
+    :func:`stadium_cache_path`, so a changed shader or style never serves a stale panorama."""
+    digest = hashlib.sha256()
+    for name in STADIUM_SHADERS:
+        digest.update(preprocess(name).text.encode("utf-8"))
+    for source in (stadium_style.__file__, __file__):
+        digest.update(Path(source).read_bytes())
+    return digest.hexdigest()[:12]
+
+
 def stadium_cache_path(seed: int, size: tuple[int, int], cache_dir: str | os.PathLike) -> Path:
-    """Where :func:`stadium_panorama_cached` keeps the panorama of ``seed`` at ``size = (W, H)``."""
+    """Where :func:`stadium_panorama_cached` keeps the panorama of ``seed`` at ``size = (W, H)``:
+    ``<cache_dir>/stadium_<seed>_<W>x<H>_<code>.npy``, ``<code>`` the :func:`stadium_code_digest`."""
     width, height = _parse_size(size)
-    return Path(cache_dir) / f"stadium_{seed}_{width}x{height}.npy"
+    return Path(cache_dir) / f"stadium_{seed}_{width}x{height}_{stadium_code_digest()}.npy"
 
 
 def stadium_panorama_cached(seed: int, size: tuple[int, int], cache_dir: str | os.PathLike | None) -> np.ndarray:
     """:func:`stadium_panorama` of ``seed`` at ``size = (W, H)`` (default style), rendered once and
-    kept as ``<cache_dir>/stadium_<seed>_<W>x<H>.npy`` (written atomically); ``cache_dir=None``
-    renders without caching. The cache is keyed by seed and size only: clear it when the stadium
-    shader changes."""
+    kept at :func:`stadium_cache_path` (written atomically); ``cache_dir=None`` renders without
+    caching. The file's name holds the shaders' and the style code's digest: after a change of
+    either, the panorama is rendered again (older files are left for the user to delete)."""
     width, height = _parse_size(size)
     path = stadium_cache_path(seed, size, cache_dir) if cache_dir is not None else None
     if path is not None and path.exists():
