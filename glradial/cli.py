@@ -16,6 +16,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import logging
 import os
 import re
 import signal
@@ -26,7 +27,7 @@ from typing import Sequence
 from . import __version__
 from .commands import CliError, UsageError
 
-__all__ = ["main", "build_parser", "COMMANDS"]
+__all__ = ["main", "build_parser", "COMMANDS", "messages_to_stderr"]
 
 #: subcommands in the order ``glradial --help`` lists them
 COMMANDS = ("correct", "distort", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
@@ -103,6 +104,36 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _MessageFormatter(logging.Formatter):
+    """A library message as the command line shows it: progress (INFO) as it is, a warning or an
+    error prefixed ``glradial: warning:`` / ``glradial: error:``."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        text = record.getMessage()
+        return text if record.levelno < logging.WARNING else f"{PROG}: {record.levelname.lower()}: {text}"
+
+
+@contextlib.contextmanager
+def messages_to_stderr(level: int = logging.INFO):
+    """While the block runs, glradial's log messages (the ``glradial`` logger and its children: an
+    evaluation's progress, a video's warnings) at ``level`` and above go to ``sys.stderr`` as the
+    command line shows them (:class:`_MessageFormatter`); also for the training scripts in ``net/``.
+    The library itself only logs: an application that embeds it configures ``logging`` its own way."""
+    logger = logging.getLogger("glradial")
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(_MessageFormatter())
+    before = logger.level
+    logger.addHandler(handler)
+    if logger.getEffectiveLevel() > level:
+        logger.setLevel(level)
+    try:
+        yield
+    finally:
+        handler.flush()
+        logger.removeHandler(handler)
+        logger.setLevel(before)
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM or SIGHUP, raised in the main thread so that everything unwinds as on Ctrl-C."""
 
@@ -142,7 +173,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     debug = bool(os.environ.get("GLRADIAL_DEBUG"))
     try:
-        with _signals_unwind():
+        with _signals_unwind(), messages_to_stderr():
             return int(args.func(args) or 0)
     except Terminated as stop:
         sys.stderr.write(f"\n{PROG}: stopped by {signal.Signals(stop.signum).name}\n")

@@ -76,7 +76,10 @@ def test_evaluate_on_the_validation_split_uses_only_val_stadiums(tmp_path, capsy
     report = (out / "results.md").read_text()
     assert "--split val" in report and "No out-of-domain figure" in report
     assert "no field panorama given" in capsys.readouterr().err
-    assert {p.name for p in (tmp_path / "cache").iterdir()} == {f"stadium_{s}_512x256.npy" for s in split_seeds("val", 2)}
+    from glradial.synthesis.stadium import stadium_cache_path
+
+    cache = tmp_path / "cache"
+    assert {p.name for p in cache.iterdir()} == {stadium_cache_path(s, (512, 256), cache).name for s in split_seeds("val", 2)}
 
 
 def test_evaluate_out_of_domain_panorama_is_an_argument(tmp_path, capsys):
@@ -132,13 +135,22 @@ def test_lens_mean_follows_the_sampling_range(k1_range):
     assert lens_mean(k1_range)[1] == pytest.approx(0.019 * (a + b) / 2 + 0.805 * (((a + b) / 2) ** 2 + (b - a) ** 2 / 12), rel=1e-12)
 
 
-def test_plots_without_matplotlib_say_so(tmp_path, monkeypatch, capsys):
+def test_plots_without_matplotlib_say_so(tmp_path, monkeypatch, capsys, caplog):
+    """The library logs a warning (it prints nothing); the command line shows it on stderr."""
+    import logging
     import sys
 
+    from glradial.cli import messages_to_stderr
     from glradial.evaluation.evaluation import plots
 
     labels = np.array([[-0.2, 0.03], [0.1, 0.01]])
     monkeypatch.setitem(sys.modules, "matplotlib", None)  # import matplotlib now raises ImportError
-    assert plots(tmp_path, labels, labels, None) == []
-    assert "matplotlib is not installed" in capsys.readouterr().err
+    with caplog.at_level(logging.WARNING, logger="glradial"):
+        assert plots(tmp_path, labels, labels, None) == []
+    assert [(r.name, r.levelno) for r in caplog.records] == [("glradial.evaluation.evaluation", logging.WARNING)]
+    assert "matplotlib is not installed" in caplog.records[0].getMessage()
+    assert capsys.readouterr().err == ""
+    with messages_to_stderr():
+        plots(tmp_path, labels, labels, None)
+    assert capsys.readouterr().err == "glradial: warning: matplotlib is not installed: no plots (pip install matplotlib)\n"
     assert list(tmp_path.iterdir()) == []

@@ -33,8 +33,8 @@ k2_hat)`` against labels ``y``:
 from __future__ import annotations
 
 import json
+import logging
 import os
-import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,6 +44,9 @@ import numpy as np
 
 from ..lens.metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px, median_interval
 from ..synthesis.crops import PAPER_RANGES
+
+#: progress of an evaluation (INFO) and what it leaves out (WARNING); ``glradial evaluate`` shows both on stderr
+logger = logging.getLogger(__name__)
 
 __all__ = [
     "TRAINING_MEAN",
@@ -193,10 +196,6 @@ class EvaluationSettings:
             raise FileNotFoundError(f"field panorama {str(self.field_panorama)!r} does not exist")
 
 
-def _say(message: str) -> None:
-    print(message, file=sys.stderr, flush=True)
-
-
 def render_test_crops(settings: EvaluationSettings, input_size: tuple[int, int]) -> tuple[np.ndarray, list, list[int]]:
     """The held-out crops :func:`evaluate` scores: ``settings.n`` crops of the ``settings.split``
     stadiums, rendered at twice ``input_size`` (W, H; area-resized by the predictor). Returns uint8
@@ -211,9 +210,9 @@ def render_test_crops(settings: EvaluationSettings, input_size: tuple[int, int])
     seeds = split_seeds(settings.split, settings.panoramas)
     panoramas = []
     for i, seed in enumerate(seeds):
-        _say(f"stadium {i + 1}/{len(seeds)} (seed {seed}, {settings.split} split)")
+        logger.info(f"stadium {i + 1}/{len(seeds)} (seed {seed}, {settings.split} split)")
         panoramas.append(stadium_panorama_cached(seed, settings.panorama_size, settings.cache_dir))
-    _say(f"rendering {settings.n} crops at {frame_size[0]}x{frame_size[1]}")
+    logger.info(f"rendering {settings.n} crops at {frame_size[0]}x{frame_size[1]}")
     frames, params = render_crop_set(panoramas, settings.n, settings.seed, size=PAPER_SIZE, out_size=frame_size)
     return frames, params, seeds
 
@@ -238,7 +237,7 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
     labels = crop_labels(params)
     frame_size = (frames.shape[2], frames.shape[1])
     t_render = time.monotonic() - t0
-    _say(f"predicting {len(frames)} crops")
+    logger.info(f"predicting {len(frames)} crops")
     t1 = time.monotonic()
     pred = predictor(frames)
     t_pred = time.monotonic() - t1
@@ -253,10 +252,10 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
     }
     ood = None
     if field is None:
-        _say("no out-of-domain figure: " + ("no field panorama given (--field-panorama)"
+        logger.warning("no out-of-domain figure: " + ("no field panorama given (--field-panorama)"
                                             if settings.field_panorama is None else "--ood-n is 0"))
     else:
-        _say(f"out of domain: {settings.ood_n} crops of {settings.field_panorama}")
+        logger.info(f"out of domain: {settings.ood_n} crops of {settings.field_panorama}")
         ood_frames, ood_params = render_crop_set([field], settings.ood_n, settings.seed + 1, size=PAPER_SIZE,
                                                  out_size=frame_size)
         ood_labels = crop_labels(ood_params)
@@ -332,14 +331,14 @@ def report_markdown(result: dict, settings: EvaluationSettings, input_size: tupl
 
 def plots(out: Path, pred: np.ndarray, labels: np.ndarray, ood: tuple[np.ndarray, np.ndarray] | None) -> list[str]:
     """Error distribution (A, B, baseline), predicted vs true k1/k2; returns the PNG names written
-    (none, with a message on stderr, when matplotlib is not installed)."""
+    (none, with a warning logged, when matplotlib is not installed)."""
     try:
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        _say("matplotlib is not installed: no plots (pip install matplotlib)")
+        logger.warning("matplotlib is not installed: no plots (pip install matplotlib)")
         return []
     from ..media.atomic import atomic_path
 

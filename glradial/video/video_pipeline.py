@@ -29,8 +29,8 @@ RGB corrector, planes of the source's own samples on the YUV path; the estimator
 from __future__ import annotations
 
 import json
+import logging
 import os
-import sys
 from dataclasses import replace
 from fractions import Fraction
 from typing import Callable
@@ -56,6 +56,10 @@ from .pipelined import Pipelined
 from .shot_track import ESTIMATE_WIDTH, EVERY, track_shots
 
 __all__ = ["LensTrack", "track_video", "correct_video", "correction_space", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
+
+#: what the pipeline notes without failing (a header's frame count the stream does not hold);
+#: ``glradial`` shows its warnings on stderr
+logger = logging.getLogger(__name__)
 
 #: estimator: RGB uint8 frame -> (k1, k2) or a Lens (a LensEstimate carries uncertainty_px and method)
 EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
@@ -265,10 +269,8 @@ def correct_video(
             writer.abort()
             raise
     if 0 < info.frame_count != writer.frames_written:
-        sys.stderr.write(
-            f"glradial: warning: {source} reports {info.frame_count} frames in its header; "
-            f"{writer.frames_written} could be decoded and were written\n"
-        )
+        logger.warning("%s reports %d frames in its header; %d could be decoded and were written",
+                       source, info.frame_count, writer.frames_written)
     return writer.frames_written
 
 
