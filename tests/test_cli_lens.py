@@ -138,6 +138,9 @@ def test_stmap_with_principal_point(tmp_path):
         (["--lens", "{lens}"], {"camera_matrix": K_OFF, "dist_coeffs": DIST, "size": [1280, 720], "rms": 0.3},
          "OpenCV calibration\\) has unknown key\\(s\\) 'rms'; accepted: camera_matrix, dist_coeffs, size", 1),
         (["--lens", "{lens}"], {"glradial": [-0.2, 0.0], "k3": 0.1}, "convert --json' output\\) has unknown key\\(s\\) 'k3'", 1),
+        # the lens_file schema: a value of the wrong type is named with its field
+        (["--lens", "{lens}"], {"k1": "-0.2"}, "\\(glradial's numbers\\): k1: '-0.2' is not of type 'number'", 1),
+        (["--lens", "{lens}"], {"glradial": [-0.2]}, "output\\): glradial: \\[-0.2\\] is too short", 1),
         # the CLI has no approximate=True: say what to do on the command line
         (["--lens", "{lens}"], {"camera_matrix": K_OFF, "dist_coeffs": [-0.2, 0, 0, 0, 0.02], "size": [1280, 720]},
          "k3=0.02. Set p1, p2, k3 ... to 0 in the file .* 'glradial convert --from opencv .*--approximate", 1),

@@ -21,7 +21,7 @@ import pytest
 import glradial
 from glradial.estimation.estimator import Estimator, default_model_path, view_box, view_to_frame
 from glradial.estimation.lens_estimate import LensEstimate, judge
-from glradial.estimation.trust import REASONS, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
+from glradial.estimation.trust import REASONS, TRUST_FILE, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
 from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
 from glradial.evaluation.real_eval import applied_lenses, self_consistent_map, self_consistent_truth
 from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px, radial_map
@@ -440,5 +440,24 @@ def test_the_shipped_calibration_loads_and_bad_files_say_so(tmp_path):
     assert trust == shipped_trust() and trust.q_lines > 0 and trust.q_net > 0
     bad = tmp_path / "trust.json"
     bad.write_text(json.dumps({"q_lines": 1.0}))
-    with pytest.raises(ValueError, match="incomplete"):
+    with pytest.raises(ValueError, match="trust calibration .*trust.json: 'q_net' is a required property"):
         load_trust(bad)
+    # checked against the schema: a field of the wrong type or a misspelt key is named
+    good = json.loads(TRUST_FILE.read_text())
+    bad.write_text(json.dumps(dict(good, q_net="34.2")))
+    with pytest.raises(ValueError, match="trust.json: q_net: '34.2' is not of type 'number'"):
+        load_trust(bad)
+    bad.write_text(json.dumps(dict(good, q_lnes=1.0)))
+    with pytest.raises(ValueError, match="unknown key\\(s\\) 'q_lnes'; accepted: blank_std"):
+        load_trust(bad)
+    bad.write_text("{not json")
+    with pytest.raises(ValueError, match="unreadable"):
+        load_trust(bad)
+    # the schema lists exactly TrustModel's fields (one list, checked here), the defaulted ones optional
+    from dataclasses import MISSING, fields
+
+    from glradial.schemas import schema
+
+    trust_schema = schema("trust")
+    assert set(trust_schema["properties"]) == {f.name for f in fields(TrustModel)}
+    assert set(trust_schema["required"]) == {f.name for f in fields(TrustModel) if f.default is MISSING}

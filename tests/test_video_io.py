@@ -248,8 +248,8 @@ def test_lens_track_out_and_back_in(tmp_path, monkeypatch, capsys):
         ("frame,k1,k2\n0,-0.1,0\n1,abc,0\n", "line 3: k1 'abc' is not a number"),
         ("frame,k1,k2\n0,-0.1,0\n2,-0.1,0\n", "line 3: frame '2', expected 1"),
         ("frame,k1,k2\n0,-3,0\n", "line 2: lens k1=-3"),
-        ("frame,k1,k2,uncertainty_px\n0,-0.1,0,-1\n", "line 2: uncertainty_px must be >= 0"),
-        ("frame,k1,k2,applied\n0,-0.1,0,2\n", "line 2: applied must be 0 or 1, got '2'"),
+        ("frame,k1,k2,uncertainty_px\n0,-0.1,0,-1\n", "line 2: uncertainty_px: -1.0 is less than the minimum of 0"),
+        ("frame,k1,k2,applied\n0,-0.1,0,2\n", "line 2: applied: 2.0 is not one of [0, 1]"),
         ("frame,k1,k2\n" + "".join(f"{i},-0.1,0\n" for i in range(30)), "the lens track has 30 frames but"),
         ("frame,k1,k2\n" + "".join(f"{i},-0.1,0\n" for i in range(20)), "the lens track has 20 frames; the video has more"),
     ]

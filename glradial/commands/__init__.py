@@ -109,14 +109,9 @@ LENS_FILE_HELP = (
     "(size: the calibration's frame size in pixels; default the frame's own); any other key is refused"
 )
 
-#: keys of each lens-file format (any other key is an error: a misspelt "k_2" must not become k2 = 0)
-LENS_KEYS = {"k1", "k2", "cx", "cy", "pixel_aspect"}
-#: what a line of 'glradial estimate --json' adds to the lens (ignored)
-ESTIMATE_KEYS = {"path", "method", "uncertainty_px", "chains", "doubtful", "reason", "source"}
-#: 'glradial convert --json' (its "glradial" pair is the lens; the rest describes the conversion)
-CONVERT_KEYS = {"from", "to", "size", "glradial", "k1", "k2", "camera_matrix", "dist_coeffs"}
-#: an OpenCV calibration
-OPENCV_KEYS = {"camera_matrix", "dist_coeffs", "size"}
+#: the number keys of glradial's own lens format (the rest of ``schemas/lens_file`` ``numbers``
+#: describes a line of 'glradial estimate --json', ignored here)
+LENS_KEYS = ("k1", "k2", "cx", "cy", "pixel_aspect")
 
 
 def add_lens_options(group: argparse._ArgumentGroup, *, k1_required: bool = False) -> None:
@@ -154,8 +149,10 @@ def lens_from_args(args: argparse.Namespace, size: tuple[int, int] | None = None
 
 
 def read_lens_file(path: str, size: tuple[int, int] | None = None):
-    """A :class:`glradial.Lens` from a JSON file (formats: :data:`LENS_FILE_HELP`)."""
+    """A :class:`glradial.Lens` from a JSON file (formats: :data:`LENS_FILE_HELP`; checked against
+    the ``lens_file`` schema, :mod:`glradial.schemas`)."""
     from ..lens.lens import Lens
+    from ..schemas import validate
 
     source = Path(path)
     if not source.is_file():
@@ -167,15 +164,12 @@ def read_lens_file(path: str, size: tuple[int, int] | None = None):
     if not isinstance(document, dict):
         raise ValueError(f"lens file {str(source)!r} must hold a JSON object, got {type(document).__name__}")
     if "glradial" in document:  # 'glradial convert --json': its k1, k2 are in the --to convention
-        _check_keys(source, document, CONVERT_KEYS, "'glradial convert --json' output")
-        pair = document["glradial"]
-        if not isinstance(pair, list) or len(pair) != 2:
-            raise ValueError(f"lens file {str(source)!r}: \"glradial\" must be [k1, k2], got {pair!r}")
-        return Lens(*pair)
+        validate(document, "lens_file", f"lens file {str(source)!r} ('glradial convert --json' output)", "convert")
+        return Lens(*document["glradial"])
     if "camera_matrix" in document or "dist_coeffs" in document:
-        _check_keys(source, document, OPENCV_KEYS, "an OpenCV calibration")
         if "camera_matrix" not in document or "dist_coeffs" not in document:
             raise ValueError(f"lens file {str(source)!r}: an OpenCV calibration needs both camera_matrix and dist_coeffs")
+        validate(document, "lens_file", f"lens file {str(source)!r} (an OpenCV calibration)", "opencv")
         calibrated = document.get("size", size)
         if calibrated is None:
             raise ValueError(f"lens file {str(source)!r}: an OpenCV calibration needs \"size\": [W, H] (pixels)")
@@ -187,18 +181,8 @@ def read_lens_file(path: str, size: tuple[int, int] | None = None):
         raise ValueError(
             f"lens file {str(source)!r} has neither \"k1\" nor an OpenCV \"camera_matrix\": keys {sorted(document)}"
         )
-    _check_keys(source, document, LENS_KEYS | ESTIMATE_KEYS, "glradial's numbers")
-    return Lens(**{name: document[name] for name in sorted(LENS_KEYS) if name in document})
-
-
-def _check_keys(source: Path, document: dict, known: set[str], kind: str) -> None:
-    """``ValueError`` naming the keys of ``document`` outside ``known`` and the accepted ones."""
-    unknown = sorted(set(document) - known)
-    if unknown:
-        raise ValueError(
-            f"lens file {str(source)!r} ({kind}) has unknown key(s) {', '.join(map(repr, unknown))}; "
-            f"accepted: {', '.join(sorted(known))}"
-        )
+    validate(document, "lens_file", f"lens file {str(source)!r} (glradial's numbers)", "numbers")
+    return Lens(**{name: document[name] for name in LENS_KEYS if name in document})
 
 
 #: the Python API's advice in :meth:`glradial.Lens.from_opencv`'s error, which the CLI has no option for

@@ -248,13 +248,17 @@ class TrustModel:
 
 
 def load_trust(path: str | Path | None = None) -> TrustModel:
-    """The calibrated :class:`TrustModel` (default: the shipped :data:`TRUST_FILE`)."""
+    """The calibrated :class:`TrustModel` (default: the shipped :data:`TRUST_FILE`), checked against
+    the ``trust`` schema (:mod:`glradial.schemas`): ``ValueError`` naming the file and the field."""
+    from ..schemas import validate
+
     path = Path(path) if path is not None else TRUST_FILE
     try:
         data = json.loads(path.read_text())
-        return TrustModel(**{f.name: data[f.name] for f in fields(TrustModel) if f.name in data})
-    except (OSError, ValueError, TypeError, KeyError) as err:
-        raise ValueError(f"trust calibration {path} is unreadable or incomplete: {err}") from None
+    except (OSError, ValueError) as err:
+        raise ValueError(f"trust calibration {path} is unreadable: {err}") from None
+    validate(data, "trust", f"trust calibration {path}")  # the fields of TrustModel, typed
+    return TrustModel(**data)
 
 
 @lru_cache(maxsize=1)

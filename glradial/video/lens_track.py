@@ -40,6 +40,7 @@ does not fold over on the frame, non-negative uncertainties); the first bad row 
 from __future__ import annotations
 
 import csv
+import functools
 import io
 import json
 import math
@@ -53,6 +54,7 @@ import numpy as np
 from ..errors import LensTrackError
 from ..lens.lens import Lens
 from ..media.atomic import atomic_write_text
+from ..schemas import schema, validate
 
 __all__ = ["DOUBTFUL_PX", "LensTrack", "load_lens_track"]
 
@@ -231,22 +233,53 @@ def _number(value: float) -> float | None:
 
 
 def _rows(path: Path) -> list[tuple[int, dict]]:
-    """(line number, row) pairs of a CSV or JSON track."""
+    """(line number, row) pairs of a CSV or JSON track; a JSON track is checked against the
+    ``lens_track`` schema as a whole (:mod:`glradial.schemas`)."""
     if path.suffix.lower() == ".json":
         try:
             document = json.loads(path.read_text())
-            frames = document["frames"]
-            if not isinstance(frames, list):
-                raise TypeError
-        except (ValueError, KeyError, TypeError):
-            raise LensTrackError(f"lens track {str(path)!r}: not a JSON document with a 'frames' list") from None
-        return [(i + 1, row if isinstance(row, dict) else {}) for i, row in enumerate(frames)]
+        except ValueError:
+            raise LensTrackError(f"lens track {str(path)!r}: not a JSON document") from None
+        validate(document, "lens_track", f"lens track {str(path)!r}", error_type=LensTrackError)
+        return [(i + 1, row) for i, row in enumerate(document["frames"])]
     with open(path, newline="") as handle:
         reader = csv.DictReader(handle)
         missing = {"frame", "k1", "k2"} - set(reader.fieldnames or [])
         if missing:
             raise LensTrackError(f"lens track {str(path)!r} line 1: the header lacks the column(s) {', '.join(sorted(missing))}")
         return [(reader.line_num, row) for row in reader]
+
+
+@functools.lru_cache(maxsize=1)
+def _number_columns() -> frozenset[str]:
+    """The columns of a row (``lens_track`` schema, ``$defs/row``) that hold numbers."""
+    def numeric(spec: dict) -> bool:
+        kinds = spec.get("type", [])
+        return "enum" in spec or bool({"number", "integer"} & set([kinds] if isinstance(kinds, str) else kinds))
+
+    return frozenset(name for name, spec in schema("lens_track")["$defs"]["row"]["properties"].items() if numeric(spec))
+
+
+def _typed_row(row: dict, where: str, checked: bool) -> dict:
+    """The given cells of a row: numbers parsed from a CSV's text (a JSON's kept), empty cells and
+    nulls left out, checked against the schema's row (``LensTrackError`` naming the line and the
+    column; also for a number that is not finite, which a schema cannot say). ``checked``: the row
+    was checked with its document (a JSON track) already."""
+    numbers, typed = _number_columns(), {}
+    for name, value in row.items():
+        if name is None or value is None or (isinstance(value, str) and not value.strip()):
+            continue
+        if name in numbers and isinstance(value, str):
+            try:
+                value = float(value)
+            except ValueError:
+                raise LensTrackError(f"{where}: {name} {value.strip()!r} is not a number") from None
+        if name in numbers and isinstance(value, float) and not math.isfinite(value):
+            raise LensTrackError(f"{where}: {name} must be finite, got {row[name]!r}")
+        typed[name] = value
+    if not checked:
+        validate(typed, "lens_track", where, "row", error_type=LensTrackError)
+    return typed
 
 
 def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, int]) -> LensTrack:
@@ -263,51 +296,22 @@ def load_lens_track(path: str | os.PathLike, rate: Fraction, size: tuple[int, in
     lens, shot, sure = np.empty((n, 2)), np.zeros(n, dtype=np.int64), np.full(n, np.nan)
     geometry = np.tile([0.0, 0.0, 1.0], (n, 1))
     method, applied = [""] * n, np.ones(n, dtype=bool)
-    for index, (line, row) in enumerate(rows):
+    for index, (line, raw) in enumerate(rows):
         where = f"lens track {str(path)!r} line {line}"
-
-        def value(name: str, required: bool = True) -> float | None:
-            text = row.get(name)
-            text = "" if text is None else str(text).strip()
-            if text == "":
-                if required:
-                    raise LensTrackError(f"{where}: {name} is missing")
-                return None
-            try:
-                number = float(text)
-            except ValueError:
-                raise LensTrackError(f"{where}: {name} {text!r} is not a number") from None
-            if not math.isfinite(number):
-                raise LensTrackError(f"{where}: {name} must be finite, got {text!r}")
-            return number
-
-        frame = value("frame")
-        if frame != index:
-            raise LensTrackError(f"{where}: frame {row.get('frame')!r}, expected {index} (one row per frame, in order from 0)")
-        k1, k2 = value("k1"), value("k2")
-        geometry[index] = [value(name, required=False) if row.get(name) not in (None, "") else default
-                           for name, default in (("cx", 0.0), ("cy", 0.0), ("pixel_aspect", 1.0))]
-        flag = value("applied", required=False)
-        if flag not in (None, 0, 1):
-            raise LensTrackError(f"{where}: applied must be 0 or 1, got {row.get('applied')!r}")
-        applied[index] = flag != 0
+        row = _typed_row(raw, where, checked=path.suffix.lower() == ".json")
+        if row["frame"] != index:
+            raise LensTrackError(f"{where}: frame {raw.get('frame')!r}, expected {index} (one row per frame, in order from 0)")
+        geometry[index] = [row.get("cx", 0.0), row.get("cy", 0.0), row.get("pixel_aspect", 1.0)]
+        applied[index] = row.get("applied", 1) != 0
         try:
-            frame_lens = Lens(k1, k2, *geometry[index])
+            frame_lens = Lens(row["k1"], row["k2"], *geometry[index])
             if applied[index]:
                 frame_lens.check_frame(size)
         except ValueError as err:
             raise LensTrackError(f"{where}: {err}") from None
-        lens[index] = (k1, k2)
-        shot_value = value("shot", required=False)
-        if shot_value is not None:
-            if shot_value != int(shot_value) or shot_value < 0:
-                raise LensTrackError(f"{where}: shot must be a non-negative integer, got {row.get('shot')!r}")
-            shot[index] = int(shot_value)
-        uncertainty = value("uncertainty_px", required=False)
-        if uncertainty is not None:
-            if uncertainty < 0:
-                raise LensTrackError(f"{where}: uncertainty_px must be >= 0, got {uncertainty}")
-            sure[index] = uncertainty
+        lens[index] = (row["k1"], row["k2"])
+        shot[index] = int(row.get("shot", 0))
+        sure[index] = row.get("uncertainty_px", np.nan)
         method[index] = str(row.get("method") or "")
     return LensTrack(rate, size, shot, lens, np.full((n, 2), np.nan), np.full(n, np.nan),
                      uncertainty_px=sure, method=method, applied=applied, geometry=geometry)
