@@ -75,7 +75,9 @@ def test_evaluate_on_the_validation_split_uses_only_val_stadiums(tmp_path, capsy
     assert "out_of_domain" not in result
     report = (out / "results.md").read_text()
     assert "--split val" in report and "No out-of-domain figure" in report
-    assert "no field panorama given" in capsys.readouterr().err
+    printed = capsys.readouterr()
+    assert "no field panorama given" in printed.err  # logged, shown on stderr by the command line
+    assert f"wrote {out / 'metrics.json'}, {out / 'results.md'}" in printed.out  # the summary on stdout
     from glradial.synthesis.stadium import stadium_cache_path
 
     cache = tmp_path / "cache"

@@ -73,7 +73,7 @@ def settings(args: argparse.Namespace, command: str):
 
 def run(args: argparse.Namespace) -> int:
     from ..estimation.estimator import default_model_path
-    from ..evaluation.evaluation import OnnxPredictor, evaluate
+    from ..evaluation.evaluation import OnnxPredictor, evaluate, summary
 
     if args.frames or args.calibrated or args.broadcast:
         from ..evaluation.real_eval import evaluate_folder
@@ -87,5 +87,6 @@ def run(args: argparse.Namespace) -> int:
     model = str(args.model or default_model_path())
     chosen = settings(args, "glradial evaluate")  # checks the options before the model loads
     predictor = OnnxPredictor(model, args.threads)
-    evaluate(predictor, predictor.input_size, args.out, chosen, model)
+    result = evaluate(predictor, predictor.input_size, args.out, chosen, model)
+    print(summary(args.out, result), flush=True)
     return 0

@@ -61,6 +61,7 @@ __all__ = [
     "OnnxPredictor",
     "EvaluationSettings",
     "evaluate",
+    "summary",
     "report_markdown",
     "plots",
 ]
@@ -221,7 +222,8 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
              settings: EvaluationSettings, model_name: str) -> dict:
     """Render the test set, predict, write ``metrics.json``, ``results.md`` and the plots to ``out``
     (all atomically); returns the metrics dict. ``input_size`` (W, H) is the network input:
-    crops are rendered at twice it. Progress goes to stderr."""
+    crops are rendered at twice it. Progress is logged (``logging``, INFO); :func:`summary` is
+    what to print after it."""
     from ..synthesis.crops import crop_labels, load_panorama, render_crop_set
 
     field = None
@@ -269,9 +271,15 @@ def evaluate(predictor: Predictor, input_size: tuple[int, int], out: str | os.Pa
     names = plots(out, pred, labels, ood)
     text = report_markdown(result, settings, input_size, names)
     atomic_write_text(out / "results.md", text)
-    print("\n".join(text.split("\n")[:12]))
-    print(f"wrote {out / 'metrics.json'}, {out / 'results.md'} ({result['seconds']})")
     return result
+
+
+def summary(out: str | os.PathLike, result: dict) -> str:
+    """What a command prints after :func:`evaluate` wrote to ``out``: the head of ``results.md``
+    (the overall figures) and the files written, with the seconds each part took."""
+    out = Path(out)
+    head = "\n".join((out / "results.md").read_text(encoding="utf-8").split("\n")[:12])
+    return f"{head}\nwrote {out / 'metrics.json'}, {out / 'results.md'} ({result['seconds']})"
 
 
 def _number(value: float | None) -> str:
