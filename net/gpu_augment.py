@@ -15,6 +15,8 @@ as :func:`net.augment.augment_pairs` gives them.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import torch
 import torch.nn.functional as F
 
@@ -43,14 +45,8 @@ class DeviceAugment:
         self.config = config
         self.device = torch.device(device)
         self.generator = torch.Generator(self.device).manual_seed(int(seed))
-        low, high = config.motion_length
-        self.size = high if high % 2 else high + 1
-        bank = torch.zeros((high - low + 1, 180, self.size, self.size))
-        for i, length in enumerate(range(low, high + 1)):
-            at = self.size // 2 - length // 2  # OpenCV's anchor (length // 2) on the bank's centre
-            for angle in range(180):
-                bank[i, angle, at : at + length, at : at + length] = torch.from_numpy(motion_kernel(length, angle))
-        self.motion_bank = bank.to(self.device)
+        self.motion_bank = motion_bank(*config.motion_length).to(self.device)
+        self.size = self.motion_bank.shape[-1]
         self.dct = _dct_matrix().to(self.device)
 
     def _uniform(self, count: int, low: float, high: float) -> torch.Tensor:
@@ -99,30 +95,48 @@ class DeviceAugment:
         grey = _round((x * torch.tensor(GREY, device=x.device).view(1, 3, 1, 1)).sum(dim=1, keepdim=True))
         sat = d["sat"].view(-1, 1, 1, 1)
         x = _round(x * sat + grey * (1.0 - sat))
-        x = _where(x, d["blur"], lambda part, rows: _round(self._gaussian(part, d["sigma"][rows])))
-        x = _where(x, d["motion"], lambda part, rows: _round(self._motion(part, d["length"][rows], d["angle"][rows])))
+        x = _where(x, d["blur"], lambda part, rows: _round(gaussian_blur(part, d["sigma"][rows])))
+        x = _where(x, d["motion"], lambda part, rows: _round(self.motion_blur(part, d["length"][rows], d["angle"][rows])))
         x = _where(x, d["noise"], lambda part, rows: _round(part + d["noise_field"] * d["noise_sigma"][rows].view(-1, 1, 1, 1)))
         x = _where(x, d["jpeg"], lambda part, rows: jpeg_artefacts(part, d["quality"][rows], self.dct))
         x = torch.where(d["flip_h"].view(-1, 1, 1, 1), x.flip(3), x)
         return torch.where(d["flip_v"].view(-1, 1, 1, 1), x.flip(2), x)
 
-    def _gaussian(self, x: torch.Tensor, sigma: torch.Tensor) -> torch.Tensor:
-        """Per-image Gaussian blur (OpenCV's 8-bit kernel size, reflect-101 borders)."""
-        half = int(((sigma.max() * 6 + 1).round().item() // 2))
-        sizes = ((sigma * 6 + 1).round().long() | 1) // 2  # each image's own half-width
-        t = torch.arange(-half, half + 1, device=x.device, dtype=x.dtype)
-        kernel = torch.exp(-(t * t) / (2 * sigma.view(-1, 1) ** 2)) * (t.abs() <= sizes.view(-1, 1))
-        kernel = kernel / kernel.sum(dim=1, keepdim=True)
-        return _separable(x, kernel)
-
-    def _motion(self, x: torch.Tensor, length: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
-        """Per-image linear motion blur with the kernel bank (correlation, reflect-101 borders)."""
+    def motion_blur(self, x: torch.Tensor, length: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
+        """Per-image linear motion blur of float ``n × 3 × H × W``: the kernel of
+        :func:`net.augment.motion_kernel` of each image's ``length`` (pixels) and ``angle`` (whole
+        degrees, 0..179), as ``cv2.filter2D`` applies it (correlation, reflect-101 borders), unrounded."""
         kernel = self.motion_bank[length - self.config.motion_length[0], angle]
         n, c, h, w = x.shape
         half = self.size // 2
         padded = F.pad(x.reshape(1, n * c, h, w), (half, half, half, half), mode="reflect")
         weight = kernel.repeat_interleave(c, dim=0).unsqueeze(1)
         return F.conv2d(padded, weight, groups=n * c).reshape(n, c, h, w)
+
+
+@lru_cache(maxsize=4)
+def motion_bank(low: int, high: int) -> torch.Tensor:
+    """``(high - low + 1) × 180 × K × K`` kernels of :func:`net.augment.motion_kernel` for every length
+    ``low..high`` and whole angle 0..179 degrees, each placed so that OpenCV's anchor (``length // 2``)
+    sits on the centre of the odd ``K × K`` (``K`` = ``high``, or ``high + 1`` when even)."""
+    size = high if high % 2 else high + 1
+    bank = torch.zeros((high - low + 1, 180, size, size))
+    for i, length in enumerate(range(low, high + 1)):
+        at = size // 2 - length // 2
+        for angle in range(180):
+            bank[i, angle, at : at + length, at : at + length] = torch.from_numpy(motion_kernel(length, angle))
+    return bank
+
+
+def gaussian_blur(x: torch.Tensor, sigma: torch.Tensor) -> torch.Tensor:
+    """Per-image Gaussian blur of float ``n × C × H × W`` with standard deviations ``sigma`` (``n``,
+    pixels), as ``cv2.GaussianBlur(img, (0, 0), sigma)`` blurs an 8-bit image (kernel size
+    ``round(6 σ + 1)`` made odd, reflect-101 borders), unrounded."""
+    sizes = ((sigma * 6 + 1).round().long() | 1) // 2  # each image's own half-width
+    half = int(sizes.max())
+    t = torch.arange(-half, half + 1, device=x.device, dtype=x.dtype)
+    kernel = torch.exp(-(t * t) / (2 * sigma.view(-1, 1) ** 2)) * (t.abs() <= sizes.view(-1, 1))
+    return _separable(x, kernel / kernel.sum(dim=1, keepdim=True))
 
 
 def _where(x: torch.Tensor, chosen: torch.Tensor, op) -> torch.Tensor:
