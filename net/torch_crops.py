@@ -146,34 +146,45 @@ class TorchCropRenderer:
 
     def render_float(self, params: Sequence[CropParams], which: Sequence[int] | np.ndarray) -> torch.Tensor:
         """As :meth:`render`, as float32 ``N × 3 × h × w`` (channels-last in memory) of whole levels 0..255."""
+        return self.render_table(crop_table(params, self.size), which)
+
+    def render_table(self, table: np.ndarray, which: Sequence[int] | np.ndarray) -> torch.Tensor:
+        """As :meth:`render_float`, from the crops' :func:`crop_table` (made on the host beforehand,
+        e.g. on another thread while the device works)."""
         which = np.asarray(which, np.int64).reshape(-1)
-        if len(which) != len(params):
-            raise ValueError(f"which must give one panorama per crop: {len(which)} for {len(params)} crops")
+        if len(which) != len(table):
+            raise ValueError(f"which must give one panorama per crop: {len(which)} for {len(table)} crops")
         if len(which) and (which.min() < 0 or which.max() >= len(self.pyramids)):
             raise ValueError(f"which must index the {len(self.pyramids)} panoramas, got {which.min()}..{which.max()}")
-        table = torch.from_numpy(crop_table(params, self.size))
-        if self.device.type == "cuda":
-            table = table.pin_memory()
-        table = table.to(self.device, non_blocking=True)
+        indexed = np.concatenate([table, np.arange(len(table), dtype=np.float32)[:, None]], axis=1)
         w, h = self.out_size
         out = torch.empty((len(which), 3, h, w), device=self.device, memory_format=torch.channels_last)
         for pano in np.unique(which):
             rows = np.flatnonzero(which == pano)
-            index = torch.from_numpy(rows).to(self.device)
-            tex, tx, ty, valid = self.footprints(table[index])
-            out[index] = self._sample(self.pyramids[int(pano)], tex, tx, ty) * valid.unsqueeze(1)
+            part = self.upload(indexed[rows])
+            newton = not table[rows, 17].all()  # decided on the host: no wait for the device
+            tex, tx, ty, valid = self.footprints(part[:, :-1], newton)
+            out[part[:, -1].long()] = self._sample(self.pyramids[int(pano)], tex, tx, ty) * valid.unsqueeze(1)
         return out
 
-    def footprints(self, table: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    def upload(self, array: np.ndarray) -> torch.Tensor:
+        """A small host array on the device without waiting for the device's queue (pinned, asynchronous)."""
+        host = torch.from_numpy(np.ascontiguousarray(array))
+        if self.device.type != "cuda":
+            return host
+        return host.pin_memory().to(self.device, non_blocking=True)
+
+    def footprints(self, table: torch.Tensor, newton: bool = True) -> tuple[torch.Tensor, ...]:
         """Texture coordinates ``(u, v)`` of each output pixel centre and the footprint vectors
         ``tx``, ``ty`` (texture units per output pixel), each ``n × h × w × 2``, and the validity
-        ``n × h × w`` (float 0 / 1) of ``n`` crops' table rows."""
+        ``n × h × w`` (float 0 / 1) of ``n`` crops' table rows (``newton``: some of them need the
+        Newton inverse)."""
         w, h = self.out_size
         n = len(table)
         series = table[:, 17:18] > 0.5
         scale = table[:, 18:] @ self._basis  # n x (h w): s(x), the inverse series
         valid = torch.ones_like(scale)
-        if not bool(series.all()):
+        if newton:
             r_u, ok = newton_radius(self._r_d, table, self.newton_steps)
             newton_scale = torch.where(self._r_d > 0, r_u / self._r_d.clamp(min=1e-30), torch.ones_like(r_u))
             scale = torch.where(series, scale, newton_scale)

@@ -154,7 +154,7 @@ def test_gpu_source_is_seeded():
     panoramas = synthetic_panoramas()
 
     def batches(seed: int, augment_seed: int) -> list:
-        source = GpuCropSource(panoramas, batch_size=6, seed=seed, out_size=(64, 36), device="cpu", paired=True,
+        source = GpuCropSource(panoramas, batch_size=8, seed=seed, out_size=(64, 36), device="cpu", paired=True, panoramas_per_batch=2,
                                augment=AugmentConfig(), augment_seed=augment_seed)
         return [source.next_batch() for _ in range(2)]
 
