@@ -1,7 +1,7 @@
 """Training throughput: samples/s of each batch source and of whole training steps, and the GPU's busy share.
 
 Usage: python bench/bench_train_throughput.py [--config net/configs/stage12_multitask.json] [--seconds 6]
-       [--sources gpu,pool] [--amp off|bf16] [--no-channels-last] [--compile] [--tiny]
+       [--sources gpu,pool] [--amp off|bf16] [--no-channels-last] [--compile] [--panoramas N] [--full]
 
 Phases, each ``--seconds`` of wall time after a warm-up, in one process, on the device training uses
 (CUDA when there is one):
@@ -116,6 +116,9 @@ def bench_config(args: argparse.Namespace, cuda: bool) -> TrainConfig:
         heads = {k: v for k, v in cfg.model.items() if k.endswith("_head") or k == "k2_residual"}  # the loss needs them
         cfg.model, cfg.panoramas, cfg.batch_size = {**tiny.model, **heads}, tiny.panoramas, tiny.batch_size
         cfg.pool_min, cfg.pool_capacity, cfg.producer_chunk, cfg.fresh_per_step = 32, 256, 16, 8
+    elif args.panoramas and isinstance(cfg.panoramas.get("seeds"), dict):
+        cfg.panoramas = {**cfg.panoramas, "seeds": {**cfg.panoramas["seeds"], "n": args.panoramas}}
+    cfg.pool_min = min(cfg.pool_min, 4 * cfg.batch_size)  # the pool's steady state, without a long fill
     cfg.amp, cfg.channels_last, cfg.compile = args.amp, args.channels_last, args.compile
     cfg.producers = min(cfg.producers, len(panorama_source(cfg.panoramas, cfg.cache_dir)))
     return cfg
@@ -170,6 +173,7 @@ def main() -> int:
     parser.add_argument("--amp", choices=("off", "bf16"), default="off")
     parser.add_argument("--channels-last", action=argparse.BooleanOptionalAction, default=True)
     parser.add_argument("--compile", action="store_true")
+    parser.add_argument("--panoramas", type=int, help="use only this many of the config's training stadiums (shorter start)")
     parser.add_argument("--full", action="store_true", help="on the CPU too: the config's network and panoramas")
     args = parser.parse_args()
     cuda = torch.cuda.is_available()
