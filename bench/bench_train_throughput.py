@@ -2,6 +2,7 @@
 
 Usage: python bench/bench_train_throughput.py [--config net/configs/stage12_multitask.json] [--seconds 6]
        [--sources gpu,pool] [--amp off|bf16] [--no-channels-last] [--compile] [--panoramas N] [--full]
+       [--sources-only]
 
 Phases, each ``--seconds`` of wall time after a warm-up, in one process, on the device training uses
 (CUDA when there is one):
@@ -124,19 +125,21 @@ def bench_config(args: argparse.Namespace, cuda: bool) -> TrainConfig:
     return cfg
 
 
-def measure_source(run: Run, name: str, shards, meter: BusyMeter, fixed: dict, seconds: float, rng) -> dict:
-    """The source's own rate and the training step's rate when fed by it."""
+def measure_source(run: Run, name: str, shards, meter: BusyMeter, fixed: dict | None, seconds: float, rng) -> dict | None:
+    """The source's own rate and (unless ``fixed`` is ``None``: sources only) the training step's
+    rate when fed by it."""
     run.cfg.source = name
     t0 = time.perf_counter()
     data = batch_source(run, panorama_source(run.cfg.panoramas, run.cfg.cache_dir), shards, rng)
     print(f"  {name} source ready in {time.perf_counter() - t0:.1f} s", flush=True)
     try:
         alone = timed(run, seconds, run.cfg.batch_size, data.next_batch, meter)
-        fed = timed(run, seconds, run.cfg.batch_size, lambda: train_step(run, data, rng, 0.5), meter)
+        fed = timed(run, seconds, run.cfg.batch_size, lambda: train_step(run, data, rng, 0.5), meter) if fixed else None
     finally:
         data.close()
     report(f"source {name}", alone, fixed)
-    report(f"train {name}", fed, fixed)
+    if fed is not None:
+        report(f"train {name}", fed, fixed)
     return fed
 
 
@@ -174,6 +177,7 @@ def main() -> int:
     parser.add_argument("--channels-last", action=argparse.BooleanOptionalAction, default=True)
     parser.add_argument("--compile", action="store_true")
     parser.add_argument("--panoramas", type=int, help="use only this many of the config's training stadiums (shorter start)")
+    parser.add_argument("--sources-only", action="store_true", help="only the sources' own rates (no training steps)")
     parser.add_argument("--full", action="store_true", help="on the CPU too: the config's network and panoramas")
     args = parser.parse_args()
     cuda = torch.cuda.is_available()
@@ -191,9 +195,11 @@ def main() -> int:
         source.inputs()
         shards = rank_shards(source, cfg, 0, 1)
         meter = BusyMeter(run.device)
-        same = FixedBatch(run)
-        fixed = timed(run, args.seconds, cfg.batch_size, lambda: train_step(run, same, np.random.default_rng(0), 0.5), meter)
-        report("step (fixed batch)", fixed, None)
+        fixed = None
+        if not args.sources_only:
+            same = FixedBatch(run)
+            fixed = timed(run, args.seconds, cfg.batch_size, lambda: train_step(run, same, np.random.default_rng(0), 0.5), meter)
+            report("step (fixed batch)", fixed, None)
         rng = np.random.default_rng(0)
         for source_name in [s for s in args.sources.split(",") if s]:
             measure_source(run, source_name, shards, meter, fixed, args.seconds, rng)

@@ -5,15 +5,22 @@ Usage::
     python -m net.train --config net/configs/stage01_128.json --out runs/stage01 [--resume]
     python -m net.train --config net/configs/stage12_multitask.json --out runs/stage12 \
         --init runs/shipped_from_onnx.pt --resume --stop-after-s 420   # one call of a longer run
+    python -m net.train --config net/configs/stage13_gpu_source.json --out runs/stage13 \
+        --init net/checkpoints/continue.pt                             # GPU batch source, bf16
     torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
 
-Data path per rank: ``producers`` :class:`~.data.CropProducer` processes render crops ahead of
-time, each with its own EGL context, its own seed (``seed * 1000 + shard``) and its own shard of the
-training panoramas (shard ``rank * producers + j`` of ``world * producers``, so memory per process
-falls as processes are added); :class:`~.data.CropProducers` interleaves their chunks in
-proportion to shard size. Every step takes exactly ``fresh_per_step`` new crops into a
-:class:`~.data.CropPool` and samples the batch from the pool, then applies
-:func:`~.augment.augment_batch` (photometric + flips).
+Data path per rank: a :class:`~.sources.BatchSource` (``source`` in the config, ``--source``).
+``"pool"`` (:class:`~.sources.PoolSource`, the default): ``producers`` :class:`~.data.CropProducer`
+processes render crops ahead of time, each with its own EGL context, its own seed
+(``seed * 1000 + shard``) and its own shard of the training panoramas (shard
+``rank * producers + j`` of ``world * producers``, so memory per process falls as processes are
+added); :class:`~.data.CropProducers` interleaves their chunks in proportion to shard size. Every
+step takes exactly ``fresh_per_step`` new crops into a :class:`~.data.CropPool` and samples the
+batch from the pool, then applies :func:`~.augment.augment_batch` (photometric + flips).
+``"gpu"`` (:class:`~.gpu_source.GpuCropSource`): this rank's shard of the panoramas on the device,
+fresh crops every step rendered by the torch twin of the crop shader and augmented on the device.
+``amp`` "bf16" runs the forward pass under bfloat16 autocast, ``channels_last`` keeps the network
+and its input channels-last, ``compile`` wraps the network in ``torch.compile``.
 Loss (:func:`step_loss`): :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the
 joint in-frame term; ``small_k1_weight`` > 0 weights near-zero lenses more), plus, with
 ``comparator_loss_weight`` > 0, the comparator head's BCE on pairs of crops (training-only: export
