@@ -51,12 +51,12 @@ _TABLE = 18 + SERIES_DEGREE + 1
 
 
 def mip_pyramid(panorama: np.ndarray | torch.Tensor, device: torch.device | str) -> list[torch.Tensor]:
-    """uint8 ``1 × C × H_l × (W_l + 2 SEAM_PAD)`` levels of an ``H × W × C`` uint8 panorama on
+    """uint8 ``1 × 3 × H_l × (W_l + 2 SEAM_PAD)`` levels of an ``H × 2H × 3`` uint8 RGB panorama on
     ``device``: level 0 is the panorama, each next one the 2 × 2 box average of the one before,
     rounded to 8 bits; each has :data:`SEAM_PAD` columns wrapped around from the other side."""
     pano = torch.as_tensor(np.asarray(panorama)) if not isinstance(panorama, torch.Tensor) else panorama
-    if pano.dtype != torch.uint8 or pano.ndim != 3 or pano.shape[1] != 2 * pano.shape[0]:
-        raise ValueError(f"panorama must be a uint8 H x 2H x C array, got {pano.dtype} {tuple(pano.shape)}")
+    if pano.dtype != torch.uint8 or pano.ndim != 3 or pano.shape[2] != 3 or pano.shape[1] != 2 * pano.shape[0]:
+        raise ValueError(f"panorama must be a uint8 H x 2H x 3 RGB array, got {pano.dtype} {tuple(pano.shape)}")
     level = pano.to(device).permute(2, 0, 1).unsqueeze(0).contiguous()
     levels = []
     while True:
@@ -85,7 +85,7 @@ def newton_radius(r_d: torch.Tensor, table: torch.Tensor, steps: int) -> tuple[t
 
 
 def crop_table(params: Sequence[CropParams], size: tuple[int, int] = PAPER_SIZE) -> np.ndarray:
-    """float32 ``N × 30`` per-crop table (host side, float64 until the end): rotation, focal length,
+    """float32 ``N × 29`` per-crop table (host side, float64 until the end): rotation, focal length,
     lens, fold radius (:func:`glradial.lens.lensfuncs.fold_radii`), Drap-Lefevre coefficients, whether
     the series inverse was accepted, and its coefficients (:func:`fit_inverse_series`)."""
     n = len(params)
@@ -110,6 +110,7 @@ class TorchCropRenderer:
     ``size`` is the frame geometry the lens refers to, ``out_size`` ``(w, h)`` the crop size (each
     output pixel covers ``W/w × H/h`` frame pixels), ``newton_steps`` the steps of the Newton inverse
     used for lenses whose series is rejected (as :class:`glradial.synthesis.crops.CropRenderer`).
+    Only the exact inverse is rendered (the training crops'; the paper's Drap-Lefevre one is not).
     """
 
     def __init__(self, panoramas: Sequence[np.ndarray], *, size: tuple[int, int] = PAPER_SIZE,
