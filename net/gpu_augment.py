@@ -46,6 +46,7 @@ class DeviceAugment:
         self.device = torch.device(device)
         self.generator = torch.Generator(self.device).manual_seed(int(seed))
         self.motion_bank = motion_bank(*config.motion_length).to(self.device)
+        self.blur_half = _half_width(config.blur_sigma[1])
         self.size = self.motion_bank.shape[-1]
         self.dct = _dct_matrix().to(self.device)
 
@@ -72,7 +73,7 @@ class DeviceAugment:
 
     def _draws(self, n: int, shape: tuple[int, int]) -> dict[str, torch.Tensor]:
         """Every random number of ``n`` images' augmentation (per-image tensors, leading dim ``n``;
-        ``noise_field``: one ``3 × H × W`` standard normal field per image that gets noise)."""
+        ``noise_field``: a ``3 × H × W`` standard normal field per image)."""
         c = self.config
         draw = {"gamma": self._uniform(n, *c.gamma), "gain": self._uniform(n, *c.gain),
                 "cgain": self._uniform(3 * n, *c.channel_gain).reshape(n, 3), "sat": self._uniform(n, *c.saturation)}
@@ -85,8 +86,7 @@ class DeviceAugment:
         draw["angle"] = torch.randint(0, 180, (n,), generator=self.generator, device=self.device)
         draw["noise_sigma"] = self._uniform(n, *c.noise_sigma)
         draw["quality"] = torch.randint(c.jpeg_quality[0], c.jpeg_quality[1] + 1, (n,), generator=self.generator, device=self.device)
-        fields = int(draw["noise"].sum())
-        draw["noise_field"] = torch.randn((fields, 3, *shape), generator=self.generator, device=self.device)
+        draw["noise_field"] = torch.randn((n, 3, *shape), generator=self.generator, device=self.device)
         return draw
 
     def _apply(self, x: torch.Tensor, d: dict[str, torch.Tensor]) -> torch.Tensor:
@@ -95,12 +95,14 @@ class DeviceAugment:
         grey = _round((x * torch.tensor(GREY, device=x.device).view(1, 3, 1, 1)).sum(dim=1, keepdim=True))
         sat = d["sat"].view(-1, 1, 1, 1)
         x = _round(x * sat + grey * (1.0 - sat))
-        x = _where(x, d["blur"], lambda part, rows: _round(gaussian_blur(part, d["sigma"][rows])))
-        x = _where(x, d["motion"], lambda part, rows: _round(self.motion_blur(part, d["length"][rows], d["angle"][rows])))
-        x = _where(x, d["noise"], lambda part, rows: _round(part + d["noise_field"] * d["noise_sigma"][rows].view(-1, 1, 1, 1)))
-        x = _where(x, d["jpeg"], lambda part, rows: jpeg_artefacts(part, d["quality"][rows], self.dct))
-        x = torch.where(d["flip_h"].view(-1, 1, 1, 1), x.flip(3), x)
-        return torch.where(d["flip_v"].view(-1, 1, 1, 1), x.flip(2), x)
+        # every operation runs on the whole batch and is kept where drawn: no wait for the device
+        # to learn which images it applies to (the operations are cheap beside a training step)
+        x = _pick(d["blur"], _round(gaussian_blur(x, d["sigma"], self.blur_half)), x)
+        x = _pick(d["motion"], _round(self.motion_blur(x, d["length"], d["angle"])), x)
+        x = _pick(d["noise"], _round(x + d["noise_field"] * d["noise_sigma"].view(-1, 1, 1, 1)), x)
+        x = _pick(d["jpeg"], jpeg_artefacts(x, d["quality"], self.dct), x)
+        x = _pick(d["flip_h"], x.flip(3), x)
+        return _pick(d["flip_v"], x.flip(2), x)
 
     def motion_blur(self, x: torch.Tensor, length: torch.Tensor, angle: torch.Tensor) -> torch.Tensor:
         """Per-image linear motion blur of float ``n × 3 × H × W``: the kernel of
@@ -128,25 +130,26 @@ def motion_bank(low: int, high: int) -> torch.Tensor:
     return bank
 
 
-def gaussian_blur(x: torch.Tensor, sigma: torch.Tensor) -> torch.Tensor:
+def _half_width(sigma: float) -> int:
+    """Half the size of OpenCV's 8-bit Gaussian kernel of ``sigma``: ``round(6 σ + 1)`` made odd."""
+    return (int(round(6 * sigma + 1)) | 1) // 2
+
+
+def gaussian_blur(x: torch.Tensor, sigma: torch.Tensor, half: int | None = None) -> torch.Tensor:
     """Per-image Gaussian blur of float ``n × C × H × W`` with standard deviations ``sigma`` (``n``,
     pixels), as ``cv2.GaussianBlur(img, (0, 0), sigma)`` blurs an 8-bit image (kernel size
-    ``round(6 σ + 1)`` made odd, reflect-101 borders), unrounded."""
+    ``round(6 σ + 1)`` made odd, reflect-101 borders), unrounded. ``half``: the largest half-width
+    any ``sigma`` needs, when known (else read back from the device)."""
     sizes = ((sigma * 6 + 1).round().long() | 1) // 2  # each image's own half-width
-    half = int(sizes.max())
+    half = int(sizes.max()) if half is None else half
     t = torch.arange(-half, half + 1, device=x.device, dtype=x.dtype)
     kernel = torch.exp(-(t * t) / (2 * sigma.view(-1, 1) ** 2)) * (t.abs() <= sizes.view(-1, 1))
     return _separable(x, kernel / kernel.sum(dim=1, keepdim=True))
 
 
-def _where(x: torch.Tensor, chosen: torch.Tensor, op) -> torch.Tensor:
-    """``x`` with ``op(x[rows], rows)`` written into the rows where ``chosen`` is true."""
-    rows = torch.nonzero(chosen).flatten()
-    if len(rows) == 0:
-        return x
-    x = x.clone()
-    x[rows] = op(x[rows], rows)
-    return x
+def _pick(chosen: torch.Tensor, changed: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
+    """``changed`` for the images where ``chosen`` (``n`` bools) is true, ``x`` for the others."""
+    return torch.where(chosen.view(-1, 1, 1, 1), changed, x)
 
 
 def _separable(x: torch.Tensor, kernel: torch.Tensor) -> torch.Tensor:

@@ -160,12 +160,18 @@ class TorchCropRenderer:
         indexed = np.concatenate([table, np.arange(len(table), dtype=np.float32)[:, None]], axis=1)
         w, h = self.out_size
         out = torch.empty((len(which), 3, h, w), device=self.device, memory_format=torch.channels_last)
+        groups = []  # per panorama: its index, the crops' rows on the device, their footprints and levels of detail
         for pano in np.unique(which):
             rows = np.flatnonzero(which == pano)
             part = self.upload(indexed[rows])
             newton = not table[rows, 17].all()  # decided on the host: no wait for the device
             tex, tx, ty, valid = self.footprints(part[:, :-1], newton)
-            out[part[:, -1].long()] = self._sample(self.pyramids[int(pano)], tex, tx, ty) * valid.unsqueeze(1)
+            groups.append((int(pano), part[:, -1].long(), tex, tx, ty, valid, self._lods(self.pyramids[int(pano)], tx, ty)))
+        # the range of mip levels each panorama's crops read, for all of them in one wait for the device
+        ranges = torch.stack([torch.stack([lod.amin(), lod.amax()]) for *_, lod in groups]).cpu().numpy()
+        for (pano, rows, tex, tx, ty, valid, lod), (low, high) in zip(groups, ranges):
+            levels = range(int(np.floor(low)), int(np.ceil(high)) + 1)
+            out[rows] = self._sample(self.pyramids[pano], tex, tx, ty, lod, levels) * valid.unsqueeze(1)
         return out
 
     def upload(self, array: np.ndarray) -> torch.Tensor:
@@ -209,20 +215,26 @@ class TorchCropRenderer:
 
         return tex, change(dwx), change(dwy), valid.reshape(n, h, w)
 
-    def _sample(self, levels: list[torch.Tensor], tex: torch.Tensor, tx: torch.Tensor, ty: torch.Tensor) -> torch.Tensor:
-        """The box average of the ``SX × SY`` trilinear sub-pixel reads -> float ``n × 3 × h × w``."""
+    def _lods(self, levels: list[torch.Tensor], tx: torch.Tensor, ty: torch.Tensor) -> torch.Tensor:
+        """Level of detail of each sub-pixel read (``n × h × w``): ``log2`` of its longer footprint in
+        level-0 texels, clamped to the pyramid (GL's minification rule, trilinear)."""
+        sx, sy = self.supersample
+        height = levels[0].shape[2]
+        texels = torch.tensor([2.0 * height, float(height)], device=tx.device)
+        rho = torch.maximum((tx / sx * texels).norm(dim=-1), (ty / sy * texels).norm(dim=-1))
+        return torch.log2(rho.clamp(min=1e-30)).clamp(0.0, len(levels) - 1)
+
+    def _sample(self, levels: list[torch.Tensor], tex: torch.Tensor, tx: torch.Tensor, ty: torch.Tensor,
+                lod: torch.Tensor, used: range) -> torch.Tensor:
+        """The box average of the ``SX × SY`` trilinear sub-pixel reads -> float ``n × 3 × h × w``
+        (``used``: the mip levels ``lod`` reaches)."""
         sx, sy = self.supersample
         n, h, w, _ = tex.shape
         acc = torch.zeros((n, 3, h, w), device=tex.device)
-        fx, fy = tx / sx, ty / sy
-        height = levels[0].shape[2]
-        texels = torch.tensor([2.0 * height, float(height)], device=tex.device)
-        rho = torch.maximum((fx * texels).norm(dim=-1), (fy * texels).norm(dim=-1))
-        lod = torch.log2(rho.clamp(min=1e-30)).clamp(0.0, len(levels) - 1)
         for j in range(sy):
             for i in range(sx):
                 pos = tex + ((i + 0.5) / sx - 0.5) * tx + ((j + 0.5) / sy - 0.5) * ty
-                acc += _trilinear(levels, pos, lod)
+                acc += _trilinear(levels, pos, lod, used)
         return acc / (sx * sy)
 
 
@@ -235,14 +247,13 @@ def _quad_difference(world: torch.Tensor, dim: int) -> torch.Tensor:
     return world.index_select(dim, second) - world.index_select(dim, first)
 
 
-def _trilinear(levels: list[torch.Tensor], pos: torch.Tensor, lod: torch.Tensor) -> torch.Tensor:
+def _trilinear(levels: list[torch.Tensor], pos: torch.Tensor, lod: torch.Tensor, used: range) -> torch.Tensor:
     """Reads at texture coordinates ``pos`` (``n × h × w × 2``) blended between the two mip levels
-    around ``lod`` (``n × h × w``) -> float ``n × 3 × h × w`` (levels 0..255)."""
+    around ``lod`` (``n × h × w``; all within the levels ``used``) -> float ``n × 3 × h × w`` (levels 0..255)."""
     n, h, w, _ = pos.shape
     u = pos[..., 0] - pos[..., 0].floor()  # the texture repeats in u
     acc = None
-    low, high = int(lod.min().floor()), int(lod.max().ceil())
-    for index in range(low, high + 1):
+    for index in used:
         weight = (1.0 - (lod - index).abs()).clamp(min=0.0)
         level = levels[index].float()
         width = level.shape[3] - 2 * SEAM_PAD
