@@ -255,3 +255,18 @@ def test_bf16_autocast_runs_the_network_in_bfloat16():
         loss, pred = step_loss(model, x, y, cfg, model_cfg, np.random.default_rng(0))
         assert seen[-1] == dtype and loss.dtype == torch.float32 and pred.dtype == torch.float32
         loss.backward()
+
+
+def test_throughput_bench_runs_and_says_it_measured_a_cpu(tmp_path):
+    # bench/bench_train_throughput.py (the lent session's 30 s check) on this CPU: the tiny network,
+    # a note that these are no GPU figures, a rate for the step, the GPU source and training from it
+    import subprocess
+    import sys
+
+    result = subprocess.run([sys.executable, str(ROOT / "bench/bench_train_throughput.py"), "--seconds", "0.2",
+                             "--sources", "gpu"], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert result.returncode == 0, result.stderr
+    assert "NOTE: no CUDA device" in result.stdout
+    for label in ("step (fixed batch)", "source gpu", "train gpu"):
+        line = next(line for line in result.stdout.splitlines() if line.startswith(label))
+        assert float(line[len(label):].split()[0]) > 0
