@@ -66,12 +66,12 @@ class DeviceAugment:
         if not self.config.enabled:
             return images.clone()
         n = images.shape[0] // 2 if paired else images.shape[0]
-        draw = self._draws(n, images.shape[2:])
+        draw = self.draws(n, images.shape[2:])
         if paired:
             draw = {name: value.repeat_interleave(2, dim=0) for name, value in draw.items()}
-        return self._apply(images, draw)
+        return self.apply(images, draw)
 
-    def _draws(self, n: int, shape: tuple[int, int]) -> dict[str, torch.Tensor]:
+    def draws(self, n: int, shape: tuple[int, int]) -> dict[str, torch.Tensor]:
         """Every random number of ``n`` images' augmentation (per-image tensors, leading dim ``n``;
         ``noise_field``: a ``3 × H × W`` standard normal field per image)."""
         c = self.config
@@ -89,7 +89,8 @@ class DeviceAugment:
         draw["noise_field"] = torch.randn((n, 3, *shape), generator=self.generator, device=self.device)
         return draw
 
-    def _apply(self, x: torch.Tensor, d: dict[str, torch.Tensor]) -> torch.Tensor:
+    def apply(self, x: torch.Tensor, d: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The operations of :meth:`draws`' draws ``d`` on ``x``, in :func:`net.augment.augment_batch`'s order."""
         gains = (d["gain"].unsqueeze(1) * d["cgain"]).view(-1, 3, 1, 1)
         x = _round((x / 255.0).pow(d["gamma"].view(-1, 1, 1, 1)) * gains * 255.0)
         grey = _round((x * torch.tensor(GREY, device=x.device).view(1, 3, 1, 1)).sum(dim=1, keepdim=True))

@@ -270,3 +270,23 @@ def test_throughput_bench_runs_and_says_it_measured_a_cpu(tmp_path):
     for label in ("step (fixed batch)", "source gpu", "train gpu"):
         line = next(line for line in result.stdout.splitlines() if line.startswith(label))
         assert float(line[len(label):].split()[0]) > 0
+
+
+def test_device_colour_operations_match_opencv():
+    # exposure, gamma, channel gains (OpenCV's lookup table, as net.augment builds it) and saturation
+    # (cv2.addWeighted with the BT.601 grey) on the same draws: within a level (rounding order)
+    import cv2
+
+    image = synthetic_panoramas()[1][:36, :64]
+    x = torch.from_numpy(image).permute(2, 0, 1)[None].float()
+    augment = DeviceAugment(AugmentConfig(p_blur=0, p_motion=0, p_noise=0, p_jpeg=0, p_flip_h=0, p_flip_v=0), 0, "cpu")
+    draws = augment.draws(1, (36, 64))
+    got = augment.apply(x, draws)[0].permute(1, 2, 0).numpy()
+    gamma, gain, sat = (float(draws[k][0]) for k in ("gamma", "gain", "sat"))
+    cgain = draws["cgain"][0].double().numpy()
+    levels = np.arange(256) / 255.0
+    lut = np.clip(np.power(levels, gamma)[:, None] * (gain * cgain)[None, :] * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    want = cv2.LUT(np.ascontiguousarray(image), lut.reshape(256, 1, 3))
+    grey = cv2.cvtColor(cv2.cvtColor(want, cv2.COLOR_RGB2GRAY), cv2.COLOR_GRAY2RGB)
+    want = cv2.addWeighted(want, sat, grey, 1.0 - sat, 0.0).astype(float)
+    assert np.abs(got - want).max() <= 1.0 and np.abs(got - want).mean() < 0.2
