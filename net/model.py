@@ -303,10 +303,11 @@ def normalise_batch(images: torch.Tensor, config: ModelConfig) -> torch.Tensor:
     ONNX graph contains it (:class:`net.export.ExportWrapper`)."""
     x = images.permute(0, 3, 1, 2).float().div_(255.0)
     if config.channels == 1:
-        w = torch.tensor(LUMA_WEIGHTS, dtype=x.dtype, device=x.device).view(1, 3, 1, 1)
+        w = torch.tensor(LUMA_WEIGHTS, dtype=x.dtype).view(1, 3, 1, 1).to(x.device, non_blocking=True)
         x = (x * w).sum(dim=1, keepdim=True)
-    mean = torch.tensor(config.mean, dtype=x.dtype, device=x.device).view(1, -1, 1, 1)
-    std = torch.tensor(config.std, dtype=x.dtype, device=x.device).view(1, -1, 1, 1)
+    # made on the host and sent without waiting (a CUDA training step does not stop here for the device)
+    mean = torch.tensor(config.mean, dtype=x.dtype).view(1, -1, 1, 1).to(x.device, non_blocking=True)
+    std = torch.tensor(config.std, dtype=x.dtype).view(1, -1, 1, 1).to(x.device, non_blocking=True)
     return (x - mean) / std
 
 

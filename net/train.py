@@ -5,15 +5,22 @@ Usage::
     python -m net.train --config net/configs/stage01_128.json --out runs/stage01 [--resume]
     python -m net.train --config net/configs/stage12_multitask.json --out runs/stage12 \
         --init runs/shipped_from_onnx.pt --resume --stop-after-s 420   # one call of a longer run
+    python -m net.train --config net/configs/stage13_gpu_source.json --out runs/stage13 \
+        --init net/checkpoints/continue.pt                             # GPU batch source, bf16
     torchrun --nproc_per_node=2 -m net.train --config net/configs/tiny.json --out runs/ddp
 
-Data path per rank: ``producers`` :class:`~.data.CropProducer` processes render crops ahead of
-time, each with its own EGL context, its own seed (``seed * 1000 + shard``) and its own shard of the
-training panoramas (shard ``rank * producers + j`` of ``world * producers``, so memory per process
-falls as processes are added); :class:`~.data.CropProducers` interleaves their chunks in
-proportion to shard size. Every step takes exactly ``fresh_per_step`` new crops into a
-:class:`~.data.CropPool` and samples the batch from the pool, then applies
-:func:`~.augment.augment_batch` (photometric + flips).
+Data path per rank: a :class:`~.sources.BatchSource` (``source`` in the config, ``--source``).
+``"pool"`` (:class:`~.sources.PoolSource`, the default): ``producers`` :class:`~.data.CropProducer`
+processes render crops ahead of time, each with its own EGL context, its own seed
+(``seed * 1000 + shard``) and its own shard of the training panoramas (shard
+``rank * producers + j`` of ``world * producers``, so memory per process falls as processes are
+added); :class:`~.data.CropProducers` interleaves their chunks in proportion to shard size. Every
+step takes exactly ``fresh_per_step`` new crops into a :class:`~.data.CropPool` and samples the
+batch from the pool, then applies :func:`~.augment.augment_batch` (photometric + flips).
+``"gpu"`` (:class:`~.gpu_source.GpuCropSource`): this rank's shard of the panoramas on the device,
+fresh crops every step rendered by the torch twin of the crop shader and augmented on the device.
+``amp`` "bf16" runs the forward pass under bfloat16 autocast, ``channels_last`` keeps the network
+and its input channels-last, ``compile`` wraps the network in ``torch.compile``.
 Loss (:func:`step_loss`): :func:`~.loss.training_loss` (the paper's; ``joint_loss_weight`` > 0 adds the
 joint in-frame term; ``small_k1_weight`` > 0 weights near-zero lenses more), plus, with
 ``comparator_loss_weight`` > 0, the comparator head's BCE on pairs of crops (training-only: export
@@ -34,6 +41,7 @@ Uses CUDA when ``torch.cuda.is_available()`` (NCCL for DDP) and the CPU otherwis
 from __future__ import annotations
 
 import argparse
+import contextlib
 import copy
 import csv
 import json
@@ -51,10 +59,17 @@ import torch.distributed as dist
 from glradial.evaluation.evaluation import metrics
 from glradial.media.atomic import atomic_path, atomic_write_text
 
-from .augment import AugmentConfig, augment_batch, augment_pairs
+from .augment import AugmentConfig
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
+from .gpu_source import GpuCropSource
 from .loss import comparator_loss, comparison_partners, error_scale_loss, small_k1_weights, training_loss
 from .model import DistortionNet, ModelConfig, count_parameters, load_grown, normalise_batch
+from .sources import BatchSource, PoolSource
+
+#: Batch sources (:mod:`net.sources`): GL producers + pool + CPU augmentation, or all on the device.
+SOURCES = ("pool", "gpu")
+#: Autocast choices of the forward pass.
+AMP = ("off", "bf16")
 
 
 @dataclass
@@ -96,6 +111,11 @@ class TrainConfig:
     log_every: int = 20
     threads: int = 1  # torch threads per process: >1 collapses (OpenMP spin-waits) on a shared machine
     cache_dir: str = "data_cache"
+    source: str = "pool"  # batch source: "pool" (GL crop producers, a reuse pool, CPU augmentation) or "gpu" (net.gpu_source)
+    panoramas_per_batch: int = 4  # panoramas feeding one batch of the "gpu" source (as the crop producer picks them)
+    amp: str = "off"  # "bf16": the forward pass under bfloat16 autocast (the loss in float32)
+    channels_last: bool = True  # the network and its input in channels-last memory layout
+    compile: bool = False  # torch.compile the network for training
 
     @classmethod
     def from_json(cls, path: str | Path) -> "TrainConfig":
@@ -118,7 +138,21 @@ class TrainConfig:
                              f"{cfg.small_k1_weight} and {cfg.small_k1_scale}")
         if cfg.paired and (cfg.batch_size % 2 or cfg.fresh_per_step % 2 or cfg.producer_chunk % 2 or cfg.pool_capacity % 2):
             raise ValueError("paired training needs even batch_size, fresh_per_step, producer_chunk and pool_capacity")
+        cfg.check_speed_options(str(path))
         return cfg
+
+    def check_speed_options(self, where: str) -> None:
+        """``ValueError`` naming ``where`` and the value for a batch source, autocast or layout
+        option that does not exist."""
+        if self.source not in SOURCES:
+            raise ValueError(f"source must be one of {SOURCES} in {where}, got {self.source!r}")
+        if self.amp not in AMP:
+            raise ValueError(f"amp must be one of {AMP} in {where}, got {self.amp!r}")
+        for name in ("channels_last", "compile"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be true or false in {where}, got {getattr(self, name)!r}")
+        if isinstance(self.panoramas_per_batch, bool) or not isinstance(self.panoramas_per_batch, int) or self.panoramas_per_batch < 1:
+            raise ValueError(f"panoramas_per_batch must be an integer >= 1 in {where}, got {self.panoramas_per_batch!r}")
 
 
 def merge_config(base: dict, changes: dict) -> dict:
@@ -248,11 +282,14 @@ def step_loss(train_model: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, cf
     :func:`~.loss.small_k1_weights`), the error head's likelihood when the model has one, and the
     comparator's BCE when ``comparator_loss_weight`` > 0 (pairs: :func:`~.loss.comparison_partners`;
     ``rng`` is drawn from only for unpaired batches). With both weights 0 it is the loss of the
-    runs before them, to the bit."""
+    runs before them, to the bit. With ``cfg.amp`` "bf16" the network runs under bfloat16
+    autocast and its outputs are taken back to float32 before the loss."""
     partner = None
     if cfg.comparator_loss_weight > 0:
         partner = torch.from_numpy(comparison_partners(len(y), cfg.paired, rng)).to(y.device)
-    out_all = train_model(x) if partner is None else train_model(x, partner)
+    with torch.autocast(x.device.type, dtype=torch.bfloat16) if cfg.amp == "bf16" else contextlib.nullcontext():
+        out_all = train_model(x) if partner is None else train_model(x, partner)
+    out_all = out_all.float()
     pred = out_all[:, :2]
     weights = small_k1_weights(y[:, 0], cfg.small_k1_weight, cfg.small_k1_scale) if cfg.small_k1_weight > 0 else None
     loss = training_loss(y, pred, joint_weight=cfg.joint_loss_weight, sample_weight=weights)
@@ -263,7 +300,8 @@ def step_loss(train_model: torch.nn.Module, x: torch.Tensor, y: torch.Tensor, cf
     return loss, pred
 
 
-def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI's option handling; complexity 33)
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    """The command line of ``python -m net.train`` (module docstring)."""
     parser = argparse.ArgumentParser(prog="python -m net.train", description=__doc__.split("\n")[0])
     parser.add_argument("--config", required=True, help="run config JSON (see TrainConfig; \"base\" names the config it extends)")
     parser.add_argument("--out", required=True, help="run folder (checkpoints, CSV, config)")
@@ -280,44 +318,101 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
                         "the weights so that training starts from the same function")
     parser.add_argument("--zero-k2-head", action="store_true",
                         help="with --init: zero the k2 head's last layer (a k2_residual model then starts on the manifold)")
+    parser.add_argument("--source", choices=SOURCES, help="override the config's batch source (pool: GL producers + CPU "
+                        "augmentation; gpu: crops rendered and augmented on the training device, net.gpu_source)")
+    parser.add_argument("--amp", choices=AMP, help="override the config's autocast of the forward pass")
+    parser.add_argument("--channels-last", action=argparse.BooleanOptionalAction, default=None,
+                        help="override the config's memory layout of the network and its input")
+    parser.add_argument("--compile", action=argparse.BooleanOptionalAction, default=None,
+                        help="override the config's torch.compile of the network")
     args = parser.parse_args(argv)
-
     if args.stop_after_s is not None and not args.stop_after_s > 0:
         raise ValueError(f"--stop-after-s must be positive, got {args.stop_after_s}")
+    return args
+
+
+def run_config(args: argparse.Namespace) -> TrainConfig:
+    """The config file with the command line's overrides."""
     cfg = TrainConfig.from_json(args.config)
-    if args.steps is not None:
-        cfg.steps = args.steps
-    if args.time_budget_s is not None:
-        cfg.time_budget_s = args.time_budget_s
-    if args.threads is not None:
-        cfg.threads = args.threads
+    for option, name in (("steps", "steps"), ("time_budget_s", "time_budget_s"), ("threads", "threads"), ("source", "source"),
+                         ("amp", "amp"), ("channels_last", "channels_last"), ("compile", "compile")):
+        if getattr(args, option) is not None:
+            setattr(cfg, name, getattr(args, option))
+    return cfg
 
-    distributed = "WORLD_SIZE" in os.environ and int(os.environ["WORLD_SIZE"]) > 1
-    cuda = torch.cuda.is_available()
-    if distributed:
-        dist.init_process_group("nccl" if cuda else "gloo")
-        rank, world = dist.get_rank(), dist.get_world_size()
-    else:
-        rank, world = 0, 1
-    source = panorama_source(cfg.panoramas, cfg.cache_dir)
-    shards = rank_shards(source, cfg, rank, world)  # too many producers: an error before anything is written
-    if cuda:
-        local = int(os.environ.get("LOCAL_RANK", 0))
-        torch.cuda.set_device(local)
-        device = torch.device("cuda", local)
-    else:
-        device = torch.device("cpu")
-    torch.set_num_threads(max(1, cfg.threads))
-    torch.manual_seed(cfg.seed)
-    out = Path(args.out)
-    is_main = rank == 0
 
-    def log(msg: str) -> None:
-        if is_main:
+@dataclass
+class Run:
+    """The state of one training process: config, placement, network, optimiser and progress."""
+
+    cfg: TrainConfig
+    model_cfg: ModelConfig
+    device: torch.device
+    rank: int
+    world: int
+    distributed: bool
+    out: Path
+    model: torch.nn.Module
+    ema: EMA
+    optimizer: torch.optim.Optimizer
+    train_model: torch.nn.Module | None = None
+    step: int = 0
+    train_time: float = 0.0
+    best: float = math.inf
+
+    @property
+    def is_main(self) -> bool:
+        return self.rank == 0
+
+    def log(self, msg: str) -> None:
+        if self.is_main:
             print(time.strftime("%H:%M:%S"), msg, flush=True)
 
+    def memory_format(self) -> torch.memory_format:
+        return torch.channels_last if self.cfg.channels_last else torch.contiguous_format
+
+    def progress(self) -> float:
+        """Fraction of the schedule done: training time over the budget, or steps over ``steps``."""
+        return self.train_time / self.cfg.time_budget_s if self.cfg.time_budget_s else self.step / max(1, self.cfg.steps)
+
+    def save_last(self) -> None:
+        save_checkpoint(self.out / "last.pt", model=self.model.state_dict(), ema=self.ema.model.state_dict(),
+                        optimizer=self.optimizer.state_dict(), step=self.step, train_time=self.train_time, best=self.best,
+                        model_config=self.model_cfg.to_dict())
+
+    def save_best(self, vm: dict) -> None:
+        save_checkpoint(self.out / "best.pt", model=self.ema.model.state_dict(), model_config=self.model_cfg.to_dict(),
+                        step=self.step, train_time=self.train_time, val=vm)
+
+
+def placement() -> tuple[bool, int, int]:
+    """``(distributed, rank, world)``: a process group under ``torchrun`` (NCCL on CUDA, else gloo)."""
+    distributed = "WORLD_SIZE" in os.environ and int(os.environ["WORLD_SIZE"]) > 1
+    if not distributed:
+        return False, 0, 1
+    dist.init_process_group("nccl" if torch.cuda.is_available() else "gloo")
+    return True, dist.get_rank(), dist.get_world_size()
+
+
+def training_device() -> torch.device:
+    """This process's CUDA device (``LOCAL_RANK``) when there is one, else the CPU."""
+    if not torch.cuda.is_available():
+        return torch.device("cpu")
+    local = int(os.environ.get("LOCAL_RANK", 0))
+    torch.cuda.set_device(local)
+    return torch.device("cuda", local)
+
+
+def build_run(cfg: TrainConfig, out: Path, distributed: bool, rank: int, world: int) -> Run:
+    """The network (in ``cfg.channels_last`` layout), its EMA and AdamW (decayed weights, undecayed
+    biases and norms, the error head at its own learning-rate scale) on this process's device."""
+    device = training_device()
+    torch.set_num_threads(max(1, cfg.threads))
+    torch.manual_seed(cfg.seed)
     model_cfg = ModelConfig.from_dict(cfg.model)
-    model = DistortionNet(model_cfg).to(device).to(memory_format=torch.channels_last)
+    model = DistortionNet(model_cfg).to(device)
+    if cfg.channels_last:
+        model = model.to(memory_format=torch.channels_last)
     ema = EMA(model, cfg.ema_decay)
     decay, no_decay, error_head = [], [], []
     for name, p in model.named_parameters():
@@ -327,154 +422,244 @@ def main(argv: list[str] | None = None) -> int:  # noqa: C901  (the training CLI
     if error_head:  # a new head next to trained weights: its own (larger) learning rate
         groups.append({"params": error_head, "weight_decay": 0.0, "lr_scale": cfg.error_head_lr_scale})
     optimizer = torch.optim.AdamW(groups, lr=cfg.lr)
-    step, train_time, best = 0, 0.0, math.inf
+    return Run(cfg, model_cfg, device, rank, world, distributed, out, model, ema, optimizer)
+
+
+def load_weights(run: Run, args: argparse.Namespace) -> None:
+    """``--init`` (weights, grown to the config's network; optionally a zeroed k2 head) and
+    ``--resume`` (everything, from ``OUT/last.pt``)."""
     if args.init:
-        state = torch.load(args.init, map_location=device, weights_only=False)
+        state = torch.load(args.init, map_location=run.device, weights_only=False)
         weights = state.get("ema", state["model"])
-        grown = load_grown(model, weights)
-        unexpected = sorted(set(weights) - set(model.state_dict()))
+        grown = load_grown(run.model, weights)
+        unexpected = sorted(set(weights) - set(run.model.state_dict()))
         if args.zero_k2_head:
             with torch.no_grad():
-                model.head_k2.net[-1].weight.zero_()
-                model.head_k2.net[-1].bias.zero_()
-        ema.model.load_state_dict(model.state_dict())
-        log(f"initialised from {args.init} ({len(grown['copied'])} tensors copied, {len(grown['grown'])} grown, "
-            f"{len(grown['new'])} new, unexpected {unexpected})")
-    if args.resume and (out / "last.pt").exists():
-        state = torch.load(out / "last.pt", map_location=device, weights_only=False)
-        model.load_state_dict(state["model"])
-        ema.model.load_state_dict(state["ema"])
-        optimizer.load_state_dict(state["optimizer"])
-        step, train_time, best = state["step"], state["train_time"], state.get("best", math.inf)
-        log(f"resumed from {out / 'last.pt'} at step {step} ({train_time:.0f} s trained)")
-    if args.stop_after_s is not None:
-        cfg.stop_at_s = train_time + args.stop_after_s
-    if is_main:
-        out.mkdir(parents=True, exist_ok=True)
-        full = asdict(cfg)
-        full["model"] = model_cfg.to_dict()
-        atomic_write_text(out / "config.json", json.dumps(full, indent=2) + "\n")
-        model_cfg.save(out / "model_config.json")
-    train_model = torch.nn.parallel.DistributedDataParallel(model) if distributed else model
-    log(f"model {count_parameters(model)} parameters, input {model_cfg.input_size}, device {device}, world {world}")
+                run.model.head_k2.net[-1].weight.zero_()
+                run.model.head_k2.net[-1].bias.zero_()
+        run.ema.model.load_state_dict(run.model.state_dict())
+        run.log(f"initialised from {args.init} ({len(grown['copied'])} tensors copied, {len(grown['grown'])} grown, "
+                f"{len(grown['new'])} new, unexpected {unexpected})")
+    if args.resume and (run.out / "last.pt").exists():
+        state = torch.load(run.out / "last.pt", map_location=run.device, weights_only=False)
+        run.model.load_state_dict(state["model"])
+        run.ema.model.load_state_dict(state["ema"])
+        run.optimizer.load_state_dict(state["optimizer"])
+        run.step, run.train_time, run.best = state["step"], state["train_time"], state.get("best", math.inf)
+        run.log(f"resumed from {run.out / 'last.pt'} at step {run.step} ({run.train_time:.0f} s trained)")
 
+
+def prepare(run: Run, args: argparse.Namespace) -> None:
+    """Stop time, the run folder's config files, the (DDP-wrapped, optionally compiled) training network."""
+    if args.stop_after_s is not None:
+        run.cfg.stop_at_s = run.train_time + args.stop_after_s
+    if run.is_main:
+        run.out.mkdir(parents=True, exist_ok=True)
+        full = asdict(run.cfg)
+        full["model"] = run.model_cfg.to_dict()
+        atomic_write_text(run.out / "config.json", json.dumps(full, indent=2) + "\n")
+        run.model_cfg.save(run.out / "model_config.json")
+    run.train_model = torch.nn.parallel.DistributedDataParallel(run.model) if run.distributed else run.model
+    if run.cfg.compile:
+        run.train_model = torch.compile(run.train_model)
+    run.log(f"model {count_parameters(run.model)} parameters, input {run.model_cfg.input_size}, device {run.device}, "
+            f"world {run.world}, source {run.cfg.source}, amp {run.cfg.amp}, channels_last {run.cfg.channels_last}, "
+            f"compile {run.cfg.compile}")
+
+
+def validation_set(run: Run) -> tuple | None:
+    """The validation crops (GL-rendered, the reference renderer), on the main process only."""
+    cfg = run.cfg
+    if not (run.is_main and cfg.val_panoramas and cfg.val_size > 0):
+        return None
+    vsrc = panorama_source(cfg.val_panoramas, cfg.cache_dir)
     t0 = time.monotonic()
-    if is_main:
+    val = render_test_set(vsrc, cfg.val_size, seed=10_000 + cfg.seed, out_size=run.model_cfg.input_size)
+    run.log(f"validation set: {len(val[0])} crops from {len(vsrc)} panoramas ({time.monotonic() - t0:.1f} s)")
+    return val
+
+
+def batch_source(run: Run, source: PanoramaSource, shards: list[tuple[int, PanoramaSource]],
+                 rng: np.random.Generator) -> BatchSource:
+    """This rank's :class:`~.sources.BatchSource`: GL crop producers on its shards with a reuse pool
+    (``source`` "pool", the pool filled before it returns), or the GPU source on its shard
+    (seed ``cfg.seed * 1000 + rank``, batches from index ``step``, augmentation seeded by seed, rank
+    and step, so a resumed run never repeats what it has seen)."""
+    cfg, model_cfg = run.cfg, run.model_cfg
+    aug_cfg = AugmentConfig(**cfg.augment)
+    if cfg.source == "gpu":
+        part = shard_source(source, run.rank, run.world)
+        augment_seed = int(np.random.SeedSequence([cfg.seed, run.rank, run.step]).generate_state(1)[0])
+        gpu = GpuCropSource(part.load(), batch_size=cfg.batch_size, seed=cfg.seed * 1000 + run.rank,
+                            out_size=model_cfg.input_size, device=run.device, augment=aug_cfg, augment_seed=augment_seed,
+                            paired=cfg.paired, panoramas_per_batch=cfg.panoramas_per_batch, start=run.step)
+        run.log(f"GPU batch source: {len(part)} panoramas on {run.device}")
+        return gpu
+    producers = start_producers(shards, cfg, run.step, model_cfg.input_size)
+    run.log(f"{len(producers.producers)} crop producer(s) on this rank, holding "
+            f"{' + '.join(str(w) for w in producers.weights)} panoramas")
+    pool = PoolSource(producers, CropPool(cfg.pool_capacity, model_cfg.input_size), batch_size=cfg.batch_size,
+                      fresh_per_step=cfg.fresh_per_step, chunk=cfg.producer_chunk, rng=rng, augment=aug_cfg,
+                      paired=cfg.paired, augment_workers=cfg.augment_workers, device=run.device)
+    try:
+        took = pool.fill(max(cfg.pool_min, cfg.batch_size))
+    except BaseException:
+        pool.close()
+        raise
+    run.log(f"pool filled with {pool.pool.count} crops ({took:.1f} s)")
+    return pool
+
+
+def open_log(run: Run, resume: bool):
+    """The run's ``train.csv`` (appended to on resume), its header written when new; ``None`` off rank 0."""
+    if not run.is_main:
+        return None
+    new = not (run.out / "train.csv").exists() or not resume
+    csv_file = open(run.out / "train.csv", "w" if new else "a", newline="")
+    if new:
+        csv.writer(csv_file).writerow(["step", "train_s", "lr", "loss", "k1_mae", "k2_mae", "img_per_s", "producer_wait_s",
+                                       "val_dl", "val_median_px", "val_p90_px", "val_a_beats_b"])
+    return csv_file
+
+
+def train_step(run: Run, data: BatchSource, rng: np.random.Generator, progress: float) -> tuple[torch.Tensor, torch.Tensor, float]:
+    """One optimiser step on the next batch; returns the loss and ``|pred - y|`` per output, detached
+    on the device (read back only when logged: no host sync per step), and the learning-rate factor."""
+    cfg = run.cfg
+    images, y = data.next_batch()
+    x = normalise_batch(images, run.model_cfg).contiguous(memory_format=run.memory_format())
+    factor = lr_factor(progress, run.step, cfg)
+    for group in run.optimizer.param_groups:
+        group["lr"] = cfg.lr * factor * group.get("lr_scale", 1.0)
+    run.train_model.train()
+    if cfg.error_head_only:
+        freeze_all_but_error_head(run.model)
+    loss, pred = step_loss(run.train_model, x, y, cfg, run.model_cfg, rng)
+    run.optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    run.optimizer.step()
+    run.ema.update(run.model, run.step)
+    run.step += 1
+    return loss.detach(), (pred.detach() - y).abs().mean(dim=0), factor
+
+
+class Window:
+    """Sums over one log interval, kept on the device (float64) until a row is written."""
+
+    def __init__(self, device: torch.device):
+        self.device = device
+        self.reset()
+
+    def reset(self) -> None:
+        self.loss = torch.zeros((), dtype=torch.float64, device=self.device)
+        self.k = torch.zeros(2, dtype=torch.float64, device=self.device)
+        self.n, self.t = 0, 0.0
+
+    def add(self, loss: torch.Tensor, k_err: torch.Tensor, dt: float) -> None:
+        self.loss += loss.double()
+        self.k += k_err.double()
+        self.n += 1
+        self.t += dt
+
+
+def report(run: Run, window: Window, val: tuple | None, with_val: bool, factor: float, wait: float, writer) -> None:
+    """One CSV row and log line (validating the EMA first when ``with_val``; a new best is saved)."""
+    vm = {}
+    if with_val:
+        vm = metrics(predict(run.ema.model, val[0], run.model_cfg, run.device), val[1])
+        if vm["median_max_px"] < run.best:
+            run.best = vm["median_max_px"]
+            run.save_best(vm)
+    k = window.k.cpu().numpy()
+    n = window.n
+    row = [run.step, round(run.train_time, 1), f"{run.cfg.lr * factor:.3g}", f"{float(window.loss) / n:.4g}",
+           f"{k[0] / n:.4f}", f"{k[1] / n:.4f}", f"{n * run.cfg.batch_size * run.world / max(window.t, 1e-9):.1f}",
+           f"{wait:.1f}", f"{vm.get('mean_dl', float('nan')):.4g}", f"{vm.get('median_max_px', float('nan')):.2f}",
+           f"{vm.get('p90_max_px', float('nan')):.2f}", f"{vm.get('a_beats_b', float('nan')):.3f}"]
+    writer.writerow(row)
+    run.log("step {} t {}s lr {} loss {} |dk1| {} |dk2| {} img/s {} wait {}s val DL {} med {}px p90 {}px A>B {}".format(*row))
+
+
+def should_stop(run: Run) -> bool:
+    """The schedule is done, or this call's stop time reached (every DDP rank follows the slowest
+    clock under a time budget, so all take the same number of steps)."""
+    if run.distributed and run.cfg.time_budget_s:
+        clock = torch.tensor([run.train_time], dtype=torch.float64)
+        dist.all_reduce(clock, op=dist.ReduceOp.MAX)
+        run.train_time = float(clock)
+    return run.progress() >= 1.0 or (run.cfg.stop_at_s is not None and run.train_time >= run.cfg.stop_at_s)
+
+
+def train_loop(run: Run, data: BatchSource, rng: np.random.Generator, val: tuple | None, csv_file) -> None:
+    """Steps until :func:`should_stop`, a log row every ``log_every`` steps (and at validations),
+    ``last.pt`` every ``checkpoint_s`` seconds and at the end, ``best.pt`` at each better validation."""
+    cfg = run.cfg
+    writer = csv.writer(csv_file) if csv_file is not None else None
+    last_ckpt = last_val = time.monotonic()
+    window = Window(run.device)
+    wait_before = data.wait_s
+    while not should_stop(run):
+        ts = time.monotonic()
+        loss, k_err, factor = train_step(run, data, rng, run.progress())
+        dt = time.monotonic() - ts
+        run.train_time += dt
+        window.add(loss, k_err, dt)
+        now = time.monotonic()
+        do_val = val is not None and (now - last_val >= cfg.val_every_s)
+        done = (not run.distributed or not cfg.time_budget_s) and run.progress() >= 1.0
+        if run.is_main and (run.step % cfg.log_every == 0 or do_val or done):
+            report(run, window, val, do_val or (done and val is not None), factor, data.wait_s - wait_before, writer)
+            csv_file.flush()
+            if do_val or (done and val is not None):
+                last_val = time.monotonic()
+            wait_before = data.wait_s
+            window.reset()
+        if run.is_main and (now - last_ckpt >= cfg.checkpoint_s or done):
+            run.save_last()
+            last_ckpt = time.monotonic()
+        if done:
+            break
+
+
+def finish(run: Run, val: tuple | None) -> None:
+    """The final ``last.pt`` and, when no validation made one, ``best.pt`` (main process)."""
+    if not run.is_main:
+        return
+    run.save_last()
+    if val is not None and not (run.out / "best.pt").exists():
+        run.save_best(metrics(predict(run.ema.model, val[0], run.model_cfg, run.device), val[1]))
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    cfg = run_config(args)
+    distributed, rank, world = placement()
+    source = panorama_source(cfg.panoramas, cfg.cache_dir)
+    shards = rank_shards(source, cfg, rank, world)  # too many producers: an error before anything is written
+    run = build_run(cfg, Path(args.out), distributed, rank, world)
+    load_weights(run, args)
+    prepare(run, args)
+    t0 = time.monotonic()
+    if run.is_main:
         source.inputs()  # stadiums rendered into the cache once, before the producers start (they read the cache)
     if distributed:
         dist.barrier()
-    log(f"{len(source)} training panoramas ready ({time.monotonic() - t0:.1f} s)")
-    val = None
-    if is_main and cfg.val_panoramas and cfg.val_size > 0:
-        vsrc = panorama_source(cfg.val_panoramas, cfg.cache_dir)
-        t0 = time.monotonic()
-        val = render_test_set(vsrc, cfg.val_size, seed=10_000 + cfg.seed, out_size=model_cfg.input_size)
-        log(f"validation set: {len(val[0])} crops from {len(vsrc)} panoramas ({time.monotonic() - t0:.1f} s)")
-
-    producers = start_producers(shards, cfg, step, model_cfg.input_size)
-    log(f"{len(producers.producers)} crop producer(s) on this rank, holding "
-        f"{' + '.join(str(w) for w in producers.weights)} panoramas")
-    rng = np.random.default_rng([cfg.seed, rank, step])
-    aug_cfg = AugmentConfig(**cfg.augment)
-    pool = CropPool(cfg.pool_capacity, model_cfg.input_size)
-    writer = None
-    if is_main:
-        new = not (out / "train.csv").exists() or not args.resume
-        csv_file = open(out / "train.csv", "w" if new else "a", newline="")
-        writer = csv.writer(csv_file)
-        if new:
-            writer.writerow(["step", "train_s", "lr", "loss", "k1_mae", "k2_mae", "img_per_s", "producer_wait_s",
-                             "val_dl", "val_median_px", "val_p90_px", "val_a_beats_b"])
+    run.log(f"{len(source)} training panoramas ready ({time.monotonic() - t0:.1f} s)")
+    val = validation_set(run)
+    rng = np.random.default_rng([cfg.seed, rank, run.step])
+    data = batch_source(run, source, shards, rng)
+    csv_file = None
     try:
-        t_fill = time.monotonic()
-        need = max(cfg.pool_min, cfg.batch_size)
-        while pool.count < need:
-            pool.add(*producers.take(cfg.producer_chunk))
-        log(f"pool filled with {pool.count} crops ({time.monotonic() - t_fill:.1f} s)")
-        last_ckpt = last_val = time.monotonic()
-        window_loss, window_k, window_n, window_t = 0.0, np.zeros(2), 0, 0.0
-        wait_before = producers.wait_s
-        while True:
-            if distributed and cfg.time_budget_s:  # every rank follows the slowest clock: same step count
-                clock = torch.tensor([train_time], dtype=torch.float64)
-                dist.all_reduce(clock, op=dist.ReduceOp.MAX)
-                train_time = float(clock)
-            progress = train_time / cfg.time_budget_s if cfg.time_budget_s else step / max(1, cfg.steps)
-            if progress >= 1.0 or (cfg.stop_at_s is not None and train_time >= cfg.stop_at_s):
-                break
-            ts = time.monotonic()
-            pool.add(*producers.take(cfg.fresh_per_step))
-            images, labels = pool.sample(cfg.batch_size, rng, paired=cfg.paired)
-            if cfg.paired:
-                images = augment_pairs(images, rng, aug_cfg, workers=cfg.augment_workers)
-            else:
-                images = augment_batch(images, rng, aug_cfg)
-            x = normalise_batch(torch.from_numpy(images).to(device), model_cfg).contiguous(memory_format=torch.channels_last)
-            y = torch.from_numpy(labels).to(device)
-            factor = lr_factor(progress, step, cfg)
-            for group in optimizer.param_groups:
-                group["lr"] = cfg.lr * factor * group.get("lr_scale", 1.0)
-            train_model.train()
-            if cfg.error_head_only:
-                freeze_all_but_error_head(model)
-            loss, pred = step_loss(train_model, x, y, cfg, model_cfg, rng)
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            optimizer.step()
-            ema.update(model, step)
-            step += 1
-            dt = time.monotonic() - ts
-            train_time += dt
-            window_loss += loss.item()
-            window_k += (pred.detach() - y).abs().mean(dim=0).cpu().numpy()
-            window_n += 1
-            window_t += dt
-            now = time.monotonic()
-            do_val = val is not None and (now - last_val >= cfg.val_every_s)
-            done = (not distributed or not cfg.time_budget_s) and (
-                (train_time / cfg.time_budget_s if cfg.time_budget_s else step / max(1, cfg.steps)) >= 1.0)
-            if is_main and (step % cfg.log_every == 0 or do_val or done):
-                vm = {}
-                if do_val or (done and val is not None):
-                    vm = metrics(predict(ema.model, val[0], model_cfg, device), val[1])
-                    last_val = time.monotonic()
-                    if vm["median_max_px"] < best:
-                        best = vm["median_max_px"]
-                        save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
-                                        step=step, train_time=train_time, val=vm)
-                wait = producers.wait_s - wait_before
-                wait_before = producers.wait_s
-                row = [step, round(train_time, 1), f"{cfg.lr * factor:.3g}", f"{window_loss / window_n:.4g}",
-                       f"{window_k[0] / window_n:.4f}", f"{window_k[1] / window_n:.4f}",
-                       f"{window_n * cfg.batch_size * world / max(window_t, 1e-9):.1f}", f"{wait:.1f}",
-                       f"{vm.get('mean_dl', float('nan')):.4g}", f"{vm.get('median_max_px', float('nan')):.2f}",
-                       f"{vm.get('p90_max_px', float('nan')):.2f}", f"{vm.get('a_beats_b', float('nan')):.3f}"]
-                writer.writerow(row)
-                csv_file.flush()
-                log("step {} t {}s lr {} loss {} |dk1| {} |dk2| {} img/s {} wait {}s val DL {} med {}px p90 {}px A>B {}".format(*row))
-                window_loss, window_k, window_n, window_t = 0.0, np.zeros(2), 0, 0.0
-            if is_main and (now - last_ckpt >= cfg.checkpoint_s or done):
-                save_checkpoint(out / "last.pt", model=model.state_dict(), ema=ema.model.state_dict(),
-                                optimizer=optimizer.state_dict(), step=step, train_time=train_time, best=best,
-                                model_config=model_cfg.to_dict())
-                last_ckpt = time.monotonic()
-            if done:
-                break
-        if is_main:
-            save_checkpoint(out / "last.pt", model=model.state_dict(), ema=ema.model.state_dict(),
-                            optimizer=optimizer.state_dict(), step=step, train_time=train_time, best=best,
-                            model_config=model_cfg.to_dict())
-            if val is not None and not (out / "best.pt").exists():
-                vm = metrics(predict(ema.model, val[0], model_cfg, device), val[1])
-                save_checkpoint(out / "best.pt", model=ema.model.state_dict(), model_config=model_cfg.to_dict(),
-                                step=step, train_time=train_time, val=vm)
+        csv_file = open_log(run, args.resume)
+        train_loop(run, data, rng, val, csv_file)
+        finish(run, val)
     finally:
-        producers.close()
-        if writer is not None:
+        data.close()
+        if csv_file is not None:
             csv_file.close()
         if distributed:
             dist.destroy_process_group()
-    log(f"done: {step} steps, {train_time:.0f} s of training")
+    run.log(f"done: {run.step} steps, {run.train_time:.0f} s of training")
     return 0
 
 
