@@ -17,9 +17,10 @@ import sys
 
 import numpy as np
 
+from glradial.cli import messages_to_stderr
 from glradial.commands.evaluate import add_arguments, settings
 from glradial.estimation.estimator import default_model_path
-from glradial.evaluation.evaluation import PREDICT_BATCH, OnnxPredictor, evaluate
+from glradial.evaluation.evaluation import PREDICT_BATCH, OnnxPredictor, evaluate, summary
 
 
 class TorchPredictor:
@@ -55,7 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     model = str(args.model or default_model_path())
     chosen = settings(args, "python -m net.evaluate")
     predictor = (TorchPredictor if model.endswith(".pt") else OnnxPredictor)(model, args.threads)
-    evaluate(predictor, predictor.input_size, args.out, chosen, model)
+    with messages_to_stderr():  # the evaluation's progress, as `glradial evaluate` shows it
+        result = evaluate(predictor, predictor.input_size, args.out, chosen, model)
+    print(summary(args.out, result))
     return 0
 
 

@@ -58,6 +58,7 @@ import torch.distributed as dist
 
 from glradial.evaluation.evaluation import metrics
 from glradial.media.atomic import atomic_path, atomic_write_text
+from glradial.schemas import validate_config
 
 from .augment import AugmentConfig
 from .data import CropPool, CropProducer, CropProducers, PanoramaSource, render_test_set, shard_source
@@ -122,10 +123,7 @@ class TrainConfig:
         """Load a run config; ``"base"`` names a config (relative to this file's folder) that it
         extends (:func:`load_config_dict`)."""
         data = load_config_dict(path)
-        names = set(cls.__dataclass_fields__)
-        unknown = set(data) - names
-        if unknown:
-            raise ValueError(f"unknown keys in {path}: {sorted(unknown)}")
+        validate_config(data, f"training config {str(path)!r}")  # types, ranges, unknown keys
         cfg = cls(**data)
         if cfg.producers < 1:
             raise ValueError(f"producers must be at least 1, got {cfg.producers}")

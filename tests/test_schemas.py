@@ -28,7 +28,7 @@ def test_a_string_for_steps_is_refused_naming_the_field():
         validate_config({"steps": "100"}, "training config 'run.json'")
     with pytest.raises(ValueError, match="panoramas.seeds"):
         validate_config({"panoramas": {"kind": "stadium", "seeds": {"split": "train", "n": 0}}})
-    with pytest.raises(ValueError, match="unknown key\\(s\\) 'stpes'; accepted: augment, augment_workers, batch_size"):
+    with pytest.raises(ValueError, match="unknown key\\(s\\) 'stpes'; accepted: amp, augment, augment_workers, batch_size"):
         validate_config({"stpes": 100})
     validate_config({"steps": 100, "val_panoramas": None})
 
@@ -62,3 +62,14 @@ def test_glradial_s_own_outputs_are_valid_lens_files(tmp_path, capsys):
     validate(opencv, "lens_file", "opencv", "opencv")
     with pytest.raises(ValueError, match="^f: camera_matrix\\[1\\]: \\[0, 1\\] is too short"):
         validate(dict(opencv, camera_matrix=[[1, 0, 0], [0, 1], [0, 0, 1]]), "lens_file", "f", "opencv")
+
+
+def test_net_train_refuses_a_config_whose_steps_is_a_string(tmp_path):
+    """The trainer itself checks its config against the schema (not only validate_config)."""
+    pytest.importorskip("torch")
+    from net.train import TrainConfig
+
+    path = tmp_path / "run.json"
+    path.write_text('{"steps": "100"}')
+    with pytest.raises(ValueError, match=r"run\.json.*steps: '100' is not of type 'integer'"):
+        TrainConfig.from_json(path)
