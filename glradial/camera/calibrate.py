@@ -25,6 +25,11 @@ from .refine import Fit, refine
 
 #: Gates (px at 1280) when tracking from the previous frame's camera.
 TRACK_GATES = (15.0, 6.0, 3.0)
+#: The coarse stage (every first guess: pinhole, wide gates) and the fine stage (the best
+#: :data:`FINE_STARTS` coarse fits: lens free, narrow gates).
+COARSE_GATES, FINE_GATES, FINE_STARTS = (60.0, 30.0, 15.0, 8.0), (8.0, 5.0, 3.0), 2
+#: The coarse stage fits at most this many evidence points (evenly thinned).
+COARSE_POINTS = 400
 #: Bound (px at 1280) of an estimate without a camera.
 NO_CAMERA_PX = 1280.0
 
@@ -46,10 +51,23 @@ def _starts(lines: WhiteLines, pitch: PitchTemplate, first_guess, previous) -> l
     homographies = first_views(lines.xy, lines.size, pitch) if first_guess is None else list(first_guess)
     cams = []
     for h in homographies:
-        cam = decompose_homography(np.asarray(h, float), lines.size)
+        cam = decompose_homography(h, lines.size)
         if cam is not None:
             cams.append(cam)
     return cams
+
+
+def _check_first_guess(first_guess: object) -> list[np.ndarray]:
+    if isinstance(first_guess, np.ndarray) and first_guess.shape == (3, 3):
+        first_guess = [first_guess]
+    try:
+        hs = [np.asarray(h, dtype=np.float64) for h in first_guess]  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise TypeError(f"first_guess must be a list of 3×3 homographies, got {first_guess!r}") from None
+    for i, h in enumerate(hs):
+        if h.shape != (3, 3) or not np.all(np.isfinite(h)):
+            raise ValueError(f"first_guess[{i}] must be a finite 3×3 homography, got {h.tolist()}")
+    return hs
 
 
 def judge(fit: Fit | None, points: int) -> CameraEstimate:
@@ -63,17 +81,17 @@ def judge(fit: Fit | None, points: int) -> CameraEstimate:
         reason = "too_few_markings"
     elif not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
         reason = "weak_geometry"
-    elif fit.share < t["min_share"] or fit.rms_px > t["max_rms_px"]:
+    elif fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
         reason = "poor_fit"
     else:
         reason = "ok"
-    return CameraEstimate(fit.camera, bound, reason != "ok", reason, fit.elements, fit.rms_px, fit.inliers)
+    return CameraEstimate(fit.camera, bound, reason != "ok", reason, fit.elements, fit.rms_px, fit.inliers, fit.support,
+                          fit.log_focal_sd)
 
 
-def _better(a: Fit | None, b: Fit | None) -> Fit | None:
-    if a is None or b is None:
-        return a or b
-    return a if (a.inliers, -a.rms_px) >= (b.inliers, -b.rms_px) else b
+def _score(fit: Fit) -> float:  # on the coarse stage's thinned points and on the fine stage's, alike
+    """How well a fit explains the frame: evidence explained times markings supported."""
+    return fit.share * fit.support
 
 
 def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
@@ -90,6 +108,8 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     if not isinstance(frame, np.ndarray):
         raise TypeError(f"frame must be a numpy image array, got {type(frame).__name__}")
     pitch = _check_pitch(pitch)
+    if first_guess is not None:
+        first_guess = _check_first_guess(first_guess)
     rgb = to_rgb8(frame)
     lines = white_lines(rgb)
     if len(lines.xy) < camera_trust()["min_points"]:
@@ -99,7 +119,10 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
                                gates=TRACK_GATES), len(lines.xy))
         if not tracked.doubtful:
             return tracked
-    best = None
-    for cam in _starts(lines, pitch, first_guess, None):
-        best = _better(best, refine(cam, lines.xy, lines.angle, pitch))
-    return judge(best, len(lines.xy))
+    thin = np.linspace(0, len(lines.xy) - 1, min(len(lines.xy), COARSE_POINTS)).round().astype(np.intp)
+    coarse = [refine(cam, lines.xy[thin], lines.angle[thin], pitch, fit_lens=False, gates=COARSE_GATES)
+              for cam in _starts(lines, pitch, first_guess, None)]
+    coarse = sorted((f for f in coarse if f is not None), key=_score, reverse=True)[:FINE_STARTS]
+    fine = [refine(f.camera, lines.xy, lines.angle, pitch, gates=FINE_GATES) for f in coarse]
+    fits = [f for f in fine if f is not None]
+    return judge(max(fits, key=_score) if fits else None, len(lines.xy))

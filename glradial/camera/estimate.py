@@ -6,7 +6,10 @@ fit's own residual scale times a quantile calibrated on procedural views with ex
 (``glradial/data/camera_trust.json``, written by ``bench/camera_procedural.py --calibrate``).
 ``doubtful`` and ``reason`` say whether to use it (one of :data:`REASONS`; ``"ok"`` exactly when not
 doubtful). ``markings``: labels of the template elements the fit used
-(:meth:`glradial.pitch.PitchTemplate.elements`). A doubtful estimate may carry no camera at all.
+(:meth:`glradial.pitch.PitchTemplate.elements`); ``rms_px`` the fit's RMS distance of the white-line
+points on them (px at 1280), ``inliers`` their number, ``support`` the share of the markings drawn in
+the frame that the frame shows (:func:`glradial.camera.refine.support`), ``focal_sd`` the relative
+standard deviation of the focal length from the fit's Jacobian. A doubtful estimate may carry no camera at all.
 """
 
 from __future__ import annotations
@@ -45,6 +48,8 @@ class CameraEstimate:
     markings: tuple[str, ...] = ()
     rms_px: float = math.inf
     inliers: int = 0
+    support: float = 0.0
+    focal_sd: float = math.inf
 
     def __post_init__(self) -> None:
         if self.reason not in REASONS or (self.reason == "ok") == bool(self.doubtful):
@@ -108,7 +113,8 @@ class CameraEstimate:
         """JSON-ready summary (units in the keys' names)."""
         out: dict = {"doubtful": self.doubtful, "reason": self.reason, "uncertainty_px": self.uncertainty_px,
                      "rms_px": self.rms_px if math.isfinite(self.rms_px) else None, "inliers": self.inliers,
-                     "markings": list(self.markings)}
+                     "support": self.support,
+                     "focal_sd": self.focal_sd if math.isfinite(self.focal_sd) else None, "markings": list(self.markings)}
         cam = self.camera
         if cam is not None:
             pan, tilt, roll = cam.pan_tilt_roll

@@ -6,7 +6,8 @@ Convention:
     detector of the line evidence (:func:`glradial.estimation.lines.bright_ridges`). Points are
     returned in pixels of the **distorted frame at its own resolution** (centres at integers), with
     their line direction (radians in [0, pi)). Letterboxes and a border margin are masked, and where
-    the frame has pitch green, points away from the grass (stands, boards, sky) are dropped.
+    the frame has pitch green, points off the pitch region (the largest green area: stands, boards, sky)
+    are dropped.
 """
 
 from __future__ import annotations
@@ -21,18 +22,20 @@ from ..estimation.trust import GREEN_HUE, GREEN_MIN_SATURATION, GREEN_MIN_VALUE
 
 #: Largest width (px) of the copy the white lines are detected on.
 DETECT_WIDTH = 960
-#: A point is on the grass when this share of its neighbourhood (a box of :data:`GRASS_BOX` px of the
-#: detection copy) is pitch green...
-GRASS_SHARE = 0.3
-GRASS_BOX = 31
-#: ...which is only required of frames where at least this share of the pixels is green.
+#: The pitch region: green closed over this many px (detection copy), then grown by this many...
+GRASS_CLOSE, GRASS_GROW = 15, 7
+#: Speckle (px, detection copy) removed before: greenish crowd pixels.
+GRASS_OPEN = 5
+#: Half width (OpenCV hue units, 2 degrees each) of the pitch's own green around the hue peak.
+HUE_HALF_WINDOW = 7
+#: ...required only of frames where at least this share of the pixels is green.
 GREEN_FRAME_SHARE = 0.15
 #: A white line is this many grey levels (0..255) brighter than the mean of a :data:`BACKGROUND_BOX` px
 #: box around it (detection copy): mowing stripes and grain are not.
 WHITE_CONTRAST = 14.0
 BACKGROUND_BOX = 21
 #: At most this many points are kept (evenly thinned): enough for a sub-pixel fit, bounded cost.
-MAX_POINTS = 1500
+MAX_POINTS = 1000
 
 
 @dataclass(frozen=True)
@@ -49,19 +52,32 @@ class WhiteLines:
 
 
 def _grass_mask(frame: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, float]:
-    """uint8 mask (detection size) of pixels near pitch green, and the green share of the frame."""
+    """uint8 mask (detection size) of the pitch: the largest connected region of pitch green, closed
+    over its lines and players (:data:`GRASS_CLOSE` px) and grown by :data:`GRASS_GROW` px so the
+    lines at its edge count; and the green share of the frame. All ones when the frame is not green
+    enough to tell."""
     if frame.ndim != 3:
         return np.ones(shape, np.uint8), 0.0
     small = cv2.resize(frame, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
     hsv = cv2.cvtColor(small, cv2.COLOR_RGB2HSV)
     lo = np.array([GREEN_HUE[0], GREEN_MIN_SATURATION, GREEN_MIN_VALUE], np.uint8)
     hi = np.array([GREEN_HUE[1], 255, 255], np.uint8)
-    green = cv2.inRange(hsv, lo, hi)
-    share = float(np.count_nonzero(green)) / green.size
+    band = cv2.inRange(hsv, lo, hi)
+    share = float(np.count_nonzero(band)) / band.size
     if share < GREEN_FRAME_SHARE:
         return np.ones(shape, np.uint8), share
-    near = cv2.blur(green.astype(np.float32) / 255.0, (GRASS_BOX, GRASS_BOX))
-    return (near > GRASS_SHARE).astype(np.uint8), share
+    # this pitch's own green: the hue window around the band's peak (stands and boards are other hues)
+    hist = np.bincount(hsv[..., 0][band > 0], minlength=181).astype(np.float64)
+    peak = int(np.argmax(np.convolve(hist, np.ones(2 * HUE_HALF_WINDOW + 1), "same")))
+    green = band & cv2.inRange(hsv[..., 0], peak - HUE_HALF_WINDOW, peak + HUE_HALF_WINDOW)
+    green = cv2.morphologyEx(green, cv2.MORPH_OPEN, np.ones((GRASS_OPEN, GRASS_OPEN), np.uint8))
+    closed = cv2.morphologyEx(green, cv2.MORPH_CLOSE, np.ones((GRASS_CLOSE, GRASS_CLOSE), np.uint8))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
+    if count < 2:
+        return np.ones(shape, np.uint8), share
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    pitch = (labels == largest).astype(np.uint8)
+    return cv2.dilate(pitch, np.ones((GRASS_GROW, GRASS_GROW), np.uint8)), share
 
 
 def white_lines(frame: np.ndarray, max_points: int = MAX_POINTS) -> WhiteLines:

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..lens.lens import Lens, frame_size, lens_to_pixels
+from ..lens.lensfuncs import LENS_RADIUS_UNBOUNDED, fold_radii, radial_factor
 
 #: The half turn of the pitch about its centre spot.
 HALF_TURN = np.diag([-1.0, -1.0, 1.0])
@@ -140,14 +141,12 @@ class Camera:
 
     def project(self, points: object) -> np.ndarray:
         """Pitch points (N x 3, or N x 2 with z = 0; metres) -> N x 2 pixels of the distorted frame,
-        lens included (the lens's forward map). Points behind the camera, or beyond the radius where the
-        lens folds over (:meth:`glradial.Lens.fold_radius`; the polynomial would bring them back into
-        the frame), are NaN."""
-        uv, z = self.undistorted_lens_points(points)
-        xy = self.lens.distort_points(lens_to_pixels(uv, self.size), self.size)
-        with np.errstate(invalid="ignore"):
-            xy[~((z > 0) & (np.hypot(uv[:, 0], uv[:, 1]) < self.lens.fold_radius()))] = np.nan
-        return xy
+        lens included (:func:`project_many`, the lens's forward map)."""
+        lens = self.lens
+        if not lens.is_centred:
+            raise ValueError(f"camera lenses have the principal point at the centre and square pixels, got {lens!r}")
+        return project_many(self.rotation[None], self.position[None], np.array([self.focal]), np.array([lens.k1]),
+                            np.array([lens.k2]), self.size, points3(points))[0]
 
     def with_size(self, size: tuple[int, int]) -> "Camera":
         """The same camera seeing a frame of another size (same field of view, same width-normalised
@@ -157,6 +156,28 @@ class Camera:
     def turned(self) -> "Camera":
         """The same view with the pitch turned half round (the camera on the other touchline)."""
         return Camera(self.rotation @ HALF_TURN, HALF_TURN @ self.position, self.focal, self.size, self.lens)
+
+
+def project_many(rotation: np.ndarray, position: np.ndarray, focal: np.ndarray, k1: np.ndarray, k2: np.ndarray,
+                 size: tuple[int, int], points: np.ndarray) -> np.ndarray:
+    """The one projection of pitch points to distorted pixels, for ``B`` cameras at once: ``rotation``
+    B x 3 x 3, ``position`` B x 3, ``focal``, ``k1``, ``k2`` (B,), ``points`` M x 3 -> B x M x 2.
+
+    Camera space ``X = R (p - C)``; undistorted lens point ``u = focal (X/Z, Y/Z)``; distorted lens
+    point ``u (1 + k1 |u|² + k2 |u|⁴)`` (:func:`glradial.lens.lensfuncs.radial_factor`, the lens's
+    forward model); pixels by :func:`glradial.lens.lens.lens_to_pixels`. NaN for points behind the
+    camera or beyond the radius where the lens folds over (:func:`glradial.lens.lensfuncs.fold_radii`:
+    the polynomial would bring them back into the frame)."""
+    cam = np.matmul(points[None] - position[:, None], np.transpose(rotation, (0, 2, 1)))
+    z = cam[..., 2:3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        uv = focal[:, None, None] * cam[..., :2] / z
+        r2 = np.sum(uv * uv, axis=-1, keepdims=True)
+        fold = fold_radii(k1, k2)
+        limit = np.where(fold >= LENS_RADIUS_UNBOUNDED, np.inf, fold)[:, None, None]
+        pd = uv * radial_factor(r2, k1[:, None, None], k2[:, None, None])
+        pd = np.where((z > 0) & (r2 < limit * limit), pd, np.nan)
+    return lens_to_pixels(pd, size)
 
 
 def hfov_deg(focal: float) -> float:

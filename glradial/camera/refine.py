@@ -27,7 +27,7 @@ from scipy.spatial.transform import Rotation
 from ..lens.lens import Lens
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
-from .model import Camera
+from .model import Camera, project_many
 
 #: Residuals are in px of a frame this wide.
 REFERENCE_WIDTH = 1280.0
@@ -45,6 +45,8 @@ LOSS_SCALE = 1.5
 K2_PRIOR, K1_PRIOR, PRIOR_POINTS = 0.08, 0.6, 20.0
 #: Least-squares evaluations per round.
 MAX_NFEV = 30
+#: A projected marking sample is supported by evidence this close (px at 1280).
+SUPPORT_PX = 4.0
 #: An element counts as used when at least this many inliers lie on it.
 MIN_ELEMENT_POINTS = 12
 
@@ -81,7 +83,9 @@ class Fit:
     1280), ``inliers`` (evidence points within the last gate), ``share`` (inliers / evidence points),
     ``elements`` (labels of the markings with at least :data:`MIN_ELEMENT_POINTS` inliers),
     ``log_focal_sd`` (standard deviation of log focal from the last round's Jacobian; infinite where
-    the markings seen do not fix it), ``cost`` (the robust cost per evidence point)."""
+    the markings seen do not fix it), ``cost`` (the robust cost per evidence point), ``support`` (the
+    share of the markings projected inside the frame that have an evidence point within
+    :data:`SUPPORT_PX`: low when the camera draws markings where the frame has none)."""
 
     camera: Camera
     rms_px: float
@@ -90,6 +94,7 @@ class Fit:
     elements: tuple[str, ...]
     log_focal_sd: float
     cost: float
+    support: float = 0.0
 
 
 def _camera(x: np.ndarray, base: Camera) -> Camera:
@@ -144,26 +149,46 @@ def _line_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndar
     return np.abs(cross), along
 
 
-def _residuals(x, base, samples, xy, a, b, with_lens, lens0):
-    if not with_lens:
-        x = np.concatenate([x, lens0])
-    try:
-        cam = _camera(x, base)
-    except ValueError:
-        return np.full(len(xy) + 2 * with_lens, 1e3)
-    pts = np.concatenate([samples.points[a], samples.points[b]])
-    proj = cam.project(pts)
-    n = len(a)
-    ab = proj[n:] - proj[:n]
-    length = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-9)
-    ap = xy - proj[:n]
-    r = (ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0]) / length * (REFERENCE_WIDTH / base.size[0])
-    r = np.where(np.isfinite(r), r, 1e3)
-    if with_lens:
-        k1, k2 = x[7], x[8]
-        w = LOSS_SCALE * math.sqrt(PRIOR_POINTS)
-        r = np.concatenate([r, [w * (k2 - manifold_k2(k1)) / K2_PRIOR, w * k1 / K1_PRIOR]])
-    return r
+class _Problem:
+    """The residuals of one round (fixed assignment) for a batch of parameter vectors, and their
+    forward-difference Jacobian computed as one batch."""
+
+    def __init__(self, base: Camera, samples: Samples, xy: np.ndarray, a: np.ndarray, b: np.ndarray,
+                 with_lens: bool, lens0: np.ndarray) -> None:
+        self.base, self.xy, self.with_lens, self.lens0 = base, xy, with_lens, lens0
+        self.points = np.column_stack([np.concatenate([samples.points[a], samples.points[b]]), np.zeros(2 * len(a))])
+        self.scale = REFERENCE_WIDTH / base.size[0]
+
+    def batch(self, x: np.ndarray) -> np.ndarray:
+        """Residuals (B x R) of parameter rows ``x`` (B x 9, or B x 7 with the lens held)."""
+        if not self.with_lens:
+            x = np.column_stack([x, np.tile(self.lens0, (len(x), 1))])
+        rot = np.matmul(Rotation.from_rotvec(x[:, :3]).as_matrix(), self.base.rotation)
+        proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points)
+        n = len(self.xy)
+        p0, ab = proj[:, :n], proj[:, n:] - proj[:, :n]
+        length = np.maximum(np.hypot(ab[..., 0], ab[..., 1]), 1e-9)
+        ap = self.xy[None] - p0
+        r = (ab[..., 0] * ap[..., 1] - ab[..., 1] * ap[..., 0]) / length * self.scale
+        r = np.where(np.isfinite(r), r, 1e3)
+        if self.with_lens:
+            k1, k2 = x[:, 7], x[:, 8]
+            w = LOSS_SCALE * math.sqrt(PRIOR_POINTS)
+            r = np.column_stack([r, w * (k2 - manifold_k2(k1)) / K2_PRIOR, w * k1 / K1_PRIOR])
+        return r
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        return self.batch(x[None])[0]
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        steps = FD_STEP * np.maximum(1.0, np.abs(x))
+        rows = np.vstack([x, x + np.diag(steps)])
+        r = self.batch(rows)
+        return ((r[1:] - r[0]) / steps[:, None]).T
+
+
+#: Relative forward-difference step of the Jacobian.
+FD_STEP = 1e-6
 
 
 def _params(camera: Camera) -> np.ndarray:
@@ -182,11 +207,11 @@ def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTempla
         if found is None or int(found[3].sum()) < 12:
             return None
         a, b, _, use = found
-        with_lens = fit_lens and round_ >= LENS_FROM
+        with_lens = fit_lens and round_ >= min(LENS_FROM, len(gates) - 1)
         x0 = _params(camera)
         lens0 = x0[7:]
-        args = (camera, samples, xy[use], a[use], b[use], with_lens, lens0)
-        result = least_squares(_residuals, x0 if with_lens else x0[:7], args=args, loss="soft_l1",
+        problem = _Problem(camera, samples, xy[use], a[use], b[use], with_lens, lens0)
+        result = least_squares(problem.residuals, x0 if with_lens else x0[:7], jac=problem.jacobian, loss="soft_l1",
                                f_scale=LOSS_SCALE, x_scale="jac", max_nfev=MAX_NFEV)
         x = result.x if with_lens else np.concatenate([result.x, lens0])
         try:
@@ -212,4 +237,17 @@ def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result) -
     except np.linalg.LinAlgError:
         sd = math.inf
     rms = float(np.sqrt(np.mean(inl ** 2))) if len(inl) else math.inf
-    return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1))
+    return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1),
+               support(camera, samples, xy))
+
+
+def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
+    """Share of the template samples projected inside the frame with an evidence point within
+    :data:`SUPPORT_PX` (0 when none is inside)."""
+    proj, ok = _segments(camera, samples)
+    width, height = camera.size
+    ok &= (proj[:, 0] >= 0) & (proj[:, 0] <= width - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= height - 1)
+    if not ok.any() or len(xy) == 0:
+        return 0.0
+    d, _ = cKDTree(xy).query(proj[ok])
+    return float(np.mean(d * REFERENCE_WIDTH / width < SUPPORT_PX))

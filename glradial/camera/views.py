@@ -93,13 +93,14 @@ def render_view(camera: Camera, seed: int = 0, pitch: PitchTemplate | None = Non
 
 
 def random_camera(rng: np.random.Generator, size: tuple[int, int] = (1280, 720), lens: bool = True) -> Camera:
-    """A main-camera-like view: on the near side (10-60 m behind the touchline, 8-35 m up, within 30 m
-    of the halfway line), aimed at a random point of the pitch, horizontal field of view 12-60
-    degrees, roll within 1 degree, and a lens on the Lopez-Antequera manifold (k1 in [-0.35, 0.05])."""
-    position = np.array([rng.uniform(-30, 30), -34.0 - rng.uniform(10, 60), rng.uniform(8, 35)])
+    """A main-camera view: on the near side (15-60 m behind the touchline, 10-32 m up, within 15 m of
+    the halfway line), aimed at a random point of the pitch, horizontal field of view 16-64 degrees
+    (log-uniform in the focal length), roll within 1 degree, and a lens on the Lopez-Antequera
+    manifold (k1 in [-0.35, 0.05])."""
+    position = np.array([rng.uniform(-15, 15), -34.0 - rng.uniform(15, 60), rng.uniform(10, 32)])
     target = np.array([rng.uniform(-50, 50), rng.uniform(-28, 28), 0.0])
-    hfov = math.degrees(2 * math.atan(math.exp(rng.uniform(math.log(math.tan(math.radians(6))),
-                                                              math.log(math.tan(math.radians(30)))))))
+    hfov = math.degrees(2 * math.atan(math.exp(rng.uniform(math.log(math.tan(math.radians(8))),
+                                                              math.log(math.tan(math.radians(32)))))))
     k1 = rng.uniform(-0.35, 0.05) if lens else 0.0
     k2 = 0.019 * k1 + 0.805 * k1 * k1
     return Camera.look_at(position, target, hfov, size, Lens(k1, k2), roll=rng.uniform(-1, 1))
