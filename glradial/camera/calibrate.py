@@ -27,9 +27,10 @@ from .refine import Fit, refine
 TRACK_GATES = (15.0, 6.0, 3.0)
 #: The coarse stage (every first guess: pinhole, wide gates) and the fine stage (the best
 #: :data:`FINE_STARTS` coarse fits: lens free, narrow gates).
-COARSE_GATES, FINE_GATES, FINE_STARTS = (60.0, 30.0, 15.0, 8.0), (8.0, 5.0, 3.0), 2
-#: The coarse stage fits at most this many evidence points (evenly thinned).
-COARSE_POINTS = 400
+COARSE_GATES, FINE_GATES, FINE_STARTS = (60.0, 30.0, 15.0, 8.0), (10.0, 6.0, 4.0, 3.0), 2
+#: The coarse and the fine stage fit at most this many evidence points (evenly thinned); the support
+#: is measured on all of them.
+COARSE_POINTS, FINE_POINTS = 400, 1000
 #: Bound (px at 1280) of an estimate without a camera.
 NO_CAMERA_PX = 1280.0
 
@@ -114,15 +115,16 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     lines = white_lines(rgb)
     if len(lines.xy) < camera_trust()["min_points"]:
         return judge(None, len(lines.xy))
+    fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
     if previous is not None:
-        tracked = judge(refine(_starts(lines, pitch, None, previous)[0], lines.xy, lines.angle, pitch,
-                               gates=TRACK_GATES), len(lines.xy))
+        tracked = judge(refine(_starts(lines, pitch, None, previous)[0], fine_lines.xy, fine_lines.angle, pitch,
+                               gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
         if not tracked.doubtful:
             return tracked
-    thin = np.linspace(0, len(lines.xy) - 1, min(len(lines.xy), COARSE_POINTS)).round().astype(np.intp)
-    coarse = [refine(cam, lines.xy[thin], lines.angle[thin], pitch, fit_lens=False, gates=COARSE_GATES)
-              for cam in _starts(lines, pitch, first_guess, None)]
+    coarse = [refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
+                     support_xy=lines.xy, hold_position=1) for cam in _starts(lines, pitch, first_guess, None)]
     coarse = sorted((f for f in coarse if f is not None), key=_score, reverse=True)[:FINE_STARTS]
-    fine = [refine(f.camera, lines.xy, lines.angle, pitch, gates=FINE_GATES) for f in coarse]
+    fine = [refine(f.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
+                   support_xy=lines.xy) for f in coarse]
     fits = [f for f in fine if f is not None]
     return judge(max(fits, key=_score) if fits else None, len(lines.xy))

@@ -34,21 +34,24 @@ GREEN_FRAME_SHARE = 0.15
 #: box around it (detection copy): mowing stripes and grain are not.
 WHITE_CONTRAST = 14.0
 BACKGROUND_BOX = 21
-#: At most this many points are kept (evenly thinned): enough for a sub-pixel fit, bounded cost.
-MAX_POINTS = 1000
 
 
 @dataclass(frozen=True)
 class WhiteLines:
     """White-line points of one frame: ``xy`` (N x 2 pixels of the ``size = (W, H)`` frame), ``angle``
-    (N, line direction in radians, [0, pi)), ``green`` (share of pitch-green pixels), ``found`` (points
-    before thinning)."""
+    (N, line direction in radians, [0, pi)), ``green`` (share of pitch-green pixels)."""
 
     xy: np.ndarray
     angle: np.ndarray
     size: tuple[int, int]
     green: float
-    found: int
+
+    def thinned(self, count: int) -> "WhiteLines":
+        """At most ``count`` of the points, evenly spread over the list (a bounded fitting cost)."""
+        if len(self.xy) <= count:
+            return self
+        keep = np.linspace(0, len(self.xy) - 1, count).round().astype(np.intp)
+        return WhiteLines(self.xy[keep], self.angle[keep], self.size, self.green)
 
 
 def _grass_mask(frame: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, float]:
@@ -80,7 +83,7 @@ def _grass_mask(frame: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, 
     return cv2.dilate(pitch, np.ones((GRASS_GROW, GRASS_GROW), np.uint8)), share
 
 
-def white_lines(frame: np.ndarray, max_points: int = MAX_POINTS) -> WhiteLines:
+def white_lines(frame: np.ndarray) -> WhiteLines:
     """The white-line points of a uint8 frame (see the module docstring)."""
     if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3):
         raise TypeError(f"frame must be a uint8 H×W or H×W×3 array, got {type(frame).__name__} "
@@ -98,10 +101,6 @@ def white_lines(frame: np.ndarray, max_points: int = MAX_POINTS) -> WhiteLines:
     r, c = np.clip(np.rint(y).astype(np.intp), 0, height - 1), np.clip(np.rint(x).astype(np.intp), 0, width - 1)
     white = gray[r, c] - background[r, c] > WHITE_CONTRAST
     x, y, angle = x[white], y[white], angle[white]
-    found = len(x)
-    if found > max_points:
-        keep = np.linspace(0, found - 1, max_points).round().astype(np.intp)
-        x, y, angle = x[keep], y[keep], angle[keep]
     s = width_full / width
     xy = np.stack([(x + 0.5) * s - 0.5, (y + 0.5) * s - 0.5], axis=1)
-    return WhiteLines(xy, angle, (width_full, height_full), share, found)
+    return WhiteLines(xy, angle, (width_full, height_full), share)

@@ -5,10 +5,11 @@ The dictionary: cameras at the halfway line, 20, 35 or 55 m behind the near touc
 m up, pan within ±60 degrees, tilt 5-40 degrees, horizontal field of view 10-70 degrees, pan and tilt
 steps a quarter of the field of view. Each view's template samples (every 2 m) are projected once per
 frame shape (pinhole, no lens). Per frame, the white-line points are drawn at :data:`SCORE_WIDTH` px;
-each view's samples are looked up in the distance transform (mean truncated distance: the markings
-find lines), and the best :data:`RESCORE` views are rescored the other way too (the lines find
-markings: the distance transform of the view's drawn markings at the evidence points), so a view that
-puts a few markings on a few lines does not win. The best views, as plane homographies to the frame's
+each view's samples are looked up in the distance transform (the sum of ``1 - d / REACH`` over its
+samples: how many markings it puts on lines), and the best :data:`RESCORE` views by that count are
+scored by its mean over the view's samples (the share of its drawn markings that lie on lines) times
+the share of the evidence its drawn markings explain (the same measure the other way), so neither a
+view that puts a few markings on a few lines nor one that draws markings everywhere wins. The best views, as plane homographies to the frame's
 undistorted pixels, go to the refinement, which recovers the actual position, focal length and lens.
 """
 
@@ -26,8 +27,9 @@ from .model import intrinsics
 
 #: Width (px) of the image the dictionary is scored on.
 SCORE_WIDTH = 320
-#: Distances beyond this (px at :data:`SCORE_WIDTH`) count as this.
-TRUNCATE = 8.0
+#: A sample (or an evidence point) counts as matched by ``1 - d / REACH`` at distance ``d`` (px at
+#: :data:`SCORE_WIDTH`), not at all beyond: about the dictionary's step, so a view near the truth scores.
+REACH = 10.0
 #: A view must put this many template samples (every 2 m) in the frame.
 MIN_SAMPLES = 20
 #: Camera positions: metres behind the near touchline, heights (metres).
@@ -36,7 +38,7 @@ DISTANCES, HEIGHTS = (20.0, 35.0, 55.0), (12.0, 20.0, 30.0)
 FOVS = (10.0, 14.0, 20.0, 28.0, 40.0, 55.0, 70.0)
 PAN, TILT = (-60.0, 60.0), (5.0, 40.0)
 #: Views rescored both ways.
-RESCORE = 40
+RESCORE = 100
 
 
 def _rotations(pans: np.ndarray, tilts: np.ndarray) -> np.ndarray:
@@ -83,17 +85,18 @@ def _homography(rot: np.ndarray, pos: np.ndarray, focal: float, size: tuple[int,
     return intrinsics(focal, size) @ np.column_stack([rot[:, 0], rot[:, 1], -rot @ pos])
 
 
-def _rescore(index_row: np.ndarray, evidence: np.ndarray, small) -> float:
-    """Mean truncated distance from the evidence points to the view's drawn markings."""
+def _explained(index_row: np.ndarray, evidence: np.ndarray, small) -> float:
+    """How much of the evidence the view's drawn markings explain: the mean of ``1 - d / REACH``
+    (0 beyond) over the evidence pixels, ``d`` their distance to the nearest drawn sample."""
     mask = np.full((small[1], small[0]), 255, np.uint8)
     mask.ravel()[index_row[index_row >= 0]] = 0
     mask = cv2.erode(mask, np.ones((3, 3), np.uint8))  # 2 m samples: close the gaps between them
     dist = cv2.distanceTransform(mask, cv2.DIST_L2, 3)
-    return float(np.mean(np.minimum(dist.ravel()[evidence], TRUNCATE)))
+    return float(np.mean(np.maximum(0.0, 1.0 - dist.ravel()[evidence] / REACH)))
 
 
 def first_views(xy: np.ndarray, size: tuple[int, int], pitch: PitchTemplate | None = None,
-                count: int = 6) -> list[np.ndarray]:
+                count: int = 10) -> list[np.ndarray]:
     """Up to ``count`` plane homographies (pitch ``(x, y, 1)`` -> undistorted pixels of the ``size``
     frame), best first, for white-line points ``xy`` (N x 2 px of the frame)."""
     size = frame_size(size)
@@ -105,9 +108,9 @@ def first_views(xy: np.ndarray, size: tuple[int, int], pitch: PitchTemplate | No
     keep = (q[:, 0] >= 0) & (q[:, 0] < small[0]) & (q[:, 1] >= 0) & (q[:, 1] < small[1])
     flat = np.unique(q[keep, 1] * small[0] + q[keep, 0])
     mask.ravel()[flat] = 0
-    dist = np.minimum(cv2.distanceTransform(mask, cv2.DIST_L2, 3), TRUNCATE).ravel()
-    d = np.where(index >= 0, dist[np.maximum(index, 0)], np.nan)
-    forward = np.nanmean(d, axis=1)
-    top = np.argsort(forward)[:RESCORE]
-    both = [forward[i] + _rescore(index[i], flat, small) for i in top]
-    return [_homography(rot[i], pos[i], foc[i], size) for i in top[np.argsort(both)][:count]]
+    near = np.maximum(0.0, 1.0 - cv2.distanceTransform(mask, cv2.DIST_L2, 3).ravel() / REACH)
+    found = np.where(index >= 0, near[np.maximum(index, 0)], 0.0).sum(axis=1)  # markings on lines
+    precision = found / np.maximum((index >= 0).sum(axis=1), 1)
+    top = np.argsort(-found)[:RESCORE]
+    both = [precision[i] * _explained(index[i], flat, small) for i in top]
+    return [_homography(rot[i], pos[i], foc[i], size) for i in top[np.argsort(both)[::-1]][:count]]

@@ -27,6 +27,7 @@ from scipy.spatial.transform import Rotation
 from ..lens.lens import Lens
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
+from .evidence import DETECT_WIDTH
 from .model import Camera, project_many
 
 #: Residuals are in px of a frame this wide.
@@ -45,8 +46,11 @@ LOSS_SCALE = 1.5
 K2_PRIOR, K1_PRIOR, PRIOR_POINTS = 0.08, 0.6, 20.0
 #: Least-squares evaluations per round.
 MAX_NFEV = 30
-#: A projected marking sample is supported by evidence this close (px at 1280).
+#: A projected marking sample is supported by evidence this close (px at 1280)...
 SUPPORT_PX = 4.0
+#: ...and counts only where a painted line (about this wide, metres) is at least this many px wide on
+#: the detection copy (far lines of a wide view are not detected).
+LINE_WIDTH_M, MIN_VISIBLE_PX = 0.12, 1.0
 #: An element counts as used when at least this many inliers lie on it.
 MIN_ELEMENT_POINTS = 12
 
@@ -154,15 +158,16 @@ class _Problem:
     forward-difference Jacobian computed as one batch."""
 
     def __init__(self, base: Camera, samples: Samples, xy: np.ndarray, a: np.ndarray, b: np.ndarray,
-                 with_lens: bool, lens0: np.ndarray) -> None:
-        self.base, self.xy, self.with_lens, self.lens0 = base, xy, with_lens, lens0
+                 with_lens: bool, free: np.ndarray) -> None:
+        self.base, self.xy, self.with_lens = base, xy, with_lens
+        self.free, self.full = free, _params(base)
         self.points = np.column_stack([np.concatenate([samples.points[a], samples.points[b]]), np.zeros(2 * len(a))])
         self.scale = REFERENCE_WIDTH / base.size[0]
 
-    def batch(self, x: np.ndarray) -> np.ndarray:
-        """Residuals (B x R) of parameter rows ``x`` (B x 9, or B x 7 with the lens held)."""
-        if not self.with_lens:
-            x = np.column_stack([x, np.tile(self.lens0, (len(x), 1))])
+    def batch(self, free: np.ndarray) -> np.ndarray:
+        """Residuals (B x R) of rows of the free parameters (``self.free`` of the 9)."""
+        x = np.tile(self.full, (len(free), 1))
+        x[:, self.free] = free
         rot = np.matmul(Rotation.from_rotvec(x[:, :3]).as_matrix(), self.base.rotation)
         proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points)
         n = len(self.xy)
@@ -196,10 +201,13 @@ def _params(camera: Camera) -> np.ndarray:
 
 
 def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTemplate | None = None,
-           *, fit_lens: bool = True, gates: tuple[float, ...] = GATES) -> Fit | None:
+           *, fit_lens: bool = True, gates: tuple[float, ...] = GATES, lens_from: int = LENS_FROM,
+           support_xy: np.ndarray | None = None, hold_position: int = 0) -> Fit | None:
     """The camera that best fits the white-line points ``xy`` (N x 2 px of ``camera``'s frame, line
-    directions ``angle``) from the start ``camera`` (see the module docstring); ``None`` when no round
-    finds enough assigned points to fit."""
+    directions ``angle``) from the start ``camera`` (see the module docstring), the lens free from
+    round ``lens_from``; ``None`` when no round finds enough assigned points to fit. ``support_xy``:
+    the points :func:`support` is measured on (default ``xy``; all the frame's points when ``xy`` is
+    a thinned copy). The camera position is held for the first ``hold_position`` rounds."""
     samples = template_samples(pitch or PitchTemplate())
     result = None
     for round_, gate in enumerate(gates):
@@ -207,21 +215,24 @@ def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTempla
         if found is None or int(found[3].sum()) < 12:
             return None
         a, b, _, use = found
-        with_lens = fit_lens and round_ >= min(LENS_FROM, len(gates) - 1)
+        with_lens = fit_lens and round_ >= min(lens_from, len(gates) - 1)
         x0 = _params(camera)
-        lens0 = x0[7:]
-        problem = _Problem(camera, samples, xy[use], a[use], b[use], with_lens, lens0)
-        result = least_squares(problem.residuals, x0 if with_lens else x0[:7], jac=problem.jacobian, loss="soft_l1",
+        free = np.arange(9 if with_lens else 7)
+        if round_ < hold_position:
+            free = np.array([0, 1, 2, 6])  # rotation and focal length first, from a far start
+        problem = _Problem(camera, samples, xy[use], a[use], b[use], with_lens, free)
+        result = least_squares(problem.residuals, x0[free], jac=problem.jacobian, loss="soft_l1",
                                f_scale=LOSS_SCALE, x_scale="jac", max_nfev=MAX_NFEV)
-        x = result.x if with_lens else np.concatenate([result.x, lens0])
+        x = x0.copy()
+        x[free] = result.x
         try:
             camera = _camera(x, camera)
         except ValueError:
             return None
-    return _summary(camera, samples, xy, angle, gates[-1], result)
+    return _summary(camera, samples, xy, angle, gates[-1], result, xy if support_xy is None else support_xy)
 
 
-def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result) -> Fit | None:
+def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result, support_xy) -> Fit | None:
     found = assign(camera, samples, xy, angle, gate)
     if found is None:
         return None
@@ -238,15 +249,20 @@ def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result) -
         sd = math.inf
     rms = float(np.sqrt(np.mean(inl ** 2))) if len(inl) else math.inf
     return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1),
-               support(camera, samples, xy))
+               support(camera, samples, support_xy))
 
 
 def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
-    """Share of the template samples projected inside the frame with an evidence point within
-    :data:`SUPPORT_PX` (0 when none is inside)."""
+    """Share of the template samples projected inside the frame, where a painted line would be wide
+    enough to detect (:data:`LINE_WIDTH_M` seen at least :data:`MIN_VISIBLE_PX` wide on the detection
+    copy), with an evidence point within :data:`SUPPORT_PX` (0 when none is inside)."""
     proj, ok = _segments(camera, samples)
     width, height = camera.size
+    _, depth = camera.undistorted_lens_points(samples.points)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seen_px = camera.focal * DETECT_WIDTH * LINE_WIDTH_M / depth
     ok &= (proj[:, 0] >= 0) & (proj[:, 0] <= width - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= height - 1)
+    ok &= seen_px >= MIN_VISIBLE_PX
     if not ok.any() or len(xy) == 0:
         return 0.0
     d, _ = cKDTree(xy).query(proj[ok])
