@@ -134,3 +134,21 @@ def test_cli_errors(tmp_path, capsys):
     assert "sensor" in capsys.readouterr().err
     assert main(["calibrate", str(src), "--overlay", str(tmp_path / "o.png")]) != 0  # no camera: nothing drawn
     assert not (tmp_path / "o.png").exists()
+
+
+def test_cli_video_tracks_the_camera_frame_to_frame(tmp_path, capsys):
+    from glradial.media.video_io import VideoInfo, VideoWriter
+
+    # a slow pan: three frames, the camera turning 0.3 degrees a frame (lossless RGB)
+    cams = [Camera.look_at(TRUTH.position, (-25.0 + 0.35 * i, 2.0), TRUTH.hfov_deg, TRUTH.size, TRUTH.lens) for i in range(3)]
+    source = tmp_path / "pan.mkv"
+    with VideoWriter(source, VideoInfo.of(TRUTH.size, 25, codec="ffv1", pix_fmt="gbrp")) as writer:
+        for cam in cams:
+            writer.write(render_view(cam, seed=5).frame)
+    assert main(["calibrate", str(source), "--json"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.strip().splitlines()]
+    assert [r["frame"] for r in rows] == [0, 1, 2]
+    for row, cam in zip(rows, cams):
+        assert row["reason"] == "ok"
+        assert row["focal"] == pytest.approx(cam.focal, rel=0.01)
+        assert row["pan_deg"] == pytest.approx(cam.pan_tilt_roll[0], abs=0.1)

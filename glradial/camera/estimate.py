@@ -26,7 +26,6 @@ from pathlib import Path
 
 import numpy as np
 
-from ..lens.lens import Lens
 from .model import Camera
 
 #: Why a camera is doubtful ("ok" when it is not).
@@ -39,6 +38,11 @@ CAMERA_TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "camera_trust
 def camera_trust() -> dict:
     """The bound's calibration and the doubt thresholds (``glradial/data/camera_trust.json``)."""
     return json.loads(CAMERA_TRUST_FILE.read_text(encoding="utf-8"))
+
+
+def _of_camera(name: str, doc: str) -> property:
+    """A read-only attribute of the estimate's camera (``None`` when it has none)."""
+    return property(lambda self: None if self.camera is None else getattr(self.camera, name), doc=doc)
 
 
 @dataclass(frozen=True)
@@ -69,39 +73,13 @@ class CameraEstimate:
             raise ValueError(f"no camera was found in this frame (reason: {self.reason})")
         return self.camera
 
-    @property
-    def lens(self) -> Lens | None:
-        """The lens (width-normalised k1, k2), or ``None`` without a camera."""
-        return None if self.camera is None else self.camera.lens
-
-    @property
-    def focal(self) -> float | None:
-        """Focal length in image widths."""
-        return None if self.camera is None else self.camera.focal
-
-    @property
-    def hfov_deg(self) -> float | None:
-        """Horizontal field of view (degrees) of the undistorted frame."""
-        return None if self.camera is None else self.camera.hfov_deg
-
-    @property
-    def rotation(self) -> np.ndarray | None:
-        """3 x 3 world (pitch) -> camera rotation (camera x right, y down, z forward)."""
-        return None if self.camera is None else self.camera.rotation
-
-    @property
-    def position(self) -> np.ndarray | None:
-        """Camera centre in pitch metres."""
-        return None if self.camera is None else self.camera.position
-
-    @property
-    def pan_tilt_roll(self) -> tuple[float, float, float] | None:
-        return None if self.camera is None else self.camera.pan_tilt_roll
-
-    @property
-    def homography(self) -> np.ndarray | None:
-        """Pitch plane ``(x, y, 1)`` metres -> undistorted frame pixels."""
-        return None if self.camera is None else self.camera.homography
+    lens = _of_camera("lens", "The lens (width-normalised k1, k2), or ``None`` without a camera.")
+    focal = _of_camera("focal", "Focal length in image widths.")
+    hfov_deg = _of_camera("hfov_deg", "Horizontal field of view (degrees) of the undistorted frame.")
+    rotation = _of_camera("rotation", "3 x 3 world (pitch) -> camera rotation (camera x right, y down, z forward).")
+    position = _of_camera("position", "Camera centre in pitch metres.")
+    pan_tilt_roll = _of_camera("pan_tilt_roll", "Pan, tilt, roll in degrees (glradial.camera.model).")
+    homography = _of_camera("homography", "Pitch plane ``(x, y, 1)`` metres -> undistorted frame pixels.")
 
     @property
     def homography_inverse(self) -> np.ndarray | None:

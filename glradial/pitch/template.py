@@ -22,7 +22,7 @@ What it holds:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
@@ -91,14 +91,14 @@ class PitchTemplate:
     ``*_width`` across, centred), ``penalty_spot`` the spot's distance from the goal line,
     ``circle_radius`` the centre circle's and the penalty arcs' radius."""
 
-    length: float = 105.0
-    width: float = 68.0
-    box_depth: float = 16.5
-    box_width: float = 40.32
-    goal_area_depth: float = 5.5
-    goal_area_width: float = 18.32
-    penalty_spot: float = 11.0
-    circle_radius: float = 9.15
+    length: float = field(default=105.0, metadata={"doc": "goal line to goal line (m)"})
+    width: float = field(default=68.0, metadata={"doc": "touchline to touchline (m)"})
+    box_depth: float = field(default=16.5, metadata={"doc": "penalty area, from the goal line into the field (m)"})
+    box_width: float = field(default=40.32, metadata={"doc": "penalty area, across (m)"})
+    goal_area_depth: float = field(default=5.5, metadata={"doc": "goal area, from the goal line into the field (m)"})
+    goal_area_width: float = field(default=18.32, metadata={"doc": "goal area, across (m)"})
+    penalty_spot: float = field(default=11.0, metadata={"doc": "penalty spot from the goal line (m)"})
+    circle_radius: float = field(default=9.15, metadata={"doc": "centre circle and penalty arcs (m)"})
 
     def __post_init__(self) -> None:
         for name in ("length", "width", "box_depth", "box_width", "goal_area_depth", "goal_area_width",
