@@ -28,6 +28,8 @@ TRACK_GATES = (15.0, 6.0, 3.0)
 #: The coarse stage (every first guess: pinhole, wide gates) and the fine stage (the best
 #: :data:`FINE_STARTS` coarse fits: lens free, narrow gates).
 COARSE_GATES, FINE_GATES, FINE_STARTS = (60.0, 30.0, 15.0, 8.0), (10.0, 6.0, 4.0, 3.0), 2
+#: A coarse fit this well supported (and explaining this share of the evidence) ends the search.
+EARLY_SUPPORT, EARLY_SHARE = 0.9, 0.45
 #: The coarse and the fine stage fit at most this many evidence points (evenly thinned); the support
 #: is measured on all of them.
 COARSE_POINTS, FINE_POINTS = 400, 1000
@@ -121,9 +123,16 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
                                gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
         if not tracked.doubtful:
             return tracked
-    coarse = [refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
-                     support_xy=lines.xy, hold_position=1) for cam in _starts(lines, pitch, first_guess, None)]
-    coarse = sorted((f for f in coarse if f is not None), key=_score, reverse=True)[:FINE_STARTS]
+    coarse = []
+    for cam in _starts(lines, pitch, first_guess, None):
+        fit = refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
+                     support_xy=lines.xy, hold_position=1)
+        if fit is not None:
+            coarse.append(fit)
+            if fit.support >= EARLY_SUPPORT and fit.share >= EARLY_SHARE:
+                coarse = [fit]  # a start that already explains the frame: no need to try the others
+                break
+    coarse = sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]
     fine = [refine(f.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
                    support_xy=lines.xy) for f in coarse]
     fits = [f for f in fine if f is not None]

@@ -37,6 +37,8 @@ DISTANCES, HEIGHTS = (20.0, 35.0, 55.0), (12.0, 20.0, 30.0)
 #: Fields of view (degrees) and the pan and tilt ranges (degrees).
 FOVS = (10.0, 14.0, 20.0, 28.0, 40.0, 55.0, 70.0)
 PAN, TILT = (-60.0, 60.0), (5.0, 40.0)
+#: Pan and tilt steps: the field of view (horizontal, vertical) over this.
+STEPS_PER_FOV = 4
 #: Views rescored both ways.
 RESCORE = 100
 
@@ -60,8 +62,8 @@ def _dictionary(size: tuple[int, int], pitch: PitchTemplate):
     world = np.column_stack([samples, np.zeros(len(samples))])
     rot, pos, foc, index = [], [], [], []
     for fov in FOVS:
-        pans = np.arange(PAN[0], PAN[1] + 1e-9, fov / 4)
-        tilts = np.arange(TILT[0], TILT[1] + 1e-9, fov * height / width / 4)
+        pans = np.arange(PAN[0], PAN[1] + 1e-9, fov / STEPS_PER_FOV)
+        tilts = np.arange(TILT[0], TILT[1] + 1e-9, fov * height / width / STEPS_PER_FOV)
         r = _rotations(*(a.ravel() for a in np.meshgrid(pans, tilts)))
         f = 0.5 / math.tan(math.radians(fov) / 2)
         for d in DISTANCES:
