@@ -32,7 +32,9 @@ COARSE_GATES, FINE_GATES, FINE_STARTS = (60.0, 30.0, 15.0, 8.0), (10.0, 6.0, 4.0
 EARLY_SUPPORT, EARLY_SHARE = 0.9, 0.45
 #: The coarse and the fine stage fit at most this many evidence points (evenly thinned); the support
 #: is measured on all of them.
-COARSE_POINTS, FINE_POINTS = 400, 1000
+COARSE_POINTS, FINE_POINTS = 250, 1000
+#: Residual evaluations per round of the coarse stage (a start is only sorted out there).
+COARSE_NFEV = 30
 #: Bound (px at 1280) of an estimate without a camera.
 NO_CAMERA_PX = 1280.0
 
@@ -126,7 +128,7 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     coarse = []
     for cam in _starts(lines, pitch, first_guess, None):
         fit = refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
-                     support_xy=lines.xy, hold_position=1)
+                     support_xy=lines.xy, hold_position=1, max_nfev=COARSE_NFEV)
         if fit is not None:
             coarse.append(fit)
             if fit.support >= EARLY_SUPPORT and fit.share >= EARLY_SHARE:

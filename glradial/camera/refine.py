@@ -202,12 +202,13 @@ def _params(camera: Camera) -> np.ndarray:
 
 def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTemplate | None = None,
            *, fit_lens: bool = True, gates: tuple[float, ...] = GATES, lens_from: int = LENS_FROM,
-           support_xy: np.ndarray | None = None, hold_position: int = 0) -> Fit | None:
+           support_xy: np.ndarray | None = None, hold_position: int = 0, max_nfev: int = MAX_NFEV) -> Fit | None:
     """The camera that best fits the white-line points ``xy`` (N x 2 px of ``camera``'s frame, line
     directions ``angle``) from the start ``camera`` (see the module docstring), the lens free from
     round ``lens_from``; ``None`` when no round finds enough assigned points to fit. ``support_xy``:
     the points :func:`support` is measured on (default ``xy``; all the frame's points when ``xy`` is
-    a thinned copy). The camera position is held for the first ``hold_position`` rounds."""
+    a thinned copy). The camera position is held for the first ``hold_position`` rounds; each round
+    evaluates the residuals at most ``max_nfev`` times."""
     samples = template_samples(pitch or PitchTemplate())
     result = None
     for round_, gate in enumerate(gates):
@@ -222,7 +223,7 @@ def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTempla
             free = np.array([0, 1, 2, 6])  # rotation and focal length first, from a far start
         problem = _Problem(camera, samples, xy[use], a[use], b[use], with_lens, free)
         result = least_squares(problem.residuals, x0[free], jac=problem.jacobian, loss="soft_l1",
-                               f_scale=LOSS_SCALE, x_scale="jac", max_nfev=MAX_NFEV)
+                               f_scale=LOSS_SCALE, x_scale="jac", max_nfev=max_nfev)
         x = x0.copy()
         x[free] = result.x
         try:
