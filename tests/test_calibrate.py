@@ -134,6 +134,30 @@ def test_cli_errors(tmp_path, capsys):
     assert "sensor" in capsys.readouterr().err
     assert main(["calibrate", str(src), "--overlay", str(tmp_path / "o.png")]) != 0  # no camera: nothing drawn
     assert not (tmp_path / "o.png").exists()
+    assert main(["calibrate", str(src), "--opentrackio", str(tmp_path / "s.jsonl"), "--sensor", "2/3-inch",
+                 "--focal-mm", "20"]) != 0
+    assert "measures the focal length" in capsys.readouterr().err
+    assert not (tmp_path / "s.jsonl").exists()
+
+
+def test_cli_streams_the_samples(tmp_path):
+    import socket
+
+    src = tmp_path / "view.png"
+    cv2.imwrite(str(src), _view()[:, :, ::-1])
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        sock.settimeout(30)
+        port = sock.getsockname()[1]
+        assert main(["calibrate", str(src), "--send", f"127.0.0.1:{port}", "--sensor", "2/3-inch"]) == 0
+        packet = sock.recv(65536)
+    from glradial.export.opentrackio_udp import parse_packet
+
+    parsed = parse_packet(packet)  # checksum and length checked; one sample fits one packet
+    assert parsed.last
+    payload = json.loads(parsed.payload.decode())
+    validate_sample(payload)
+    assert payload["transforms"][0]["id"] == "camera"
 
 
 def test_cli_video_tracks_the_camera_frame_to_frame(tmp_path, capsys):

@@ -68,12 +68,13 @@ def _check(args: argparse.Namespace) -> str:
     for out in (args.overlay, args.topview):
         if out:
             check_overwrite(check_output_folder(__import__("pathlib").Path(out)), args.overwrite)
+    if args.focal_mm is not None:
+        raise UsageError("calibrate measures the focal length: --focal-mm is not used")
     if opentrackio_wanted(args):
         if sensor_mm(args)[0] is None:
             raise UsageError("OpenTrackIO samples: give --sensor-width-mm MM (or --sensor 2/3-inch); the focal "
                              "length is measured")
-        if args.focal_mm is None:
-            args.focal_mm = 1.0  # placeholder for the option checks; every sample carries the measured focal
+        args.focal_mm = 1.0  # placeholder for the shared option checks; every sample carries the measured focal
         check_opentrackio_output(args)
         args.focal_mm = None
     return kind
@@ -111,6 +112,7 @@ def _write_opentrackio(args: argparse.Namespace, estimates, size: tuple[int, int
     """One OpenTrackIO sample per frame with the measured focal length (mm, from the sensor width) and
     the camera's transform (pitch metres; OpenTrackIO pan/tilt/roll); a frame with no camera is left
     out, a doubtful one is flagged."""
+    from ..export.engines import MODEL_NAMES
     from ..export.opentrackio import Camera as OtioCamera
     from ..export.opentrackio import track_samples, validate_sample, write_samples
     from ..lens.lens import Lens
@@ -123,8 +125,8 @@ def _write_opentrackio(args: argparse.Namespace, estimates, size: tuple[int, int
     samples = []
     for i, e in rows:
         otio = OtioCamera(size, width_mm, e.focal * width_mm, height_mm)
-        sample = track_samples([Lens(e.lens.k1, e.lens.k2)], otio, uncertainty_px=[math.nan], doubtful=[e.doubtful],
-                               source_id=source)[0]
+        sample = track_samples([Lens(e.lens.k1, e.lens.k2)], otio, model=MODEL_NAMES[args.distortion_model],
+                               uncertainty_px=[math.nan], doubtful=[e.doubtful], source_id=source)[0]
         pan, tilt, roll = e.pan_tilt_roll
         x, y, z = (float(v) for v in e.position)
         # OpenTrackIO: Z up, Y forward at pan = tilt = roll = 0, pan counter-clockwise seen from above,
@@ -135,4 +137,11 @@ def _write_opentrackio(args: argparse.Namespace, estimates, size: tuple[int, int
                                              "calibration_reason": e.reason})
         validate_sample(sample)
         samples.append(sample)
-    write_samples(args.opentrackio, samples, cbor=args.cbor)
+    if args.opentrackio:
+        write_samples(args.opentrackio, samples, cbor=args.cbor)
+    if args.send:
+        from ..export.opentrackio import encode_sample
+        from ..export.opentrackio_udp import ENCODING_CBOR, ENCODING_JSON, parse_address, send_payloads
+
+        send_payloads((encode_sample(s, args.cbor) for s in samples), parse_address(args.send),
+                      encoding=ENCODING_CBOR if args.cbor else ENCODING_JSON, rate=None)
