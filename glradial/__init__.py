@@ -15,6 +15,8 @@ from .lazy import attach
 __version__ = "0.1.0"
 
 if TYPE_CHECKING:
+    from .camera.calibrate import calibrate
+    from .camera.estimate import CameraEstimate
     from .errors import Error, GLUnavailableError, LensTrackError, ModelLoadError, ShaderCompileError
     from .estimation.estimator import Estimator, estimate
     from .estimation.lens_estimate import LensEstimate

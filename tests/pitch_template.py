@@ -8,8 +8,10 @@ import cv2
 import numpy as np
 
 import glradial
+from glradial.pitch import PitchTemplate
 
-LENGTH, WIDTH = 105.0, 68.0
+PITCH = PitchTemplate()  # the one home of the markings' dimensions
+LENGTH, WIDTH = PITCH.length, PITCH.width
 GRASS, WHITE = (40, 110, 40), (235, 235, 235)
 
 
@@ -24,7 +26,8 @@ def _arc(centre, radius: float, start: float, stop: float, n: int = 240) -> np.n
 
 
 def markings(parts: tuple[str, ...] = ("lines", "circle", "arcs")) -> list[np.ndarray]:
-    """Polylines (metres on the pitch plane, x along the length, y across) of the chosen parts:
+    """Polylines (metres on the pitch plane, x along the length, y across, origin at a corner: the
+    centred coordinates of :class:`glradial.pitch.PitchTemplate` shifted by half its size) of the chosen parts:
     ``"lines"`` (touchlines, goal lines, halfway line, both penalty areas and goal areas),
     ``"circle"`` (the centre circle), ``"arcs"`` (the penalty arcs outside the areas), or any of
     ``"touchline"``, ``"box_sides"`` for the single elements the degenerate tests need."""
@@ -35,20 +38,21 @@ def markings(parts: tuple[str, ...] = ("lines", "circle", "arcs")) -> list[np.nd
                 _segment((0, 0), (0, WIDTH)), _segment((LENGTH, 0), (LENGTH, WIDTH)),
                 _segment((LENGTH / 2, 0), (LENGTH / 2, WIDTH))]
         for x0, s in ((0.0, 1.0), (LENGTH, -1.0)):
-            for depth, half in ((16.5, 20.16), (5.5, 9.16)):
+            for depth, half in ((PITCH.box_depth, PITCH.box_width / 2), (PITCH.goal_area_depth, PITCH.goal_area_width / 2)):
                 out += [np.concatenate([_segment((x0, cy - half), (x0 + s * depth, cy - half)),
                                         _segment((x0 + s * depth, cy - half), (x0 + s * depth, cy + half)),
                                         _segment((x0 + s * depth, cy + half), (x0, cy + half))])]
     if "touchline" in parts:
         out.append(_segment((20.0, 0.0), (45.0, 0.0)))
     if "box_sides" in parts:
-        out += [_segment((0, cy - 20.16), (16.5, cy - 20.16)), _segment((0, cy + 20.16), (16.5, cy + 20.16))]
+        half, depth = PITCH.box_width / 2, PITCH.box_depth
+        out += [_segment((0, cy - half), (depth, cy - half)), _segment((0, cy + half), (depth, cy + half))]
     if "circle" in parts:
-        out.append(_arc((LENGTH / 2, cy), 9.15, 0, 360, 480))
+        out.append(_arc((LENGTH / 2, cy), PITCH.circle_radius, 0, 360, 480))
     if "arcs" in parts:
-        half_angle = np.degrees(np.arccos(5.5 / 9.15))  # the arc outside the area (16.5 - 11 = 5.5 m)
-        out.append(_arc((11.0, cy), 9.15, -half_angle, half_angle))
-        out.append(_arc((LENGTH - 11.0, cy), 9.15, 180 - half_angle, 180 + half_angle))
+        half_angle, r, spot = PITCH.arc_half_angle(), PITCH.circle_radius, PITCH.penalty_spot  # the arc outside the area
+        out.append(_arc((spot, cy), r, -half_angle, half_angle))
+        out.append(_arc((LENGTH - spot, cy), r, 180 - half_angle, 180 + half_angle))
     return out
 
 

@@ -455,6 +455,16 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
     return LineEvidence(chains, (width_full, height_full), width, overlays, density)
 
 
+def bright_ridges(gray: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sub-pixel centres of the bright thin lines of a float32 gray image (the ridge points chains are
+    made of, before grouping): ``(x, y, angle)`` in pixels of ``gray`` (centres at integers) and the
+    line direction in [0, pi); ``valid``: uint8 mask of where to look."""
+    g = cv2.GaussianBlur(gray, (0, 0), SMOOTH_SIGMA)
+    gx, gy, gxx, gyy, gxy = _derivatives(g)
+    x, y, angle, _, _ = _ridge_points(gx, gy, gxx, gyy, gxy, valid)
+    return x, y, angle
+
+
 #: Returned by :func:`_chain` for a chain taken for broadcast graphics.
 _OVERLAY = object()
 

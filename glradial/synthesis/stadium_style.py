@@ -22,8 +22,12 @@ from typing import Any
 
 import numpy as np
 
-PITCH_LENGTH = 105.0
-PITCH_WIDTH = 68.0
+from ..pitch.template import default_pitch
+
+#: the pitch the stadiums are built around (glradial.pitch.template holds its markings; the GLSL
+#: markings in shaders/stadium_pitch.glsl restate the same default dimensions)
+PITCH_LENGTH = default_pitch().length
+PITCH_WIDTH = default_pitch().width
 HALF_LENGTH = PITCH_LENGTH / 2.0
 HALF_WIDTH = PITCH_WIDTH / 2.0
 

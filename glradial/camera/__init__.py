@@ -1,0 +1,17 @@
+"""The whole camera of one frame from the pitch's known geometry: the pinhole-plus-lens camera model
+(projection, plane-homography decomposition), the joint refinement of pose, focal length and lens
+against the pitch markings, and :func:`calibrate` with its judged :class:`CameraEstimate`."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from ..lazy import attach
+
+if TYPE_CHECKING:
+    from .calibrate import calibrate
+    from .estimate import REASONS, CameraEstimate
+    from .model import Camera, decompose_homography
+    from .views import random_camera, render_view
+
+__getattr__, __dir__, __all__ = attach(__name__, __file__)

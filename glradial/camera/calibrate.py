@@ -1,0 +1,141 @@
+"""``calibrate``: the whole camera of one frame (lens, focal length, pose) from the pitch markings.
+
+Steps: the white-line points (:mod:`glradial.camera.evidence`); first guesses, either given (plane
+homographies to the frame's undistorted pixels, best first, e.g. a dedicated first-guess search), the
+previous frame's camera (tracking a video: one start, shorter gates), or glradial's own dictionary of
+synthetic views (:mod:`glradial.camera.first_views`); each decomposed into a camera
+(:func:`glradial.camera.model.decompose_homography`) and refined (:func:`glradial.camera.refine.refine`);
+the fit with the most inliers is judged (:mod:`glradial.camera.estimate`'s doubt policy and bound).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..media.frames import to_rgb8
+from ..pitch.template import PitchTemplate
+from .estimate import CameraEstimate, camera_trust
+from .evidence import WhiteLines, white_lines
+from .first_views import first_views
+from .model import Camera, decompose_homography
+from .refine import Fit, refine
+
+#: Gates (px at 1280) when tracking from the previous frame's camera.
+TRACK_GATES = (15.0, 6.0, 3.0)
+#: The coarse stage (every first guess: pinhole, wide gates) and the fine stage (the best
+#: :data:`FINE_STARTS` coarse fits: lens free, narrow gates).
+COARSE_GATES, FINE_GATES, FINE_STARTS = (60.0, 30.0, 15.0, 8.0), (10.0, 6.0, 4.0, 3.0), 2
+#: A coarse fit this well supported (and explaining this share of the evidence) ends the search.
+EARLY_SUPPORT, EARLY_SHARE = 0.9, 0.45
+#: The coarse and the fine stage fit at most this many evidence points (evenly thinned); the support
+#: is measured on all of them.
+COARSE_POINTS, FINE_POINTS = 250, 1000
+#: Residual evaluations per round of the coarse stage (a start is only sorted out there).
+COARSE_NFEV = 30
+#: Bound (px at 1280) of an estimate without a camera.
+NO_CAMERA_PX = 1280.0
+
+
+def _check_pitch(pitch: object) -> PitchTemplate:
+    if pitch is None:
+        return PitchTemplate()
+    if not isinstance(pitch, PitchTemplate):
+        raise TypeError(f"pitch must be a glradial.pitch.PitchTemplate or None, got {pitch!r}")
+    return pitch
+
+
+def _starts(lines: WhiteLines, pitch: PitchTemplate, first_guess, previous) -> list[Camera]:
+    if previous is not None:
+        cam = previous.camera if isinstance(previous, CameraEstimate) else previous
+        if not isinstance(cam, Camera):
+            raise TypeError(f"previous must be a Camera or a CameraEstimate with a camera, got {previous!r}")
+        return [cam.with_size(lines.size)]
+    homographies = first_views(lines.xy, lines.size, pitch) if first_guess is None else list(first_guess)
+    cams = []
+    for h in homographies:
+        cam = decompose_homography(h, lines.size)
+        if cam is not None:
+            cams.append(cam)
+    return cams
+
+
+def _check_first_guess(first_guess: object) -> list[np.ndarray]:
+    if isinstance(first_guess, np.ndarray) and first_guess.shape == (3, 3):
+        first_guess = [first_guess]
+    try:
+        hs = [np.asarray(h, dtype=np.float64) for h in first_guess]  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise TypeError(f"first_guess must be a list of 3×3 homographies, got {first_guess!r}") from None
+    for i, h in enumerate(hs):
+        if h.shape != (3, 3) or not np.all(np.isfinite(h)):
+            raise ValueError(f"first_guess[{i}] must be a finite 3×3 homography, got {h.tolist()}")
+    return hs
+
+
+def judge(fit: Fit | None, points: int) -> CameraEstimate:
+    """The estimate of a refined fit (or of none) under the doubt policy of ``camera_trust.json``."""
+    t = camera_trust()
+    if fit is None:
+        reason = "no_markings" if points < t["min_points"] else "poor_fit"
+        return CameraEstimate(None, NO_CAMERA_PX, True, reason)
+    bound = t["quantile"] * max(fit.rms_px, t["floor_px"])
+    if fit.inliers < t["min_points"] or len(fit.elements) < t["min_elements"]:
+        reason = "too_few_markings"
+    elif not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
+        reason = "weak_geometry"
+    elif fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
+        reason = "poor_fit"
+    else:
+        reason = "ok"
+    return CameraEstimate(fit.camera, bound, reason != "ok", reason, fit.elements, fit.rms_px, fit.inliers, fit.support,
+                          fit.log_focal_sd)
+
+
+def _score(fit: Fit) -> float:  # on the coarse stage's thinned points and on the fine stage's, alike
+    """How well a fit explains the frame: evidence explained times markings supported."""
+    return fit.share * fit.support
+
+
+def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
+              first_guess: Sequence[np.ndarray] | None = None,
+              previous: Camera | CameraEstimate | None = None) -> CameraEstimate:
+    """The camera of ``frame`` (uint8/uint16/float RGB or gray array, any size) from the markings of
+    ``pitch`` (default: 105 x 68 m, :class:`glradial.pitch.PitchTemplate`).
+
+    ``first_guess``: plane homographies (pitch ``(x, y, 1)`` -> undistorted pixels of this frame),
+    best first, instead of glradial's own dictionary. ``previous``: the previous frame's camera (a
+    video): refined from there with shorter gates, falling back to a fresh search when that fit is
+    doubtful. Never raises for a frame that shows no pitch: the estimate is then doubtful with a reason.
+    """
+    if not isinstance(frame, np.ndarray):
+        raise TypeError(f"frame must be a numpy image array, got {type(frame).__name__}")
+    pitch = _check_pitch(pitch)
+    if first_guess is not None:
+        first_guess = _check_first_guess(first_guess)
+    rgb = to_rgb8(frame)
+    lines = white_lines(rgb)
+    if len(lines.xy) < camera_trust()["min_points"]:
+        return judge(None, len(lines.xy))
+    fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
+    if previous is not None:
+        tracked = judge(refine(_starts(lines, pitch, None, previous)[0], fine_lines.xy, fine_lines.angle, pitch,
+                               gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
+        if not tracked.doubtful:
+            return tracked
+    coarse = []
+    for cam in _starts(lines, pitch, first_guess, None):
+        fit = refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
+                     support_xy=lines.xy, hold_position=1, max_nfev=COARSE_NFEV)
+        if fit is not None:
+            coarse.append(fit)
+            if fit.support >= EARLY_SUPPORT and fit.share >= EARLY_SHARE:
+                coarse = [fit]  # a start that already explains the frame: no need to try the others
+                break
+    coarse = sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]
+    fine = [refine(f.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
+                   support_xy=lines.xy) for f in coarse]
+    fits = [f for f in fine if f is not None]
+    return judge(max(fits, key=_score) if fits else None, len(lines.xy))

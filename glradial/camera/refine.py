@@ -1,0 +1,270 @@
+"""The joint refinement of pose, focal length and lens against the pitch markings (ICP style).
+
+Evidence: white-line points of the distorted frame (:mod:`glradial.camera.evidence`). Model: the
+template's elements sampled every :data:`SAMPLE_STEP` metres and projected through the camera, lens
+included (:meth:`glradial.camera.model.Camera.project`). Each round assigns every evidence point to its
+nearest projected marking segment (within a gate that shrinks round by round, and with a line
+direction within :data:`MAX_ANGLE_DEG`), then ``scipy.optimize.least_squares`` (soft-L1 loss) moves
+the rotation (a rotation vector about the current one), the camera position, log focal length and
+``(k1, k2)`` to shrink the point-to-projected-segment distances. The lens is held at its start for the
+first rounds (the pinhole first) and carries a weak prior toward the Lopez-Antequera manifold (a
+straight-line view cannot tell ``k2`` from ``k1`` well).
+
+Residuals are stated in pixels of a 1280-wide frame (:data:`REFERENCE_WIDTH`), whatever the frame's
+size, so the gates, the loss scale and the reported RMS are comparable across sizes.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.spatial import cKDTree
+from scipy.spatial.transform import Rotation
+
+from ..lens.lens import Lens
+from ..lens.metrics import manifold_k2
+from ..pitch.template import PitchTemplate
+from .evidence import DETECT_WIDTH
+from .model import Camera, project_many
+
+#: Residuals are in px of a frame this wide.
+REFERENCE_WIDTH = 1280.0
+#: Template sampling (metres) for the projected segments.
+SAMPLE_STEP = 1.0
+#: Gates (px at 1280) of the assignment rounds; the lens is free from round :data:`LENS_FROM` on.
+GATES = (40.0, 20.0, 10.0, 5.0, 3.0)
+LENS_FROM = 2
+#: Largest angle (degrees) between an evidence point's line direction and its assigned segment.
+MAX_ANGLE_DEG = 25.0
+#: Scale (px at 1280) of the soft-L1 loss: residuals beyond it count linearly.
+LOSS_SCALE = 1.5
+#: Prior on the lens: ``k2`` within :data:`K2_PRIOR` of the manifold, ``k1`` within :data:`K1_PRIOR` of 0,
+#: each worth as much as :data:`PRIOR_POINTS` evidence points off by one loss scale.
+K2_PRIOR, K1_PRIOR, PRIOR_POINTS = 0.08, 0.6, 20.0
+#: Least-squares evaluations per round.
+MAX_NFEV = 30
+#: A projected marking sample is supported by evidence this close (px at 1280)...
+SUPPORT_PX = 4.0
+#: ...and counts only where a painted line (about this wide, metres) is at least this many px wide on
+#: the detection copy (far lines of a wide view are not detected).
+LINE_WIDTH_M, MIN_VISIBLE_PX = 0.12, 1.0
+#: An element counts as used when at least this many inliers lie on it.
+MIN_ELEMENT_POINTS = 12
+
+
+@dataclass(frozen=True)
+class Samples:
+    """The template sampled for projection: ``points`` (M x 2 metres), ``element`` (M, index into
+    ``labels``), ``next`` (M, the index of the following sample of the same element, -1 at the end)."""
+
+    points: np.ndarray
+    element: np.ndarray
+    next: np.ndarray
+    labels: tuple[str, ...]
+
+
+def template_samples(pitch: PitchTemplate, step: float = SAMPLE_STEP) -> Samples:
+    """The markings of ``pitch`` as :class:`Samples` every ``step`` metres."""
+    pts, elem, nxt, labels = [], [], [], []
+    start = 0
+    for i, (label, p) in enumerate(pitch.polylines(step)):
+        labels.append(label)
+        pts.append(p)
+        elem.append(np.full(len(p), i))
+        n = np.arange(start + 1, start + len(p) + 1)
+        n[-1] = -1
+        nxt.append(n)
+        start += len(p)
+    return Samples(np.concatenate(pts), np.concatenate(elem), np.concatenate(nxt), tuple(labels))
+
+
+@dataclass(frozen=True)
+class Fit:
+    """The refined camera and how well it fits: ``rms_px`` (RMS of the inliers' distances, px at
+    1280), ``inliers`` (evidence points within the last gate), ``share`` (inliers / evidence points),
+    ``elements`` (labels of the markings with at least :data:`MIN_ELEMENT_POINTS` inliers),
+    ``log_focal_sd`` (standard deviation of log focal from the last round's Jacobian; infinite where
+    the markings seen do not fix it), ``cost`` (the robust cost per evidence point), ``support`` (the
+    share of the markings projected inside the frame that have an evidence point within
+    :data:`SUPPORT_PX`: low when the camera draws markings where the frame has none)."""
+
+    camera: Camera
+    rms_px: float
+    inliers: int
+    share: float
+    elements: tuple[str, ...]
+    log_focal_sd: float
+    cost: float
+    support: float = 0.0
+
+
+def _camera(x: np.ndarray, base: Camera) -> Camera:
+    rot = Rotation.from_rotvec(x[:3]).as_matrix() @ base.rotation
+    return Camera(rot, x[3:6], math.exp(x[6]), base.size, Lens(float(x[7]), float(x[8])))
+
+
+def _segments(camera: Camera, samples: Samples) -> tuple[np.ndarray, np.ndarray]:
+    """Projected samples (M x 2 px, NaN where not seen) and whether each is usable."""
+    xy = camera.project(samples.points)
+    uv, z = camera.undistorted_lens_points(samples.points)
+    # beyond 1.2 x the frame's corner radius the lens polynomial is not the lens any more
+    r = np.hypot(uv[:, 0], uv[:, 1])
+    ok = (z > 0.5) & (r < 1.2 * 0.5 * math.hypot(1.0, camera.size[1] / camera.size[0])) & np.isfinite(xy).all(1)
+    return xy, ok
+
+
+def assign(camera: Camera, samples: Samples, xy: np.ndarray, angle: np.ndarray, gate: float):
+    """For each evidence point, ``(sample index a, following index b, distance px at 1280)`` of its
+    nearest projected segment, and the mask of points assigned within ``gate``."""
+    proj, ok = _segments(camera, samples)
+    scale = REFERENCE_WIDTH / camera.size[0]
+    idx = np.flatnonzero(ok)
+    if len(idx) < 2:
+        return None
+    _, near = cKDTree(proj[idx]).query(xy)
+    k = idx[near]
+    best_a, best_b, best_d = k.copy(), k.copy(), np.full(len(xy), np.inf)
+    prev = np.full(len(samples.points), -1)
+    has_next = samples.next >= 0
+    prev[samples.next[has_next]] = np.flatnonzero(has_next)
+    for a, b in ((prev[k], k), (k, samples.next[k])):
+        good = (a >= 0) & (b >= 0)
+        a, b = np.where(good, a, 0), np.where(good, b, 0)
+        good &= ok[a] & ok[b]
+        d, along = _line_distance(xy, proj[a], proj[b])
+        seg_dir = np.arctan2(proj[b, 1] - proj[a, 1], proj[b, 0] - proj[a, 0])
+        diff = np.abs((seg_dir - angle + np.pi / 2) % np.pi - np.pi / 2)
+        d = np.where(good & (along > -0.5) & (along < 1.5) & (diff < math.radians(MAX_ANGLE_DEG)), d * scale, np.inf)
+        better = d < best_d
+        best_a, best_b, best_d = np.where(better, a, best_a), np.where(better, b, best_b), np.where(better, d, best_d)
+    return best_a, best_b, best_d, best_d < gate
+
+
+def _line_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distance of points ``p`` to the lines through ``a``, ``b`` (rows), and the position along."""
+    ab = b - a
+    length = np.maximum(np.hypot(ab[:, 0], ab[:, 1]), 1e-9)
+    ap = p - a
+    cross = (ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0]) / length
+    along = (ap * ab).sum(1) / (length * length)
+    return np.abs(cross), along
+
+
+class _Problem:
+    """The residuals of one round (fixed assignment) for a batch of parameter vectors, and their
+    forward-difference Jacobian computed as one batch."""
+
+    def __init__(self, base: Camera, samples: Samples, xy: np.ndarray, a: np.ndarray, b: np.ndarray,
+                 with_lens: bool, free: np.ndarray) -> None:
+        self.base, self.xy, self.with_lens = base, xy, with_lens
+        self.free, self.full = free, _params(base)
+        self.points = np.column_stack([np.concatenate([samples.points[a], samples.points[b]]), np.zeros(2 * len(a))])
+        self.scale = REFERENCE_WIDTH / base.size[0]
+
+    def batch(self, free: np.ndarray) -> np.ndarray:
+        """Residuals (B x R) of rows of the free parameters (``self.free`` of the 9)."""
+        x = np.tile(self.full, (len(free), 1))
+        x[:, self.free] = free
+        rot = np.matmul(Rotation.from_rotvec(x[:, :3]).as_matrix(), self.base.rotation)
+        proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points)
+        n = len(self.xy)
+        p0, ab = proj[:, :n], proj[:, n:] - proj[:, :n]
+        length = np.maximum(np.hypot(ab[..., 0], ab[..., 1]), 1e-9)
+        ap = self.xy[None] - p0
+        r = (ab[..., 0] * ap[..., 1] - ab[..., 1] * ap[..., 0]) / length * self.scale
+        r = np.where(np.isfinite(r), r, 1e3)
+        if self.with_lens:
+            k1, k2 = x[:, 7], x[:, 8]
+            w = LOSS_SCALE * math.sqrt(PRIOR_POINTS)
+            r = np.column_stack([r, w * (k2 - manifold_k2(k1)) / K2_PRIOR, w * k1 / K1_PRIOR])
+        return r
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        return self.batch(x[None])[0]
+
+    def jacobian(self, x: np.ndarray) -> np.ndarray:
+        steps = FD_STEP * np.maximum(1.0, np.abs(x))
+        rows = np.vstack([x, x + np.diag(steps)])
+        r = self.batch(rows)
+        return ((r[1:] - r[0]) / steps[:, None]).T
+
+
+#: Relative forward-difference step of the Jacobian.
+FD_STEP = 1e-6
+
+
+def _params(camera: Camera) -> np.ndarray:
+    return np.r_[0.0, 0.0, 0.0, camera.position, math.log(camera.focal), camera.lens.k1, camera.lens.k2]
+
+
+def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTemplate | None = None,
+           *, fit_lens: bool = True, gates: tuple[float, ...] = GATES, lens_from: int = LENS_FROM,
+           support_xy: np.ndarray | None = None, hold_position: int = 0, max_nfev: int = MAX_NFEV) -> Fit | None:
+    """The camera that best fits the white-line points ``xy`` (N x 2 px of ``camera``'s frame, line
+    directions ``angle``) from the start ``camera`` (see the module docstring), the lens free from
+    round ``lens_from``; ``None`` when no round finds enough assigned points to fit. ``support_xy``:
+    the points :func:`support` is measured on (default ``xy``; all the frame's points when ``xy`` is
+    a thinned copy). The camera position is held for the first ``hold_position`` rounds; each round
+    evaluates the residuals at most ``max_nfev`` times."""
+    samples = template_samples(pitch or PitchTemplate())
+    result = None
+    for round_, gate in enumerate(gates):
+        found = assign(camera, samples, xy, angle, gate)
+        if found is None or int(found[3].sum()) < 12:
+            return None
+        a, b, _, use = found
+        with_lens = fit_lens and round_ >= min(lens_from, len(gates) - 1)
+        x0 = _params(camera)
+        free = np.arange(9 if with_lens else 7)
+        if round_ < hold_position:
+            free = np.array([0, 1, 2, 6])  # rotation and focal length first, from a far start
+        problem = _Problem(camera, samples, xy[use], a[use], b[use], with_lens, free)
+        result = least_squares(problem.residuals, x0[free], jac=problem.jacobian, loss="soft_l1",
+                               f_scale=LOSS_SCALE, x_scale="jac", max_nfev=max_nfev)
+        x = x0.copy()
+        x[free] = result.x
+        try:
+            camera = _camera(x, camera)
+        except ValueError:
+            return None
+    return _summary(camera, samples, xy, angle, gates[-1], result, xy if support_xy is None else support_xy)
+
+
+def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result, support_xy) -> Fit | None:
+    found = assign(camera, samples, xy, angle, gate)
+    if found is None:
+        return None
+    a, _, d, use = found
+    inl = d[use]
+    counts = np.bincount(samples.element[a[use]], minlength=len(samples.labels))
+    elements = tuple(lab for lab, c in zip(samples.labels, counts) if c >= MIN_ELEMENT_POINTS)
+    jac = result.jac[: len(result.fun)]
+    sigma2 = float(np.mean(np.minimum(inl, 3 * LOSS_SCALE) ** 2)) if len(inl) else 1.0
+    try:
+        cov = np.linalg.inv(jac.T @ jac) * max(sigma2, 0.25)
+        sd = float(math.sqrt(max(cov[6, 6], 0.0)))
+    except np.linalg.LinAlgError:
+        sd = math.inf
+    rms = float(np.sqrt(np.mean(inl ** 2))) if len(inl) else math.inf
+    return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1),
+               support(camera, samples, support_xy))
+
+
+def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
+    """Share of the template samples projected inside the frame, where a painted line would be wide
+    enough to detect (:data:`LINE_WIDTH_M` seen at least :data:`MIN_VISIBLE_PX` wide on the detection
+    copy), with an evidence point within :data:`SUPPORT_PX` (0 when none is inside)."""
+    proj, ok = _segments(camera, samples)
+    width, height = camera.size
+    _, depth = camera.undistorted_lens_points(samples.points)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seen_px = camera.focal * DETECT_WIDTH * LINE_WIDTH_M / depth
+    ok &= (proj[:, 0] >= 0) & (proj[:, 0] <= width - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= height - 1)
+    ok &= seen_px >= MIN_VISIBLE_PX
+    if not ok.any() or len(xy) == 0:
+        return 0.0
+    d, _ = cKDTree(xy).query(proj[ok])
+    return float(np.mean(d * REFERENCE_WIDTH / width < SUPPORT_PX))
