@@ -18,7 +18,7 @@ PACKAGE = ROOT / "glradial"
 
 #: The layers, lowest first: a unit may import from its own layer and the ones before it. Units are
 #: the top-level modules and the sub-packages; ``__init__`` (the lazy public API) is the top.
-LAYERS = ["errors", "lazy", "lens", "gl", "media", "remapping", "export", "synthesis", "estimation", "video",
+LAYERS = ["errors", "lazy", "lens", "gl", "media", "remapping", "export", "synthesis", "estimation", "camera", "video",
           "evaluation", "commands", "cli", "__main__", "__init__"]
 #: Folders under glradial/ that hold data, not code.
 DATA = {"data", "models", "__pycache__"}

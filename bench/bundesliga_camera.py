@@ -1,0 +1,136 @@
+"""Benchmark: the camera's first guess (glradial.camera.first_guess) on the 109 real Bundesliga frames
+against their hand-labelled pitch keypoints (validation only: nothing is fitted to these frames).
+
+Usage: ``python bench/bundesliga_camera.py [--data DIR] [--csv OUT] [--limit N]``
+
+Each frame (stored squashed to 640x640) is resized to 1280x720 (cubic), given to ``first_guess`` on
+one thread, and the best candidate's homography projects the 32 keypoints; the frame's error is the
+RMS distance (px at 1280x720) to its labelled keypoints. Per clip (ids ``2e57b9`` and ``42ba34``) and
+overall it prints the median RMS (unanswered frames count as infinitely wrong), the share of frames
+within 5 and 10 px (unanswered frames are misses), the share answered, the median time per frame and
+its ratio to a 1080p ``cv2.GaussianBlur`` (sigma 1) timed in the same process; beside them the floor
+(a homography fitted by least squares to the frame's own labels), the best of the returned
+candidates (how much is ranking), and how the frames outside 10 px split: wrong lines (RMS over
+30 px), near misses (10-30 px), unanswered. The half-turn ambiguity is resolved by the method (main
+camera on the near touchline) and is not scored both ways.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # one thread, before numpy loads its BLAS
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import csv  # noqa: E402
+import json  # noqa: E402
+import statistics  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import cv2  # noqa: E402
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+sys.path.insert(0, str(ROOT / "tests"))  # the template helper, until glradial.camera has its own
+import pitch_points  # noqa: E402
+
+from glradial.camera.first_guess import first_guess  # noqa: E402
+
+CLIPS = ("2e57b9", "42ba34")
+
+
+def _project(h: np.ndarray, points: np.ndarray) -> np.ndarray:
+    p = np.column_stack([points, np.ones(len(points))]) @ h.T
+    return p[:, :2] / p[:, 2:3]
+
+
+def _rms(h: np.ndarray, pitch: np.ndarray, labels: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((_project(h, pitch) - labels) ** 2, axis=1))))
+
+
+def _blur_ms() -> float:
+    frame = cv2.GaussianBlur(np.random.default_rng(0).integers(0, 256, (1080, 1920, 3), dtype=np.uint8), (0, 0), 2.0)
+    times = []
+    for _ in range(20):
+        t0 = time.perf_counter()
+        cv2.GaussianBlur(frame, (0, 0), 1.0)
+        times.append((time.perf_counter() - t0) * 1000)
+    return statistics.median(times)
+
+
+def _frame(path: Path) -> np.ndarray:
+    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if image is None:
+        raise SystemExit(f"cannot read {path}")
+    return np.ascontiguousarray(cv2.resize(image, (1280, 720), interpolation=cv2.INTER_CUBIC)[:, :, ::-1])
+
+
+def evaluate(data: Path, limit: int | None) -> list[dict]:
+    """One row per frame: its clip, error of the best candidate, of the best of all candidates, the
+    floor, whether answered, and the time (ms)."""
+    labels = json.loads((data / "keypoints" / "keypoints.json").read_text())
+    pitch = np.array([k["pitch_m"][:2] for k in labels["keypoints"]], float)
+    points, ids = pitch_points.template()
+    rows = []
+    names = sorted(labels["frames"])[:limit]
+    for n, name in enumerate(names):
+        kp = labels["frames"][name]
+        seen = np.array([p is not None for p in kp])
+        xy = np.array([p for p in kp if p is not None], float)
+        frame = _frame(data / f"{name}.jpg")
+        t0 = time.perf_counter()
+        found = first_guess(frame, points, ids)
+        ms = (time.perf_counter() - t0) * 1000
+        floor_h, _ = cv2.findHomography(pitch[seen], xy, 0)
+        errors = [_rms(c.homography, pitch[seen], xy) for c in found]
+        rows.append(dict(frame=name, clip=name.split("_")[0], answered=bool(found), ms=ms,
+                         rms=errors[0] if errors else float("inf"), best_of=min(errors, default=float("inf")),
+                         floor=_rms(floor_h, pitch[seen], xy), score=found[0].score if found else 0.0))
+        print(f"[{n + 1}/{len(names)}] {name}: {rows[-1]['rms']:.1f} px (floor {rows[-1]['floor']:.1f}, "
+              f"best of {len(found)} {rows[-1]['best_of']:.1f}) {ms:.0f} ms", file=sys.stderr)
+    return rows
+
+
+def summary(rows: list[dict], blur: float) -> str:
+    rms = np.array([r["rms"] for r in rows])
+    best = np.array([r["best_of"] for r in rows])
+    floor = np.array([r["floor"] for r in rows])
+    ms = statistics.median(r["ms"] for r in rows)
+    answered = np.array([r["answered"] for r in rows])
+    wrong = int(np.sum(answered & (rms > 30)))
+    near = int(np.sum(answered & (rms > 10) & (rms <= 30)))
+    return (f"n={len(rows):3d} median {np.median(rms):6.2f} px | <=5 px {np.mean(rms <= 5):5.1%} | <=10 px "
+            f"{np.mean(rms <= 10):5.1%} | answered {np.mean(answered):5.1%} | {ms:5.0f} ms/frame "
+            f"({ms / blur:5.1f}x blur) || best-of-candidates median {np.median(best):5.2f}, <=10 px "
+            f"{np.mean(best <= 10):5.1%} | floor median {np.median(floor):4.2f} || outside 10 px: wrong (>30) "
+            f"{wrong}, near miss (10-30) {near}, unanswered {int(np.sum(~answered))}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--data", default=str(ROOT.parent / "shared/data/broadcast_bundesliga"))
+    parser.add_argument("--csv", default=None, help="write the per-frame rows here")
+    parser.add_argument("--limit", type=int, default=None, help="only the first N frames (sorted by name)")
+    args = parser.parse_args()
+    cv2.setNumThreads(1)
+    blur = _blur_ms()
+    rows = evaluate(Path(args.data), args.limit)
+    print(f"1080p GaussianBlur (sigma 1), one thread: {blur:.2f} ms")
+    for clip in CLIPS:
+        part = [r for r in rows if r["clip"] == clip]
+        if part:
+            print(f"{clip}: {summary(part, blur)}")
+    print(f"all   : {summary(rows, blur)}")
+    if args.csv:
+        with open(args.csv, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+            writer.writeheader()
+            writer.writerows(rows)
+
+
+if __name__ == "__main__":
+    main()

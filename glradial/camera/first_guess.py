@@ -1,0 +1,306 @@
+"""The first guess of a broadcast frame's camera: the homography from the pitch plane to the image,
+found from the white pitch lines alone (no detector trained on labelled frames).
+
+Steps (docs/CAMERA_SEARCH.md has the figures):
+
+1. **Evidence** (:mod:`glradial.camera.white_lines`): a white-line mask on the grass of a 640-px wide
+   work copy, its straight lines (Hough segments merged and refit), split into two families by
+   their vanishing points.
+2. **Hypotheses** (:mod:`glradial.camera.line_hypotheses`): two lines of one family assigned to two
+   x-parallel template lines and two of the other to two y-parallel ones, in the main camera's
+   order (both families tried in both roles), each giving a homography; kept only when it is a
+   pinhole view with square pixels and a centred principal point from a plausible main-camera
+   position (on the near touchline's side, 4-80 m up).
+3. **Score**: the projected template against the mask's distance transform (:func:`coverage`).
+4. **Refinement**: the best distinct hypotheses are refit to the mask pixels (robust ICP,
+   point-to-marking distances, all 8 homography parameters) and scored again.
+
+Conventions: ``template_points`` are metres on the pitch plane (origin at the centre spot, x along
+the touchlines toward the goal on the right of the main camera's view, y toward the far touchline);
+a :class:`Candidate`'s homography maps ``(x, y, 1)`` to pixels of the given frame at its own
+resolution (pixel centres at integers), or of the frame undistorted by ``lens`` when one is given
+(width-normalised ``(k1, k2)``, :class:`glradial.lens.lens.Lens`, same size and principal point).
+"""
+
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..lens.lens import Lens
+from .line_hypotheses import camera_of, line_homographies, plausible, template_lines
+from .white_lines import WhiteLines, white_lines
+
+#: Coverage scoring: a projected template point counts ``exp(-d² / 2 SIGMA²) - MISS_PENALTY`` per px
+#: of marking it stands for, ``d`` its distance (work px) to the nearest mask pixel, where the work
+#: copy is grass; a px of marking stands for at most MAX_POINT_WEIGHT px.
+SIGMA, MISS_PENALTY, MAX_POINT_WEIGHT = 1.5, 0.3, 6.0
+#: Template points used for the coarse score of every hypothesis (a subsample of the given ones).
+COARSE_POINTS = 400
+#: Hypotheses scored per batch (memory), and how many of the best distinct ones are refined.
+BATCH, REFINED = 4096, 4
+#: Two homographies are distinct when the pitch points they see at a 3 x 3 grid over the image
+#: differ by more than this (m).
+DISTINCT_M = 1.5
+#: ICP: matching bands (work px), one refit each, and the most mask pixels used.
+ICP_BANDS = (8.0, 5.0, 3.0, 2.0)
+#: Reweighted solves per band and the Cauchy scale (px) of the weights.
+ICP_STEPS, ICP_CAUCHY = 3, 1.0
+ICP_MAX_POINTS = 4000
+#: A frame has usable pitch structure when this share of the work copy is grass and the best
+#: candidate's coverage score reaches MIN_SCORE px (work copy).
+MIN_GRASS, MIN_SCORE = 0.15, 60.0
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """One camera hypothesis of a frame.
+
+    ``homography``: 3 x 3 float64, pitch ``(x, y, 1)`` metres -> frame pixels (module docstring).
+    ``score``: higher is better: the length (frame px) of projected template marking that lands on
+    white-line evidence, minus :data:`MISS_PENALTY` times the length that lands on grass without any
+    (:func:`coverage`). ``rms_px``: RMS point-to-marking distance (frame px) of the mask pixels
+    matched in the last ICP band; ``matched``: how many there were. ``focal``: focal length in image
+    widths and ``position``: camera centre (x, y, z metres) read from the homography with square
+    pixels and a centred principal point (no lens).
+    """
+
+    homography: np.ndarray
+    score: float
+    rms_px: float
+    matched: int
+    focal: float
+    position: tuple[float, float, float]
+
+
+def _check_inputs(frame_rgb, template_points, template_labels, lens, max_candidates):
+    if not isinstance(frame_rgb, np.ndarray):
+        raise TypeError(f"frame_rgb must be a numpy array, got {type(frame_rgb).__name__}")
+    if frame_rgb.dtype != np.uint8 or frame_rgb.ndim != 3 or frame_rgb.shape[2] != 3:
+        raise ValueError(f"frame_rgb must be an H x W x 3 uint8 RGB image, got {frame_rgb.dtype} {frame_rgb.shape}")
+    if min(frame_rgb.shape[:2]) < 16:
+        raise ValueError(f"frame_rgb is too small: {frame_rgb.shape}")
+    points = np.asarray(template_points, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 2 or len(points) < 8 or not np.isfinite(points).all():
+        raise ValueError(f"template_points must be a finite M x 2 array (M >= 8), got shape {points.shape}")
+    labels = np.asarray(template_labels)
+    if labels.shape != (len(points),) or not np.issubdtype(labels.dtype, np.integer):
+        raise ValueError(f"template_labels must be {len(points)} integers, got {labels.dtype} {labels.shape}")
+    if isinstance(max_candidates, bool) or not isinstance(max_candidates, numbers.Integral):
+        raise TypeError(f"max_candidates must be an integer, got {max_candidates!r}")
+    if max_candidates < 1:
+        raise ValueError(f"max_candidates must be >= 1, got {max_candidates}")
+    if lens is not None:
+        try:
+            k1, k2 = lens
+            lens = Lens(float(k1), float(k2))
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"lens must be (k1, k2) or None, got {lens!r}: {exc}") from None
+    return points, labels, lens
+
+
+def _tangents(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """Unit tangent (M x 2) of the marking at each template point: the principal direction of its
+    nearest neighbours of the same label."""
+    out = np.zeros_like(points)
+    for label in np.unique(labels):
+        idx = np.flatnonzero(labels == label)
+        p = points[idx]
+        k = min(5, len(p))
+        _, nn = cKDTree(p).query(p, k=k)
+        d = p[nn] - p[nn].mean(axis=1, keepdims=True)
+        cov = np.einsum("mki,mkj->mij", d, d)
+        out[idx] = np.linalg.eigh(cov)[1][:, :, 1]
+    return out
+
+
+def _project(h: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(xy, w)``: template points (M x 2) through homographies (N x 3 x 3) -> N x M x 2 and depths."""
+    p = np.einsum("nij,mj->nmi", h[:, :, :2], points) + h[:, None, :, 2]
+    w = p[..., 2]
+    with np.errstate(all="ignore"):
+        return p[..., :2] / w[..., None], w
+
+
+def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray, field: np.ndarray) -> np.ndarray:
+    """Coverage score (work px) of homographies ``h`` (N x 3 x 3): over the template ``points``
+    (M x 2, ``spacing`` metres apart along the markings) that land on the field, the length of marking
+    each stands for times ``exp(-d² / 2 SIGMA²) - MISS_PENALTY``, ``d`` from the distance transform
+    ``dist`` of the line mask."""
+    height, width = dist.shape
+    out = np.empty(len(h))
+    det = np.abs(np.linalg.det(h))
+    for s in range(0, len(h), BATCH):
+        xy, w = _project(h[s: s + BATCH], points)
+        with np.errstate(all="ignore"):
+            length = np.minimum(np.sqrt(det[s: s + BATCH, None] / np.abs(w) ** 3) * spacing, MAX_POINT_WEIGHT)
+            ix, iy = np.round(xy[..., 0]), np.round(xy[..., 1])
+            inside = (w > 0) & (ix >= 0) & (ix < width) & (iy >= 0) & (iy < height)
+        ix = np.where(inside, ix, 0).astype(np.intp)
+        iy = np.where(inside, iy, 0).astype(np.intp)
+        on = inside & (field[iy, ix] > 0)
+        d = dist[iy, ix]
+        out[s: s + BATCH] = np.sum(np.where(on, length * (np.exp(-0.5 * (d / SIGMA) ** 2) - MISS_PENALTY), 0.0), axis=1)
+    return out
+
+
+def _grid_views(h: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Pitch points (N x 9 x 2) seen at a 3 x 3 grid over a ``(W, H)`` image (NaN behind the camera)."""
+    gx, gy = np.meshgrid(np.linspace(0.1, 0.9, 3) * size[0], np.linspace(0.3, 0.9, 3) * size[1])
+    grid = np.stack([gx.ravel(), gy.ravel(), np.ones(9)], axis=1)
+    with np.errstate(all="ignore"):
+        p = np.einsum("nij,mj->nmi", np.linalg.inv(h), grid)
+        return p[..., :2] / p[..., 2:3]
+
+
+def _distinct_best(h: np.ndarray, score: np.ndarray, size: tuple[int, int], n: int) -> list[int]:
+    """Indices of the ``n`` best-scoring homographies that see the image's grid differently."""
+    chosen: list[int] = []
+    views: list[np.ndarray] = []
+    for k in np.argsort(-score):
+        if not np.isfinite(score[k]) or len(chosen) >= n:
+            break
+        view = _grid_views(h[k: k + 1], size)[0]
+        if any(np.nanmax(np.linalg.norm(view - v, axis=1)) <= DISTINCT_M for v in views):
+            continue
+        chosen.append(int(k))
+        views.append(view)
+    return chosen
+
+
+def _line_fit(pm: np.ndarray, normal: np.ndarray, e: np.ndarray, depth: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """The homography (normalised coordinates) minimising the weighted distances, along the image
+    ``normal``, of the template points ``pm`` from the pixels ``e``: ``n . (h1 X, h2 X) - (n . e) h3 X``
+    is linear in ``h``, divided by the current ``depth`` (h3 X) it is the distance in pixels."""
+    x = np.column_stack([pm, np.ones(len(pm))])
+    c = np.sum(normal * e, axis=1)
+    a = np.hstack([normal[:, :1] * x, normal[:, 1:] * x, -c[:, None] * x]) * (np.sqrt(weight) / depth)[:, None]
+    _, vecs = np.linalg.eigh(a.T @ a)
+    return vecs[:, 0].reshape(3, 3)
+
+
+def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np.ndarray,
+           size: tuple[int, int]) -> tuple[np.ndarray, float, int]:
+    """Robust ICP of one homography (pitch m -> work px) to the mask pixels ``evidence`` (N x 2):
+    in each band of :data:`ICP_BANDS`, every pixel is matched to the nearest projected template
+    point within the band, and the homography is refit (all 8 parameters, linear in the homography's
+    entries, Cauchy-weighted, :data:`ICP_STEPS` reweighted solves) to the pixels' distances from the
+    markings' tangent lines there. Returns ``(h, rms px, matched)`` of the last band."""
+    width, height = size
+    norm = np.array([[2 / width, 0, -1], [0, 2 / width, -height / width], [0, 0, 1]])
+    pitch_norm = np.diag([1 / 50, 1 / 50, 1.0])
+    e_all = evidence @ norm[:2, :2].T + norm[:2, 2]
+    g = norm @ h @ np.linalg.inv(pitch_norm)
+    pts = points / 50
+    rms, matched = np.inf, 0
+    for band in ICP_BANDS:
+        xy, w = _project(g[None], pts)
+        xy, w = xy[0], w[0]
+        front = (w > 0) & (np.abs(xy[:, 0]) < 2) & (np.abs(xy[:, 1]) < 2)
+        if front.sum() < 8:
+            break
+        idx = np.flatnonzero(front)
+        dist, nn = cKDTree(xy[idx]).query(e_all, distance_upper_bound=band * 2 / width)
+        ok = np.isfinite(dist)
+        if ok.sum() < 12:
+            break
+        e, m = e_all[ok], idx[nn[ok]]
+        pm = pts[m]
+        for _ in range(ICP_STEPS):
+            q, depth = _project(g[None], pm)
+            ahead, _ = _project(g[None], pm + 1e-3 * tangents[m])
+            t = ahead[0] - q[0]
+            normal = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+            r = np.sum((q[0] - e) * normal, axis=1) * width / 2
+            weight = 1 / (1 + (r / ICP_CAUCHY) ** 2)
+            g_new = _line_fit(pm, normal, e, depth[0], weight)
+            g = g_new * np.sign(np.sum(g_new * g))
+        q, _ = _project(g[None], pm)
+        r = np.sum((q[0] - e) * normal, axis=1) * width / 2
+        rms, matched = float(np.sqrt(np.mean(r**2))), int(len(r))
+    return np.linalg.inv(norm) @ g @ pitch_norm, rms, matched
+
+
+def _hypotheses(wl: WhiteLines, xs: np.ndarray, ys: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Plausible line-correspondence homographies (pitch m -> work px), both families in both roles."""
+    centre = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2])
+    fam1, fam2 = wl.families
+    h = np.concatenate([line_homographies(fam1, fam2, xs, ys, centre), line_homographies(fam2, fam1, xs, ys, centre)])
+    return h[plausible(h, size)] if len(h) else h
+
+
+def _to_frame(h: np.ndarray, scale: float) -> np.ndarray:
+    """A work-copy homography as one to frame pixels (pixel centres at integers at both scales)."""
+    s = np.array([[scale, 0, 0.5 * scale - 0.5], [0, scale, 0.5 * scale - 0.5], [0, 0, 1]])
+    out = s @ h
+    return out / np.linalg.norm(out)
+
+
+def _undistorted_evidence(wl: WhiteLines, lens: Lens, frame_size: tuple[int, int]) -> WhiteLines:
+    """``wl`` with its mask pixels moved to where ``lens`` undistorts them (frame-size lens units),
+    the mask redrawn from them, and its lines found again."""
+    from .white_lines import families, straight_lines
+
+    shape = wl.mask.shape
+    s = wl.scale
+    full = (wl.points + 0.5) * s - 0.5
+    und = lens.undistort_points(full, frame_size)
+    ok = np.isfinite(und).all(axis=1)
+    pts = (und[ok] + 0.5) / s - 0.5
+    inside = (pts[:, 0] >= 0) & (pts[:, 0] <= shape[1] - 1) & (pts[:, 1] >= 0) & (pts[:, 1] <= shape[0] - 1)
+    pts = pts[inside]
+    mask = np.zeros(shape, np.uint8)
+    mask[np.round(pts[:, 1]).astype(int), np.round(pts[:, 0]).astype(int)] = 1
+    lines = straight_lines(mask * 255, pts)
+    fams, others = families(lines)
+    return WhiteLines(mask, wl.field, wl.grass, pts, s, fams, others)
+
+
+def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_labels: np.ndarray, *,
+                lens: tuple[float, float] | None = None, max_candidates: int = 5) -> list[Candidate]:
+    """Up to ``max_candidates`` camera hypotheses (:class:`Candidate`, best first) of a uint8 RGB
+    broadcast frame seen by the main camera, from its white pitch lines and the template's markings
+    (module docstring); ``[]`` when the frame has no usable pitch structure (too little grass, no two
+    lines of each direction, or no hypothesis that covers enough of the marking evidence)."""
+    points, labels, lens_ = _check_inputs(frame_rgb, template_points, template_labels, lens, max_candidates)
+    frame_size = (frame_rgb.shape[1], frame_rgb.shape[0])
+    wl = white_lines(frame_rgb)
+    if wl.grass < MIN_GRASS or len(wl.points) < 50:
+        return []
+    if lens_ is not None:
+        wl = _undistorted_evidence(wl, lens_, frame_size)
+    size = (wl.mask.shape[1], wl.mask.shape[0])
+    xs, ys = template_lines(points, _spacing(points))
+    h = _hypotheses(wl, xs, ys, size)
+    if len(h) == 0:
+        return []
+    dist = cv2.distanceTransform(1 - wl.mask, cv2.DIST_L2, 3)
+    step = max(1, len(points) // COARSE_POINTS)
+    spacing = _spacing(points) * step
+    coarse = coverage(h, points[::step], spacing, dist, wl.field)
+    tangents = _tangents(points, labels)
+    evidence = wl.points[:: max(1, len(wl.points) // ICP_MAX_POINTS)]
+    found = []
+    for k in _distinct_best(h, coarse, size, max(REFINED, max_candidates)):
+        hk, rms, matched = refine(h[k], evidence, points, tangents, size)
+        score = float(coverage(hk[None], points, _spacing(points), dist, wl.field)[0])
+        found.append((score, hk, rms, matched))
+    found.sort(key=lambda f: -f[0])
+    out = []
+    for score, hk, rms, matched in found[:max_candidates]:
+        if score < MIN_SCORE:
+            continue
+        focal, centre, _ = camera_of(hk[None], size)
+        out.append(Candidate(_to_frame(hk, wl.scale), score * wl.scale, rms * wl.scale, matched,
+                             float(focal[0]), tuple(float(c) for c in centre[0])))
+    return out
+
+
+def _spacing(points: np.ndarray) -> float:
+    """Median distance (m) between template points and their nearest neighbour."""
+    d, _ = cKDTree(points).query(points, k=2)
+    return float(np.median(d[:, 1]))

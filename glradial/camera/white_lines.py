@@ -1,0 +1,246 @@
+"""White pitch-line evidence of a broadcast frame, for the camera's first guess: a mask of the painted
+lines on the grass, its pixels, the straight lines through them and their two families.
+
+Convention: everything here is in pixels of the **work copy**, the frame resized (area
+interpolation) to :data:`WORK_WIDTH` pixels wide with its aspect kept; pixel centres at integers,
+x right, y down. A line is ``(a, b, c)`` with ``a x + b y + c = 0`` and ``a² + b² = 1``.
+
+The mask: grass is green (hue 30..90 on OpenCV's 0..180 scale, saturated, not dark); a line pixel is
+brighter than its surroundings by :data:`TOPHAT_MIN` grey levels (a white top-hat with a disc wider
+than a painted line at the work scale) and lies where most of its neighbourhood is grass, so the
+stands, ad boards and the sky, which are not grass, bring no evidence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+#: Width (px) of the work copy. The first guess needs lines, not detail: 640 px keeps a 12 cm line at
+#: 60 m from a 1280-px wide shot about one pixel wide, and the whole search within its time budget.
+WORK_WIDTH = 640
+#: Grass: OpenCV HSV hue range (0..180), smallest saturation and value (0..255).
+GRASS_HUE, GRASS_MIN_SAT, GRASS_MIN_VAL = (30, 90), 50, 40
+#: Side (px) of the window in which a line pixel needs :data:`GRASS_SHARE` of grass around it.
+GRASS_WINDOW, GRASS_SHARE = 15, 0.45
+#: White top-hat: disc diameter (px of the work copy) and smallest response (grey levels).
+TOPHAT_DISC, TOPHAT_MIN = 9, 22
+#: Probabilistic Hough transform on the mask: accumulator threshold, shortest segment, largest gap (px).
+HOUGH_VOTES, HOUGH_MIN_LENGTH, HOUGH_MAX_GAP = 25, 25, 6
+#: Segments join one line when they point within MERGE_ANGLE (radians) of it and both their ends
+#: lie within MERGE_OFFSET px of it.
+MERGE_ANGLE, MERGE_OFFSET = 0.035, 2.5
+#: A line is kept when its mask pixels cover at least this length (px).
+MIN_LINE_SUPPORT = 30.0
+#: Mask pixels this close (px) to a line, and at most SPAN_MARGIN px beyond its Hough segments'
+#: ends, are its support in the refit.
+SUPPORT_BAND, SPAN_MARGIN = 2.0, 12.0
+#: Mask components are dropped when they extend less than BLOB_MIN_EXTENT px, or less than
+#: BLOB_COMPACT_EXTENT px with more than BLOB_MAX_THICKNESS px of area per px of extent (players,
+#: the ball and specks are compact; lines, alone or joined to a player, are long).
+BLOB_MIN_EXTENT, BLOB_COMPACT_EXTENT, BLOB_MAX_THICKNESS = 14, 48, 4.5
+#: At most this many lines (longest support first) are kept.
+MAX_LINES = 24
+#: A line belongs to a family when the line, turned about its centre to point at the family's
+#: vanishing point, moves its ends by at most FAMILY_OFFSET px, and its direction is within FAMILY_ANGLE.
+FAMILY_OFFSET, FAMILY_ANGLE = 2.5, 0.05
+#: At most this many lines per family (longest first) enter the hypotheses.
+MAX_FAMILY_LINES = 7
+
+
+@dataclass(frozen=True)
+class Line:
+    """A straight line of the mask: ``abc`` its normalised equation, ``ends`` (2 x 2) the extreme
+    support pixels along it, ``support`` the length (px) its mask pixels cover."""
+
+    abc: np.ndarray
+    ends: np.ndarray
+    support: float
+
+    @property
+    def centre(self) -> np.ndarray:
+        return self.ends.mean(axis=0)
+
+    @property
+    def half_length(self) -> float:
+        return 0.5 * float(np.linalg.norm(self.ends[1] - self.ends[0]))
+
+
+@dataclass(frozen=True)
+class WhiteLines:
+    """Line evidence of one frame: ``mask`` (uint8 0/1, work copy), ``field`` (uint8 0/1, where lines
+    could be seen: mostly grass around), ``grass`` (the share of the work copy that is grass), ``points`` (N x 2 float64, the mask's pixels), ``scale`` (frame px per work
+    px), ``families`` (two lists of :class:`Line`, each pointing at one vanishing point, longest first;
+    either may be empty) and ``others`` (lines in no family)."""
+
+    mask: np.ndarray
+    field: np.ndarray
+    grass: float
+    points: np.ndarray
+    scale: float
+    families: tuple[list[Line], list[Line]]
+    others: list[Line]
+
+
+def work_copy(frame_rgb: np.ndarray) -> tuple[np.ndarray, float]:
+    """The frame resized to :data:`WORK_WIDTH` wide (area interpolation; never enlarged) and the
+    scale ``frame px / work px``."""
+    height, width = frame_rgb.shape[:2]
+    if width <= WORK_WIDTH:
+        return frame_rgb, 1.0
+    scale = width / WORK_WIDTH
+    size = (WORK_WIDTH, max(2, int(round(height / scale))))
+    return cv2.resize(frame_rgb, size, interpolation=cv2.INTER_AREA), scale
+
+
+def line_mask(small_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(mask, field, grass share)``: the white-line mask and the field (uint8 0/1: mostly grass
+    around) of a work copy (module docstring)."""
+    hsv = cv2.cvtColor(small_rgb, cv2.COLOR_RGB2HSV)
+    hue, sat, val = hsv[..., 0], hsv[..., 1], hsv[..., 2]
+    grass = ((hue > GRASS_HUE[0]) & (hue < GRASS_HUE[1]) & (sat > GRASS_MIN_SAT) & (val > GRASS_MIN_VAL)).astype(np.float32)
+    around = cv2.blur(grass, (GRASS_WINDOW, GRASS_WINDOW))
+    gray = cv2.cvtColor(small_rgb, cv2.COLOR_RGB2GRAY)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (TOPHAT_DISC, TOPHAT_DISC))
+    tophat = cv2.morphologyEx(gray, cv2.MORPH_TOPHAT, disc)
+    field = (around >= GRASS_SHARE).astype(np.uint8)
+    return (tophat >= TOPHAT_MIN).astype(np.uint8) & field, field, float(grass.mean())
+
+
+def _direction(abc: np.ndarray) -> np.ndarray:
+    return np.array([-abc[1], abc[0]])
+
+
+def _refit(points: np.ndarray, abc: np.ndarray, span: tuple[float, float]) -> Line | None:
+    """The total-least-squares line through the mask ``points`` within :data:`SUPPORT_BAND` of
+    ``abc`` and within ``span`` (positions along ``abc``'s direction) widened by
+    :data:`SPAN_MARGIN` (two passes), its ends and support; ``None`` when the support is too short."""
+    along = points @ _direction(abc)
+    points = points[(along >= span[0] - SPAN_MARGIN) & (along <= span[1] + SPAN_MARGIN)]
+    for _ in range(2):
+        near = points[np.abs(points @ abc[:2] + abc[2]) <= SUPPORT_BAND]
+        if len(near) < MIN_LINE_SUPPORT:
+            return None
+        centre = near.mean(axis=0)
+        d = near - centre
+        _, vecs = np.linalg.eigh(d.T @ d)
+        normal = vecs[:, 0]
+        abc = np.array([normal[0], normal[1], -normal @ centre])
+    s = (near - centre) @ _direction(abc)
+    # support: the length covered by occupied 1-px bins along the line (gaps behind players excluded)
+    support = float(len(np.unique(np.round(s))))
+    if support < MIN_LINE_SUPPORT:
+        return None
+    ends = centre + np.outer([s.min(), s.max()], _direction(abc))
+    return Line(abc, ends, support)
+
+
+def _merge_segments(segments: np.ndarray) -> list[tuple[np.ndarray, list[float]]]:
+    """Hough segments (K x 4: x1, y1, x2, y2), longest first, grouped into lines: the equation of
+    each group's longest segment and the span ``[lo, hi]`` of the group's ends along it."""
+    lines: list[tuple[np.ndarray, list[float]]] = []
+    for x1, y1, x2, y2 in segments:
+        d = np.array([x2 - x1, y2 - y1], float)
+        d /= max(np.linalg.norm(d), 1e-9)
+        ends = np.array([[x1, y1], [x2, y2]])
+        for abc, span in lines:
+            ends_off = np.abs(ends @ abc[:2] + abc[2])
+            if ends_off.max() <= MERGE_OFFSET and abs(d @ abc[:2]) <= MERGE_ANGLE:
+                along = ends @ _direction(abc)
+                span[0], span[1] = min(span[0], along.min()), max(span[1], along.max())
+                break
+        else:
+            abc = np.array([-d[1], d[0], d[1] * x1 - d[0] * y1])
+            along = ends @ _direction(abc)
+            lines.append((abc, [float(along.min()), float(along.max())]))
+    return lines
+
+
+def thin_components(mask: np.ndarray) -> np.ndarray:
+    """``mask`` (uint8 0/1) without its compact components (players, the ball, specks): see
+    :data:`BLOB_MIN_EXTENT` and the next constants."""
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    extent = np.maximum(stats[:, cv2.CC_STAT_WIDTH], stats[:, cv2.CC_STAT_HEIGHT])
+    compact = (extent < BLOB_COMPACT_EXTENT) & (stats[:, cv2.CC_STAT_AREA] > BLOB_MAX_THICKNESS * extent)
+    keep = (extent >= BLOB_MIN_EXTENT) & ~compact
+    keep[0] = False
+    return keep[labels].astype(np.uint8)
+
+
+def straight_lines(mask: np.ndarray, points: np.ndarray) -> list[Line]:
+    """The straight lines of ``mask`` (Hough segments merged, refit to the mask pixels ``points``),
+    duplicates removed, longest support first."""
+    found = cv2.HoughLinesP(mask, 1, np.pi / 360, HOUGH_VOTES, minLineLength=HOUGH_MIN_LENGTH, maxLineGap=HOUGH_MAX_GAP)
+    if found is None:
+        return []
+    segments = found.reshape(-1, 4).astype(np.float64)
+    order = np.argsort(-np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]))
+    lines: list[Line] = []
+    for abc, span in _merge_segments(segments[order]):
+        line = _refit(points, abc, (span[0], span[1]))
+        if line is None:
+            continue
+        if any(abs(_direction(line.abc) @ other.abc[:2]) <= MERGE_ANGLE
+               and np.abs(line.ends @ other.abc[:2] + other.abc[2]).max() <= MERGE_OFFSET for other in lines):
+            continue
+        lines.append(line)
+    return sorted(lines, key=lambda line: -line.support)[:MAX_LINES]
+
+
+def points_at(abc: np.ndarray, centre: np.ndarray, half_length: np.ndarray, vp: np.ndarray) -> np.ndarray:
+    """Whether each line (``abc`` L x 3, ``centre`` L x 2, ``half_length`` L) points at each
+    homogeneous point ``vp`` (P x 3): P x L booleans (module constants)."""
+    towards = vp[:, None, :2] - vp[:, None, 2:3] * centre[None]
+    norm = np.maximum(np.linalg.norm(towards, axis=2), 1e-12)
+    sin = np.abs(np.einsum("plk,lk->pl", towards, abc[:, :2])) / norm
+    return (sin <= FAMILY_ANGLE) & (half_length[None] * sin <= FAMILY_OFFSET)
+
+
+def _best_family(lines: list[Line]) -> np.ndarray:
+    """Members (bool per line) of the vanishing point that the most support points at (the meeting
+    point of two of the lines); the longest line alone when no two lines agree."""
+    best = np.zeros(len(lines), bool)
+    if not lines:
+        return best
+    best[0] = True
+    if len(lines) < 2:
+        return best
+    abc = np.array([line.abc for line in lines])
+    centre = np.array([line.centre for line in lines])
+    half = np.array([line.half_length for line in lines])
+    support = np.array([line.support for line in lines])
+    i, j = np.triu_indices(len(lines), 1)
+    vp = np.cross(abc[i], abc[j])
+    vp /= np.maximum(np.linalg.norm(vp, axis=1, keepdims=True), 1e-18)
+    members = points_at(abc, centre, half, vp)
+    members[np.arange(len(i)), i] = True
+    members[np.arange(len(i)), j] = True
+    score = members @ support
+    k = int(np.argmax(score))
+    return members[k] if score[k] > support[0] else best
+
+
+def families(lines: list[Line]) -> tuple[tuple[list[Line], list[Line]], list[Line]]:
+    """Split ``lines`` (longest first) into two families sharing a vanishing point each, the
+    stronger first, and the rest; each family is cut to :data:`MAX_FAMILY_LINES` lines."""
+    first = _best_family(lines)
+    rest = [line for line, m in zip(lines, first) if not m]
+    second = _best_family(rest)
+    fam1 = [line for line, m in zip(lines, first) if m]
+    fam2 = [line for line, m in zip(rest, second) if m]
+    others = [line for line, m in zip(rest, second) if not m]
+    return (fam1[:MAX_FAMILY_LINES], fam2[:MAX_FAMILY_LINES]), others
+
+
+def white_lines(frame_rgb: np.ndarray) -> WhiteLines:
+    """The line evidence (:class:`WhiteLines`) of a uint8 RGB frame."""
+    small, scale = work_copy(frame_rgb)
+    mask, field, grass = line_mask(small)
+    mask = thin_components(mask)
+    ys, xs = np.nonzero(mask)
+    points = np.stack([xs, ys], axis=1).astype(np.float64)
+    lines = straight_lines(mask * 255, points) if len(points) else []
+    fams, others = families(lines)
+    return WhiteLines(mask, field, grass, points, scale, fams, others)
