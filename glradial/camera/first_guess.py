@@ -39,8 +39,9 @@ from .white_lines import WhiteLines, white_lines
 #: of marking it stands for, ``d`` its distance (work px) to the nearest mask pixel, where the work
 #: copy is grass; a px of marking stands for at most MAX_POINT_WEIGHT px.
 SIGMA, MISS_PENALTY, MAX_POINT_WEIGHT = 1.5, 0.3, 6.0
-#: Template points used for the coarse score of every hypothesis (a subsample of the given ones).
-COARSE_POINTS = 400
+#: Template points used for the quick score of every hypothesis and for the coarse score of the
+#: QUICK_KEPT best (subsamples of the given ones).
+QUICK_POINTS, QUICK_KEPT, COARSE_POINTS = 80, 400, 400
 #: Hypotheses scored per batch (memory), and how many of the best distinct ones are refined.
 BATCH, REFINED = 4096, 4
 #: Two homographies are distinct when the pitch points they see at a 3 x 3 grid over the image
@@ -120,10 +121,11 @@ def _tangents(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
 
 def _project(h: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(xy, w)``: template points (M x 2) through homographies (N x 3 x 3) -> N x M x 2 and depths."""
-    p = np.einsum("nij,mj->nmi", h[:, :, :2], points) + h[:, None, :, 2]
-    w = p[..., 2]
+    x = np.vstack([points.T, np.ones(len(points))])
+    p = (h.reshape(-1, 3) @ x).reshape(len(h), 3, -1)
+    w = p[:, 2]
     with np.errstate(all="ignore"):
-        return p[..., :2] / w[..., None], w
+        return np.stack([p[:, 0] / w, p[:, 1] / w], axis=-1), w
 
 
 def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray, field: np.ndarray) -> np.ndarray:
@@ -256,7 +258,7 @@ def _undistorted_evidence(wl: WhiteLines, lens: Lens, frame_size: tuple[int, int
     mask = np.zeros(shape, np.uint8)
     mask[np.round(pts[:, 1]).astype(int), np.round(pts[:, 0]).astype(int)] = 1
     lines = straight_lines(mask * 255, pts)
-    fams, others = families(lines)
+    fams, others = families(lines, wl.field)
     return WhiteLines(mask, wl.field, wl.grass, pts, s, fams, others)
 
 
@@ -279,9 +281,12 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
     if len(h) == 0:
         return []
     dist = cv2.distanceTransform(1 - wl.mask, cv2.DIST_L2, 3)
+    spacing = _spacing(points)
+    step = max(1, len(points) // QUICK_POINTS)
+    quick = coverage(h, points[::step], spacing * step, dist, wl.field)
+    h = h[np.argsort(-quick)[:QUICK_KEPT]]
     step = max(1, len(points) // COARSE_POINTS)
-    spacing = _spacing(points) * step
-    coarse = coverage(h, points[::step], spacing, dist, wl.field)
+    coarse = coverage(h, points[::step], spacing * step, dist, wl.field)
     tangents = _tangents(points, labels)
     evidence = wl.points[:: max(1, len(wl.points) // ICP_MAX_POINTS)]
     found = []

@@ -24,7 +24,7 @@ WORK_WIDTH = 640
 #: Grass: OpenCV HSV hue range (0..180), smallest saturation and value (0..255).
 GRASS_HUE, GRASS_MIN_SAT, GRASS_MIN_VAL = (30, 90), 50, 40
 #: Side (px) of the window in which a line pixel needs :data:`GRASS_SHARE` of grass around it.
-GRASS_WINDOW, GRASS_SHARE = 15, 0.45
+GRASS_WINDOW, GRASS_SHARE = 15, 0.3
 #: White top-hat: disc diameter (px of the work copy) and smallest response (grey levels).
 TOPHAT_DISC, TOPHAT_MIN = 9, 22
 #: Probabilistic Hough transform on the mask: accumulator threshold, shortest segment, largest gap (px).
@@ -198,9 +198,38 @@ def points_at(abc: np.ndarray, centre: np.ndarray, half_length: np.ndarray, vp: 
     return (sin <= FAMILY_ANGLE) & (half_length[None] * sin <= FAMILY_OFFSET)
 
 
-def _best_family(lines: list[Line]) -> np.ndarray:
+def _off_field(vp: np.ndarray, lines: list[Line], field: np.ndarray) -> np.ndarray:
+    """Whether each homogeneous point ``vp`` (P x 3) can be a vanishing point of pitch lines: not on
+    the field in view (the horizon is above the grass) and not within any of ``lines``' extents
+    (parallel lines never meet on the pitch)."""
+    height, width = field.shape
+    with np.errstate(all="ignore"):
+        xy = vp[:, :2] / vp[:, 2:3]
+    finite = np.isfinite(xy).all(axis=1) & (np.abs(vp[:, 2]) > 1e-12)
+    ix = np.clip(np.nan_to_num(np.round(xy[:, 0])), 0, width - 1).astype(np.intp)
+    iy = np.clip(np.nan_to_num(np.round(xy[:, 1])), 0, height - 1).astype(np.intp)
+    inside = finite & (xy[:, 0] >= 0) & (xy[:, 0] < width) & (xy[:, 1] >= 0) & (xy[:, 1] < height)
+    ok = ~(inside & (field[iy, ix] > 0))
+    for line in lines:
+        d = _direction(line.abc)
+        lo, hi = np.sort(line.ends @ d)
+        along = np.where(finite, np.nan_to_num(xy) @ d, np.inf)
+        ok &= ~((along > lo - SPAN_MARGIN) & (along < hi + SPAN_MARGIN)
+                & (np.abs(np.nan_to_num(xy) @ line.abc[:2] + line.abc[2]) < SPAN_MARGIN))
+    return ok
+
+
+def _vanishing_point(lines: list[Line]) -> np.ndarray:
+    """The homogeneous point (unit norm) the ``lines`` point at best, in least squares weighted by
+    their support (the smallest eigenvector of their equations' scatter)."""
+    abc = np.array([line.abc for line in lines]) * np.sqrt([line.support for line in lines])[:, None]
+    return np.linalg.eigh(abc.T @ abc)[1][:, 0]
+
+
+def _best_family(lines: list[Line], field: np.ndarray) -> np.ndarray:
     """Members (bool per line) of the vanishing point that the most support points at (the meeting
-    point of two of the lines); the longest line alone when no two lines agree."""
+    point of two of the lines, off the field, :func:`_off_field`); the longest line alone when no two
+    lines agree."""
     best = np.zeros(len(lines), bool)
     if not lines:
         return best
@@ -217,17 +246,27 @@ def _best_family(lines: list[Line]) -> np.ndarray:
     members = points_at(abc, centre, half, vp)
     members[np.arange(len(i)), i] = True
     members[np.arange(len(i)), j] = True
-    score = members @ support
+    score = np.where(_off_field(vp, lines, field), members @ support, 0.0)
     k = int(np.argmax(score))
-    return members[k] if score[k] > support[0] else best
+    if score[k] <= support[0]:
+        return best
+    chosen = members[k]
+    for _ in range(2):  # the members' own vanishing point, then its members
+        vp_k = _vanishing_point([line for line, m in zip(lines, chosen) if m])
+        again = points_at(abc, centre, half, vp_k[None])[0] | chosen
+        if not _off_field(vp_k[None], [], field)[0] or again.sum() == chosen.sum():
+            break
+        chosen = again
+    return chosen
 
 
-def families(lines: list[Line]) -> tuple[tuple[list[Line], list[Line]], list[Line]]:
+def families(lines: list[Line], field: np.ndarray) -> tuple[tuple[list[Line], list[Line]], list[Line]]:
     """Split ``lines`` (longest first) into two families sharing a vanishing point each, the
-    stronger first, and the rest; each family is cut to :data:`MAX_FAMILY_LINES` lines."""
-    first = _best_family(lines)
+    stronger first, and the rest; each family is cut to :data:`MAX_FAMILY_LINES` lines. ``field``:
+    the work copy's field mask (a vanishing point is never on it)."""
+    first = _best_family(lines, field)
     rest = [line for line, m in zip(lines, first) if not m]
-    second = _best_family(rest)
+    second = _best_family(rest, field)
     fam1 = [line for line, m in zip(lines, first) if m]
     fam2 = [line for line, m in zip(rest, second) if m]
     others = [line for line, m in zip(rest, second) if not m]
@@ -242,5 +281,5 @@ def white_lines(frame_rgb: np.ndarray) -> WhiteLines:
     ys, xs = np.nonzero(mask)
     points = np.stack([xs, ys], axis=1).astype(np.float64)
     lines = straight_lines(mask * 255, points) if len(points) else []
-    fams, others = families(lines)
+    fams, others = families(lines, field)
     return WhiteLines(mask, field, grass, points, scale, fams, others)
