@@ -33,7 +33,7 @@ from scipy.spatial import cKDTree
 
 from ..lens.lens import Lens
 from .line_hypotheses import camera_of, line_homographies, plausible, template_lines
-from .white_lines import WhiteLines, white_lines
+from .white_lines import WhiteLines, hull, pair_vanishing_points, white_lines
 
 #: Coverage scoring: a projected template point counts ``exp(-d² / 2 SIGMA²) - MISS_PENALTY`` per px
 #: of marking it stands for, ``d`` its distance (work px) to the nearest mask pixel, where the work
@@ -48,7 +48,7 @@ BATCH, REFINED = 4096, 4
 #: differ by more than this (m).
 DISTINCT_M = 1.5
 #: ICP: matching bands (work px), one refit each, and the most mask pixels used.
-ICP_BANDS = (8.0, 5.0, 3.0, 2.0)
+ICP_BANDS = (8.0, 6.0, 4.0, 4.0)
 #: Reweighted solves per band and the Cauchy scale (px) of the weights.
 ICP_STEPS, ICP_CAUCHY = 3, 1.0
 ICP_MAX_POINTS = 4000
@@ -228,10 +228,9 @@ def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np
 
 
 def _hypotheses(wl: WhiteLines, xs: np.ndarray, ys: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Plausible line-correspondence homographies (pitch m -> work px), both families in both roles."""
-    centre = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2])
-    fam1, fam2 = wl.families
-    h = np.concatenate([line_homographies(fam1, fam2, xs, ys, centre), line_homographies(fam2, fam1, xs, ys, centre)])
+    """Plausible line-correspondence homographies (pitch m -> work px)."""
+    _, valid = pair_vanishing_points(wl.lines, wl.points)
+    h = line_homographies(wl.lines, valid, hull(wl.points), xs, ys, size)
     return h[plausible(h, size)] if len(h) else h
 
 
@@ -245,7 +244,7 @@ def _to_frame(h: np.ndarray, scale: float) -> np.ndarray:
 def _undistorted_evidence(wl: WhiteLines, lens: Lens, frame_size: tuple[int, int]) -> WhiteLines:
     """``wl`` with its mask pixels moved to where ``lens`` undistorts them (frame-size lens units),
     the mask redrawn from them, and its lines found again."""
-    from .white_lines import families, straight_lines
+    from .white_lines import straight_lines
 
     shape = wl.mask.shape
     s = wl.scale
@@ -257,9 +256,7 @@ def _undistorted_evidence(wl: WhiteLines, lens: Lens, frame_size: tuple[int, int
     pts = pts[inside]
     mask = np.zeros(shape, np.uint8)
     mask[np.round(pts[:, 1]).astype(int), np.round(pts[:, 0]).astype(int)] = 1
-    lines = straight_lines(mask * 255, pts)
-    fams, others = families(lines, wl.field)
-    return WhiteLines(mask, wl.field, wl.grass, pts, s, fams, others)
+    return WhiteLines(mask, wl.field, wl.grass, pts, s, straight_lines(mask * 255, pts))
 
 
 def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_labels: np.ndarray, *,

@@ -31,6 +31,15 @@ MAX_ABS_X = 150.0
 #: A homography is a pinhole view with square pixels and the principal point at the centre when its
 #: two pitch axes map to orthogonal rays of equal length: at most this |cosine| and this norm ratio.
 MAX_AXIS_COSINE, MAX_AXIS_RATIO = 0.2, 1.3
+#: Two vanishing points are the pitch's directions only with the horizon through them within this
+#: roll (degrees) and, unless one is far out (directions from the centre within FAR_VP_COSINE of
+#: orthogonal), with a focal length in HFOV_RANGE.
+MAX_ROLL_DEG, FAR_VP_COSINE = 12.0, 0.15
+#: Line pixels may lie this far (px) above the horizon (line noise, pixels off the pitch).
+HULL_MARGIN = 3.0
+#: Line quads tried per frame: the pairs of line pairs whose meeting points most lines point at
+#: (ends within POINTING_PX px, direction within POINTING_ANGLE radians), then the longest.
+MAX_QUADS, POINTING_PX, POINTING_ANGLE = 48, 2.5, 0.05
 
 
 def template_lines(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
@@ -45,44 +54,35 @@ def template_lines(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.n
     return out[0], out[1]
 
 
-def _order(lines: list[Line], centre: np.ndarray, axis: int) -> list[Line]:
-    """``lines`` of one family sorted along the image direction ``axis`` (1: downward, 0: rightward),
-    measured where they cross the line through ``centre`` across the family's mean direction."""
-    d = np.array([[-line.abc[1], line.abc[0]] for line in lines])
-    d *= np.sign(d @ d[0] + 1e-12)[:, None]
-    across = np.array([-d.mean(axis=0)[1], d.mean(axis=0)[0]])
-    if across[axis] < 0:
-        across = -across
-    t = []
-    for line in lines:
-        denom = line.abc[:2] @ across
-        t.append(-(line.abc[:2] @ centre + line.abc[2]) / denom if abs(denom) > 1e-9 else np.inf)
-    return [lines[k] for k in np.argsort(t)]
+def _order(abc: np.ndarray, centre: np.ndarray, axis: int) -> np.ndarray:
+    """Line pairs ``abc`` (P x 2 x 3) each sorted along the image direction ``axis`` (1: downward,
+    0: rightward), measured where they cross the line through ``centre`` across their mean
+    direction."""
+    d = np.stack([-abc[..., 1], abc[..., 0]], axis=-1)
+    d[:, 1] *= np.sign(np.sum(d[:, 0] * d[:, 1], axis=1) + 1e-12)[:, None]
+    mean = d.sum(axis=1)
+    across = np.stack([-mean[:, 1], mean[:, 0]], axis=1)
+    across *= np.where(across[:, axis] < 0, -1.0, 1.0)[:, None]
+    with np.errstate(all="ignore"):
+        t = -(abc[..., :2] @ centre + abc[..., 2]) / np.einsum("pkj,pj->pk", abc[..., :2], across)
+    swap = t[:, 0] > t[:, 1]
+    out = abc.copy()
+    out[swap] = abc[swap][:, ::-1]
+    return out
 
 
 def _basis(p: np.ndarray) -> np.ndarray:
     """Projective bases (N x 3 x 3) mapping e1, e2, e3, (1, 1, 1) to the homogeneous points
     ``p`` (N x 4 x 3)."""
     m = np.transpose(p[:, :3], (0, 2, 1))
-    lam = np.linalg.solve(m + 1e-300, p[:, 3][..., None])[..., 0]
+    with np.errstate(all="ignore"):
+        lam = np.linalg.solve(m + 1e-300, p[:, 3][..., None])[..., 0]
     return m * lam[:, None, :]
 
 
-def _image_quads(fam_a: list[Line], fam_b: list[Line]) -> np.ndarray:
-    """Corner points (Q x 4 x 3) of each pair of ordered lines of ``fam_a`` (the x-parallel
-    candidates, top to bottom) with each pair of ``fam_b`` (left to right): corners in the order
-    (a_i, b_k), (a_i, b_l), (a_j, b_l), (a_j, b_k)."""
-    a = np.array([line.abc for line in fam_a])
-    b = np.array([line.abc for line in fam_b])
-    quads = []
-    for (i, j), (k, m) in itertools.product(itertools.combinations(range(len(a)), 2),
-                                             itertools.combinations(range(len(b)), 2)):
-        quads.append([np.cross(a[i], b[k]), np.cross(a[i], b[m]), np.cross(a[j], b[m]), np.cross(a[j], b[k])])
-    return np.array(quads, float).reshape(-1, 4, 3)
-
-
 def _pitch_quads(xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
-    """The matching pitch rectangles (R x 4 x 3): y pairs far to near, x pairs left to right."""
+    """The pitch rectangles (R x 4 x 3) of two template lines of each direction: y pairs far to
+    near, x pairs left to right, corners as in :func:`line_homographies`."""
     quads = []
     for (ya, yb), (xc, xd) in itertools.product(itertools.combinations(np.sort(ys)[::-1], 2),
                                                  itertools.combinations(np.sort(xs), 2)):
@@ -90,22 +90,98 @@ def _pitch_quads(xs: np.ndarray, ys: np.ndarray) -> np.ndarray:
     return np.array(quads, float).reshape(-1, 4, 3)
 
 
-def line_homographies(fam_a: list[Line], fam_b: list[Line], xs: np.ndarray, ys: np.ndarray,
-                      centre: np.ndarray) -> np.ndarray:
-    """Every homography (N x 3 x 3, pitch -> work px) that sends two template lines of each direction
-    onto two image lines of each family, in the main camera's order (module docstring)."""
-    if len(fam_a) < 2 or len(fam_b) < 2 or len(xs) < 2 or len(ys) < 2:
+def _normalised_vp(vp: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Homogeneous points (N x 3, px) about the image centre in image widths, unit norm."""
+    width, height = size
+    v = np.stack([vp[:, 0] - (width - 1) / 2 * vp[:, 2], vp[:, 1] - (height - 1) / 2 * vp[:, 2], width * vp[:, 2]], axis=1)
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+
+
+def vanishing_pairs(vp: np.ndarray, size: tuple[int, int], hull: np.ndarray) -> np.ndarray:
+    """Which pairs of vanishing points (``vp`` P x 3) can be the pitch's two orthogonal directions
+    seen by a pinhole camera with a centred principal point, square pixels and a small roll: P x P
+    booleans (focal length in :data:`HFOV_RANGE`, roll within :data:`MAX_ROLL_DEG`, and the line
+    pixels' convex hull ``hull`` (K x 2) below the horizon through the two, the sky's side up)."""
+    v = _normalised_vp(vp, size)
+    dot = v[:, None, 0] * v[None, :, 0] + v[:, None, 1] * v[None, :, 1]
+    ww = v[:, None, 2] * v[None, :, 2]
+    with np.errstate(all="ignore"):
+        f2 = -dot / ww
+        f_lo, f_hi = (0.5 / np.tan(np.radians(h / 2)) for h in HFOV_RANGE[::-1])
+        focal_ok = (f2 >= f_lo**2) & (f2 <= f_hi**2)
+        # nearly parallel lines (a vanishing point far out) say little about the focal length
+        norm = np.hypot(v[:, 0], v[:, 1])
+        far = np.abs(dot) <= FAR_VP_COSINE * norm[:, None] * norm[None, :]
+        horizon = np.cross(v[:, None, :], v[None, :, :])  # in the normalised coordinates of v
+        roll = np.degrees(np.arctan2(np.abs(horizon[..., 0]), np.abs(horizon[..., 1])))
+        horizon *= np.where(horizon[..., 1:2] < 0, -1.0, 1.0)  # positive below the horizon (y down)
+        horizon /= np.maximum(np.hypot(horizon[..., 0], horizon[..., 1]), 1e-300)[..., None]
+        width, height = size
+        h_norm = np.column_stack([hull[:, 0] - (width - 1) / 2, hull[:, 1] - (height - 1) / 2, np.full(len(hull), width)]) / width
+        below = np.einsum("pqk,mk->pqm", horizon, h_norm).min(axis=2) >= -HULL_MARGIN / width
+    return (focal_ok | far) & (roll <= MAX_ROLL_DEG) & below
+
+
+def _pointing(lines: list[Line], vp: np.ndarray) -> np.ndarray:
+    """Whether each line points at each homogeneous point ``vp`` (P x 3): P x L booleans; a line
+    points at a point when turning it about its centre to pass through the point moves its ends by at
+    most :data:`POINTING_PX` and turns it by at most :data:`POINTING_ANGLE`."""
+    abc = np.array([line.abc for line in lines])
+    centre = np.array([line.centre for line in lines])
+    half = np.array([line.half_length for line in lines])
+    towards = vp[:, None, :2] - vp[:, None, 2:3] * centre[None]
+    norm = np.maximum(np.linalg.norm(towards, axis=2), 1e-300)
+    sin = np.abs(np.einsum("plk,lk->pl", towards, abc[:, :2])) / norm
+    return (sin <= POINTING_ANGLE) & (half[None] * sin <= POINTING_PX)
+
+
+def line_homographies(lines: list[Line], valid_vp: np.ndarray, hull: np.ndarray, xs: np.ndarray,
+                      ys: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Every homography (N x 3 x 3, pitch -> work px, sign: positive depth at the image centre,
+    unit norm) that sends two template lines of each direction onto two pairs of image lines
+    whose meeting points can be the pitch's vanishing points (``valid_vp``, per line pair: off the
+    hull of the line pixels ``hull``, :func:`vanishing_pairs`), either pair in either role, in the main camera's order
+    (module docstring)."""
+    if len(lines) < 4 or len(xs) < 2 or len(ys) < 2:
         return np.zeros((0, 3, 3))
-    img = _basis(_image_quads(_order(fam_a, centre, 1), _order(fam_b, centre, 0)))
+    abc = np.array([line.abc for line in lines])
+    i, j = np.triu_indices(len(lines), 1)
+    keep = valid_vp
+    i, j = i[keep], j[keep]
+    vp = np.cross(abc[i], abc[j])
+    p, q = np.nonzero(vanishing_pairs(vp, size, hull))
+    pointing = _pointing(lines, vp)
+    # four distinct lines, and neither pair's lines point at the other pair's meeting point
+    apart = ~(pointing[p, i[q]] | pointing[p, j[q]] | pointing[q, i[p]] | pointing[q, j[p]])
+    p, q = p[apart], q[apart]  # ordered pairs: p is the x-parallel pair, q the y-parallel one
+    if len(p) == 0:
+        return np.zeros((0, 3, 3))
+    support = np.array([line.support for line in lines])
+    family = pointing @ support  # support of all the lines through each meeting point
+    rank = family[p] + family[q] + 0.5 * (support[i[p]] + support[j[p]] + support[i[q]] + support[j[q]])
+    best = np.argsort(-rank)[:MAX_QUADS]
+    p, q = p[best], q[best]
+    centre = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2])
+    a = _order(np.stack([abc[i[p]], abc[j[p]]], axis=1), centre, 1)
+    b = _order(np.stack([abc[i[q]], abc[j[q]]], axis=1), centre, 0)
+    corners = np.stack([np.cross(a[:, 0], b[:, 0]), np.cross(a[:, 0], b[:, 1]),
+                        np.cross(a[:, 1], b[:, 1]), np.cross(a[:, 1], b[:, 0])], axis=1)
+    img = _basis(corners)
     pitch = _basis(_pitch_quads(xs, ys))
     with np.errstate(all="ignore"):
         inv = np.linalg.inv(pitch)
         h = np.einsum("qij,rjk->qrik", img, inv).reshape(-1, 3, 3)
-        h = h[np.isfinite(h).all(axis=(1, 2))]
-        # sign: the pitch point seen at the image centre has a positive depth (h X)_3
+    return front_facing(h, centre)
+
+
+def front_facing(h: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """The finite homographies of ``h`` with the sign that gives the pitch point seen at image point
+    ``centre`` a positive depth ``(h X)_3``, scaled to unit norm."""
+    h = h[np.isfinite(h).all(axis=(1, 2))]
+    with np.errstate(all="ignore"):
         seen = np.linalg.solve(h, np.tile([centre[0], centre[1], 1.0], (len(h), 1))[..., None])[..., 0]
-        h *= np.sign(seen[:, 2])[:, None, None]
-        h /= np.linalg.norm(h, axis=(1, 2))[:, None, None]
+        h = h * np.sign(seen[:, 2])[:, None, None]
+        h = h / np.linalg.norm(h, axis=(1, 2))[:, None, None]
     return h[np.isfinite(h).all(axis=(1, 2))]
 
 

@@ -1,5 +1,5 @@
 """White pitch-line evidence of a broadcast frame, for the camera's first guess: a mask of the painted
-lines on the grass, its pixels, the straight lines through them and their two families.
+lines on the grass, its pixels, the straight lines through them and where pairs of them meet.
 
 Convention: everything here is in pixels of the **work copy**, the frame resized (area
 interpolation) to :data:`WORK_WIDTH` pixels wide with its aspect kept; pixel centres at integers,
@@ -37,17 +37,16 @@ MIN_LINE_SUPPORT = 30.0
 #: Mask pixels this close (px) to a line, and at most SPAN_MARGIN px beyond its Hough segments'
 #: ends, are its support in the refit.
 SUPPORT_BAND, SPAN_MARGIN = 2.0, 12.0
+#: A line found takes the mask pixels this close (px) to it, along its extent, from the later lines.
+CLAIM_BAND = 3.5
 #: Mask components are dropped when they extend less than BLOB_MIN_EXTENT px, or less than
 #: BLOB_COMPACT_EXTENT px with more than BLOB_MAX_THICKNESS px of area per px of extent (players,
 #: the ball and specks are compact; lines, alone or joined to a player, are long).
 BLOB_MIN_EXTENT, BLOB_COMPACT_EXTENT, BLOB_MAX_THICKNESS = 14, 48, 4.5
 #: At most this many lines (longest support first) are kept.
-MAX_LINES = 24
-#: A line belongs to a family when the line, turned about its centre to point at the family's
-#: vanishing point, moves its ends by at most FAMILY_OFFSET px, and its direction is within FAMILY_ANGLE.
-FAMILY_OFFSET, FAMILY_ANGLE = 2.5, 0.05
-#: At most this many lines per family (longest first) enter the hypotheses.
-MAX_FAMILY_LINES = 7
+MAX_LINES = 14
+#: A vanishing point may lie at most this far (px) inside the convex hull of the line pixels.
+HULL_MARGIN = 3.0
 
 
 @dataclass(frozen=True)
@@ -71,17 +70,16 @@ class Line:
 @dataclass(frozen=True)
 class WhiteLines:
     """Line evidence of one frame: ``mask`` (uint8 0/1, work copy), ``field`` (uint8 0/1, where lines
-    could be seen: mostly grass around), ``grass`` (the share of the work copy that is grass), ``points`` (N x 2 float64, the mask's pixels), ``scale`` (frame px per work
-    px), ``families`` (two lists of :class:`Line`, each pointing at one vanishing point, longest first;
-    either may be empty) and ``others`` (lines in no family)."""
+    could be seen: mostly grass around), ``grass`` (the share of the work copy that is grass),
+    ``points`` (N x 2 float64, the mask's pixels), ``scale`` (frame px per work px) and ``lines``
+    (its straight lines, :class:`Line`, longest support first)."""
 
     mask: np.ndarray
     field: np.ndarray
     grass: float
     points: np.ndarray
     scale: float
-    families: tuple[list[Line], list[Line]]
-    others: list[Line]
+    lines: list[Line]
 
 
 def work_copy(frame_rgb: np.ndarray) -> tuple[np.ndarray, float]:
@@ -171,106 +169,61 @@ def thin_components(mask: np.ndarray) -> np.ndarray:
 
 def straight_lines(mask: np.ndarray, points: np.ndarray) -> list[Line]:
     """The straight lines of ``mask`` (Hough segments merged, refit to the mask pixels ``points``),
-    duplicates removed, longest support first."""
+    longest support first. Lines are taken in turn, longest Hough group first, and each takes its
+    pixels (within :data:`CLAIM_BAND` px, along its extent) away from the later ones, so a thick
+    line or a line beside an ad board's edge does not come back as a fan of near copies."""
     found = cv2.HoughLinesP(mask, 1, np.pi / 360, HOUGH_VOTES, minLineLength=HOUGH_MIN_LENGTH, maxLineGap=HOUGH_MAX_GAP)
     if found is None:
         return []
     segments = found.reshape(-1, 4).astype(np.float64)
     order = np.argsort(-np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]))
     lines: list[Line] = []
+    free = points
     for abc, span in _merge_segments(segments[order]):
-        line = _refit(points, abc, (span[0], span[1]))
+        line = _refit(free, abc, (span[0], span[1]))
         if line is None:
             continue
-        if any(abs(_direction(line.abc) @ other.abc[:2]) <= MERGE_ANGLE
-               and np.abs(line.ends @ other.abc[:2] + other.abc[2]).max() <= MERGE_OFFSET for other in lines):
-            continue
         lines.append(line)
+        d = _direction(line.abc)
+        along = free @ d
+        lo, hi = np.sort(line.ends @ d)
+        claimed = (np.abs(free @ line.abc[:2] + line.abc[2]) <= CLAIM_BAND) & (along >= lo - 1) & (along <= hi + 1)
+        free = free[~claimed]
     return sorted(lines, key=lambda line: -line.support)[:MAX_LINES]
 
 
-def points_at(abc: np.ndarray, centre: np.ndarray, half_length: np.ndarray, vp: np.ndarray) -> np.ndarray:
-    """Whether each line (``abc`` L x 3, ``centre`` L x 2, ``half_length`` L) points at each
-    homogeneous point ``vp`` (P x 3): P x L booleans (module constants)."""
-    towards = vp[:, None, :2] - vp[:, None, 2:3] * centre[None]
-    norm = np.maximum(np.linalg.norm(towards, axis=2), 1e-12)
-    sin = np.abs(np.einsum("plk,lk->pl", towards, abc[:, :2])) / norm
-    return (sin <= FAMILY_ANGLE) & (half_length[None] * sin <= FAMILY_OFFSET)
+def hull(points: np.ndarray) -> np.ndarray:
+    """The convex hull (K x 2 float64, px) of the line pixels ``points``."""
+    if len(points) < 3:
+        return points.astype(np.float64)
+    return cv2.convexHull(points.astype(np.float32))[:, 0, :].astype(np.float64)
 
 
-def _off_field(vp: np.ndarray, lines: list[Line], field: np.ndarray) -> np.ndarray:
-    """Whether each homogeneous point ``vp`` (P x 3) can be a vanishing point of pitch lines: not on
-    the field in view (the horizon is above the grass) and not within any of ``lines``' extents
-    (parallel lines never meet on the pitch)."""
-    height, width = field.shape
-    with np.errstate(all="ignore"):
-        xy = vp[:, :2] / vp[:, 2:3]
-    finite = np.isfinite(xy).all(axis=1) & (np.abs(vp[:, 2]) > 1e-12)
-    ix = np.clip(np.nan_to_num(np.round(xy[:, 0])), 0, width - 1).astype(np.intp)
-    iy = np.clip(np.nan_to_num(np.round(xy[:, 1])), 0, height - 1).astype(np.intp)
-    inside = finite & (xy[:, 0] >= 0) & (xy[:, 0] < width) & (xy[:, 1] >= 0) & (xy[:, 1] < height)
-    ok = ~(inside & (field[iy, ix] > 0))
-    for line in lines:
-        d = _direction(line.abc)
-        lo, hi = np.sort(line.ends @ d)
-        along = np.where(finite, np.nan_to_num(xy) @ d, np.inf)
-        ok &= ~((along > lo - SPAN_MARGIN) & (along < hi + SPAN_MARGIN)
-                & (np.abs(np.nan_to_num(xy) @ line.abc[:2] + line.abc[2]) < SPAN_MARGIN))
-    return ok
-
-
-def _vanishing_point(lines: list[Line]) -> np.ndarray:
-    """The homogeneous point (unit norm) the ``lines`` point at best, in least squares weighted by
-    their support (the smallest eigenvector of their equations' scatter)."""
-    abc = np.array([line.abc for line in lines]) * np.sqrt([line.support for line in lines])[:, None]
-    return np.linalg.eigh(abc.T @ abc)[1][:, 0]
-
-
-def _best_family(lines: list[Line], field: np.ndarray) -> np.ndarray:
-    """Members (bool per line) of the vanishing point that the most support points at (the meeting
-    point of two of the lines, off the field, :func:`_off_field`); the longest line alone when no two
-    lines agree."""
-    best = np.zeros(len(lines), bool)
-    if not lines:
-        return best
-    best[0] = True
-    if len(lines) < 2:
-        return best
-    abc = np.array([line.abc for line in lines])
-    centre = np.array([line.centre for line in lines])
-    half = np.array([line.half_length for line in lines])
-    support = np.array([line.support for line in lines])
+def pair_vanishing_points(lines: list[Line], points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(vp, valid)`` of every pair of ``lines`` (in ``np.triu_indices`` order): the homogeneous
+    point where the two meet (unit norm) and whether it can be a vanishing point of parallel pitch
+    lines: outside the convex hull of the line pixels ``points`` by more than :data:`HULL_MARGIN`
+    (parallel lines never meet on the pitch in view, the horizon is beyond it) and not within either
+    line's extent."""
+    abc = np.array([line.abc for line in lines]).reshape(-1, 3)
     i, j = np.triu_indices(len(lines), 1)
     vp = np.cross(abc[i], abc[j])
-    vp /= np.maximum(np.linalg.norm(vp, axis=1, keepdims=True), 1e-18)
-    members = points_at(abc, centre, half, vp)
-    members[np.arange(len(i)), i] = True
-    members[np.arange(len(i)), j] = True
-    score = np.where(_off_field(vp, lines, field), members @ support, 0.0)
-    k = int(np.argmax(score))
-    if score[k] <= support[0]:
-        return best
-    chosen = members[k]
-    for _ in range(2):  # the members' own vanishing point, then its members
-        vp_k = _vanishing_point([line for line, m in zip(lines, chosen) if m])
-        again = points_at(abc, centre, half, vp_k[None])[0] | chosen
-        if not _off_field(vp_k[None], [], field)[0] or again.sum() == chosen.sum():
-            break
-        chosen = again
-    return chosen
-
-
-def families(lines: list[Line], field: np.ndarray) -> tuple[tuple[list[Line], list[Line]], list[Line]]:
-    """Split ``lines`` (longest first) into two families sharing a vanishing point each, the
-    stronger first, and the rest; each family is cut to :data:`MAX_FAMILY_LINES` lines. ``field``:
-    the work copy's field mask (a vanishing point is never on it)."""
-    first = _best_family(lines, field)
-    rest = [line for line, m in zip(lines, first) if not m]
-    second = _best_family(rest, field)
-    fam1 = [line for line, m in zip(lines, first) if m]
-    fam2 = [line for line, m in zip(rest, second) if m]
-    others = [line for line, m in zip(rest, second) if not m]
-    return (fam1[:MAX_FAMILY_LINES], fam2[:MAX_FAMILY_LINES]), others
+    vp /= np.maximum(np.linalg.norm(vp, axis=1, keepdims=True), 1e-300)
+    with np.errstate(all="ignore"):
+        xy = np.nan_to_num(vp[:, :2] / vp[:, 2:3], nan=1e9, posinf=1e9, neginf=-1e9)
+    valid = np.ones(len(vp), bool)
+    if len(points) >= 3:
+        outline = hull(points).astype(np.float32)[:, None, :]
+        near = np.flatnonzero(np.all(np.abs(xy) < 1e6, axis=1))
+        for k in near:
+            valid[k] = cv2.pointPolygonTest(outline, (float(xy[k, 0]), float(xy[k, 1])), True) < HULL_MARGIN
+    ends = np.array([line.ends for line in lines]).reshape(-1, 2, 2)
+    for k in (i, j):
+        d = np.stack([-abc[k, 1], abc[k, 0]], axis=1)
+        a, b = np.sum(ends[k, 0] * d, axis=1), np.sum(ends[k, 1] * d, axis=1)
+        along = np.sum(xy * d, axis=1)
+        valid &= ~((along > np.minimum(a, b) - SPAN_MARGIN) & (along < np.maximum(a, b) + SPAN_MARGIN))
+    return vp, valid
 
 
 def white_lines(frame_rgb: np.ndarray) -> WhiteLines:
@@ -281,5 +234,4 @@ def white_lines(frame_rgb: np.ndarray) -> WhiteLines:
     ys, xs = np.nonzero(mask)
     points = np.stack([xs, ys], axis=1).astype(np.float64)
     lines = straight_lines(mask * 255, points) if len(points) else []
-    fams, others = families(lines, field)
-    return WhiteLines(mask, field, grass, points, scale, fams, others)
+    return WhiteLines(mask, field, grass, points, scale, lines)
