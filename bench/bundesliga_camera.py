@@ -1,7 +1,7 @@
 """Benchmark: the camera's first guess (glradial.camera.first_guess) on the 109 real Bundesliga frames
 against their hand-labelled pitch keypoints (validation only: nothing is fitted to these frames).
 
-Usage: ``python bench/bundesliga_camera.py [--data DIR] [--csv OUT] [--limit N]``
+Usage: ``python bench/bundesliga_camera.py [--data DIR] [--lens none|auto] [--csv OUT] [--limit N]``
 
 Each frame (stored squashed to 640x640) is resized to 1280x720 (cubic), given to ``first_guess`` on
 one thread, and the best candidate's homography projects the 32 keypoints; the frame's error is the
@@ -13,6 +13,11 @@ its ratio to a 1080p ``cv2.GaussianBlur`` (sigma 1) timed in the same process; b
 candidates (how much is ranking), and how the frames outside 10 px split: wrong lines (RMS over
 30 px), near misses (10-30 px), unanswered. The half-turn ambiguity is resolved by the method (main
 camera on the near touchline) and is not scored both ways.
+
+``--lens auto``: the frame's lens is first estimated by ``glradial.estimate`` (its own evidence, no
+labels; timed apart), the first guess runs on the frame undistorted by it (``lens=``), and the
+keypoints are projected with the homography and then distorted by that lens: how much of the
+no-lens residual is the lens, with today's lens estimate.
 """
 
 from __future__ import annotations
@@ -69,9 +74,26 @@ def _frame(path: Path) -> np.ndarray:
     return np.ascontiguousarray(cv2.resize(image, (1280, 720), interpolation=cv2.INTER_CUBIC)[:, :, ::-1])
 
 
-def evaluate(data: Path, limit: int | None) -> list[dict]:
+def _lens_of(frame: np.ndarray, mode: str):
+    """``(lens or None, ms)``: the frame's lens by ``glradial.estimate`` for ``mode == "auto"``."""
+    if mode == "none":
+        return None, 0.0
+    from glradial.estimation.estimator import estimate
+
+    t0 = time.perf_counter()
+    found = estimate(frame)
+    return found, (time.perf_counter() - t0) * 1000
+
+
+def _keypoints(candidate, pitch: np.ndarray, lens) -> np.ndarray:
+    """Keypoints (px of the frame) by a candidate's homography, then ``lens`` when given."""
+    xy = _project(candidate.homography, pitch)
+    return xy if lens is None else lens.distort_points(xy, (1280, 720))
+
+
+def evaluate(data: Path, limit: int | None, lens_mode: str = "none") -> list[dict]:
     """One row per frame: its clip, error of the best candidate, of the best of all candidates, the
-    floor, whether answered, and the time (ms)."""
+    floor, whether answered, the time (ms) and, with a lens mode, the lens and its time."""
     labels = json.loads((data / "keypoints" / "keypoints.json").read_text())
     pitch = np.array([k["pitch_m"][:2] for k in labels["keypoints"]], float)
     points, ids = pitch_points.template()
@@ -82,14 +104,17 @@ def evaluate(data: Path, limit: int | None) -> list[dict]:
         seen = np.array([p is not None for p in kp])
         xy = np.array([p for p in kp if p is not None], float)
         frame = _frame(data / f"{name}.jpg")
+        lens, lens_ms = _lens_of(frame, lens_mode)
         t0 = time.perf_counter()
-        found = first_guess(frame, points, ids)
+        found = first_guess(frame, points, ids, lens=None if lens is None else (lens.k1, lens.k2))
         ms = (time.perf_counter() - t0) * 1000
         floor_h, _ = cv2.findHomography(pitch[seen], xy, 0)
-        errors = [_rms(c.homography, pitch[seen], xy) for c in found]
+        errors = [float(np.sqrt(np.mean(np.sum((_keypoints(c, pitch[seen], lens) - xy) ** 2, axis=1)))) for c in found]
         rows.append(dict(frame=name, clip=name.split("_")[0], answered=bool(found), ms=ms,
                          rms=errors[0] if errors else float("inf"), best_of=min(errors, default=float("inf")),
-                         floor=_rms(floor_h, pitch[seen], xy), score=found[0].score if found else 0.0))
+                         floor=_rms(floor_h, pitch[seen], xy), score=found[0].score if found else 0.0,
+                         k1=lens.k1 if lens is not None else 0.0, k2=lens.k2 if lens is not None else 0.0,
+                         lens_ms=lens_ms))
         print(f"[{n + 1}/{len(names)}] {name}: {rows[-1]['rms']:.1f} px (floor {rows[-1]['floor']:.1f}, "
               f"best of {len(found)} {rows[-1]['best_of']:.1f}) {ms:.0f} ms", file=sys.stderr)
     return rows
@@ -113,13 +138,17 @@ def summary(rows: list[dict], blur: float) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default=str(ROOT.parent / "shared/data/broadcast_bundesliga"))
+    parser.add_argument("--lens", choices=("none", "auto"), default="none",
+                        help="auto: undistort with glradial.estimate's lens first (timed apart)")
     parser.add_argument("--csv", default=None, help="write the per-frame rows here")
     parser.add_argument("--limit", type=int, default=None, help="only the first N frames (sorted by name)")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     blur = _blur_ms()
-    rows = evaluate(Path(args.data), args.limit)
-    print(f"1080p GaussianBlur (sigma 1), one thread: {blur:.2f} ms")
+    rows = evaluate(Path(args.data), args.limit, args.lens)
+    print(f"1080p GaussianBlur (sigma 1), one thread: {blur:.2f} ms; lens: {args.lens}"
+          + (f" (glradial.estimate median {statistics.median(r['lens_ms'] for r in rows):.0f} ms, not in the times below)"
+             if args.lens != "none" else ""))
     for clip in CLIPS:
         part = [r for r in rows if r["clip"] == clip]
         if part:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass
+from functools import lru_cache
 
 import cv2
 import numpy as np
@@ -42,16 +43,17 @@ SIGMA, MISS_PENALTY, MAX_POINT_WEIGHT = 1.5, 0.3, 6.0
 #: Template points used for the quick score of every hypothesis and for the coarse score of the
 #: QUICK_KEPT best (subsamples of the given ones).
 QUICK_POINTS, QUICK_KEPT, COARSE_POINTS = 80, 400, 400
-#: Hypotheses scored per batch (memory), and how many of the best distinct ones are refined.
-BATCH, REFINED = 4096, 4
+#: Hypotheses scored per batch (memory).
+BATCH = 4096
 #: Two homographies are distinct when the pitch points they see at a 3 x 3 grid over the image
 #: differ by more than this (m).
 DISTINCT_M = 1.5
 #: ICP: matching bands (work px), one refit each, and the most mask pixels used.
-ICP_BANDS = (8.0, 6.0, 4.0, 4.0)
+ICP_BANDS = (8.0, 5.0, 4.0)
 #: Reweighted solves per band and the Cauchy scale (px) of the weights.
-ICP_STEPS, ICP_CAUCHY = 3, 1.0
-ICP_MAX_POINTS = 4000
+ICP_STEPS, ICP_CAUCHY = 2, 1.0
+#: The most mask pixels the ICP uses, and the spacing (m) of the template points it matches them to.
+ICP_MAX_POINTS, ICP_SPACING_M = 2500, 0.5
 #: A frame has usable pitch structure when this share of the work copy is grass and the best
 #: candidate's coverage score reaches MIN_SCORE px (work copy).
 MIN_GRASS, MIN_SCORE = 0.15, 60.0
@@ -259,6 +261,52 @@ def _undistorted_evidence(wl: WhiteLines, lens: Lens, frame_size: tuple[int, int
     return WhiteLines(mask, wl.field, wl.grass, pts, s, straight_lines(mask * 255, pts))
 
 
+@dataclass(frozen=True)
+class _Template:
+    """A template prepared for the search: its points (M x 2, m), their ``spacing`` (m), the x of
+    its y-parallel lines and the y of its x-parallel ones, and the subsamples the scores and the ICP
+    use (the ICP's with the markings' unit tangents)."""
+
+    points: np.ndarray
+    spacing: float
+    xs: np.ndarray
+    ys: np.ndarray
+    quick: np.ndarray
+    coarse: np.ndarray
+    icp: np.ndarray
+    icp_tangents: np.ndarray
+
+
+@lru_cache(maxsize=4)
+def _prepared(points_bytes: bytes, labels_bytes: bytes, labels_dtype: str) -> _Template:
+    """The :class:`_Template` of a template given as the bytes of its float64 points and labels
+    (cached: a video calls with the same template every frame)."""
+    points = np.frombuffer(points_bytes, np.float64).reshape(-1, 2)
+    labels = np.frombuffer(labels_bytes, np.dtype(labels_dtype))
+    spacing = _spacing(points)
+    xs, ys = template_lines(points, spacing)
+    quick = max(1, len(points) // QUICK_POINTS)
+    coarse = max(1, len(points) // COARSE_POINTS)
+    icp = max(1, int(round(ICP_SPACING_M / spacing)))
+    tangents = _tangents(points, labels)
+    return _Template(points, spacing, xs, ys, points[::quick], points[::coarse], points[::icp], tangents[::icp])
+
+
+def _search(wl: WhiteLines, tpl: _Template, dist: np.ndarray, n: int) -> list[np.ndarray]:
+    """The ``n`` best distinct line hypotheses (pitch m -> work px) by coverage: all of them on
+    the quick subsample, the best :data:`QUICK_KEPT` on the coarse one."""
+    size = (wl.mask.shape[1], wl.mask.shape[0])
+    h = _hypotheses(wl, tpl.xs, tpl.ys, size)
+    if len(h) == 0:
+        return []
+    step = len(tpl.points) / len(tpl.quick)
+    quick = coverage(h, tpl.quick, tpl.spacing * step, dist, wl.field)
+    h = h[np.argsort(-quick)[:QUICK_KEPT]]
+    step = len(tpl.points) / len(tpl.coarse)
+    coarse = coverage(h, tpl.coarse, tpl.spacing * step, dist, wl.field)
+    return [h[k] for k in _distinct_best(h, coarse, size, n)]
+
+
 def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_labels: np.ndarray, *,
                 lens: tuple[float, float] | None = None, max_candidates: int = 5) -> list[Candidate]:
     """Up to ``max_candidates`` camera hypotheses (:class:`Candidate`, best first) of a uint8 RGB
@@ -266,6 +314,7 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
     (module docstring); ``[]`` when the frame has no usable pitch structure (too little grass, no two
     lines of each direction, or no hypothesis that covers enough of the marking evidence)."""
     points, labels, lens_ = _check_inputs(frame_rgb, template_points, template_labels, lens, max_candidates)
+    tpl = _prepared(np.ascontiguousarray(points).tobytes(), np.ascontiguousarray(labels).tobytes(), labels.dtype.str)
     frame_size = (frame_rgb.shape[1], frame_rgb.shape[0])
     wl = white_lines(frame_rgb)
     if wl.grass < MIN_GRASS or len(wl.points) < 50:
@@ -273,33 +322,26 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
     if lens_ is not None:
         wl = _undistorted_evidence(wl, lens_, frame_size)
     size = (wl.mask.shape[1], wl.mask.shape[0])
-    xs, ys = template_lines(points, _spacing(points))
-    h = _hypotheses(wl, xs, ys, size)
-    if len(h) == 0:
-        return []
     dist = cv2.distanceTransform(1 - wl.mask, cv2.DIST_L2, 3)
-    spacing = _spacing(points)
-    step = max(1, len(points) // QUICK_POINTS)
-    quick = coverage(h, points[::step], spacing * step, dist, wl.field)
-    h = h[np.argsort(-quick)[:QUICK_KEPT]]
-    step = max(1, len(points) // COARSE_POINTS)
-    coarse = coverage(h, points[::step], spacing * step, dist, wl.field)
-    tangents = _tangents(points, labels)
     evidence = wl.points[:: max(1, len(wl.points) // ICP_MAX_POINTS)]
-    found = []
-    for k in _distinct_best(h, coarse, size, max(REFINED, max_candidates)):
-        hk, rms, matched = refine(h[k], evidence, points, tangents, size)
-        score = float(coverage(hk[None], points, _spacing(points), dist, wl.field)[0])
-        found.append((score, hk, rms, matched))
-    found.sort(key=lambda f: -f[0])
+    found: list[tuple[float, np.ndarray, float, int]] = []
+    for h0 in _search(wl, tpl, dist, max_candidates):
+        h, rms, matched = refine(h0, evidence, tpl.icp, tpl.icp_tangents, size)
+        score = float(coverage(h[None], tpl.points, tpl.spacing, dist, wl.field)[0])
+        if score >= MIN_SCORE and not any(_same_view(h, other[1], size) for other in found):
+            found.append((score, h, rms, matched))
     out = []
-    for score, hk, rms, matched in found[:max_candidates]:
-        if score < MIN_SCORE:
-            continue
-        focal, centre, _ = camera_of(hk[None], size)
-        out.append(Candidate(_to_frame(hk, wl.scale), score * wl.scale, rms * wl.scale, matched,
+    for score, h, rms, matched in sorted(found, key=lambda f: -f[0]):
+        focal, centre, _ = camera_of(h[None], size)
+        out.append(Candidate(_to_frame(h, wl.scale), score * wl.scale, rms * wl.scale, matched,
                              float(focal[0]), tuple(float(c) for c in centre[0])))
     return out
+
+
+def _same_view(a: np.ndarray, b: np.ndarray, size: tuple[int, int]) -> bool:
+    """Whether two homographies see the image's grid at pitch points within :data:`DISTINCT_M`."""
+    views = _grid_views(np.stack([a, b]), size)
+    return bool(np.nanmax(np.linalg.norm(views[0] - views[1], axis=1)) <= DISTINCT_M)
 
 
 def _spacing(points: np.ndarray) -> float:

@@ -26,9 +26,9 @@ GRASS_HUE, GRASS_MIN_SAT, GRASS_MIN_VAL = (30, 90), 50, 40
 #: Side (px) of the window in which a line pixel needs :data:`GRASS_SHARE` of grass around it.
 GRASS_WINDOW, GRASS_SHARE = 15, 0.3
 #: White top-hat: disc diameter (px of the work copy) and smallest response (grey levels).
-TOPHAT_DISC, TOPHAT_MIN = 9, 22
+TOPHAT_DISC, TOPHAT_MIN = 9, 15
 #: Probabilistic Hough transform on the mask: accumulator threshold, shortest segment, largest gap (px).
-HOUGH_VOTES, HOUGH_MIN_LENGTH, HOUGH_MAX_GAP = 25, 25, 6
+HOUGH_VOTES, HOUGH_MIN_LENGTH, HOUGH_MAX_GAP = 25, 25, 10
 #: Segments join one line when they point within MERGE_ANGLE (radians) of it and both their ends
 #: lie within MERGE_OFFSET px of it.
 MERGE_ANGLE, MERGE_OFFSET = 0.035, 2.5
