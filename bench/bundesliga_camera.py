@@ -113,6 +113,7 @@ def evaluate(data: Path, limit: int | None, lens_mode: str = "none") -> list[dic
         rows.append(dict(frame=name, clip=name.split("_")[0], answered=bool(found), ms=ms,
                          rms=errors[0] if errors else float("inf"), best_of=min(errors, default=float("inf")),
                          floor=_rms(floor_h, pitch[seen], xy), score=found[0].score if found else 0.0,
+                         share=found[0].share if found else 0.0,
                          k1=lens.k1 if lens is not None else 0.0, k2=lens.k2 if lens is not None else 0.0,
                          lens_ms=lens_ms))
         print(f"[{n + 1}/{len(names)}] {name}: {rows[-1]['rms']:.1f} px (floor {rows[-1]['floor']:.1f}, "

@@ -40,6 +40,8 @@ from .white_lines import WhiteLines, hull, pair_vanishing_points, white_lines
 #: of marking it stands for, ``d`` its distance (work px) to the nearest mask pixel, where the work
 #: copy is grass; a px of marking stands for at most MAX_POINT_WEIGHT px.
 SIGMA, MISS_PENALTY, MAX_POINT_WEIGHT = 1.5, 0.3, 6.0
+#: A template point is on the evidence within HIT_PX (work px) of a mask pixel.
+HIT_PX = 2.0
 #: Template points used for the quick score of every hypothesis and for the coarse score of the
 #: QUICK_KEPT best (subsamples of the given ones).
 QUICK_POINTS, QUICK_KEPT, COARSE_POINTS = 80, 400, 400
@@ -54,9 +56,10 @@ ICP_BANDS = (8.0, 5.0, 4.0)
 ICP_STEPS, ICP_CAUCHY = 2, 1.0
 #: The most mask pixels the ICP uses, and the spacing (m) of the template points it matches them to.
 ICP_MAX_POINTS, ICP_SPACING_M = 2500, 0.5
-#: A frame has usable pitch structure when this share of the work copy is grass and the best
-#: candidate's coverage score reaches MIN_SCORE px (work copy).
-MIN_GRASS, MIN_SCORE = 0.15, 60.0
+#: A frame has usable pitch structure when this share of the work copy is grass; a refined candidate
+#: is kept when it is still a plausible main camera, its coverage score reaches MIN_SCORE px (work
+#: copy) and MIN_SHARE of its projected marking on the field lies on the evidence.
+MIN_GRASS, MIN_SCORE, MIN_SHARE = 0.15, 60.0, 0.5
 
 
 @dataclass(frozen=True)
@@ -66,7 +69,8 @@ class Candidate:
     ``homography``: 3 x 3 float64, pitch ``(x, y, 1)`` metres -> frame pixels (module docstring).
     ``score``: higher is better: the length (frame px) of projected template marking that lands on
     white-line evidence, minus :data:`MISS_PENALTY` times the length that lands on grass without any
-    (:func:`coverage`). ``rms_px``: RMS point-to-marking distance (frame px) of the mask pixels
+    (:func:`coverage`); ``share``: the share of the projected marking on the field that lies on
+    the evidence (within :data:`HIT_PX` work px). ``rms_px``: RMS point-to-marking distance (frame px) of the mask pixels
     matched in the last ICP band; ``matched``: how many there were. ``focal``: focal length in image
     widths and ``position``: camera centre (x, y, z metres) read from the homography with square
     pixels and a centred principal point (no lens).
@@ -74,6 +78,7 @@ class Candidate:
 
     homography: np.ndarray
     score: float
+    share: float
     rms_px: float
     matched: int
     focal: float
@@ -130,13 +135,15 @@ def _project(h: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]
         return np.stack([p[:, 0] / w, p[:, 1] / w], axis=-1), w
 
 
-def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray, field: np.ndarray) -> np.ndarray:
+def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray, field: np.ndarray,
+             share: bool = False) -> np.ndarray:
     """Coverage score (work px) of homographies ``h`` (N x 3 x 3): over the template ``points``
     (M x 2, ``spacing`` metres apart along the markings) that land on the field, the length of marking
     each stands for times ``exp(-d² / 2 SIGMA²) - MISS_PENALTY``, ``d`` from the distance transform
-    ``dist`` of the line mask."""
+    ``dist`` of the line mask. With ``share``: also the share of that length within :data:`HIT_PX`
+    of the mask (``2 x N``: scores, shares)."""
     height, width = dist.shape
-    out = np.empty(len(h))
+    out = np.empty((2, len(h)))
     det = np.abs(np.linalg.det(h))
     for s in range(0, len(h), BATCH):
         xy, w = _project(h[s: s + BATCH], points)
@@ -148,8 +155,11 @@ def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray
         iy = np.where(inside, iy, 0).astype(np.intp)
         on = inside & (field[iy, ix] > 0)
         d = dist[iy, ix]
-        out[s: s + BATCH] = np.sum(np.where(on, length * (np.exp(-0.5 * (d / SIGMA) ** 2) - MISS_PENALTY), 0.0), axis=1)
-    return out
+        length = np.where(on, length, 0.0)
+        out[0, s: s + BATCH] = np.sum(length * (np.exp(-0.5 * (d / SIGMA) ** 2) - MISS_PENALTY), axis=1)
+        if share:
+            out[1, s: s + BATCH] = np.sum(length * (d <= HIT_PX), axis=1) / np.maximum(np.sum(length, axis=1), 1e-9)
+    return out if share else out[0]
 
 
 def _grid_views(h: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -324,16 +334,17 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
     size = (wl.mask.shape[1], wl.mask.shape[0])
     dist = cv2.distanceTransform(1 - wl.mask, cv2.DIST_L2, 3)
     evidence = wl.points[:: max(1, len(wl.points) // ICP_MAX_POINTS)]
-    found: list[tuple[float, np.ndarray, float, int]] = []
+    found: list[tuple[float, np.ndarray, float, int, float]] = []
     for h0 in _search(wl, tpl, dist, max_candidates):
         h, rms, matched = refine(h0, evidence, tpl.icp, tpl.icp_tangents, size)
-        score = float(coverage(h[None], tpl.points, tpl.spacing, dist, wl.field)[0])
-        if score >= MIN_SCORE and not any(_same_view(h, other[1], size) for other in found):
-            found.append((score, h, rms, matched))
+        score, share = coverage(h[None], tpl.points, tpl.spacing, dist, wl.field, share=True)[:, 0]
+        if (score >= MIN_SCORE and share >= MIN_SHARE and plausible(h[None], size)[0]
+                and not any(_same_view(h, other[1], size) for other in found)):
+            found.append((float(score), h, rms, matched, float(share)))
     out = []
-    for score, h, rms, matched in sorted(found, key=lambda f: -f[0]):
+    for score, h, rms, matched, share in sorted(found, key=lambda f: -f[0]):
         focal, centre, _ = camera_of(h[None], size)
-        out.append(Candidate(_to_frame(h, wl.scale), score * wl.scale, rms * wl.scale, matched,
+        out.append(Candidate(_to_frame(h, wl.scale), score * wl.scale, share, rms * wl.scale, matched,
                              float(focal[0]), tuple(float(c) for c in centre[0])))
     return out
 

@@ -5,7 +5,8 @@ Convention: everything here is in pixels of the **work copy**, the frame resized
 interpolation) to :data:`WORK_WIDTH` pixels wide with its aspect kept; pixel centres at integers,
 x right, y down. A line is ``(a, b, c)`` with ``a x + b y + c = 0`` and ``a² + b² = 1``.
 
-The mask: grass is green (hue 30..90 on OpenCV's 0..180 scale, saturated, not dark); a line pixel is
+The mask: grass is green (hue 30..90 on OpenCV's 0..180 scale, saturated, not dark, once blurred
+over a few pixels); a line pixel is
 brighter than its surroundings by :data:`TOPHAT_MIN` grey levels (a white top-hat with a disc wider
 than a painted line at the work scale) and lies where most of its neighbourhood is grass, so the
 stands, ad boards and the sky, which are not grass, bring no evidence.
@@ -23,6 +24,8 @@ import numpy as np
 WORK_WIDTH = 640
 #: Grass: OpenCV HSV hue range (0..180), smallest saturation and value (0..255).
 GRASS_HUE, GRASS_MIN_SAT, GRASS_MIN_VAL = (30, 90), 50, 40
+#: Grass is judged on a box-blurred copy (side, px): grass is green over an area, noise is not.
+GRASS_BLUR = 5
 #: Side (px) of the window in which a line pixel needs :data:`GRASS_SHARE` of grass around it.
 GRASS_WINDOW, GRASS_SHARE = 15, 0.3
 #: White top-hat: disc diameter (px of the work copy) and smallest response (grey levels).
@@ -96,7 +99,7 @@ def work_copy(frame_rgb: np.ndarray) -> tuple[np.ndarray, float]:
 def line_mask(small_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """``(mask, field, grass share)``: the white-line mask and the field (uint8 0/1: mostly grass
     around) of a work copy (module docstring)."""
-    hsv = cv2.cvtColor(small_rgb, cv2.COLOR_RGB2HSV)
+    hsv = cv2.cvtColor(cv2.blur(small_rgb, (GRASS_BLUR, GRASS_BLUR)), cv2.COLOR_RGB2HSV)
     hue, sat, val = hsv[..., 0], hsv[..., 1], hsv[..., 2]
     grass = ((hue > GRASS_HUE[0]) & (hue < GRASS_HUE[1]) & (sat > GRASS_MIN_SAT) & (val > GRASS_MIN_VAL)).astype(np.float32)
     around = cv2.blur(grass, (GRASS_WINDOW, GRASS_WINDOW))
