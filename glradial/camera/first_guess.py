@@ -33,6 +33,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..lens.lens import Lens
+from .circle_hypotheses import circle_homographies, ellipses, template_radius
 from .line_hypotheses import camera_of, line_homographies, plausible, template_lines
 from .white_lines import WhiteLines, hull, pair_vanishing_points, white_lines
 
@@ -51,9 +52,12 @@ BATCH = 4096
 #: differ by more than this (m).
 DISTINCT_M = 1.5
 #: ICP: matching bands (work px), one refit each, and the most mask pixels used.
-ICP_BANDS = (8.0, 5.0, 4.0)
-#: Reweighted solves per band and the Cauchy scale (px) of the weights.
-ICP_STEPS, ICP_CAUCHY = 2, 1.0
+ICP_BANDS = (16.0, 8.0, 5.0, 4.0)
+#: Reweighted solves per band, and the Cauchy scale of the weights as a share of the band.
+ICP_STEPS, ICP_CAUCHY = 2, 0.35
+#: A pixel's nearest template point is looked for within this many bands (the points are spaced
+#: along the markings; the band applies to the distance from the marking's tangent line).
+ICP_REACH = 3.0
 #: The most mask pixels the ICP uses, and the spacing (m) of the template points it matches them to.
 ICP_MAX_POINTS, ICP_SPACING_M = 2500, 0.5
 #: A frame has usable pitch structure when this share of the work copy is grass; a refined candidate
@@ -197,52 +201,74 @@ def _line_fit(pm: np.ndarray, normal: np.ndarray, e: np.ndarray, depth: np.ndarr
     return vecs[:, 0].reshape(3, 3)
 
 
+def _normals(g: np.ndarray, pm: np.ndarray, tm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(projected points, depths, unit image normals)`` of template points ``pm`` with tangents
+    ``tm`` through the homography ``g``."""
+    q, depth = _project(g[None], pm)
+    ahead, _ = _project(g[None], pm + 1e-3 * tm)
+    t = ahead[0] - q[0]
+    normal = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+    return q[0], depth[0], normal
+
+
+def _matches(g: np.ndarray, pts: np.ndarray, tangents: np.ndarray, e_all: np.ndarray, band: float):
+    """``(pixels, template points, tangents)`` of the evidence ``e_all`` whose nearest projected
+    template point (within :data:`ICP_REACH` bands) has its marking's tangent line within ``band``
+    (all in the refinement's normalised units); ``None`` when too few."""
+    xy, w = _project(g[None], pts)
+    front = (w[0] > 0) & (np.abs(xy[0, :, 0]) < 2) & (np.abs(xy[0, :, 1]) < 2)
+    if front.sum() < 8:
+        return None
+    idx = np.flatnonzero(front)
+    dist, nn = cKDTree(xy[0, idx]).query(e_all, distance_upper_bound=ICP_REACH * band)
+    ok = np.isfinite(dist)
+    e, m = e_all[ok], idx[nn[ok]]
+    q, _, normal = _normals(g, pts[m], tangents[m])
+    near = np.abs(np.sum((q - e) * normal, axis=1)) <= band
+    if near.sum() < 12:
+        return None
+    return e[near], pts[m[near]], tangents[m[near]]
+
+
 def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np.ndarray,
            size: tuple[int, int]) -> tuple[np.ndarray, float, int]:
     """Robust ICP of one homography (pitch m -> work px) to the mask pixels ``evidence`` (N x 2):
-    in each band of :data:`ICP_BANDS`, every pixel is matched to the nearest projected template
-    point within the band, and the homography is refit (all 8 parameters, linear in the homography's
-    entries, Cauchy-weighted, :data:`ICP_STEPS` reweighted solves) to the pixels' distances from the
-    markings' tangent lines there. Returns ``(h, rms px, matched)`` of the last band."""
+    in each band of :data:`ICP_BANDS`, every pixel is matched to the marking of the nearest projected
+    template point when its tangent line there passes within the band, and the homography is refit
+    (all 8 parameters, linear in the homography's entries, Cauchy-weighted, :data:`ICP_STEPS`
+    reweighted solves) to the pixels' distances from those tangent lines. Returns
+    ``(h, rms px, matched)`` of the last band."""
     width, height = size
     norm = np.array([[2 / width, 0, -1], [0, 2 / width, -height / width], [0, 0, 1]])
     pitch_norm = np.diag([1 / 50, 1 / 50, 1.0])
     e_all = evidence @ norm[:2, :2].T + norm[:2, 2]
     g = norm @ h @ np.linalg.inv(pitch_norm)
-    pts = points / 50
     rms, matched = np.inf, 0
     for band in ICP_BANDS:
-        xy, w = _project(g[None], pts)
-        xy, w = xy[0], w[0]
-        front = (w > 0) & (np.abs(xy[:, 0]) < 2) & (np.abs(xy[:, 1]) < 2)
-        if front.sum() < 8:
+        found = _matches(g, points / 50, tangents, e_all, band * 2 / width)
+        if found is None:
             break
-        idx = np.flatnonzero(front)
-        dist, nn = cKDTree(xy[idx]).query(e_all, distance_upper_bound=band * 2 / width)
-        ok = np.isfinite(dist)
-        if ok.sum() < 12:
-            break
-        e, m = e_all[ok], idx[nn[ok]]
-        pm = pts[m]
+        e, pm, tm = found
         for _ in range(ICP_STEPS):
-            q, depth = _project(g[None], pm)
-            ahead, _ = _project(g[None], pm + 1e-3 * tangents[m])
-            t = ahead[0] - q[0]
-            normal = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-            r = np.sum((q[0] - e) * normal, axis=1) * width / 2
-            weight = 1 / (1 + (r / ICP_CAUCHY) ** 2)
-            g_new = _line_fit(pm, normal, e, depth[0], weight)
+            q, depth, normal = _normals(g, pm, tm)
+            r = np.sum((q - e) * normal, axis=1) * width / 2
+            weight = 1 / (1 + (r / (ICP_CAUCHY * band)) ** 2)
+            g_new = _line_fit(pm, normal, e, depth, weight)
             g = g_new * np.sign(np.sum(g_new * g))
-        q, _ = _project(g[None], pm)
-        r = np.sum((q[0] - e) * normal, axis=1) * width / 2
+        q, _, normal = _normals(g, pm, tm)
+        r = np.sum((q - e) * normal, axis=1) * width / 2
         rms, matched = float(np.sqrt(np.mean(r**2))), int(len(r))
     return np.linalg.inv(norm) @ g @ pitch_norm, rms, matched
 
 
-def _hypotheses(wl: WhiteLines, xs: np.ndarray, ys: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Plausible line-correspondence homographies (pitch m -> work px)."""
+def _hypotheses(wl: WhiteLines, tpl: "_Template", size: tuple[int, int]) -> np.ndarray:
+    """Plausible homographies (pitch m -> work px) from line correspondences and from the centre
+    circle with the halfway line."""
     _, valid = pair_vanishing_points(wl.lines, wl.points)
-    h = line_homographies(wl.lines, valid, hull(wl.points), xs, ys, size)
+    h = line_homographies(wl.lines, valid, hull(wl.points), tpl.xs, tpl.ys, size)
+    if tpl.radius is not None:
+        found = ellipses(wl.points, wl.lines, wl.mask.shape)
+        h = np.concatenate([h, circle_homographies(found, wl.lines, tpl.radius, size)])
     return h[plausible(h, size)] if len(h) else h
 
 
@@ -274,13 +300,15 @@ def _undistorted_evidence(wl: WhiteLines, lens: Lens, frame_size: tuple[int, int
 @dataclass(frozen=True)
 class _Template:
     """A template prepared for the search: its points (M x 2, m), their ``spacing`` (m), the x of
-    its y-parallel lines and the y of its x-parallel ones, and the subsamples the scores and the ICP
+    its y-parallel lines and the y of its x-parallel ones, the centre circle's radius (m; ``None``
+    without one), and the subsamples the scores and the ICP
     use (the ICP's with the markings' unit tangents)."""
 
     points: np.ndarray
     spacing: float
     xs: np.ndarray
     ys: np.ndarray
+    radius: float | None
     quick: np.ndarray
     coarse: np.ndarray
     icp: np.ndarray
@@ -299,21 +327,23 @@ def _prepared(points_bytes: bytes, labels_bytes: bytes, labels_dtype: str) -> _T
     coarse = max(1, len(points) // COARSE_POINTS)
     icp = max(1, int(round(ICP_SPACING_M / spacing)))
     tangents = _tangents(points, labels)
-    return _Template(points, spacing, xs, ys, points[::quick], points[::coarse], points[::icp], tangents[::icp])
+    radius = template_radius(points, xs, ys)
+    return _Template(points, spacing, xs, ys, radius, points[::quick], points[::coarse], points[::icp], tangents[::icp])
 
 
 def _search(wl: WhiteLines, tpl: _Template, dist: np.ndarray, n: int) -> list[np.ndarray]:
-    """The ``n`` best distinct line hypotheses (pitch m -> work px) by coverage: all of them on
-    the quick subsample, the best :data:`QUICK_KEPT` on the coarse one."""
+    """The ``n`` best distinct hypotheses (pitch m -> work px) by coverage score times covered
+    share (:func:`coverage`): all of them on the quick subsample, the best :data:`QUICK_KEPT` on the
+    coarse one."""
     size = (wl.mask.shape[1], wl.mask.shape[0])
-    h = _hypotheses(wl, tpl.xs, tpl.ys, size)
+    h = _hypotheses(wl, tpl, size)
     if len(h) == 0:
         return []
     step = len(tpl.points) / len(tpl.quick)
-    quick = coverage(h, tpl.quick, tpl.spacing * step, dist, wl.field)
+    quick = np.prod(coverage(h, tpl.quick, tpl.spacing * step, dist, wl.field, share=True), axis=0)
     h = h[np.argsort(-quick)[:QUICK_KEPT]]
     step = len(tpl.points) / len(tpl.coarse)
-    coarse = coverage(h, tpl.coarse, tpl.spacing * step, dist, wl.field)
+    coarse = np.prod(coverage(h, tpl.coarse, tpl.spacing * step, dist, wl.field, share=True), axis=0)
     return [h[k] for k in _distinct_best(h, coarse, size, n)]
 
 
@@ -342,7 +372,7 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
                 and not any(_same_view(h, other[1], size) for other in found)):
             found.append((float(score), h, rms, matched, float(share)))
     out = []
-    for score, h, rms, matched, share in sorted(found, key=lambda f: -f[0]):
+    for score, h, rms, matched, share in sorted(found, key=lambda f: -f[0] * f[4]):
         focal, centre, _ = camera_of(h[None], size)
         out.append(Candidate(_to_frame(h, wl.scale), score * wl.scale, share, rms * wl.scale, matched,
                              float(focal[0]), tuple(float(c) for c in centre[0])))

@@ -71,7 +71,7 @@ def _order(abc: np.ndarray, centre: np.ndarray, axis: int) -> np.ndarray:
     return out
 
 
-def _basis(p: np.ndarray) -> np.ndarray:
+def projective_basis(p: np.ndarray) -> np.ndarray:
     """Projective bases (N x 3 x 3) mapping e1, e2, e3, (1, 1, 1) to the homogeneous points
     ``p`` (N x 4 x 3)."""
     m = np.transpose(p[:, :3], (0, 2, 1))
@@ -166,8 +166,8 @@ def line_homographies(lines: list[Line], valid_vp: np.ndarray, hull: np.ndarray,
     b = _order(np.stack([abc[i[q]], abc[j[q]]], axis=1), centre, 0)
     corners = np.stack([np.cross(a[:, 0], b[:, 0]), np.cross(a[:, 0], b[:, 1]),
                         np.cross(a[:, 1], b[:, 1]), np.cross(a[:, 1], b[:, 0])], axis=1)
-    img = _basis(corners)
-    pitch = _basis(_pitch_quads(xs, ys))
+    img = projective_basis(corners)
+    pitch = projective_basis(_pitch_quads(xs, ys))
     with np.errstate(all="ignore"):
         inv = np.linalg.inv(pitch)
         h = np.einsum("qij,rjk->qrik", img, inv).reshape(-1, 3, 3)
