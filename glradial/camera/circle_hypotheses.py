@@ -93,15 +93,16 @@ def ellipses(points: np.ndarray, lines: list[Line], shape: tuple[int, int]) -> l
     if len(rest) < MIN_COMPONENT_PIXELS:
         return []
     mask = np.zeros(shape, np.uint8)
-    mask[rest[:, 1].astype(int), rest[:, 0].astype(int)] = 1
+    ix, iy = rest[:, 0].astype(int), rest[:, 1].astype(int)
+    mask[iy, ix] = 1
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
     big = [k for k in np.argsort(-stats[:, cv2.CC_STAT_AREA]) if k and stats[k, cv2.CC_STAT_AREA] >= MIN_COMPONENT_PIXELS]
-    big = big[:MAX_COMPONENTS]
-    groups = [[k] for k in big] + [[a, b] for i, a in enumerate(big) for b in big[i + 1:]]
+    label_of = labels[iy, ix]
+    pieces = {k: rest[label_of == k] for k in big[:MAX_COMPONENTS]}
+    groups = [[k] for k in pieces] + [[a, b] for i, a in enumerate(pieces) for b in list(pieces)[i + 1:]]
     found = []
     for group in groups:
-        ys, xs = np.nonzero(np.isin(labels, group))
-        pts = np.column_stack([xs, ys]).astype(np.float64)
+        pts = np.concatenate([pieces[k] for k in group])
         if len(pts) < 2 * MIN_COMPONENT_PIXELS:
             continue
         ellipse = cv2.fitEllipse(pts.astype(np.float32))

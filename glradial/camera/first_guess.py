@@ -53,6 +53,8 @@ BATCH = 4096
 DISTINCT_M = 1.5
 #: ICP: matching bands (work px), one refit each, and the most mask pixels used.
 ICP_BANDS = (16.0, 8.0, 5.0, 4.0)
+#: The first bands run for every hypothesis, the rest only for those still distinct after them.
+ICP_ROUGH_BANDS = 2
 #: Reweighted solves per band, and the Cauchy scale of the weights as a share of the band.
 ICP_STEPS, ICP_CAUCHY = 2, 0.35
 #: A pixel's nearest template point is looked for within this many bands (the points are spaced
@@ -231,9 +233,9 @@ def _matches(g: np.ndarray, pts: np.ndarray, tangents: np.ndarray, e_all: np.nda
 
 
 def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np.ndarray,
-           size: tuple[int, int]) -> tuple[np.ndarray, float, int]:
+           size: tuple[int, int], bands: tuple[float, ...] = ICP_BANDS) -> tuple[np.ndarray, float, int]:
     """Robust ICP of one homography (pitch m -> work px) to the mask pixels ``evidence`` (N x 2):
-    in each band of :data:`ICP_BANDS`, every pixel is matched to the marking of the nearest projected
+    in each of the ``bands`` (px), every pixel is matched to the marking of the nearest projected
     template point when its tangent line there passes within the band, and the homography is refit
     (all 8 parameters, linear in the homography's entries, Cauchy-weighted, :data:`ICP_STEPS`
     reweighted solves) to the pixels' distances from those tangent lines. Returns
@@ -244,7 +246,7 @@ def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np
     e_all = evidence @ norm[:2, :2].T + norm[:2, 2]
     g = norm @ h @ np.linalg.inv(pitch_norm)
     rms, matched = np.inf, 0
-    for band in ICP_BANDS:
+    for band in bands:
         found = _matches(g, points / 50, tangents, e_all, band * 2 / width)
         if found is None:
             break
@@ -365,8 +367,13 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
     dist = cv2.distanceTransform(1 - wl.mask, cv2.DIST_L2, 3)
     evidence = wl.points[:: max(1, len(wl.points) // ICP_MAX_POINTS)]
     found: list[tuple[float, np.ndarray, float, int, float]] = []
-    for h0 in _search(wl, tpl, dist, max_candidates):
-        h, rms, matched = refine(h0, evidence, tpl.icp, tpl.icp_tangents, size)
+    rough: list[np.ndarray] = []
+    for h0 in _search(wl, tpl, dist, max_candidates):  # the wide bands first: many hypotheses meet there
+        h = refine(h0, evidence, tpl.icp, tpl.icp_tangents, size, ICP_BANDS[:ICP_ROUGH_BANDS])[0]
+        if not any(_same_view(h, other, size) for other in rough):
+            rough.append(h)
+    for h0 in rough:
+        h, rms, matched = refine(h0, evidence, tpl.icp, tpl.icp_tangents, size, ICP_BANDS[ICP_ROUGH_BANDS:])
         score, share = coverage(h[None], tpl.points, tpl.spacing, dist, wl.field, share=True)[:, 0]
         if (score >= MIN_SCORE and share >= MIN_SHARE and plausible(h[None], size)[0]
                 and not any(_same_view(h, other[1], size) for other in found)):

@@ -32,6 +32,8 @@ GRASS_WINDOW, GRASS_SHARE = 15, 0.3
 TOPHAT_DISC, TOPHAT_MIN = 9, 15
 #: Probabilistic Hough transform on the mask: accumulator threshold, shortest segment, largest gap (px).
 HOUGH_VOTES, HOUGH_MIN_LENGTH, HOUGH_MAX_GAP = 25, 25, 10
+#: At most this many Hough segments (longest first) are grouped.
+MAX_SEGMENTS = 300
 #: Segments join one line when they point within MERGE_ANGLE (radians) of it and both their ends
 #: lie within MERGE_OFFSET px of it.
 MERGE_ANGLE, MERGE_OFFSET = 0.035, 2.5
@@ -140,23 +142,25 @@ def _refit(points: np.ndarray, abc: np.ndarray, span: tuple[float, float]) -> Li
 
 def _merge_segments(segments: np.ndarray) -> list[tuple[np.ndarray, list[float]]]:
     """Hough segments (K x 4: x1, y1, x2, y2), longest first, grouped into lines: the equation of
-    each group's longest segment and the span ``[lo, hi]`` of the group's ends along it."""
-    lines: list[tuple[np.ndarray, list[float]]] = []
+    each group's longest segment and the span ``[lo, hi]`` of the group's ends along it; groups
+    spanning less than :data:`MIN_LINE_SUPPORT` are left out."""
+    abc = np.zeros((len(segments), 3))
+    spans = np.zeros((len(segments), 2))
+    n = 0
     for x1, y1, x2, y2 in segments:
-        d = np.array([x2 - x1, y2 - y1], float)
-        d /= max(np.linalg.norm(d), 1e-9)
-        ends = np.array([[x1, y1], [x2, y2]])
-        for abc, span in lines:
-            ends_off = np.abs(ends @ abc[:2] + abc[2])
-            if ends_off.max() <= MERGE_OFFSET and abs(d @ abc[:2]) <= MERGE_ANGLE:
-                along = ends @ _direction(abc)
-                span[0], span[1] = min(span[0], along.min()), max(span[1], along.max())
-                break
-        else:
-            abc = np.array([-d[1], d[0], d[1] * x1 - d[0] * y1])
-            along = ends @ _direction(abc)
-            lines.append((abc, [float(along.min()), float(along.max())]))
-    return lines
+        d = np.array([x2 - x1, y2 - y1]) / max(np.hypot(x2 - x1, y2 - y1), 1e-9)
+        off = np.maximum(np.abs(abc[:n, 0] * x1 + abc[:n, 1] * y1 + abc[:n, 2]),
+                         np.abs(abc[:n, 0] * x2 + abc[:n, 1] * y2 + abc[:n, 2]))
+        same = np.flatnonzero((off <= MERGE_OFFSET) & (np.abs(abc[:n, :2] @ d) <= MERGE_ANGLE))
+        k = int(same[0]) if len(same) else n
+        if k == n:
+            abc[n] = [-d[1], d[0], d[1] * x1 - d[0] * y1]
+            spans[n] = [np.inf, -np.inf]
+            n += 1
+        along = np.array([[x1, y1], [x2, y2]]) @ _direction(abc[k])
+        spans[k] = [min(spans[k, 0], along.min()), max(spans[k, 1], along.max())]
+    keep = spans[:n, 1] - spans[:n, 0] >= MIN_LINE_SUPPORT
+    return [(abc[k], list(spans[k])) for k in np.flatnonzero(keep)]
 
 
 def thin_components(mask: np.ndarray) -> np.ndarray:
@@ -175,11 +179,11 @@ def straight_lines(mask: np.ndarray, points: np.ndarray) -> list[Line]:
     longest support first. Lines are taken in turn, longest Hough group first, and each takes its
     pixels (within :data:`CLAIM_BAND` px, along its extent) away from the later ones, so a thick
     line or a line beside an ad board's edge does not come back as a fan of near copies."""
-    found = cv2.HoughLinesP(mask, 1, np.pi / 360, HOUGH_VOTES, minLineLength=HOUGH_MIN_LENGTH, maxLineGap=HOUGH_MAX_GAP)
+    found = cv2.HoughLinesP(mask, 1, np.pi / 180, HOUGH_VOTES, minLineLength=HOUGH_MIN_LENGTH, maxLineGap=HOUGH_MAX_GAP)
     if found is None:
         return []
     segments = found.reshape(-1, 4).astype(np.float64)
-    order = np.argsort(-np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]))
+    order = np.argsort(-np.hypot(segments[:, 2] - segments[:, 0], segments[:, 3] - segments[:, 1]))[:MAX_SEGMENTS]
     lines: list[Line] = []
     free = points
     for abc, span in _merge_segments(segments[order]):
