@@ -157,3 +157,5 @@ def test_bad_arguments_are_refused_by_name(template):
         first_guess(frame, points, labels, max_candidates=0)
     with pytest.raises(ValueError, match="lens"):
         first_guess(frame, points, labels, lens=(0.1,))
+    with pytest.raises(ValueError, match="lens"):  # folds over inside the frame: no undistorted frame
+        first_guess(frame, points, labels, lens=(-3.0, 0.0))

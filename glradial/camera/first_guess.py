@@ -111,9 +111,11 @@ def _check_inputs(frame_rgb, template_points, template_labels, lens, max_candida
     if lens is not None:
         try:
             k1, k2 = lens
-            lens = Lens(float(k1), float(k2))
+            checked = Lens(float(k1), float(k2))
+            checked.check_frame((frame_rgb.shape[1], frame_rgb.shape[0]))
         except (TypeError, ValueError) as exc:
-            raise ValueError(f"lens must be (k1, k2) or None, got {lens!r}: {exc}") from None
+            raise ValueError(f"lens must be (k1, k2) or None, usable on the frame, got {lens!r}: {exc}") from None
+        lens = checked
     return points, labels, lens
 
 
@@ -281,24 +283,6 @@ def _to_frame(h: np.ndarray, scale: float) -> np.ndarray:
     return out / np.linalg.norm(out)
 
 
-def _undistorted_evidence(wl: WhiteLines, lens: Lens, frame_size: tuple[int, int]) -> WhiteLines:
-    """``wl`` with its mask pixels moved to where ``lens`` undistorts them (frame-size lens units),
-    the mask redrawn from them, and its lines found again."""
-    from .white_lines import straight_lines
-
-    shape = wl.mask.shape
-    s = wl.scale
-    full = (wl.points + 0.5) * s - 0.5
-    und = lens.undistort_points(full, frame_size)
-    ok = np.isfinite(und).all(axis=1)
-    pts = (und[ok] + 0.5) / s - 0.5
-    inside = (pts[:, 0] >= 0) & (pts[:, 0] <= shape[1] - 1) & (pts[:, 1] >= 0) & (pts[:, 1] <= shape[0] - 1)
-    pts = pts[inside]
-    mask = np.zeros(shape, np.uint8)
-    mask[np.round(pts[:, 1]).astype(int), np.round(pts[:, 0]).astype(int)] = 1
-    return WhiteLines(mask, wl.field, wl.grass, pts, s, straight_lines(mask * 255, pts))
-
-
 @dataclass(frozen=True)
 class _Template:
     """A template prepared for the search: its points (M x 2, m), their ``spacing`` (m), the x of
@@ -357,12 +341,9 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
     lines of each direction, or no hypothesis that covers enough of the marking evidence)."""
     points, labels, lens_ = _check_inputs(frame_rgb, template_points, template_labels, lens, max_candidates)
     tpl = _prepared(np.ascontiguousarray(points).tobytes(), np.ascontiguousarray(labels).tobytes(), labels.dtype.str)
-    frame_size = (frame_rgb.shape[1], frame_rgb.shape[0])
-    wl = white_lines(frame_rgb)
+    wl = white_lines(frame_rgb, lens_)
     if wl.grass < MIN_GRASS or len(wl.points) < 50:
         return []
-    if lens_ is not None:
-        wl = _undistorted_evidence(wl, lens_, frame_size)
     size = (wl.mask.shape[1], wl.mask.shape[0])
     dist = cv2.distanceTransform(1 - wl.mask, cv2.DIST_L2, 3)
     evidence = wl.points[:: max(1, len(wl.points) // ICP_MAX_POINTS)]

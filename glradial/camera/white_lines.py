@@ -19,6 +19,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..lens.lens import Lens
+
 #: Width (px) of the work copy. The first guess needs lines, not detail: 640 px keeps a 12 cm line at
 #: 60 m from a 1280-px wide shot about one pixel wide, and the whole search within its time budget.
 WORK_WIDTH = 640
@@ -233,9 +235,13 @@ def pair_vanishing_points(lines: list[Line], points: np.ndarray) -> tuple[np.nda
     return vp, valid
 
 
-def white_lines(frame_rgb: np.ndarray) -> WhiteLines:
-    """The line evidence (:class:`WhiteLines`) of a uint8 RGB frame."""
+def white_lines(frame_rgb: np.ndarray, lens: Lens | None = None) -> WhiteLines:
+    """The line evidence (:class:`WhiteLines`) of a uint8 RGB frame; with ``lens``, of the work
+    copy undistorted by it (same size and principal point, scale 1: ``Lens.maps(fit="same")``)."""
     small, scale = work_copy(frame_rgb)
+    if lens is not None:
+        map_x, map_y = lens.maps((small.shape[1], small.shape[0]), direction="undistort", fit="same")
+        small = cv2.remap(small, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     mask, field, grass = line_mask(small)
     mask = thin_components(mask)
     ys, xs = np.nonzero(mask)
