@@ -116,20 +116,25 @@ def ellipses(points: np.ndarray, lines: list[Line], shape: tuple[int, int]) -> l
     return [(conic, ellipse) for _, conic, ellipse in found[:MAX_ELLIPSES]]
 
 
-def _meet(conic: np.ndarray, line: np.ndarray) -> np.ndarray | None:
-    """The two points (2 x 2, px) where a homogeneous ``line`` meets the conic, upper (smaller y)
-    first; ``None`` when it does not."""
-    d = np.array([-line[1], line[0]])
-    p0 = -line[2] * line[:2] / (line[:2] @ line[:2])
-    x0 = np.append(p0, 1.0)
-    dd = np.append(d, 0.0)
-    a, b, c = dd @ conic @ dd, 2 * dd @ conic @ x0, x0 @ conic @ x0
+def _meet(conic: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each homogeneous line (K x 3) meets the conic: ``(points K x 2 x 2, upper (smaller y)
+    first; ok K)``, ``ok`` False where a line misses it."""
+    lines = np.atleast_2d(lines)
+    d = np.stack([-lines[:, 1], lines[:, 0]], axis=1)
+    p0 = -lines[:, 2:3] * lines[:, :2] / np.sum(lines[:, :2] ** 2, axis=1, keepdims=True)
+    x0 = np.column_stack([p0, np.ones(len(p0))])
+    dd = np.column_stack([d, np.zeros(len(d))])
+    a = np.einsum("ki,ij,kj->k", dd, conic, dd)
+    b = 2 * np.einsum("ki,ij,kj->k", dd, conic, x0)
+    c = np.einsum("ki,ij,kj->k", x0, conic, x0)
     disc = b * b - 4 * a * c
-    if abs(a) < 1e-300 or disc <= 0:
-        return None
-    t = (-b + np.array([-1.0, 1.0]) * np.sqrt(disc)) / (2 * a)
-    pts = p0 + t[:, None] * d
-    return pts[np.argsort(pts[:, 1])]
+    ok = (np.abs(a) > 1e-300) & (disc > 0)
+    with np.errstate(all="ignore"):
+        t = (-b[:, None] + np.array([-1.0, 1.0]) * np.sqrt(np.where(ok, disc, 0.0))[:, None]) / (2 * a[:, None])
+    pts = p0[:, None, :] + t[..., None] * d[:, None, :]
+    swap = pts[:, 0, 1] > pts[:, 1, 1]
+    pts[swap] = pts[swap][:, ::-1]
+    return pts, ok
 
 
 def _homogeneous(p: np.ndarray) -> np.ndarray:
@@ -150,19 +155,17 @@ def circle_homographies(ellipse_list, lines: list[Line], radius: float, size: tu
         for line in lines:
             if abs(line.abc[:2] @ centre + line.abc[2]) > DIAMETER_OFFSET * minor + 1.0:
                 continue
-            crossing = _meet(conic, line.abc)
-            if crossing is None:
+            crossing, ok = _meet(conic, line.abc)
+            if not ok[0]:
                 continue
-            far, near = _homogeneous(crossing[0]), _homogeneous(crossing[1])
+            far, near = _homogeneous(crossing[0, 0]), _homogeneous(crossing[0, 1])
             vp = np.cross(conic @ far, conic @ near)  # the tangents meet at the touchlines' vanishing point
-            for s in CENTRE_SAMPLES:
-                seen = crossing[0] + s * (crossing[1] - crossing[0])
-                side = _meet(conic, np.cross(_homogeneous(seen), vp))
-                if side is None:
-                    continue
-                right = side[np.argmax(side[:, 0])]
-                img = np.array([far, near, vp, _homogeneous(right)])
-                out.append(projective_basis(img[None])[0] @ p_inv)
+            seen = crossing[0, 0] + CENTRE_SAMPLES[:, None] * (crossing[0, 1] - crossing[0, 0])
+            side, ok = _meet(conic, np.cross(np.column_stack([seen, np.ones(len(seen))]), vp))
+            right = side[np.arange(len(side)), np.argmax(side[:, :, 0], axis=1)][ok]
+            img = np.stack([np.broadcast_to(far, (len(right), 3)), np.broadcast_to(near, (len(right), 3)),
+                            np.broadcast_to(vp, (len(right), 3)), np.column_stack([right, np.ones(len(right))])], axis=1)
+            out.append(projective_basis(img) @ p_inv)
     if not out:
         return np.zeros((0, 3, 3))
-    return front_facing(np.array(out), np.array([(size[0] - 1) / 2, (size[1] - 1) / 2]))
+    return front_facing(np.concatenate(out), np.array([(size[0] - 1) / 2, (size[1] - 1) / 2]))

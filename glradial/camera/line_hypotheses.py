@@ -179,10 +179,36 @@ def front_facing(h: np.ndarray, centre: np.ndarray) -> np.ndarray:
     ``centre`` a positive depth ``(h X)_3``, scaled to unit norm."""
     h = h[np.isfinite(h).all(axis=(1, 2))]
     with np.errstate(all="ignore"):
-        seen = np.linalg.solve(h, np.tile([centre[0], centre[1], 1.0], (len(h), 1))[..., None])[..., 0]
-        h = h * np.sign(seen[:, 2])[:, None, None]
-        h = h / np.linalg.norm(h, axis=(1, 2))[:, None, None]
-    return h[np.isfinite(h).all(axis=(1, 2))]
+        # h⁻¹ c = adj(h) c / det h, adj(h)'s columns the cross products of h's rows
+        c01, c12, c20 = np.cross(h[:, 0], h[:, 1]), np.cross(h[:, 1], h[:, 2]), np.cross(h[:, 2], h[:, 0])
+        seen_w = centre[0] * c12[:, 2] + centre[1] * c20[:, 2] + c01[:, 2]
+        det = np.sum(h[:, 2] * c01, axis=1)
+        h = h * np.sign(seen_w * det)[:, None, None]
+        h = h / np.sqrt(np.sum(h**2, axis=(1, 2)))[:, None, None]
+    return h[np.isfinite(h).all(axis=(1, 2)) & (np.abs(det) > 0)]
+
+
+def _pinhole(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(focal, metric, m)``: the focal length (image widths, NaN where none fits) of homographies
+    ``h`` read as views with a centred principal point and square pixels, whether their two pitch axes
+    then map to orthogonal rays of equal length, and ``K⁻¹ h`` in width-normalised image coordinates."""
+    width, height = size
+    g = h.copy()
+    g[:, 0] = (h[:, 0] - (width - 1) / 2 * h[:, 2]) / width
+    g[:, 1] = (h[:, 1] - (height - 1) / 2 * h[:, 2]) / width
+    a1, b1, c1 = g[:, 0, 0], g[:, 1, 0], g[:, 2, 0]
+    a2, b2, c2 = g[:, 0, 1], g[:, 1, 1], g[:, 2, 1]
+    u1, u2 = a1 * a2 + b1 * b2, a1 * a1 + b1 * b1 - a2 * a2 - b2 * b2
+    v1, v2 = c1 * c2, c1 * c1 - c2 * c2
+    with np.errstate(all="ignore"):
+        w = -(u1 * v1 + u2 * v2) / (u1 * u1 + u2 * u2)  # 1 / focal^2, least squares
+        focal = np.where(w > 0, 1 / np.sqrt(np.abs(w)), np.nan)
+        g[:, :2] /= focal[:, None, None]
+        n1 = np.sqrt(np.sum(g[:, :, 0] ** 2, axis=1))
+        n2 = np.sqrt(np.sum(g[:, :, 1] ** 2, axis=1))
+        cosine = np.abs(np.sum(g[:, :, 0] * g[:, :, 1], axis=1)) / (n1 * n2)
+        metric = (cosine <= MAX_AXIS_COSINE) & (np.maximum(n1 / n2, n2 / n1) <= MAX_AXIS_RATIO)
+    return focal, metric, g
 
 
 def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -190,26 +216,13 @@ def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndar
     image) read as pinhole views with square pixels and the principal point at the image centre:
     the focal length in image widths (NaN where none fits), the camera centre (N x 3, metres, z up)
     and whether the two pitch axes map to orthogonal rays of equal length (:data:`MAX_AXIS_COSINE`)."""
-    width, height = size
-    shift = np.array([[1 / width, 0, -(width - 1) / 2 / width], [0, 1 / width, -(height - 1) / 2 / width], [0, 0, 1]])
-    g = np.einsum("ij,njk->nik", shift, h)
-    a1, b1, c1 = g[:, 0, 0], g[:, 1, 0], g[:, 2, 0]
-    a2, b2, c2 = g[:, 0, 1], g[:, 1, 1], g[:, 2, 1]
-    u = np.stack([a1 * a2 + b1 * b2, a1 * a1 + b1 * b1 - a2 * a2 - b2 * b2], axis=1)
-    v = np.stack([c1 * c2, c1 * c1 - c2 * c2], axis=1)
+    focal, metric, m = _pinhole(h, size)
     with np.errstate(all="ignore"):
-        w = -np.sum(u * v, axis=1) / np.sum(u * u, axis=1)  # 1 / focal^2, least squares
-        focal = np.where(w > 0, 1 / np.sqrt(np.abs(w)), np.nan)
-        k_inv = np.stack([1 / focal, 1 / focal, np.ones_like(focal)], axis=1)[:, :, None]
-        m = g * k_inv
         r1, r2, t = m[:, :, 0], m[:, :, 1], m[:, :, 2]
-        n1, n2 = np.linalg.norm(r1, axis=1), np.linalg.norm(r2, axis=1)
-        metric = (np.abs(np.sum(r1 * r2, axis=1)) / (n1 * n2) <= MAX_AXIS_COSINE) & (np.maximum(n1 / n2, n2 / n1) <= MAX_AXIS_RATIO)
-        scale = 2 / (n1 + n2)
-        # sign: the pitch point seen at the image centre lies in front of the camera
-        seen = np.linalg.solve(g, np.tile([0.0, 0.0, 1.0], (len(g), 1))[..., None])[..., 0]
-        depth = np.sum(m[:, 2, :] * seen, axis=1) * seen[:, 2]
-        scale = scale * np.sign(depth)
+        scale = 2 / (np.linalg.norm(r1, axis=1) + np.linalg.norm(r2, axis=1))
+        # sign: the pitch point seen at the image centre, m⁻¹ e3 ∝ row0 × row1, lies in front
+        seen = np.cross(m[:, 0], m[:, 1])
+        scale = scale * np.sign(np.sum(m[:, 2] * seen, axis=1) * seen[:, 2])
         r1, r2, t = r1 * scale[:, None], r2 * scale[:, None], t * scale[:, None]
         r3 = np.cross(r1, r2)
         centre = -np.stack([np.sum(r1 * t, axis=1), np.sum(r2 * t, axis=1), np.sum(r3 * t, axis=1)], axis=1)
@@ -218,10 +231,13 @@ def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndar
 
 def plausible(h: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """Whether each homography (N x 3 x 3) is a view a main camera could take (module constants)."""
-    focal, centre, metric = camera_of(h, size)
+    focal, metric, _ = _pinhole(h, size)
     with np.errstate(all="ignore"):
         hfov = np.degrees(2 * np.arctan(0.5 / focal))
-        ok = metric & (hfov >= HFOV_RANGE[0]) & (hfov <= HFOV_RANGE[1])
-        ok &= (centre[:, 2] >= HEIGHT_RANGE[0]) & (centre[:, 2] <= HEIGHT_RANGE[1])
-        ok &= (centre[:, 1] >= Y_RANGE[0]) & (centre[:, 1] <= Y_RANGE[1]) & (np.abs(centre[:, 0]) <= MAX_ABS_X)
-    return ok & np.isfinite(focal)
+    ok = metric & (hfov >= HFOV_RANGE[0]) & (hfov <= HFOV_RANGE[1])
+    idx = np.flatnonzero(ok)
+    _, centre, _ = camera_of(h[idx], size)
+    with np.errstate(all="ignore"):
+        ok[idx] = (centre[:, 2] >= HEIGHT_RANGE[0]) & (centre[:, 2] <= HEIGHT_RANGE[1])
+        ok[idx] &= (centre[:, 1] >= Y_RANGE[0]) & (centre[:, 1] <= Y_RANGE[1]) & (np.abs(centre[:, 0]) <= MAX_ABS_X)
+    return ok
