@@ -45,7 +45,7 @@ SIGMA, MISS_PENALTY, MAX_POINT_WEIGHT = 1.5, 0.3, 6.0
 HIT_PX = 2.0
 #: Template points used for the quick score of every hypothesis and for the coarse score of the
 #: QUICK_KEPT best (subsamples of the given ones).
-QUICK_POINTS, QUICK_KEPT, COARSE_POINTS = 80, 400, 400
+QUICK_POINTS, QUICK_KEPT, COARSE_POINTS = 80, 200, 400
 #: Hypotheses scored per batch (memory).
 BATCH = 4096
 #: Two homographies are distinct when the pitch points they see at a 3 x 3 grid over the image
@@ -54,7 +54,7 @@ DISTINCT_M = 1.5
 #: ICP: matching bands (work px), one refit each, and the most mask pixels used.
 ICP_BANDS = (16.0, 8.0, 5.0, 4.0)
 #: The first bands run for every hypothesis, the rest only for those still distinct after them.
-ICP_ROUGH_BANDS = 2
+ICP_ROUGH_BANDS = 1
 #: Reweighted solves per band, and the Cauchy scale of the weights as a share of the band.
 ICP_STEPS, ICP_CAUCHY = 2, 0.35
 #: A pixel's nearest template point is looked for within this many bands (the points are spaced
