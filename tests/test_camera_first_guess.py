@@ -85,6 +85,20 @@ def test_partial_view_of_one_box_is_answered(template):
     assert np.sqrt(np.mean(_keypoint_errors(found[0], truth) ** 2)) <= 1.5
 
 
+@pytest.mark.parametrize("view", [
+    dict(camera=(52.5, -30.0, 20.0), target=(52.5, 40.0), hfov_deg=34.0),  # circle, halfway, far touchline
+    dict(camera=(60.0, -40.0, 18.0), target=(55.0, 20.0), hfov_deg=28.0),  # ... and the near touchline
+])
+def test_centre_circle_and_halfway_line_are_enough(template, view):
+    frame, truth = _view(**view)
+    seen = _project(truth, pitch_points.keypoints())
+    inside = (np.abs(seen[:, 0] - 640) < 640) & (np.abs(seen[:, 1] - 360) < 360)
+    assert set(np.flatnonzero(inside)) <= {13, 14, 15, 16, 30, 31}  # only the halfway line's points
+    found = first_guess(frame, *template)
+    assert found
+    assert np.sqrt(np.mean(_keypoint_errors(found[0], truth) ** 2)) <= 1.5
+
+
 def test_lens_given_maps_to_the_undistorted_frame(template):
     lens = (-0.12, 0.02)
     frame, truth = _view(**VIEWS["centre"], lens=lens)
