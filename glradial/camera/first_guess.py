@@ -1,19 +1,19 @@
 """The first guess of a broadcast frame's camera: the homography from the pitch plane to the image,
 found from the white pitch lines alone (no detector trained on labelled frames).
 
-Steps (docs/CAMERA_SEARCH.md has the figures):
+Steps (docs/CAMERA_SEARCH.md has the details and the figures):
 
 1. **Evidence** (:mod:`glradial.camera.white_lines`): a white-line mask on the grass of a 640-px wide
-   work copy, its straight lines (Hough segments merged and refit), split into two families by
-   their vanishing points.
-2. **Hypotheses** (:mod:`glradial.camera.line_hypotheses`): two lines of one family assigned to two
-   x-parallel template lines and two of the other to two y-parallel ones, in the main camera's
-   order (both families tried in both roles), each giving a homography; kept only when it is a
-   pinhole view with square pixels and a centred principal point from a plausible main-camera
-   position (on the near touchline's side, 4-80 m up).
+   work copy (undistorted by ``lens`` when one is given) and its straight lines.
+2. **Hypotheses**: two pairs of lines whose meeting points can be the pitch's two vanishing points,
+   matched to two template lines of each direction in the main camera's order
+   (:mod:`glradial.camera.line_hypotheses`), and the centre circle's ellipse with the halfway line
+   (:mod:`glradial.camera.circle_hypotheses`); kept only when the homography is a pinhole view with
+   square pixels and a centred principal point from a plausible main-camera position (on the near
+   touchline's side, 4-80 m up).
 3. **Score**: the projected template against the mask's distance transform (:func:`coverage`).
-4. **Refinement**: the best distinct hypotheses are refit to the mask pixels (robust ICP,
-   point-to-marking distances, all 8 homography parameters) and scored again.
+4. **Refinement**: the best distinct hypotheses are refit to the mask pixels (:func:`refine`: robust
+   ICP, point-to-marking distances, all 8 homography parameters) and scored again.
 
 Conventions: ``template_points`` are metres on the pitch plane (origin at the centre spot, x along
 the touchlines toward the goal on the right of the main camera's view, y toward the far touchline);
@@ -53,7 +53,8 @@ BATCH = 4096
 DISTINCT_M = 1.5
 #: ICP: matching bands (work px), one refit each, and the most mask pixels used.
 ICP_BANDS = (16.0, 8.0, 5.0, 4.0)
-#: The first bands run for every hypothesis, the rest only for those still distinct after them.
+#: The first ICP_ROUGH_BANDS bands run for every hypothesis, the rest only for those still distinct
+#: after them.
 ICP_ROUGH_BANDS = 1
 #: Reweighted solves per band, and the Cauchy scale of the weights as a share of the band.
 ICP_STEPS, ICP_CAUCHY = 2, 0.35
@@ -76,8 +77,9 @@ class Candidate:
     ``score``: higher is better: the length (frame px) of projected template marking that lands on
     white-line evidence, minus :data:`MISS_PENALTY` times the length that lands on grass without any
     (:func:`coverage`); ``share``: the share of the projected marking on the field that lies on
-    the evidence (within :data:`HIT_PX` work px). ``rms_px``: RMS point-to-marking distance (frame px) of the mask pixels
-    matched in the last ICP band; ``matched``: how many there were. ``focal``: focal length in image
+    the evidence (within :data:`HIT_PX` work px); candidates are ranked by ``score * share``.
+    ``rms_px``: RMS point-to-marking distance (frame px) of the mask pixels matched in the last ICP
+    band; ``matched``: how many there were. ``focal``: focal length in image
     widths and ``position``: camera centre (x, y, z metres) read from the homography with square
     pixels and a centred principal point (no lens).
     """

@@ -1,6 +1,8 @@
-"""Pitch-to-image homographies from line correspondences: two image lines of each family assigned
-to two template lines of each direction, four lines -> the four corners of a pitch rectangle -> one
-homography; then the cheap test that a real main camera could have taken the view.
+"""Pitch-to-image homographies from line correspondences: two pairs of image lines whose meeting
+points can be the pitch's two vanishing points, assigned to two template lines of each direction,
+four lines -> the four corners of a pitch rectangle -> one homography; the pinhole reading of a
+homography (focal length, camera centre) and the cheap test that a real main camera could have
+taken the view.
 
 Conventions: image coordinates are pixels of the work copy (:mod:`glradial.camera.white_lines`);
 pitch coordinates are metres, x along the touchlines, y toward the far touchline. The main camera
@@ -36,7 +38,7 @@ MAX_AXIS_COSINE, MAX_AXIS_RATIO = 0.2, 1.3
 #: orthogonal), with a focal length in HFOV_RANGE.
 MAX_ROLL_DEG, FAR_VP_COSINE = 12.0, 0.15
 #: Line pixels may lie this far (px) above the horizon (line noise, pixels off the pitch).
-HULL_MARGIN = 3.0
+HORIZON_MARGIN = 3.0
 #: Line quads tried per frame: the pairs of line pairs whose meeting points most lines point at
 #: (ends within POINTING_PX px, direction within POINTING_ANGLE radians), then the longest.
 MAX_QUADS, POINTING_PX, POINTING_ANGLE = 48, 2.5, 0.05
@@ -118,7 +120,7 @@ def vanishing_pairs(vp: np.ndarray, size: tuple[int, int], hull: np.ndarray) -> 
         horizon /= np.maximum(np.hypot(horizon[..., 0], horizon[..., 1]), 1e-300)[..., None]
         width, height = size
         h_norm = np.column_stack([hull[:, 0] - (width - 1) / 2, hull[:, 1] - (height - 1) / 2, np.full(len(hull), width)]) / width
-        below = np.einsum("pqk,mk->pqm", horizon, h_norm).min(axis=2) >= -HULL_MARGIN / width
+        below = np.einsum("pqk,mk->pqm", horizon, h_norm).min(axis=2) >= -HORIZON_MARGIN / width
     return (focal_ok | far) & (roll <= MAX_ROLL_DEG) & below
 
 

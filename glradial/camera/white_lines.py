@@ -6,10 +6,10 @@ interpolation) to :data:`WORK_WIDTH` pixels wide with its aspect kept; pixel cen
 x right, y down. A line is ``(a, b, c)`` with ``a x + b y + c = 0`` and ``a² + b² = 1``.
 
 The mask: grass is green (hue 30..90 on OpenCV's 0..180 scale, saturated, not dark, once blurred
-over a few pixels); a line pixel is
-brighter than its surroundings by :data:`TOPHAT_MIN` grey levels (a white top-hat with a disc wider
-than a painted line at the work scale) and lies where most of its neighbourhood is grass, so the
-stands, ad boards and the sky, which are not grass, bring no evidence.
+over a few pixels); a line pixel is brighter than its surroundings by :data:`TOPHAT_MIN` grey levels
+(a white top-hat with a disc wider than a painted line at the work scale) and lies where enough of
+its neighbourhood is grass (:data:`GRASS_SHARE`), so the stands, ad boards and the sky bring no
+evidence; compact blobs (players, the ball) are dropped.
 """
 
 from __future__ import annotations
