@@ -28,13 +28,13 @@ def template():
     return pitch_points.template()
 
 
-def _view(camera, target, hfov_deg, lens=None):
+def _view(camera, target, hfov_deg, lens=None, size=SIZE):
     """``(frame RGB, true homography centre-spot metres -> px)`` of a pinhole view (corner-origin
     camera and target, as pitch_template takes them), through ``lens`` when given."""
-    h = pitch_template.homography(camera, target, hfov_deg, SIZE)
-    image = pitch_template.render(h, SIZE)
+    h = pitch_template.homography(camera, target, hfov_deg, size)
+    image = pitch_template.render(h, size, thickness=max(2, round(3 * size[0] / SIZE[0])))
     if lens is not None:  # at scale 1 (fit "same"): the undistorted frame is the rendered one
-        map_x, map_y = glradial.Lens(*lens).maps(SIZE, direction="distort", fit="same")
+        map_x, map_y = glradial.Lens(*lens).maps(size, direction="distort", fit="same")
         image = cv2.remap(image, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     return np.ascontiguousarray(image[:, :, ::-1]), h @ TO_CORNER
 
@@ -44,11 +44,11 @@ def _project(h, points):
     return p[:, :2] / p[:, 2:3]
 
 
-def _keypoint_errors(found: Candidate, truth: np.ndarray) -> np.ndarray:
+def _keypoint_errors(found: Candidate, truth: np.ndarray, size=SIZE) -> np.ndarray:
     """Distances (px) between the keypoints in the frame by the true and the found homography."""
     keypoints = pitch_points.keypoints()
     true_xy = _project(truth, keypoints)
-    inside = (true_xy[:, 0] >= 0) & (true_xy[:, 0] < SIZE[0]) & (true_xy[:, 1] >= 0) & (true_xy[:, 1] < SIZE[1])
+    inside = (true_xy[:, 0] >= 0) & (true_xy[:, 0] < size[0]) & (true_xy[:, 1] >= 0) & (true_xy[:, 1] < size[1])
     assert inside.sum() >= 4
     return np.linalg.norm(_project(found.homography, keypoints[inside]) - true_xy[inside], axis=1)
 
@@ -73,6 +73,15 @@ def test_known_view_comes_back_at_the_keypoints(template, name):
     assert errors.max() <= 4.0, errors
     assert found[0].homography.shape == (3, 3) and found[0].homography.dtype == np.float64
     assert [c.score for c in found] == sorted((c.score for c in found), reverse=True)
+
+
+@pytest.mark.parametrize("size", [(1920, 1080), (480, 270)])
+def test_other_frame_sizes(template, size):
+    # the search runs on a 640-px copy; the homography is the frame's own, at any size
+    frame, truth = _view(**VIEWS["centre"], size=size)
+    found = first_guess(frame, *template)
+    assert found
+    assert np.sqrt(np.mean(_keypoint_errors(found[0], truth, size) ** 2)) <= 1.5 * size[0] / SIZE[0]
 
 
 def test_partial_view_of_one_box_is_answered(template):

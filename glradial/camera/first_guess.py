@@ -278,9 +278,11 @@ def _hypotheses(wl: WhiteLines, tpl: "_Template", size: tuple[int, int]) -> np.n
     return h[plausible(h, size)] if len(h) else h
 
 
-def _to_frame(h: np.ndarray, scale: float) -> np.ndarray:
-    """A work-copy homography as one to frame pixels (pixel centres at integers at both scales)."""
-    s = np.array([[scale, 0, 0.5 * scale - 0.5], [0, scale, 0.5 * scale - 0.5], [0, 0, 1]])
+def _to_frame(h: np.ndarray, frame_shape: tuple[int, ...], work_shape: tuple[int, ...]) -> np.ndarray:
+    """A work-copy homography as one to frame pixels (pixel centres at integers in both; the scales
+    from the two images' shapes, ``(H, W, ...)``)."""
+    sy, sx = frame_shape[0] / work_shape[0], frame_shape[1] / work_shape[1]
+    s = np.array([[sx, 0, 0.5 * sx - 0.5], [0, sy, 0.5 * sy - 0.5], [0, 0, 1]])
     out = s @ h
     return out / np.linalg.norm(out)
 
@@ -364,7 +366,7 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
     out = []
     for score, h, rms, matched, share in sorted(found, key=lambda f: -f[0] * f[4]):
         focal, centre, _ = camera_of(h[None], size)
-        out.append(Candidate(_to_frame(h, wl.scale), score * wl.scale, share, rms * wl.scale, matched,
+        out.append(Candidate(_to_frame(h, frame_rgb.shape, wl.mask.shape), score * wl.scale, share, rms * wl.scale, matched,
                              float(focal[0]), tuple(float(c) for c in centre[0])))
     return out
 
