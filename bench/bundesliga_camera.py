@@ -1,7 +1,7 @@
 """Benchmark: the camera's first guess (glradial.camera.first_guess) on the 109 real Bundesliga frames
 against their hand-labelled pitch keypoints (validation only: nothing is fitted to these frames).
 
-Usage: ``python bench/bundesliga_camera.py [--data DIR] [--lens none|auto] [--csv OUT] [--limit N]``
+Usage: ``python bench/bundesliga_camera.py [--data DIR] [--lens none|auto] [--csv OUT] [--limit N] [--time-1080p]``
 
 Each frame (stored squashed to 640x640) is resized to 1280x720 (cubic), given to ``first_guess`` on
 one thread, and the best candidate's homography projects the 32 keypoints; the frame's error is the
@@ -18,6 +18,9 @@ camera on the near touchline) and is not scored both ways.
 labels; timed apart), the first guess runs on the frame undistorted by it (``lens=``), and the
 keypoints are projected with the homography and then distorted by that lens: how much of the
 no-lens residual is the lens, with today's lens estimate.
+
+``--time-1080p``: also the median time of ``first_guess`` on every 10th frame resized to 1920x1080
+(issue 34 states its speed target at 1080p), with the same blur ratio.
 """
 
 from __future__ import annotations
@@ -136,6 +139,23 @@ def summary(rows: list[dict], blur: float) -> str:
             f"{wrong}, near miss (10-30) {near}, unanswered {int(np.sum(~answered))}")
 
 
+def time_1080p(data: Path, blur: float) -> str:
+    """The median ms of ``first_guess`` on every 10th frame at 1920x1080 and its ratio to ``blur``."""
+    points, ids = pitch_points.template()
+    frames = []
+    for path in sorted(data.glob("*.jpg"))[::10]:
+        image = cv2.imread(str(path), cv2.IMREAD_COLOR)
+        frames.append(np.ascontiguousarray(cv2.resize(image, (1920, 1080), interpolation=cv2.INTER_CUBIC)[:, :, ::-1]))
+    first_guess(frames[0], points, ids)  # warm-up
+    times = []
+    for frame in frames:
+        t0 = time.perf_counter()
+        first_guess(frame, points, ids)
+        times.append((time.perf_counter() - t0) * 1000)
+    ms = statistics.median(times)
+    return f"1080p: {len(frames)} frames, first_guess median {ms:.0f} ms ({ms / blur:.1f}x blur)"
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--data", default=str(ROOT.parent / "shared/data/broadcast_bundesliga"))
@@ -143,6 +163,7 @@ def main() -> None:
                         help="auto: undistort with glradial.estimate's lens first (timed apart)")
     parser.add_argument("--csv", default=None, help="write the per-frame rows here")
     parser.add_argument("--limit", type=int, default=None, help="only the first N frames (sorted by name)")
+    parser.add_argument("--time-1080p", action="store_true", help="also time every 10th frame at 1920x1080")
     args = parser.parse_args()
     cv2.setNumThreads(1)
     blur = _blur_ms()
@@ -155,6 +176,8 @@ def main() -> None:
         if part:
             print(f"{clip}: {summary(part, blur)}")
     print(f"all   : {summary(rows, blur)}")
+    if args.time_1080p:
+        print(time_1080p(Path(args.data), blur))
     if args.csv:
         with open(args.csv, "w", newline="") as f:
             writer = csv.DictWriter(f, fieldnames=list(rows[0]))
