@@ -1,6 +1,9 @@
 """The whole camera of one frame from the pitch's known geometry: the pinhole-plus-lens camera model
 (projection, plane-homography decomposition), the joint refinement of pose, focal length and lens
-against the pitch markings, and :func:`calibrate` with its judged :class:`CameraEstimate`."""
+against the pitch markings, and :func:`calibrate` with its judged :class:`CameraEstimate`.
+
+The first guess on a frame is ``glradial.camera.first_guess.first_guess`` (imported from its module:
+the module of that name is what ``glradial.camera.first_guess`` names)."""
 
 from __future__ import annotations
 
@@ -13,5 +16,6 @@ if TYPE_CHECKING:
     from .estimate import REASONS, CameraEstimate
     from .model import Camera, decompose_homography
     from .views import random_camera, render_view
+    from .first_guess import Candidate
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

@@ -1,0 +1,171 @@
+"""Pitch-to-image homographies from the centre circle and the halfway line, for views where fewer
+than two lines of one direction are in sight (the centre circle, the halfway line, a touchline).
+
+The circle's image is an ellipse; the halfway line is a diameter. Where the line meets the ellipse
+are the circle points (0, +r) (the upper one: the far side) and (0, -r); the tangents there are the
+images of the lines y = ±r, which are parallel to the touchlines, so they meet in the touchlines'
+vanishing point. One parameter is left (the circle and one diameter keep a one-parameter family of
+projective maps): where the circle's centre is seen along the halfway line. It is sampled; each
+sample gives the line through the centre toward that vanishing point, which meets the ellipse at
+(±r, 0), and four correspondences give a homography. The plausibility test and the coverage score
+of the first guess choose among them, and the refinement fits the rest.
+
+Conventions as in :mod:`glradial.camera.line_hypotheses` (work-copy pixels, pitch metres, main
+camera on the near touchline).
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .line_hypotheses import front_facing, projective_basis
+from .white_lines import Line
+
+#: The centre circle is looked for within this distance (m) of the centre spot in the template.
+CIRCLE_SEARCH_M = 20.0
+#: Mask pixels this close (px) to a straight line are left out of the ellipse search.
+LINE_BAND = 3.0
+#: Components (8-connected) of the remaining pixels tried, largest first, alone and in pairs, and the
+#: fewest pixels one needs.
+MAX_COMPONENTS, MIN_COMPONENT_PIXELS = 6, 25
+#: An ellipse is kept when the RMS distance (px) of its pixels is at most MAX_ELLIPSE_RMS, its
+#: semi-axes are within AXIS_RANGE (px), and it keeps at most MAX_ELLIPSES of the best.
+MAX_ELLIPSE_RMS, AXIS_RANGE, MAX_ELLIPSES = 1.5, (6.0, 800.0), 3
+#: The halfway line passes the ellipse's centre within this share of its smaller semi-axis.
+DIAMETER_OFFSET = 0.35
+#: Where the circle's centre may be seen between the far and the near crossing (share of the way).
+CENTRE_SAMPLES = np.linspace(0.2, 0.7, 51)
+
+
+def template_radius(points: np.ndarray, xs: np.ndarray, ys: np.ndarray) -> float | None:
+    """The centre circle's radius (m) read from the template points (M x 2): the points off the
+    straight lines (``xs``, ``ys``) within :data:`CIRCLE_SEARCH_M` of the centre spot, when they lie
+    on one circle (spread of their distances under 1 %); ``None`` when there is none."""
+    off = ~np.isin(np.round(points[:, 0], 3), np.round(xs, 3)) & ~np.isin(np.round(points[:, 1], 3), np.round(ys, 3))
+    r = np.hypot(points[off, 0], points[off, 1])
+    r = r[(r > 1.0) & (r < CIRCLE_SEARCH_M)]
+    if len(r) < 16 or np.std(r) > 0.01 * np.median(r):
+        return None
+    return float(np.median(r))
+
+
+def _conic(ellipse) -> np.ndarray:
+    """The 3 x 3 conic matrix (x^T C x = 0) of a ``cv2.fitEllipse`` result."""
+    (cx, cy), (w, h), angle = ellipse
+    a, b = w / 2, h / 2
+    t = np.radians(angle)
+    rot = np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
+    q = rot @ np.diag([1 / a**2, 1 / b**2]) @ rot.T
+    centre = np.array([cx, cy])
+    c = np.zeros((3, 3))
+    c[:2, :2] = q
+    c[:2, 2] = c[2, :2] = -q @ centre
+    c[2, 2] = centre @ q @ centre - 1
+    return c
+
+
+def _rms(conic: np.ndarray, points: np.ndarray) -> float:
+    """RMS Sampson distance (px) of ``points`` (N x 2) from the conic."""
+    x = np.column_stack([points, np.ones(len(points))])
+    cx = x @ conic
+    value = np.sum(cx * x, axis=1)
+    grad = 2 * np.hypot(cx[:, 0], cx[:, 1])
+    return float(np.sqrt(np.mean((value / np.maximum(grad, 1e-12)) ** 2)))
+
+
+def _off_lines(points: np.ndarray, lines: list[Line]) -> np.ndarray:
+    """The ``points`` farther than :data:`LINE_BAND` from every line's extent."""
+    keep = np.ones(len(points), bool)
+    for line in lines:
+        d = np.array([-line.abc[1], line.abc[0]])
+        lo, hi = np.sort(line.ends @ d)
+        along = points @ d
+        keep &= ~((np.abs(points @ line.abc[:2] + line.abc[2]) <= LINE_BAND) & (along >= lo - 2) & (along <= hi + 2))
+    return points[keep]
+
+
+def ellipses(points: np.ndarray, lines: list[Line], shape: tuple[int, int]) -> list[tuple[np.ndarray, tuple]]:
+    """Ellipses among the mask pixels ``points`` (N x 2, px of a work copy of ``shape`` (H, W)) not
+    on the straight ``lines``: ``(conic 3 x 3, cv2 ellipse)`` of the best fits to one or two of its
+    largest components, most pixels first."""
+    rest = _off_lines(points, lines)
+    if len(rest) < MIN_COMPONENT_PIXELS:
+        return []
+    mask = np.zeros(shape, np.uint8)
+    ix, iy = rest[:, 0].astype(int), rest[:, 1].astype(int)
+    mask[iy, ix] = 1
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    big = [k for k in np.argsort(-stats[:, cv2.CC_STAT_AREA]) if k and stats[k, cv2.CC_STAT_AREA] >= MIN_COMPONENT_PIXELS]
+    label_of = labels[iy, ix]
+    pieces = {k: rest[label_of == k] for k in big[:MAX_COMPONENTS]}
+    groups = [[k] for k in pieces] + [[a, b] for i, a in enumerate(pieces) for b in list(pieces)[i + 1:]]
+    found = []
+    for group in groups:
+        pts = np.concatenate([pieces[k] for k in group])
+        if len(pts) < 2 * MIN_COMPONENT_PIXELS:
+            continue
+        ellipse = cv2.fitEllipse(pts.astype(np.float32))
+        axes = np.array(ellipse[1]) / 2
+        if not (np.all(np.isfinite(axes)) and AXIS_RANGE[0] <= axes.min() and axes.max() <= AXIS_RANGE[1]):
+            continue
+        conic = _conic(ellipse)
+        if _rms(conic, pts) <= MAX_ELLIPSE_RMS:
+            found.append((len(pts), conic, ellipse))
+    found.sort(key=lambda f: -f[0])
+    return [(conic, ellipse) for _, conic, ellipse in found[:MAX_ELLIPSES]]
+
+
+def _meet(conic: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each homogeneous line (K x 3) meets the conic: ``(points K x 2 x 2, upper (smaller y)
+    first; ok K)``, ``ok`` False where a line misses it."""
+    lines = np.atleast_2d(lines)
+    d = np.stack([-lines[:, 1], lines[:, 0]], axis=1)
+    p0 = -lines[:, 2:3] * lines[:, :2] / np.sum(lines[:, :2] ** 2, axis=1, keepdims=True)
+    x0 = np.column_stack([p0, np.ones(len(p0))])
+    dd = np.column_stack([d, np.zeros(len(d))])
+    a = np.einsum("ki,ij,kj->k", dd, conic, dd)
+    b = 2 * np.einsum("ki,ij,kj->k", dd, conic, x0)
+    c = np.einsum("ki,ij,kj->k", x0, conic, x0)
+    disc = b * b - 4 * a * c
+    ok = (np.abs(a) > 1e-300) & (disc > 0)
+    with np.errstate(all="ignore"):
+        t = (-b[:, None] + np.array([-1.0, 1.0]) * np.sqrt(np.where(ok, disc, 0.0))[:, None]) / (2 * a[:, None])
+    pts = p0[:, None, :] + t[..., None] * d[:, None, :]
+    swap = pts[:, 0, 1] > pts[:, 1, 1]
+    pts[swap] = pts[swap][:, ::-1]
+    return pts, ok
+
+
+def _homogeneous(p: np.ndarray) -> np.ndarray:
+    return np.append(p, 1.0)
+
+
+def circle_homographies(ellipse_list, lines: list[Line], radius: float, size: tuple[int, int]) -> np.ndarray:
+    """Homographies (N x 3 x 3, pitch m -> work px; sign and scale as
+    :func:`glradial.camera.line_hypotheses.front_facing`) from each ellipse with each line through it
+    as the halfway line, for each sampled centre (module docstring); ``radius``: the template's
+    centre-circle radius (m)."""
+    pitch = np.array([[0, radius, 1], [0, -radius, 1], [1, 0, 0], [radius, 0, 1]], float)
+    p_inv = np.linalg.inv(projective_basis(pitch[None])[0])
+    out = []
+    for conic, ellipse in ellipse_list:
+        centre = np.array(ellipse[0])
+        minor = min(ellipse[1]) / 2
+        for line in lines:
+            if abs(line.abc[:2] @ centre + line.abc[2]) > DIAMETER_OFFSET * minor + 1.0:
+                continue
+            crossing, ok = _meet(conic, line.abc)
+            if not ok[0]:
+                continue
+            far, near = _homogeneous(crossing[0, 0]), _homogeneous(crossing[0, 1])
+            vp = np.cross(conic @ far, conic @ near)  # the tangents meet at the touchlines' vanishing point
+            seen = crossing[0, 0] + CENTRE_SAMPLES[:, None] * (crossing[0, 1] - crossing[0, 0])
+            side, ok = _meet(conic, np.cross(np.column_stack([seen, np.ones(len(seen))]), vp))
+            right = side[np.arange(len(side)), np.argmax(side[:, :, 0], axis=1)][ok]
+            img = np.stack([np.broadcast_to(far, (len(right), 3)), np.broadcast_to(near, (len(right), 3)),
+                            np.broadcast_to(vp, (len(right), 3)), np.column_stack([right, np.ones(len(right))])], axis=1)
+            out.append(projective_basis(img) @ p_inv)
+    if not out:
+        return np.zeros((0, 3, 3))
+    return front_facing(np.concatenate(out), np.array([(size[0] - 1) / 2, (size[1] - 1) / 2]))
