@@ -14,8 +14,8 @@ from ..lazy import attach
 if TYPE_CHECKING:
     from .calibrate import calibrate
     from .estimate import REASONS, CameraEstimate
+    from .first_guess import Candidate
     from .model import Camera, decompose_homography
     from .views import random_camera, render_view
-    from .first_guess import Candidate
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)
