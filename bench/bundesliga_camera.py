@@ -43,10 +43,8 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
-sys.path.insert(0, str(ROOT / "tests"))  # the template helper, until glradial.camera has its own
-import pitch_points  # noqa: E402
-
 from glradial.camera.first_guess import first_guess  # noqa: E402
+from glradial.pitch import PitchTemplate  # noqa: E402
 
 CLIPS = ("2e57b9", "42ba34")
 
@@ -99,7 +97,7 @@ def evaluate(data: Path, limit: int | None, lens_mode: str = "none") -> list[dic
     floor, whether answered, the time (ms) and, with a lens mode, the lens and its time."""
     labels = json.loads((data / "keypoints" / "keypoints.json").read_text())
     pitch = np.array([k["pitch_m"][:2] for k in labels["keypoints"]], float)
-    points, ids = pitch_points.template()
+    points, ids = PitchTemplate().sampled_points(0.25)
     rows = []
     names = sorted(labels["frames"])[:limit]
     for n, name in enumerate(names):
@@ -141,7 +139,7 @@ def summary(rows: list[dict], blur: float) -> str:
 
 def time_1080p(data: Path, blur: float) -> str:
     """The median ms of ``first_guess`` on every 10th frame at 1920x1080 and its ratio to ``blur``."""
-    points, ids = pitch_points.template()
+    points, ids = PitchTemplate().sampled_points(0.25)
     frames = []
     for path in sorted(data.glob("*.jpg"))[::10]:
         image = cv2.imread(str(path), cv2.IMREAD_COLOR)

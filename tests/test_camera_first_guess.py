@@ -9,13 +9,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-import pitch_points
 import pitch_template
 import pytest
 
 import glradial
 from glradial.camera.first_guess import Candidate, first_guess
 from glradial.camera.line_hypotheses import camera_of, template_lines
+from glradial.pitch import PitchTemplate
 
 SIZE = (1280, 720)
 #: pitch_template's homographies take corner-origin pitch coordinates; first_guess centre-spot ones.
@@ -25,7 +25,7 @@ ROAD = Path(__file__).resolve().parents[1].parent / "shared/data/road_straight_l
 
 @pytest.fixture(scope="module")
 def template():
-    return pitch_points.template()
+    return PitchTemplate().sampled_points(0.25)
 
 
 def _view(camera, target, hfov_deg, lens=None, size=SIZE):
@@ -46,7 +46,7 @@ def _project(h, points):
 
 def _keypoint_errors(found: Candidate, truth: np.ndarray, size=SIZE) -> np.ndarray:
     """Distances (px) between the keypoints in the frame by the true and the found homography."""
-    keypoints = pitch_points.keypoints()
+    keypoints = PitchTemplate().keypoints()[:, :2]
     true_xy = _project(truth, keypoints)
     inside = (true_xy[:, 0] >= 0) & (true_xy[:, 0] < size[0]) & (true_xy[:, 1] >= 0) & (true_xy[:, 1] < size[1])
     assert inside.sum() >= 4
@@ -87,7 +87,7 @@ def test_other_frame_sizes(template, size):
 def test_partial_view_of_one_box_is_answered(template):
     # tele view of the left penalty area only: no touchline, no halfway line, no circle
     frame, truth = _view(camera=(25.0, -25.0, 15.0), target=(8.0, 34.0), hfov_deg=28.0)
-    seen = _project(truth, pitch_points.keypoints())
+    seen = _project(truth, PitchTemplate().keypoints()[:, :2])
     assert not np.any((np.abs(seen[13:17, 0] - 640) < 640) & (np.abs(seen[13:17, 1] - 360) < 360))  # no halfway point
     found = first_guess(frame, *template)
     assert found
@@ -100,7 +100,7 @@ def test_partial_view_of_one_box_is_answered(template):
 ])
 def test_centre_circle_and_halfway_line_are_enough(template, view):
     frame, truth = _view(**view)
-    seen = _project(truth, pitch_points.keypoints())
+    seen = _project(truth, PitchTemplate().keypoints()[:, :2])
     inside = (np.abs(seen[:, 0] - 640) < 640) & (np.abs(seen[:, 1] - 360) < 360)
     assert set(np.flatnonzero(inside)) <= {13, 14, 15, 16, 30, 31}  # only the halfway line's points
     found = first_guess(frame, *template)

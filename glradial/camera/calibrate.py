@@ -2,8 +2,9 @@
 
 Steps: the white-line points (:mod:`glradial.camera.evidence`); first guesses, either given (plane
 homographies to the frame's undistorted pixels, best first, e.g. a dedicated first-guess search), the
-previous frame's camera (tracking a video: one start, shorter gates), or glradial's own dictionary of
-synthetic views (:mod:`glradial.camera.first_views`); each decomposed into a camera
+previous frame's camera (tracking a video: one start, shorter gates), or by default the line and
+circle hypotheses of :mod:`glradial.camera.first_guess`, with glradial's dictionary of synthetic views
+(:mod:`glradial.camera.first_views`) where that search finds nothing; each decomposed into a camera
 (:func:`glradial.camera.model.decompose_homography`) and refined (:func:`glradial.camera.refine.refine`);
 the fit with the most inliers is judged (:mod:`glradial.camera.estimate`'s doubt policy and bound).
 """
@@ -19,10 +20,13 @@ from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
 from .estimate import CameraEstimate, camera_trust
 from .evidence import WhiteLines, white_lines
+from .first_guess import first_guess as search
 from .first_views import first_views
 from .model import Camera, decompose_homography
 from .refine import Fit, refine
 
+#: Spacing (m) of the template points the first-guess search takes.
+SEARCH_STEP = 0.25
 #: Gates (px at 1280) when tracking from the previous frame's camera.
 TRACK_GATES = (15.0, 6.0, 3.0)
 #: The coarse stage (every first guess: pinhole, wide gates) and the fine stage (the best
@@ -47,13 +51,17 @@ def _check_pitch(pitch: object) -> PitchTemplate:
     return pitch
 
 
-def _starts(lines: WhiteLines, pitch: PitchTemplate, first_guess, previous) -> list[Camera]:
+def _starts(lines: WhiteLines, pitch: PitchTemplate, first_guess, previous, rgb: np.ndarray | None = None) -> list[Camera]:
     if previous is not None:
         cam = previous.camera if isinstance(previous, CameraEstimate) else previous
         if not isinstance(cam, Camera):
             raise TypeError(f"previous must be a Camera or a CameraEstimate with a camera, got {previous!r}")
         return [cam.with_size(lines.size)]
-    homographies = first_views(lines.xy, lines.size, pitch) if first_guess is None else list(first_guess)
+    if first_guess is None:
+        points, labels = pitch.sampled_points(SEARCH_STEP)
+        homographies = [c.homography for c in search(rgb, points, labels)] or first_views(lines.xy, lines.size, pitch)
+    else:
+        homographies = list(first_guess)
     cams = []
     for h in homographies:
         cam = decompose_homography(h, lines.size)
@@ -106,7 +114,8 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     ``pitch`` (default: 105 x 68 m, :class:`glradial.pitch.PitchTemplate`).
 
     ``first_guess``: plane homographies (pitch ``(x, y, 1)`` -> undistorted pixels of this frame),
-    best first, instead of glradial's own dictionary. ``previous``: the previous frame's camera (a
+    best first, instead of glradial's own search (:func:`glradial.camera.first_guess.first_guess`, then
+    the dictionary of synthetic views where it finds nothing). ``previous``: the previous frame's camera (a
     video): refined from there with shorter gates, falling back to a fresh search when that fit is
     doubtful. Never raises for a frame that shows no pitch: the estimate is then doubtful with a reason.
     """
@@ -126,7 +135,7 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
         if not tracked.doubtful:
             return tracked
     coarse = []
-    for cam in _starts(lines, pitch, first_guess, None):
+    for cam in _starts(lines, pitch, first_guess, None, rgb):
         fit = refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
                      support_xy=lines.xy, hold_position=1, max_nfev=COARSE_NFEV)
         if fit is not None:

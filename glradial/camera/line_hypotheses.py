@@ -44,15 +44,30 @@ HORIZON_MARGIN = 3.0
 MAX_QUADS, POINTING_PX, POINTING_ANGLE = 48, 2.5, 0.05
 
 
+def _longest_run(along: np.ndarray, spacing: float) -> float:
+    """Length (m) of the longest stretch of ``along`` (sorted coordinates) with no gap over two
+    spacings: how much continuous marking a set of points on one straight line makes."""
+    if len(along) < 2:
+        return 0.0
+    breaks = np.flatnonzero(np.diff(along) > 2.0 * spacing)
+    starts = np.concatenate([[0], breaks + 1])
+    stops = np.concatenate([breaks, [len(along) - 1]])
+    return float(np.max(along[stops] - along[starts]))
+
+
 def template_lines(points: np.ndarray, spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """``(xs, ys)``: the x of the template's straight lines parallel to the y axis (goal lines, box
     fronts, halfway line) and the y of those parallel to the x axis (touchlines, box sides), read from
     the template points (``M x 2``, metres, ``spacing`` apart along the markings): a value many
-    points share over a length of marking."""
+    points share over a continuous length of marking (ends of other markings that happen to share a
+    coordinate, as the circle's and the goal lines' crossings of y = 0 do, make no line)."""
     out = []
     for axis in (0, 1):
-        values, counts = np.unique(np.round(points[:, axis], 3), return_counts=True)
-        out.append(values[(counts >= TEMPLATE_LINE_POINTS) & (counts * spacing >= TEMPLATE_LINE_LENGTH)])
+        key = np.round(points[:, axis], 3)
+        values, counts = np.unique(key, return_counts=True)
+        keep = [v for v, n in zip(values, counts)
+                if n >= TEMPLATE_LINE_POINTS and _longest_run(np.sort(points[key == v, 1 - axis]), spacing) >= TEMPLATE_LINE_LENGTH]
+        out.append(np.array(keep, dtype=np.float64))
     return out[0], out[1]
 
 

@@ -140,6 +140,14 @@ class PitchTemplate:
         step = _positive("step", step)
         return [(e.label, e.sample(step)) for e in self.elements()]
 
+    def sampled_points(self, step: float = 0.25) -> tuple[np.ndarray, np.ndarray]:
+        """``(points M x 2, labels M)``: every element sampled at most ``step`` metres apart (metres,
+        pitch coordinates), one integer label per element (its index in :meth:`elements`): the form
+        :func:`glradial.camera.first_guess.first_guess` takes."""
+        lines = self.polylines(step)
+        labels = np.concatenate([np.full(len(xy), k, dtype=np.int64) for k, (_, xy) in enumerate(lines)])
+        return np.concatenate([xy for _, xy in lines]), labels
+
     def keypoints(self) -> np.ndarray:
         """The 32 keypoints (order of :data:`KEYPOINT_NAMES`), ``32 x 3`` metres with z = 0."""
         hl, hw = self.half_length, self.half_width
