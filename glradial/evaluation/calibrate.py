@@ -181,7 +181,7 @@ def _errors(records: list[Record], trust: TrustModel, method: str = "auto") -> t
 
 def fit(records: list[Record], base: TrustModel) -> TrustModel:
     """The trust model calibrated on ``records`` (module docstring, step 2); thresholds of the
-    no-evidence rules and ``doubt_px`` are kept from ``base``."""
+    no-evidence rules are kept from ``base``."""
     net_err, _, _ = _errors(records, base, "net")
     q_net = conformal_quantile(net_err)
     no_fit = np.array([r.evidence.lines is None or r.evidence.soft for r in records])  # no white-line fit
