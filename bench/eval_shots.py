@@ -97,6 +97,7 @@ def evaluate(clip: Path, estimator, sources: list[str] | None = None, own: dict[
             "k1_offset": float(np.median(track.lens[frames, 0] - truth.lens[frames, 0])),
             "joint_max_px": joint_px, "joint_sigma_px": joint.sigma_px if joint is not None else math.nan,
             "joint_stated_px": joint.uncertainty_px if joint is not None else math.nan,
+            "near_cut_max_px": float(np.max(error[frames[:3]] if shot > 0 else error[frames[-3:]])),
             "errors": error[frames].tolist(), "errors_own": max_displacement_px(track.lens[frames], with_own).tolist(), "seconds_per_frame": seconds / len(truth.shot),
         })
     return rows
@@ -110,6 +111,7 @@ def summary(rows: list[dict]) -> dict:
         "median_px": float(np.median(errors)), "p90_px": float(np.percentile(errors, 90)),
         "after_cut_median_px": float(np.median(after)) if len(after) else None,
         "after_cut_p90_px": float(np.percentile(after, 90)) if len(after) else None,
+        "near_cut_max_px": max((r["near_cut_max_px"] for r in rows if len(rows) > 1), default=None),
         "coverage": float(np.mean([r["covered"] for r in rows])),
         "doubtful": float(np.mean([r["doubtful"] for r in rows])),
         "median_stated_px": float(np.median([r["stated_px"] for r in rows])),
@@ -173,8 +175,8 @@ def main() -> None:
     used = [r for r in rows if r["clip"] in calibrate]
     report = {
         "all": summary(rows),
-        "real": summary([r for r in rows if r["group"] == "real"]),
-        "procedural": summary([r for r in rows if r["group"] == "procedural"]),
+        "real": summary([r for r in rows if r["group"] == "real"]) if any(r["group"] == "real" for r in rows) else None,
+        "procedural": summary([r for r in rows if r["group"] == "procedural"]) if any(r["group"] == "procedural" for r in rows) else None,
         "confident": summary([r for r in rows if not r["doubtful"]]) if any(not r["doubtful"] for r in rows) else None,
         "bound_scale_in_use": BOUND_SCALE, "static_bound_scale_in_use": STATIC_BOUND_SCALE,
         "calibrated_on": sorted(calibrate),

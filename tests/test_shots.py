@@ -205,9 +205,10 @@ def test_static_shot_without_lines_is_doubtful(field_panorama):
 
 def test_a_shot_takes_its_per_frame_estimates_when_they_are_surer(stadium):
     """The joint fit and the per-frame estimates (which state their own calibrated bound) both read
-    the shot; it takes whichever states the smaller bound. Estimates stating 2 px beat the fit and
-    give the shot their lens and exactly their bound; stating 200 px, they lose to it. Estimates
-    that disagree add their spread (the distance from their median to the furthest) to the bound."""
+    the shot. A static shot is never worse than its frames: it takes their median whenever that is
+    sure enough (not doubtful). Estimates stating 2 px give the shot their lens and exactly their
+    bound; stating 200 px (doubtful), they lose to the fit. Estimates that scatter further than
+    they state make their spread (the distance from their median to the furthest) the bound."""
     from glradial.estimation.lens_estimate import LensEstimate
 
     evidence, truth, _ = collect(pitch_view(stadium, 3))
@@ -227,11 +228,14 @@ def test_a_shot_takes_its_per_frame_estimates_when_they_are_surer(stadium):
     other = (-0.30, float(manifold_k2(-0.30)))
     apart = max_displacement_px(np.asarray(other), truth[0])
     split = fit_shot(stating([truth[0], other, other], 0.5))  # median: the other lens, spread: all of it
-    if 0.5 + apart < fit.uncertainty_px:
-        assert split.chains == 0 and split.uncertainty_px == pytest.approx(0.5 + apart, rel=1e-6), (split, apart)
-        assert max_displacement_px(split.lens_at(0.0), np.asarray(other)) < 1e-9
-    else:
-        assert split.chains > 0 and split.uncertainty_px < 0.5 + apart, (split, apart)
+    assert fit.static and apart > 10.0  # a static shot, its frames 15 px apart: doubtful above 10 px
+    # their median would state 15 px (doubtful): the shot weighs it against the fit as a moving shot does
+    assert split.chains > 0 and split.uncertainty_px < 0.5 + apart, (split, apart)
+    close = (-0.30 + 0.4 * (truth[0][0] + 0.30), None)  # estimates 40 % of the way: within the threshold
+    close = (close[0], float(manifold_k2(close[0])))
+    near = max_displacement_px(np.asarray(close), truth[0])
+    mixed = fit_shot(stating([truth[0], close, close], 0.5))
+    assert near < 10.0 and mixed.chains == 0 and not mixed.doubtful and mixed.uncertainty_px == pytest.approx(near, rel=1e-6)
 
 
 def test_one_frame_shot(stadium):
