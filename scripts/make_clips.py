@@ -140,10 +140,12 @@ def static_clips(data: Path, n: int, seed: int = 2, seeds: tuple[int, ...] = (23
 
 def two_shot_clips(data: Path, n: int) -> dict[str, list[ShotSpec]]:
     """Issue 35's clip from real frames: a static shot (k1 -0.5), a cut, then a 1.0 -> 1.6x zoom-in
-    whose lens follows the zoom (k1 -0.35 -> -0.10)."""
+    whose lens follows the zoom (k1 -0.35 -> -0.10); three clips, each real view once static and
+    once zoomed (``two_shot_a``: views 0 then 2, ``_b``: 1 then 0, ``_c``: 2 then 1)."""
     views = [_read(data / name) for name in VIEWS]
-    return {"two_shot": [ShotSpec(views[0], n, k1=(-0.5, -0.5)),
-                         ShotSpec(views[2], n, (0, 0, 1.0), (0, 0, 1.6), (-0.35, -0.10))]}
+    return {f"two_shot_{name}": [ShotSpec(views[a], n, k1=(-0.5, -0.5)),
+                                 ShotSpec(views[b], n, (0, 0, 1.0), (0, 0, 1.6), (-0.35, -0.10))]
+            for name, (a, b) in zip("abc", ((0, 2), (1, 0), (2, 1)))}
 
 
 def _digest(picture: np.ndarray) -> str:
