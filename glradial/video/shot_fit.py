@@ -45,7 +45,7 @@ their median bound plus their spread (the furthest of them from the median: a zo
 range, or estimators that disagree), is surer than the joint fit, the shot takes it (the fit's
 chains stand in for no extra evidence there: the estimates read the same lines, through the
 single-frame fit's fuller model). A static shot (one view, one lens) takes its frames' median, stating
-their median bound (or their spread, when they scatter further than they state): it is never worse than its frames (on the real wide camera the joint fit of
+their median bound (plus their typical scatter where they scatter further than they state): it is never worse than its frames (on the real wide camera the joint fit of
 its pooled chains read 8.9 px where its frames read 5.9, docs/eval/shots.md); it falls back to the
 joint fit (whichever of the two states less) only when that median is doubtful (most frames doubtful,
 or its bound above the run's threshold). A fit that
@@ -452,17 +452,21 @@ def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometr
     (:data:`NO_GEOMETRY_PX` where they state none; never less for being many: they read the same
     picture) plus their spread (the largest maximum displacement between the median and any of
     them: a zooming lens's range, or estimators that disagree); for a ``static`` shot (one view, one
-    lens) the larger of their median bound and their spread: each estimate's bound is calibrated to
-    cover it 90 % of the time and their median is at least as close as the typical one (their
-    scatter within their bounds is noise the median removes, not a range of lenses), unless they
-    scatter further than they state. Doubtful (reason ``why``) when that bound exceeds
+    lens) their median bound: each estimate's bound is calibrated to cover it 90 % of the time and
+    their median is at least as close as the typical one (their scatter within their bounds is noise
+    the median removes, not a range of lenses; one estimate far out does not move the median), plus
+    their typical scatter (the median distance from their median) where that exceeds what they state. Doubtful (reason ``why``) when that bound exceeds
     ``doubtful_px``, or (reason theirs) when most per-frame estimates say they are doubtful."""
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     k = np.median([[e.k1, e.k2] for e in estimates], axis=0) if estimates else np.zeros(2)
     stated = [float(getattr(e, "uncertainty_px", NO_GEOMETRY_PX)) for e in estimates]
-    spread = float(np.max(max_displacement_px(np.array([[e.k1, e.k2] for e in estimates]), k))) if estimates else 0.0
+    distances = max_displacement_px(np.array([[e.k1, e.k2] for e in estimates]), k) if estimates else np.zeros(1)
     median = float(np.median(stated)) if stated else NO_GEOMETRY_PX
-    bound = max(median, spread) if static and estimates else median + spread
+    if static and estimates:  # their typical scatter, when it exceeds what they state, adds to it
+        scatter = float(np.median(distances))
+        bound = median if scatter <= median else median + scatter
+    else:
+        bound = median + float(np.max(distances))
     theirs = [str(getattr(e, "reason", "") or "doubtful") for e in estimates if getattr(e, "doubtful", False)]
     reason = why if not bound <= doubtful_px else ""
     if 2 * len(theirs) > len(estimates):
