@@ -84,7 +84,8 @@ def evaluate(clip: Path, estimator, sources: list[str] | None = None, own: dict[
         read, joint, sampled, zoom, kind = fits[int(np.bincount(track.shot[frames]).argmax())]
         joint_px = math.nan
         if joint is not None:
-            joint_px = float(np.max(max_displacement_px(joint.lens_at(np.interp(frames, sampled, zoom)), truth.lens[frames])))
+            joint_px = float(np.max(max_displacement_px(joint.lens_at(shot_track._log_zoom_at(frames, sampled, zoom)),
+                                                        truth.lens[frames])))
         stated = float(np.max(track.uncertainty_px[frames]))
         reasons = sorted({track.reason[i] for i in frames if track.reason[i]})
         rows.append({

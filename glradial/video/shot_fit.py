@@ -112,7 +112,7 @@ K1_GRID = np.arange(-1.0, 0.4 + 1e-9, 0.05)
 #: calibrated multiplier from the 1-sigma displacement (redundancy-corrected) to the 90 % bound, and
 #: the floor added to it (px at 1920): the error of a frame's own residual distortion and of the
 #: model (see the module docstring and docs/eval/shots.md)
-BOUND_SCALE = 0.98
+BOUND_SCALE = 1.02
 BOUND_FLOOR_PX = 1.0
 #: the same multiplier for a static shot (not zooming, panned less than :data:`PAN_MIN`), calibrated
 #: apart (docs/eval/shots.md, "The bound"): its lens rests on the lines of one view alone, a
