@@ -254,7 +254,7 @@ def _lens(k1: float) -> tuple[float, float]:
 
 
 def test_reasons_follow_the_rules():
-    trust = TrustModel(q_lines=1.0, q_net=30.0, q_no_lines=50.0, floor_px=2.0, sigma_weight=1.0, disagree_weight=0.0,
+    trust = TrustModel(q_lines=1.0, q_net=30.0, q_no_lines=80.0, floor_px=2.0, sigma_weight=1.0, disagree_weight=0.0,
                        disagree_max_px=20.0, green_min=0.25, blank_std=2.0, noise_edge_density=0.12)
     pitch = dict(green=0.6, gray_std=40.0, edge_density=0.05, grass=0.5, grass_width=1.0)
     near = _lens(-0.20)
@@ -262,7 +262,7 @@ def test_reasons_follow_the_rules():
         (FrameEvidence(near, **{**pitch, "gray_std": 0.5}), "blank_frame"),
         (FrameEvidence(near, **{**pitch, "edge_density": 0.3}), "noise_frame"),
         (FrameEvidence(near, **{**pitch, "grass": 0.02}), "not_a_pitch"),  # a tuft of green
-        (FrameEvidence(near, **pitch), "too_few_lines"),
+        (FrameEvidence(near, **pitch), "too_few_lines"),  # the CNN alone: its 80 px bound reaches its 69 px of lens
         (FrameEvidence(near, (0.1, 0.0), 3.0, 6, 6, **pitch), "evidence_disagrees"),
         (FrameEvidence(near, near, 26.0, 2, 3, **pitch), "ok"),  # bound 26.1 < 69 px of lens: correcting helps
         (FrameEvidence(near, near, 3.0, 6, 6, **pitch), "ok"),
@@ -270,7 +270,9 @@ def test_reasons_follow_the_rules():
     for evidence, reason in cases:
         e = judge(evidence, "auto", trust)
         assert e.reason == reason and e.doubtful == (reason != "ok"), (reason, e)
-    assert judge(cases[3][0], "auto", trust).uncertainty_px == 50.0  # a line fit sought, none found
+    assert judge(cases[3][0], "auto", trust).uncertainty_px == 80.0  # a line fit sought, none found
+    strong = judge(FrameEvidence(_lens(-0.45), **pitch), "auto", trust)  # 145 px of lens, bound 80: it helps
+    assert strong.method == "net" and strong.reason == "ok" and strong.uncertainty_px == 80.0
     net = judge(cases[3][0], "net", trust)  # the CNN alone: q_net 30 px < the answer's own 69 px: it helps
     assert net.uncertainty_px == 30.0 and net.reason == "ok"
     weak_net = judge(replace(cases[3][0], net=_lens(-0.05)), "net", trust)  # 30 px bound, 18 px of lens

@@ -31,9 +31,10 @@ estimate is doubtful when correcting with it cannot be shown to help.
     of a pitch, :meth:`TrustModel.is_pitch`: one wide region of one pitch green reaching the lower
     part of the view, any share of it; or a narrower one with painted lines on it), ``too_few_lines``
     (neither a white-line fit of at least two agreeing chains nor a soft-edge fit: the answer is
-    the CNN's alone). A soft-edge fit is evidence: its frame is judged by benefit like a white-line
-    fit's, with its own calibrated bound (``q_soft``), whichever answer (the fit's or the CNN's)
-    states less.
+    the CNN's alone, and its own calibrated bound, ``q_no_lines_rel`` times its error head's
+    expected error, reaches the uncorrected frame; where it does not, the CNN's answer is applied).
+    A soft-edge fit is evidence: its frame is judged by benefit like a white-line fit's, with its
+    own calibrated bound (``q_soft``), whichever answer (the fit's or the CNN's) states less.
     The bound reaches the uncorrected frame: ``evidence_disagrees`` (the line fit and the CNN are
     more than ``disagree_max_px`` apart, and the answer not taken is at least that far from the
     identity lens: were it the truth, correcting would not help), ``weak_geometry`` (the identity lens
@@ -326,8 +327,9 @@ class TrustModel:
         empty = self.no_evidence(evidence)
         if empty is not None:
             return lens, source, max(bound, anything_bound(lens)), True, empty
-        if method != "net" and evidence.lines is None:  # no line evidence at all: the CNN alone
-            return lens, source, bound, True, "too_few_lines"
+        if method != "net" and evidence.lines is None:  # no line evidence: the CNN alone, by its own bound
+            doubtful = not bound < shift_px(lens)
+            return lens, source, bound, doubtful, "too_few_lines" if doubtful else "ok"
         reason = benefit_doubt(lens, bound, evidence, other_answer=method != "net", disagree_max_px=self.disagree_max_px)
         return lens, source, bound, reason != "ok", reason
 
