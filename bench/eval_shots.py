@@ -183,11 +183,15 @@ def main() -> None:
         "calibrated_on": sorted(calibrate),
         "bound_scale_needed": conformal_scale([r for r in used if r["kind"] != "static"]) if used else None,
         "static_bound_scale_needed": conformal_scale([r for r in used if r["kind"] == "static"]) if used else None,
+        "clips": {clip: summary([r for r in rows if r["clip"] == clip]) for clip in sorted({r["clip"] for r in rows})},
         "pictures": by_picture(rows, own),
         "shots": [{k: v for k, v in r.items() if k not in ("errors", "errors_own")} for r in rows],
     }
     for key in ("all", "real", "procedural", "confident"):
         print(key, json.dumps(report[key]))
+    for clip, entry in report["clips"].items():
+        print(f"clip {clip}: median {entry['median_px']:.2f} p90 {entry['p90_px']:.2f} px, "
+              f"within three frames of a cut {entry['near_cut_max_px']:.2f} px at most")
     for entry in report["pictures"]:
         print(json.dumps(entry))
     if used:
