@@ -28,23 +28,25 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 from unittest import mock
 
 import numpy as np
 
-from glradial.lens.metrics import max_displacement_px
-from glradial.video import shot_track
-from glradial.video.clips import read_truth
-from glradial.video.shot_fit import (
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's glradial, not an installed one
+from glradial.lens.metrics import max_displacement_px  # noqa: E402
+from glradial.video import shot_track  # noqa: E402
+from glradial.video.clips import read_truth  # noqa: E402
+from glradial.video.shot_fit import (  # noqa: E402
     BOUND_FLOOR_PX,
     BOUND_SCALE,
     STATIC_BOUND_SCALE,
     fit_shot,
     joint_fit,
 )
-from glradial.video.video_pipeline import default_estimator, track_video
+from glradial.video.video_pipeline import default_estimator, track_video  # noqa: E402
 
 #: the bound's target coverage (per shot)
 COVERAGE = 0.9

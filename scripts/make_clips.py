@@ -19,12 +19,14 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from glradial.video.clips import ShotSpec, render_clip, write_clip
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's glradial, not an installed one
+from glradial.video.clips import ShotSpec, render_clip, write_clip  # noqa: E402
 
 SIZE = (640, 360)
 
