@@ -223,6 +223,7 @@ def _off_domain_frames() -> dict[str, np.ndarray]:
     if shutil.which("ffmpeg"):
         frames["testsrc2"] = ffmpeg_frame("testsrc2")
         frames["mandelbrot"] = ffmpeg_frame("mandelbrot")
+        frames["smptehdbars"] = ffmpeg_frame("smptehdbars")  # a full-height green bar: narrow, not grass
     return frames
 
 
