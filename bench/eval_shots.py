@@ -28,23 +28,25 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from pathlib import Path
 from unittest import mock
 
 import numpy as np
 
-from glradial.lens.metrics import max_displacement_px
-from glradial.video import shot_track
-from glradial.video.clips import read_truth
-from glradial.video.shot_fit import (
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's glradial, not an installed one
+from glradial.lens.metrics import max_displacement_px  # noqa: E402
+from glradial.video import shot_track  # noqa: E402
+from glradial.video.clips import read_truth  # noqa: E402
+from glradial.video.shot_fit import (  # noqa: E402
     BOUND_FLOOR_PX,
     BOUND_SCALE,
     STATIC_BOUND_SCALE,
     fit_shot,
     joint_fit,
 )
-from glradial.video.video_pipeline import default_estimator, track_video
+from glradial.video.video_pipeline import default_estimator, track_video  # noqa: E402
 
 #: the bound's target coverage (per shot)
 COVERAGE = 0.9
@@ -84,7 +86,8 @@ def evaluate(clip: Path, estimator, sources: list[str] | None = None, own: dict[
         read, joint, sampled, zoom, kind = fits[int(np.bincount(track.shot[frames]).argmax())]
         joint_px = math.nan
         if joint is not None:
-            joint_px = float(np.max(max_displacement_px(joint.lens_at(np.interp(frames, sampled, zoom)), truth.lens[frames])))
+            joint_px = float(np.max(max_displacement_px(joint.lens_at(shot_track._log_zoom_at(frames, sampled, zoom)),
+                                                        truth.lens[frames])))
         stated = float(np.max(track.uncertainty_px[frames]))
         reasons = sorted({track.reason[i] for i in frames if track.reason[i]})
         rows.append({
@@ -97,6 +100,7 @@ def evaluate(clip: Path, estimator, sources: list[str] | None = None, own: dict[
             "k1_offset": float(np.median(track.lens[frames, 0] - truth.lens[frames, 0])),
             "joint_max_px": joint_px, "joint_sigma_px": joint.sigma_px if joint is not None else math.nan,
             "joint_stated_px": joint.uncertainty_px if joint is not None else math.nan,
+            "near_cut_max_px": float(np.max(error[frames[:3]] if shot > 0 else error[frames[-3:]])),
             "errors": error[frames].tolist(), "errors_own": max_displacement_px(track.lens[frames], with_own).tolist(), "seconds_per_frame": seconds / len(truth.shot),
         })
     return rows
@@ -110,6 +114,7 @@ def summary(rows: list[dict]) -> dict:
         "median_px": float(np.median(errors)), "p90_px": float(np.percentile(errors, 90)),
         "after_cut_median_px": float(np.median(after)) if len(after) else None,
         "after_cut_p90_px": float(np.percentile(after, 90)) if len(after) else None,
+        "near_cut_max_px": max((r["near_cut_max_px"] for r in rows if len(rows) > 1), default=None),
         "coverage": float(np.mean([r["covered"] for r in rows])),
         "doubtful": float(np.mean([r["doubtful"] for r in rows])),
         "median_stated_px": float(np.median([r["stated_px"] for r in rows])),
@@ -173,18 +178,22 @@ def main() -> None:
     used = [r for r in rows if r["clip"] in calibrate]
     report = {
         "all": summary(rows),
-        "real": summary([r for r in rows if r["group"] == "real"]),
-        "procedural": summary([r for r in rows if r["group"] == "procedural"]),
+        "real": summary([r for r in rows if r["group"] == "real"]) if any(r["group"] == "real" for r in rows) else None,
+        "procedural": summary([r for r in rows if r["group"] == "procedural"]) if any(r["group"] == "procedural" for r in rows) else None,
         "confident": summary([r for r in rows if not r["doubtful"]]) if any(not r["doubtful"] for r in rows) else None,
         "bound_scale_in_use": BOUND_SCALE, "static_bound_scale_in_use": STATIC_BOUND_SCALE,
         "calibrated_on": sorted(calibrate),
         "bound_scale_needed": conformal_scale([r for r in used if r["kind"] != "static"]) if used else None,
         "static_bound_scale_needed": conformal_scale([r for r in used if r["kind"] == "static"]) if used else None,
+        "clips": {clip: summary([r for r in rows if r["clip"] == clip]) for clip in sorted({r["clip"] for r in rows})},
         "pictures": by_picture(rows, own),
         "shots": [{k: v for k, v in r.items() if k not in ("errors", "errors_own")} for r in rows],
     }
     for key in ("all", "real", "procedural", "confident"):
         print(key, json.dumps(report[key]))
+    for clip, entry in report["clips"].items():
+        print(f"clip {clip}: median {entry['median_px']:.2f} p90 {entry['p90_px']:.2f} px, "
+              f"within three frames of a cut {entry['near_cut_max_px']:.2f} px at most")
     for entry in report["pictures"]:
         print(json.dumps(entry))
     if used:

@@ -7,9 +7,10 @@ panorama of ``../shared/data/real_football/`` (rendered pinhole views, though th
 at k1 -0.025/+0.028/+0.012, docs/eval/shots.md, and an equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
 
 Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--frames 50]
-[--set main|check|static]`` (``check``: held-out clips, other lenses and paths, other stadiums;
+[--set main|check|static|twoshot]`` (``check``: held-out clips, other lenses and paths, other stadiums;
 ``static``: static shots only, more calibration shots for the static shots' bound, see
-``bench/eval_shots.py``); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
+``bench/eval_shots.py``; ``twoshot``: one clip, a static shot, a cut and a zoom whose lens follows
+it, over real frames); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
 of each shot) and the clips.
 """
 
@@ -18,12 +19,14 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from glradial.video.clips import ShotSpec, render_clip, write_clip
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's glradial, not an installed one
+from glradial.video.clips import ShotSpec, render_clip, write_clip  # noqa: E402
 
 SIZE = (640, 360)
 
@@ -137,6 +140,16 @@ def static_clips(data: Path, n: int, seed: int = 2, seeds: tuple[int, ...] = (23
     return clips
 
 
+def two_shot_clips(data: Path, n: int) -> dict[str, list[ShotSpec]]:
+    """Issue 35's clip from real frames: a static shot (k1 -0.5), a cut, then a 1.0 -> 1.6x zoom-in
+    whose lens follows the zoom (k1 -0.35 -> -0.10); three clips, each real view once static and
+    once zoomed (``two_shot_a``: views 0 then 2, ``_b``: 1 then 0, ``_c``: 2 then 1)."""
+    views = [_read(data / name) for name in VIEWS]
+    return {f"two_shot_{name}": [ShotSpec(views[a], n, k1=(-0.5, -0.5)),
+                                 ShotSpec(views[b], n, (0, 0, 1.0), (0, 0, 1.6), (-0.35, -0.10))]
+            for name, (a, b) in zip("abc", ((0, 2), (1, 0), (2, 1)))}
+
+
 def _digest(picture: np.ndarray) -> str:
     return hashlib.sha1(np.ascontiguousarray(picture).tobytes()).hexdigest()
 
@@ -146,14 +159,17 @@ def main() -> None:
     parser.add_argument("out", type=Path)
     parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/real_football")
     parser.add_argument("--frames", type=int, default=50, help="frames per shot (default 50: 2 s)")
-    parser.add_argument("--set", choices=("main", "check", "static"), default="main",
+    parser.add_argument("--set", choices=("main", "check", "static", "twoshot"), default="main",
                         help="main: the calibration and report clips; check: held-out real clips and other stadiums; "
-                             "static: static shots only, more calibration shots for the static shots' bound")
+                             "static: static shots only, more calibration shots for the static shots' bound; "
+                             "twoshot: a static shot, a cut and a zoom over real frames (issue 35)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     manifest = {}
     if args.set == "main":
         sets = (("real", real_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames)))
+    elif args.set == "twoshot":
+        sets = (("real", two_shot_clips(args.data, args.frames)),)
     elif args.set == "check":
         sets = (("real", check_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames, (5, 17))))
     else:

@@ -22,7 +22,7 @@ from glradial.estimation import lens_estimate
 from glradial.estimation.line_fit import fit_lines
 from glradial.estimation.lines import detect_chains
 from glradial.estimation.soft_lines import SOFT_WIDTH, detect_soft_chains, fit_soft_lines, soft_gray
-from glradial.estimation.trust import FrameEvidence, shipped_trust
+from glradial.estimation.trust import FrameEvidence, ViewFeatures, shipped_trust
 from glradial.lens.metrics import manifold_k2, max_displacement_px
 
 SIZE = (1280, 720)
@@ -85,7 +85,10 @@ def test_blurred_stripes_are_read_from_their_vanishing_point(pose, k1):
 @pytest.mark.parametrize("pose", POSES, ids=["across", "oblique"])
 def test_stripes_through_the_estimator_are_within_the_bound_or_doubtful(pose):
     """The whole estimator on the stripe scenes: the stated 90 % bound covers the real error, or
-    the estimate is doubtful (it never claims an accuracy it does not have)."""
+    the estimate is doubtful (it never claims an accuracy it does not have). Doubt is not the
+    answer to everything: under the strong barrel (k1 -0.5, about 150 px at the corner) the soft fit
+    reads the lens within 1 px and its bound (14-17 px) is far from the uncorrected frame, so the
+    frame is corrected (doubt by benefit)."""
     for k1 in (-0.5, 0.15):
         truth = np.array([k1, float(manifold_k2(k1))])
         frame = distorted(stripes(homography(*pose, SIZE)), *truth)
@@ -93,6 +96,8 @@ def test_stripes_through_the_estimator_are_within_the_bound_or_doubtful(pose):
         error = float(max_displacement_px(np.array([estimate.k1, estimate.k2]), truth))
         assert math.isfinite(estimate.uncertainty_px)
         assert estimate.doubtful or error <= estimate.uncertainty_px, (estimate, error)
+        if k1 < 0:
+            assert not estimate.doubtful and estimate.reason == "ok" and error <= estimate.uncertainty_px, (estimate, error)
 
 
 @pytest.mark.parametrize("sagitta", [40.0, 150.0])
@@ -118,7 +123,7 @@ def test_the_soft_detector_runs_only_where_white_lines_give_no_fit(monkeypatch):
 
     monkeypatch.setattr(soft_lines, "fit_soft_lines", forbidden)
     frame = distorted(render(homography((40.0, -35.0, 18.0), (14.0, 30.0), 50.0, SIZE), SIZE), -0.3, 0.09)
-    evidence = lens_estimate.frame_evidence(frame, (-0.25, 0.06), (0.5, 40.0))
+    evidence = lens_estimate.frame_evidence(frame, (-0.25, 0.06), ViewFeatures(0.5, 40.0, 0.5, 1.0))
     assert evidence.lines is not None and not evidence.soft
 
 

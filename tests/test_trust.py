@@ -12,6 +12,7 @@ import shutil
 import subprocess
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -204,6 +205,7 @@ def test_pitch_templates_with_little_geometry_are_read_within_their_bound_or_dou
             assert est.doubtful and est.reason == "too_few_lines"
         if name == "two parallel lines":  # two long lines near the frame edge pin k1 (measured 0.3 px)
             assert est.method == "lines" and error_px(est, k) < 2.0
+            assert not est.doubtful and est.reason == "ok"  # doubt does not fire where the lines read the lens
 
 
 # -- doubt -------------------------------------------------------------------------------------------
@@ -221,6 +223,7 @@ def _off_domain_frames() -> dict[str, np.ndarray]:
     if shutil.which("ffmpeg"):
         frames["testsrc2"] = ffmpeg_frame("testsrc2")
         frames["mandelbrot"] = ffmpeg_frame("mandelbrot")
+        frames["smptehdbars"] = ffmpeg_frame("smptehdbars")  # a full-height green bar: narrow, not grass
     return frames
 
 
@@ -247,29 +250,35 @@ def test_off_domain_and_degenerate_frames_are_doubtful_or_covered_never_nan(meth
             assert e.reason == "blank_frame"
 
 
+def _lens(k1: float) -> tuple[float, float]:
+    return (k1, float(manifold_k2(k1)))
+
+
 def test_reasons_follow_the_rules():
-    trust = TrustModel(q_lines=1.0, q_net=30.0, q_no_lines=50.0, floor_px=2.0, sigma_weight=1.0, disagree_weight=0.0,
-                       disagree_max_px=20.0, doubt_px=25.0, green_min=0.25, blank_std=2.0, noise_edge_density=0.12)
-    pitch = dict(green=0.6, gray_std=40.0, edge_density=0.05)
-    near = (-0.20, float(manifold_k2(-0.20)))
+    trust = TrustModel(q_lines=1.0, q_net=30.0, q_no_lines=80.0, floor_px=2.0, sigma_weight=1.0, disagree_weight=0.0,
+                       disagree_max_px=20.0, green_min=0.25, blank_std=2.0, noise_edge_density=0.12)
+    pitch = dict(green=0.6, gray_std=40.0, edge_density=0.05, grass=0.5, grass_width=1.0)
+    near = _lens(-0.20)
     cases = [
         (FrameEvidence(near, **{**pitch, "gray_std": 0.5}), "blank_frame"),
         (FrameEvidence(near, **{**pitch, "edge_density": 0.3}), "noise_frame"),
-        (FrameEvidence(near, **{**pitch, "green": 0.1}), "not_a_pitch"),
-        (FrameEvidence(near, **pitch), "too_few_lines"),
+        (FrameEvidence(near, **{**pitch, "grass": 0.02}), "not_a_pitch"),  # a tuft of green
+        (FrameEvidence(near, **pitch), "too_few_lines"),  # the CNN alone: its 80 px bound reaches its 69 px of lens
         (FrameEvidence(near, (0.1, 0.0), 3.0, 6, 6, **pitch), "evidence_disagrees"),
-        (FrameEvidence(near, near, 26.0, 2, 3, **pitch), "weak_geometry"),  # lines (26.1 < 30) but above 25
+        (FrameEvidence(near, near, 26.0, 2, 3, **pitch), "ok"),  # bound 26.1 < 69 px of lens: correcting helps
         (FrameEvidence(near, near, 3.0, 6, 6, **pitch), "ok"),
     ]
     for evidence, reason in cases:
         e = judge(evidence, "auto", trust)
         assert e.reason == reason and e.doubtful == (reason != "ok"), (reason, e)
-    assert judge(cases[3][0], "auto", trust).uncertainty_px == 50.0  # a line fit sought, none found
-    net = judge(cases[3][0], "net", trust)  # the CNN alone: q_net, and here q_net (30) > doubt_px (25)
-    assert net.uncertainty_px == 30.0 and net.reason == "weak_geometry"
+    assert judge(cases[3][0], "auto", trust).uncertainty_px == 80.0  # a line fit sought, none found
+    strong = judge(FrameEvidence(_lens(-0.45), **pitch), "auto", trust)  # 145 px of lens, bound 80: it helps
+    assert strong.method == "net" and strong.reason == "ok" and strong.uncertainty_px == 80.0
+    net = judge(cases[3][0], "net", trust)  # the CNN alone: q_net 30 px < the answer's own 69 px: it helps
+    assert net.uncertainty_px == 30.0 and net.reason == "ok"
+    weak_net = judge(replace(cases[3][0], net=_lens(-0.05)), "net", trust)  # 30 px bound, 18 px of lens
+    assert weak_net.doubtful and weak_net.reason == "weak_geometry"
     # with the error head calibrated, the CNN's bound scales with its own expected error
-    from dataclasses import replace
-
     scaled = replace(trust, q_net_rel=2.0, q_no_lines_rel=3.0)
     own = replace(cases[3][0], net_error_px=6.0)
     assert judge(own, "net", scaled).uncertainty_px == 12.0 and judge(own, "auto", scaled).uncertainty_px == 18.0
@@ -284,15 +293,69 @@ def test_reasons_follow_the_rules():
     assert blank.uncertainty_px == pytest.approx(worst) and worst > 150.0
 
 
+def test_doubt_by_benefit_known_answers():
+    """Doubtful exactly when the identity lens lies within the stated bound of the answer (or the
+    other reading, were it true, would not be helped): the answer's own displacement is the
+    analytic maximum over the 16:9 radius of ``|k1 r^3 + k2 r^5|``, px at 1920."""
+    trust = TrustModel(q_lines=1.0, q_net=1000.0, q_no_lines=1000.0, floor_px=0.0, sigma_weight=1.0, disagree_weight=0.0,
+                       disagree_max_px=42.0, green_min=0.25, blank_std=2.0, noise_edge_density=0.12)
+    pitch = dict(green=0.3, gray_std=40.0, edge_density=0.05, grass=0.2, grass_width=1.0)
+    r = np.linspace(0.0, CORNER_RADIUS_16_9, 20001)
+    for k1, sigma in [(-0.7, 12.0), (-0.7, 150.0), (-0.02, 5.0), (-0.02, 9.0), (-0.3, 20.0), (0.2, 40.0), (0.2, 80.0)]:
+        k = _lens(k1)
+        shift = float(np.max(np.abs(k[0] * r**3 + k[1] * r**5))) * REPORT_WIDTH
+        e = judge(FrameEvidence(k, k, sigma, 8, 8, **pitch), "auto", trust)
+        assert e.uncertainty_px == pytest.approx(sigma)
+        assert e.doubtful == (sigma >= shift) and e.reason == ("weak_geometry" if sigma >= shift else "ok"), (k1, sigma, shift, e)
+    # a 200 px barrel read 12 px off is corrected
+    strong = judge(FrameEvidence(_lens(-0.6), _lens(-0.7), 12.0, 8, 8, **pitch), "auto", trust)
+    assert not strong.doubtful and strong.reason == "ok"
+    # the line fit and the CNN 64 px apart (> 42): both strong barrels, so correcting with the lines
+    # helps even if the CNN (145 px of lens) were right; a CNN near pinhole makes it doubtful
+    both = FrameEvidence(_lens(-0.45), _lens(-0.7), 12.0, 8, 8, **pitch)
+    assert both.disagreement_px > 42.0 and judge(both, "auto", trust).reason == "ok"
+    pinhole = replace(both, net=_lens(-0.05))
+    assert judge(pinhole, "auto", trust).reason == "evidence_disagrees"
+
+
+def test_a_pitch_is_its_grass_region_not_its_share_of_the_frame():
+    trust = shipped_trust()
+    base = dict(gray_std=40.0, edge_density=0.05)
+    lines = dict(lines=_lens(-0.3), sigma_px=3.0, chains=6, candidates=6)
+    # a wide view: one pitch green over 12 % of the view (under 25 %), spanning it: a pitch
+    assert trust.is_pitch(FrameEvidence(_lens(-0.3), green=0.12, grass=0.12, grass_width=1.0, **base))
+    # a narrow green region (a colour bar, roadside grass): a pitch only with painted lines on it
+    narrow = FrameEvidence(_lens(-0.3), green=0.15, grass=0.15, grass_width=0.45, **base)
+    assert not trust.is_pitch(narrow)
+    assert not trust.is_pitch(replace(narrow, **lines))  # lines without a vanishing-point family
+    assert trust.is_pitch(replace(narrow, **lines, families=1))
+    assert not trust.is_pitch(replace(narrow, grass_width=0.2, **lines, families=1))
+    # records made before the grass region was measured keep the older rule
+    assert trust.is_pitch(FrameEvidence(_lens(-0.3), green=0.3)) and not trust.is_pitch(FrameEvidence(_lens(-0.3), green=0.1))
+
+
 def test_view_features_tell_a_pitch_from_test_patterns():
     rng = np.random.default_rng(1)
     pitch = np.clip(rng.normal(0, 8, (216, 384, 3)) + np.array(GRASS), 0, 255).astype(np.uint8)
-    green, std = view_features(pitch)
-    assert green > 0.7 and 5.0 < std < 15.0
+    features = view_features(pitch)
+    assert features.green > 0.7 and 5.0 < features.gray_std < 15.0
+    assert features.grass > 0.9 and features.grass_width == 1.0
     bars = np.zeros((216, 384, 3), np.uint8)  # seven colour bars: one green bar of seven
     for i, colour in enumerate([(255, 255, 255), (255, 255, 0), (0, 255, 255), (0, 255, 0), (255, 0, 255), (255, 0, 0), (0, 0, 255)]):
         bars[:, i * 384 // 7:(i + 1) * 384 // 7] = colour
-    assert view_features(bars)[0] < 0.25 and view_features(np.zeros_like(bars))[1] == 0.0
+    assert view_features(bars).green < 0.25 and view_features(np.zeros_like(bars)).gray_std == 0.0
+    assert view_features(bars).grass_width < 0.2  # the green bar: one seventh of the width
+    # a wide view: sky and stands over the upper 85 %, a strip of grass with a white line below
+    wide = np.full((216, 384, 3), (120, 150, 200), np.uint8)
+    wide[184:] = GRASS
+    wide[200:203] = WHITE
+    features = view_features(wide)
+    assert features.green < 0.25 and features.grass == pytest.approx(32 * 384 / wide[..., 0].size, rel=0.05)
+    assert features.grass_width == 1.0
+    # grass only at the top (a tree line over a road): not the grass of a pitch
+    trees = np.full((216, 384, 3), (90, 90, 90), np.uint8)
+    trees[:60] = GRASS
+    assert view_features(trees).grass == 0.0
 
 
 # -- the doubt policy ------------------------------------------------------------------------------------

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..lens.lens import Lens, real_number
 from ..lens.options import METHODS, SOURCES
-from .trust import REASONS, FrameEvidence, TrustModel, shipped_trust
+from .trust import REASONS, FrameEvidence, TrustModel, ViewFeatures, shipped_trust
 
 #: The default ``uncertainty_px`` of a bare LensEstimate: no evidence of the bound (px at 1920).
 NO_EVIDENCE_UNCERTAINTY_PX = 60.0
@@ -83,19 +83,19 @@ def check_method(method: object) -> str:
     return method
 
 
-def frame_evidence(frame: np.ndarray, net: tuple[float, float], view_features: tuple[float, float],
+def frame_evidence(frame: np.ndarray, net: tuple[float, float], view_features: ViewFeatures,
                    lines: bool = True, net_error_px: float | None = None) -> FrameEvidence:
     """The :class:`glradial.estimation.trust.FrameEvidence` of the uint8 RGB ``frame``: the CNN's ``net``
-    ``(k1, k2)`` (frame geometry), the ``(green, gray_std)`` of its 16:9 view
-    (:func:`glradial.estimation.trust.view_features`) and, with ``lines``, its line fit (pieces linked with the
+    ``(k1, k2)`` (frame geometry), the features of its 16:9 view
+    (:func:`glradial.estimation.trust.view_features`: green share, grey spread, grass region) and, with ``lines``, its line fit (pieces linked with the
     CNN's lens as the hint, the CNN's k1 as the prior; where it gives no fit on a soft frame, the soft-edge
     fit of :mod:`glradial.estimation.soft_lines`, marked ``soft``); ``net_error_px``: the network's own expected
     error, when its model has an error head."""
-    green, gray_std = view_features
+    green, gray_std, grass, grass_width = view_features
     net = (float(net[0]), float(net[1]))
     net_error = None if net_error_px is None else float(net_error_px)
     if not lines:
-        return FrameEvidence(net, green=green, gray_std=gray_std, net_error_px=net_error)
+        return FrameEvidence(net, green=green, gray_std=gray_std, net_error_px=net_error, grass=grass, grass_width=grass_width)
     from . import soft_lines
     from .line_fit import fit_lines
     from .lines import detect_chains
@@ -112,7 +112,7 @@ def frame_evidence(frame: np.ndarray, net: tuple[float, float], view_features: t
                          float(fit.sigma_px) if usable else math.inf, int(fit.chains) if usable else 0,
                          int(fit.candidates), green, gray_std, float(evidence.edge_density), net_error,
                          float(fit.rms_px), int(fit.families), int(fit.conics), float(fit.reach),
-                         float(fit.difficulty) if usable else math.inf, soft)
+                         float(fit.difficulty) if usable else math.inf, soft, grass, grass_width)
 
 
 def judge(evidence: FrameEvidence, method: str, trust: TrustModel | None = None) -> LensEstimate:

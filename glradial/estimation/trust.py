@@ -24,13 +24,24 @@ Bound (split conformal):
     checked on the others by :mod:`glradial.evaluation.calibrate` (``python -m glradial.evaluation.calibrate``), which writes
     them to ``glradial/data/trust.json`` (loaded here; docs/LINES.md, "Confidence").
 
-Doubt (:attr:`glradial.LensEstimate.reason`, first match wins; :data:`REASONS`):
-    ``blank_frame`` (grey std below ``blank_std``), ``noise_frame`` (no line fit and more than
-    ``noise_edge_density`` of the pixels are edges), ``not_a_pitch`` (less than ``green_min`` of the
-    16:9 view is pitch green), ``too_few_lines`` (no white-line fit of at least two agreeing chains:
-    the answer is the CNN's, or a soft-edge fit's where its bound is lower; always doubtful, since on
-    the real panorama crops that have one soft fits err by 5-70 px), ``evidence_disagrees`` (the line fit and the CNN are more than
-    ``disagree_max_px`` apart), ``weak_geometry`` (the bound exceeds ``doubt_px``); else ``ok``.
+Doubt by benefit (:attr:`glradial.LensEstimate.reason`, first match wins; :data:`REASONS`): an
+estimate is doubtful when correcting with it cannot be shown to help.
+    No usable evidence: ``blank_frame`` (grey std below ``blank_std``), ``noise_frame`` (no line fit
+    and more than ``noise_edge_density`` of the pixels are edges), ``not_a_pitch`` (no grass region
+    of a pitch, :meth:`TrustModel.is_pitch`: one wide region of one pitch green reaching the lower
+    part of the view, any share of it; or a narrower one with painted lines on it), ``too_few_lines``
+    (neither a white-line fit of at least two agreeing chains nor a soft-edge fit: the answer is
+    the CNN's alone, and its own calibrated bound, ``q_no_lines_rel`` times its error head's
+    expected error, reaches the uncorrected frame; where it does not, the CNN's answer is applied).
+    A soft-edge fit is evidence: its frame is judged by benefit like a white-line fit's, with its
+    own calibrated bound (``q_soft``), whichever answer (the fit's or the CNN's) states less.
+    The bound reaches the uncorrected frame: ``evidence_disagrees`` (the line fit and the CNN are
+    more than ``disagree_max_px`` apart, and the answer not taken is at least that far from the
+    identity lens: were it the truth, correcting would not help), ``weak_geometry`` (the identity lens
+    lies within the stated bound of the answer: ``uncertainty_px`` at least the answer's own maximum
+    displacement, :func:`shift_px`); else ``ok``. A frame with 200 px of barrel read 12 px off is
+    corrected; a near-pinhole frame whose lens is within its bound is left alone (leaving it costs
+    at most the bound).
     With ``method="net"`` no line fit is run, so only the first, third and ``weak_geometry`` apply.
 
 New diagnostics of the line fit become features by adding a field to :class:`FrameEvidence` and a
@@ -44,6 +55,7 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from functools import lru_cache
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
@@ -60,6 +72,15 @@ LENS_RANGE_K1 = (-1.0, 0.4)
 GREEN_HUE, GREEN_MIN_SATURATION, GREEN_MIN_VALUE = (18, 95), 50, 40
 #: Width of the hue window (OpenCV hue units of 2 degrees) that one pitch's green falls into.
 GREEN_WINDOW = 12
+#: The grass region (:func:`grass_region`): the largest 8-connected region of the view in its
+#: dominant pitch-green hue window, closed over painted lines and players by a square of
+#: GRASS_CLOSE px (of the 384-px network input). It is a pitch's grass when it covers at least
+#: GRASS_MIN_AREA of the view, reaches below GRASS_LOW of the view's height (a pitch lies under the
+#: stands and the sky; the lowest rows may show the near stand of a high camera), fills at least GRASS_MIN_FILL
+#: of its bounding box (a trapezoid seen in perspective, not a fractal or scattered foliage) and spans
+#: GRASS_WIDE of the view's width, or GRASS_NARROW with painted lines on it (a white-line fit with a
+#: vanishing-point family). Any share of the frame: wide views, stands, sky, roofs, tracks.
+GRASS_CLOSE, GRASS_MIN_AREA, GRASS_LOW, GRASS_MIN_FILL, GRASS_WIDE, GRASS_NARROW = 5, 0.05, 0.4, 0.25, 0.6, 0.3
 #: The shipped calibration (written by ``python -m glradial.evaluation.calibrate``).
 TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "trust.json"
 
@@ -96,6 +117,8 @@ class FrameEvidence:
     reach: float | None = None
     fit_difficulty: float | None = None
     soft: bool = False
+    grass: float | None = None
+    grass_width: float = 0.0
 
     @property
     def disagreement_px(self) -> float:
@@ -132,22 +155,59 @@ class FrameEvidence:
         return cls(**values)
 
 
-def view_features(view: np.ndarray) -> tuple[float, float]:
-    """``(green, gray_std)`` of a small uint8 RGB view (the network input).
+class ViewFeatures(NamedTuple):
+    """What the 16:9 view (the network input) shows, before any line is sought: ``green`` the share
+    of it in its dominant pitch-green hue window, ``gray_std`` the grey-level spread (0..255),
+    ``grass`` the share of it in its grass region (0 when the region does not pass
+    :func:`grass_region`'s shape test) and ``grass_width`` that region's width (share of the view's)."""
 
-    ``green``: the share of pixels in the most populated :data:`GREEN_WINDOW`-wide hue window of
-    the pitch-green band (saturated, not dark): a pitch is one green, while test patterns and
-    street scenes spread their colours (testsrc2 0.16, mandelbrot 0.06, a road photo 0.10, real
-    pitch frames 0.36 and up); ``gray_std``: the grey-level standard deviation (0..255)."""
+    green: float
+    gray_std: float
+    grass: float = 0.0
+    grass_width: float = 0.0
+
+
+def _green_mask(view: np.ndarray) -> tuple[np.ndarray, float]:
+    """The view's pixels in its dominant :data:`GREEN_WINDOW`-wide hue window of the pitch-green band
+    (saturated, not dark), and their share of the view."""
     import cv2
 
     hsv = cv2.cvtColor(view, cv2.COLOR_RGB2HSV)
     h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
     band = (h >= GREEN_HUE[0]) & (h <= GREEN_HUE[1]) & (s >= GREEN_MIN_SATURATION) & (v >= GREEN_MIN_VALUE)
-    hist = np.bincount(h[band], minlength=181).astype(np.float64)
-    green = float(np.convolve(hist, np.ones(GREEN_WINDOW), "valid").max()) / max(h.size, 1)
+    hist = np.convolve(np.bincount(h[band], minlength=181).astype(np.float64), np.ones(GREEN_WINDOW), "valid")
+    low = int(np.argmax(hist))
+    return band & (h >= low) & (h < low + GREEN_WINDOW), float(hist[low]) / max(h.size, 1)
+
+
+def grass_region(mask: np.ndarray) -> tuple[float, float]:
+    """``(area, width)`` of the grass region of a pitch-green ``mask`` (shares of the view's area and
+    width; :data:`GRASS_CLOSE` and the shape test of the constants above): the largest connected
+    region after closing, ``(0, 0)`` when none, ``(0, width)`` when it does not reach the lower part of
+    the view or fills too little of its bounding box."""
+    import cv2
+
+    closed = cv2.morphologyEx(mask.astype(np.uint8), cv2.MORPH_CLOSE, np.ones((GRASS_CLOSE, GRASS_CLOSE), np.uint8))
+    count, _, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
+    if count <= 1:
+        return 0.0, 0.0
+    left, top, width, height, area = stats[1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))]
+    rows, cols = mask.shape
+    shaped = top + height >= GRASS_LOW * rows and area >= GRASS_MIN_FILL * width * height
+    return (float(area) / mask.size if shaped else 0.0), float(width) / cols
+
+
+def view_features(view: np.ndarray) -> ViewFeatures:
+    """The :class:`ViewFeatures` of a small uint8 RGB view (the network input). A pitch is one green,
+    while test patterns and street scenes spread their colours (``green``: testsrc2 0.16, mandelbrot
+    0.06, a road photo 0.10, close broadcast frames 0.36 and up); its grass is one wide region in the
+    lower part of the picture whatever its share (wide views, stands and sky: 0.10 and up)."""
+    import cv2
+
+    mask, green = _green_mask(view)
+    grass, width = grass_region(mask)
     gray = cv2.cvtColor(view, cv2.COLOR_RGB2GRAY)
-    return green, float(gray.std())
+    return ViewFeatures(green, float(gray.std()), grass, width)
 
 
 @lru_cache(maxsize=1)
@@ -167,6 +227,29 @@ def line_scale(floor_px, sigma_weight, spread, disagree_weight, disagreement):
     return np.sqrt(floor_px**2 + (sigma_weight * spread) ** 2 + (disagree_weight * disagreement) ** 2)
 
 
+def shift_px(k: tuple[float, float]) -> float:
+    """How far lens ``k`` moves the frame: its maximum displacement from the identity lens (px at 1920)."""
+    return float(max_displacement_px(np.array(k, np.float64), np.zeros(2)))
+
+
+def benefit_doubt(lens: tuple[float, float], bound: float, evidence: FrameEvidence, other_answer: bool,
+                  disagree_max_px: float) -> str:
+    """Doubt by benefit (module docstring): ``"weak_geometry"`` when the stated ``bound`` reaches
+    the uncorrected frame (the identity lens is within ``bound`` of ``lens``: correcting cannot be
+    shown to help); ``"evidence_disagrees"`` when, with ``other_answer`` (a line fit was run), the
+    line fit and the CNN are more than ``disagree_max_px`` apart and correcting with ``lens`` would
+    not help if the other answer were the truth (their disagreement is at least the other answer's
+    own shift); else ``"ok"``."""
+    shift = shift_px(lens)
+    if other_answer and evidence.lines is not None and evidence.disagreement_px > disagree_max_px:
+        other = evidence.net if tuple(lens) == tuple(evidence.lines) else evidence.lines
+        if evidence.disagreement_px >= shift_px(other):
+            return "evidence_disagrees"
+    if not bound < shift:
+        return "weak_geometry"
+    return "ok"
+
+
 @dataclass(frozen=True)
 class TrustModel:
     """Calibrated constants of the bound and the doubt rules (module docstring; ``trust.json``)."""
@@ -178,7 +261,6 @@ class TrustModel:
     sigma_weight: float
     disagree_weight: float
     disagree_max_px: float
-    doubt_px: float
     green_min: float
     blank_std: float
     noise_edge_density: float
@@ -206,6 +288,18 @@ class TrustModel:
             return rel * evidence.net_error_px
         return self.q_no_lines if no_lines else self.q_net
 
+    def is_pitch(self, evidence: FrameEvidence) -> bool:
+        """Whether the view shows a pitch: a grass region of :data:`GRASS_MIN_AREA` or more that is
+        :data:`GRASS_WIDE` wide, or :data:`GRASS_NARROW` wide with painted lines on it (a white-line fit
+        with a vanishing-point family); for records without the grass region (``grass`` None), the
+        older rule (``green_min`` of the view in one pitch green)."""
+        if evidence.grass is None:
+            return evidence.green >= self.green_min
+        if evidence.grass < GRASS_MIN_AREA:
+            return False
+        painted = evidence.lines is not None and not evidence.soft and evidence.families > 0
+        return evidence.grass_width >= GRASS_WIDE or (painted and evidence.grass_width >= GRASS_NARROW)
+
     def no_evidence(self, evidence: FrameEvidence) -> str | None:
         """``blank_frame``, ``noise_frame``, ``not_a_pitch`` or ``None``."""
         if evidence.gray_std < self.blank_std:
@@ -213,14 +307,14 @@ class TrustModel:
         no_fit = evidence.lines is None or evidence.soft  # contrast-equalised noise can give soft "lines"
         if no_fit and evidence.edge_density is not None and evidence.edge_density > self.noise_edge_density:
             return "noise_frame"
-        if evidence.green < self.green_min:
+        if not self.is_pitch(evidence):
             return "not_a_pitch"
         return None
 
     def judge(self, evidence: FrameEvidence, method: str) -> tuple[tuple[float, float], str, float, bool, str]:
         """``(lens, source, uncertainty_px, doubtful, reason)`` for ``method`` ("auto", "net",
-        "lines"): which answer, its bound and the doubt verdict. A soft-edge fit counts only under a
-        model calibrated for it (``q_soft > 0``)."""
+        "lines"): which answer, its bound and the doubt verdict (doubt by benefit, module docstring).
+        A soft-edge fit counts only under a model calibrated for it (``q_soft > 0``)."""
         if evidence.soft and self.q_soft <= 0.0:
             evidence = replace(evidence, lines=None, sigma_px=math.inf, chains=0, fit_difficulty=math.inf, soft=False)
         use_lines = evidence.lines is not None and method != "net"
@@ -233,13 +327,11 @@ class TrustModel:
         empty = self.no_evidence(evidence)
         if empty is not None:
             return lens, source, max(bound, anything_bound(lens)), True, empty
-        if method != "net" and not white:  # a soft-edge fit may be the better answer, never a sure one
-            return lens, source, bound, True, "too_few_lines"
-        if evidence.lines is not None and method != "net" and evidence.disagreement_px > self.disagree_max_px:
-            return lens, source, bound, True, "evidence_disagrees"
-        if bound > self.doubt_px:
-            return lens, source, bound, True, "weak_geometry"
-        return lens, source, bound, False, "ok"
+        if method != "net" and evidence.lines is None:  # no line evidence: the CNN alone, by its own bound
+            doubtful = not bound < shift_px(lens)
+            return lens, source, bound, doubtful, "too_few_lines" if doubtful else "ok"
+        reason = benefit_doubt(lens, bound, evidence, other_answer=method != "net", disagree_max_px=self.disagree_max_px)
+        return lens, source, bound, reason != "ok", reason
 
     def save(self, path: str | Path) -> None:
         from ..media.atomic import atomic_write_text

@@ -181,7 +181,7 @@ def _errors(records: list[Record], trust: TrustModel, method: str = "auto") -> t
 
 def fit(records: list[Record], base: TrustModel) -> TrustModel:
     """The trust model calibrated on ``records`` (module docstring, step 2); thresholds of the
-    no-evidence rules and ``doubt_px`` are kept from ``base``."""
+    no-evidence rules are kept from ``base``."""
     net_err, _, _ = _errors(records, base, "net")
     q_net = conformal_quantile(net_err)
     no_fit = np.array([r.evidence.lines is None or r.evidence.soft for r in records])  # no white-line fit
@@ -242,27 +242,34 @@ def _halves(records: list[Record]) -> np.ndarray:
 
 def cross_check(records: list[Record], base: TrustModel) -> tuple[list[dict], dict[int, TrustModel]]:
     """Each record judged with the model fitted on the other fold: rows with source, group,
-    difficulty, error, bound, doubt, reason, line-rich."""
+    difficulty, error, bound, doubt, reason, line-rich and the identity lens's error (leaving the lens in)."""
     models = {fold: fit([r for r in records if r.fold != fold], base) for fold in sorted({r.fold for r in records})}
     rows = []
     for fold, trust in models.items():
         mine = [r for r in records if r.fold == fold]
         err, bound, est = _errors(mine, trust, "auto")
-        for r, e, b, x in zip(mine, err, bound, est):
+        identity = max_displacement_px(np.zeros(2), np.array([r.truth("auto", trust) for r in mine]).reshape(-1, 2))
+        for r, e, b, x, i in zip(mine, err, bound, est, identity):
             rows.append({"source": r.source, "group": r.group, "fold": fold, "difficulty": r.evidence.difficulty,
                          "error_px": float(e), "bound_px": float(b), "doubtful": x.doubtful, "reason": x.reason,
-                         "line_rich": r.line_rich, "method": x.method})
+                         "line_rich": r.line_rich, "method": x.method, "identity_px": float(i)})
     return rows, models
 
 
-def coverage_table(rows: list[dict]) -> list[tuple[str, int, float, float, float, float]]:
-    """``(group, n, coverage, median error, median bound, doubtful share)`` overall, per source and
-    per quartile of difficulty (frames without a fit are the hardest)."""
+def coverage_table(rows: list[dict]) -> list[tuple[str, int, float, float, float, float, float, float]]:
+    """``(group, n, coverage, median error, median bound, doubtful share, left uncorrected where the
+    estimate would have helped, corrected and made worse)`` overall, per source and per quartile of
+    difficulty (frames without a fit are the hardest). "Helped" / "worse": the error after correcting
+    with the estimate below / above the identity lens's error (``identity_px``; NaN when not given)."""
     def stats(name: str, sel: list[dict]) -> tuple:
         err = np.array([r["error_px"] for r in sel])
         bound = np.array([r["bound_px"] for r in sel])
+        doubt = np.array([bool(r["doubtful"]) for r in sel])
+        ident = np.array([r.get("identity_px", math.nan) for r in sel], np.float64)
+        known = bool(np.all(np.isfinite(ident)))
         return (name, len(sel), float(np.mean(err <= bound)), float(np.median(err)), float(np.median(bound)),
-                float(np.mean([r["doubtful"] for r in sel])))
+                float(doubt.mean()), float(np.mean(doubt & (err < ident))) if known else math.nan,
+                float(np.mean(~doubt & (err > ident))) if known else math.nan)
 
     out = [stats("all", rows)]
     for source in sorted({r["source"] for r in rows}):
@@ -297,11 +304,14 @@ def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel,
              "Method `auto`. Errors: max displacement over the 16:9 frame, px at 1920; broadcast and real "
              "frames self-consistent (applied lens composed with the reading of the unmodified frame).", "",
              f"{n_records} frames. Coverage counts every frame, doubtful or not (a doubtful frame still states "
-             "its bound).", "",
-             "| group | n | inside bound | median error px | median bound px | doubtful |",
-             "| --- | ---: | ---: | ---: | ---: | ---: |"]
-    for name, n, cov, err, bound, doubt in coverage_table(rows):
-        lines.append(f"| {name} | {n} | {100 * cov:.1f} % | {err:.2f} | {bound:.2f} | {100 * doubt:.1f} % |")
+             "its bound). Left, would help: doubtful frames whose estimate is closer to the truth than leaving "
+             "the lens in (the identity lens's error, same metric); corrected, worse: frames not doubtful whose "
+             "estimate is farther from it (shares of the group's frames).", "",
+             "| group | n | inside bound | median error px | median bound px | doubtful | left, would help | corrected, worse |",
+             "| --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: |"]
+    for name, n, cov, err, bound, doubt, left, worse in coverage_table(rows):
+        lines.append(f"| {name} | {n} | {100 * cov:.1f} % | {err:.2f} | {bound:.2f} | {100 * doubt:.1f} % | "
+                     f"{100 * left:.1f} % | {100 * worse:.1f} % |")
     reasons: dict[str, int] = {}
     for r in rows:
         reasons[r["reason"]] = reasons.get(r["reason"], 0) + 1

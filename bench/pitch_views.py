@@ -1,0 +1,260 @@
+"""Does the automatic lens help on real-looking pitch views unlike close broadcast frames?
+
+Usage::
+
+    python bench/pitch_views.py [--data ../shared/data] [--frames /tmp/pitch_views_frames.pkl]
+        [--evidence /tmp/pitch_views_evidence.pkl] [--trust glradial/data/trust.json] [--json OUT]
+        [--sources wide_camera,...]
+
+Validation sets (validation only: nothing is trained or tuned on them for the figures reported):
+
+* ``wide_camera``: 30 frames spread over ``real_wide_camera/wide_pitch_camera.mp4`` (a real static
+  wide camera, checkerboard-calibrated k1 -0.6615, k2 +0.4098), reduced to 1536x864 (the lens is
+  width-normalised: the same lens at any size).
+* ``real_stadium_views``: 24 wide perspective views (hfov 60-90 deg, tilt -10..+8) of the real
+  stadium panorama (``real_football/stadium_01_1k_tonemapped.jpg``: camera at pitch level, large
+  stands and sky) through a known lens (k1 -0.70..-0.15, k2 on or above the manifold), 1280x720.
+* ``field_views``: 12 such views of the real dry-grass field panorama (``panorama_field_2048x1024``:
+  grass and a horizon, no painted lines).
+* ``real_frames``: the three football360 frames (real stadium views, 640x360), six strong known
+  lenses each (``distort``, ``fit="crop"``), scored against the applied lens composed with the frame's
+  own reading (k1 -0.023 / +0.029 / +0.024 on the manifold, docs/eval/shots.md).
+* ``procedural_high``: 8 views each of five held-out procedural stadiums seen from high tribune or
+  main-stand cameras (15-49 m up), three of them at night (floodlights), hfov 55-90 deg, tilted down.
+* negatives: ``test_patterns`` (ffmpeg testsrc2, smptehdbars, mandelbrot; true lens none),
+  ``road`` (the road photo and the chessboard photo of the calibrated road camera,
+  docs/eval/road_camera.json), ``blank_noise`` (a flat frame and three noise frames; lens none).
+
+Per source: median / p90 error of ``auto`` (max displacement over the 16:9 frame, px at 1920,
+:func:`glradial.lens.metrics.max_displacement_px`), share doubtful, share doubtful among the frames
+whose estimate is within its bound, coverage of the stated bound, and the benefit of correcting:
+each frame's error after correction with the estimate is compared with the error of leaving the
+lens in (the identity lens's error, same metric). **Left uncorrected, would have helped**: doubtful
+frames whose estimate is closer to the truth than the identity; **corrected, made worse**: frames
+not doubtful whose estimate is farther from it than the identity (both as a share of the source's
+frames).
+
+Frames are cached in ``--frames`` (pickle; delete to rebuild), the estimator's evidence in
+``--evidence`` (delete it whenever the detection, the fit or ``FrameEvidence`` change); ``--trust``
+judges the cached evidence with another calibration.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import pickle
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from glradial.estimation.lens_estimate import judge  # noqa: E402
+from glradial.estimation.trust import load_trust, shipped_trust  # noqa: E402
+from glradial.lens.metrics import manifold_k2, max_displacement_px  # noqa: E402
+
+WIDE_CAMERA_LENS = (-0.6615, 0.4098)
+#: the football360 frames' own reading (k1 on the manifold; docs/eval/shots.md "--own")
+OWN_K1 = {"football360_cam_0000000": -0.023, "football360_cam_0012000": 0.029, "football360_cam_0019000": 0.024}
+#: held-out procedural stadiums with high cameras: (seed, lighting override or None)
+HIGH_STADIUMS = ((179, None), (219, None), (319, None), (39, None), (389, None))
+SIZE = (1280, 720)
+NEGATIVE_SOURCES = ("test_patterns", "road", "blank_noise")
+#: grass without a pitch (no painted lines): reported, not counted among the pitch views
+NOT_PITCH_SOURCES = ("field_views",) + NEGATIVE_SOURCES
+
+
+def _lens_draws(n: int, seed: int, k1_range=(-0.70, -0.15)) -> list[tuple[float, float]]:
+    from glradial.synthesis.crops import lens_covers_frame
+
+    rng = np.random.default_rng(seed)
+    out: list[tuple[float, float]] = []
+    while len(out) < n:
+        k1 = float(rng.uniform(*k1_range))
+        k2 = float(manifold_k2(k1) + abs(rng.normal(0.0, 0.03)))
+        if lens_covers_frame(k1, k2, SIZE):
+            out.append((k1, k2))
+    return out
+
+
+def _views(pano: np.ndarray, n: int, seed: int, hfov, tilt, pan=(-180.0, 180.0)) -> list[tuple[np.ndarray, tuple]]:
+    from glradial.synthesis.crops import CropParams, CropRenderer
+
+    rng = np.random.default_rng(seed)
+    lenses = _lens_draws(n, seed + 1)
+    params = [CropParams(float(rng.uniform(*pan)), float(rng.uniform(*tilt)), float(rng.uniform(-1.5, 1.5)),
+                         float(rng.uniform(*hfov)), k1, k2) for k1, k2 in lenses]
+    with CropRenderer(pano, size=SIZE, supersample=2) as renderer:
+        frames = renderer.render(params)[..., :3]
+    return [(np.ascontiguousarray(f), (p.k1, p.k2)) for f, p in zip(frames, params)]
+
+
+def _wide_camera(data: Path, n: int = 30) -> list[tuple[str, np.ndarray, tuple]]:
+    import av
+
+    wanted = set(np.linspace(0, 249, n).round().astype(int).tolist())
+    out = []
+    with av.open(str(data / "real_wide_camera" / "wide_pitch_camera.mp4")) as container:
+        for i, frame in enumerate(container.decode(video=0)):
+            if i in wanted:
+                rgb = cv2.resize(frame.to_ndarray(format="rgb24"), (1536, 864), interpolation=cv2.INTER_AREA)
+                out.append((f"frame{i:03d}", rgb, WIDE_CAMERA_LENS))
+    return out
+
+
+def _ffmpeg(source: str) -> np.ndarray:
+    import subprocess
+
+    w, h = SIZE
+    raw = subprocess.run(["ffmpeg", "-v", "error", "-f", "lavfi", "-i", f"{source}=size={w}x{h}", "-frames:v", "1",
+                          "-f", "rawvideo", "-pix_fmt", "rgb24", "-"], capture_output=True, check=True).stdout
+    return np.frombuffer(raw, np.uint8).reshape(h, w, 3).copy()
+
+
+def _real_frames(data: Path) -> list[tuple[str, np.ndarray, tuple]]:
+    from glradial.evaluation.real_eval import read_rgb, self_consistent_items, self_consistent_truth
+
+    out = []
+    for j, (stem, own_k1) in enumerate(OWN_K1.items()):
+        frame = read_rgb(data / "real_football" / f"{stem}.png")
+        own = (own_k1, float(manifold_k2(own_k1)))
+        lenses = _lens_draws(6, 300 + j, (-0.75, -0.2))
+        for i, (applied, scale, distorted) in enumerate(self_consistent_items(frame, lenses)):
+            out.append((f"{stem}/{i}", distorted, self_consistent_truth(applied, own, scale)))
+    return out
+
+
+def _procedural(n_per: int = 8) -> list[tuple[str, np.ndarray, tuple]]:
+    from glradial.synthesis.stadium import stadium_panorama
+
+    out = []
+    for j, (seed, lighting) in enumerate(HIGH_STADIUMS):
+        pano = stadium_panorama(seed, size=(4096, 2048), **({"lighting": lighting} if lighting else {}))
+        for i, (frame, lens) in enumerate(_views(pano, n_per, 500 + j, hfov=(55.0, 90.0), tilt=(-30.0, -8.0), pan=(-40.0, 40.0))):
+            out.append((f"stadium{seed}/{i}", frame, lens))
+    return out
+
+
+def build(data: Path) -> dict[str, list[tuple[str, np.ndarray, tuple | None]]]:
+    """Every source's ``(name, uint8 RGB frame, true lens or None)``."""
+    from glradial.evaluation.real_eval import load_calibrated, read_rgb
+
+    stadium = read_rgb(data / "real_football" / "stadium_01_1k_tonemapped.jpg")
+    field = read_rgb(data / "panorama_field_2048x1024.jpg")
+    _, road_frames, road_lens = load_calibrated(ROOT / "docs" / "eval" / "road_camera.json")
+    rng = np.random.default_rng(7)
+    return {
+        "wide_camera": _wide_camera(data),
+        "real_stadium_views": [(f"view{i}", f, k) for i, (f, k) in
+                               enumerate(_views(stadium, 24, 100, hfov=(60.0, 90.0), tilt=(-10.0, 8.0)))],
+        "field_views": [(f"view{i}", f, k) for i, (f, k) in
+                        enumerate(_views(field, 12, 200, hfov=(60.0, 90.0), tilt=(-12.0, 5.0)))],
+        "real_frames": _real_frames(data),
+        "procedural_high": _procedural(),
+        "test_patterns": [(s, _ffmpeg(s), (0.0, 0.0)) for s in ("testsrc2", "smptehdbars", "mandelbrot")],
+        "road": [(f"road{i}", f, (road_lens.k1, road_lens.k2)) for i, f in enumerate(road_frames)],
+        "blank_noise": [("blank", np.full((SIZE[1], SIZE[0], 3), 90, np.uint8), (0.0, 0.0))]
+        + [(f"noise{i}", rng.integers(0, 256, (SIZE[1], SIZE[0], 3), dtype=np.uint8), (0.0, 0.0)) for i in range(3)],
+    }
+
+
+def _cached(path: Path | None, make):
+    if path is not None and path.exists():
+        with open(path, "rb") as f:
+            return pickle.load(f)
+    value = make()
+    if path is not None:
+        with open(path, "wb") as f:
+            pickle.dump(value, f)
+    return value
+
+
+def collect(frames: dict, sources: list[str]) -> dict:
+    """The :class:`~glradial.estimation.trust.FrameEvidence` of every frame (one CNN session)."""
+    from glradial.estimation.estimator import Estimator
+
+    estimator = Estimator(threads=1)
+    out = {}
+    for source in sources:
+        out[source] = [(name, estimator.evidence_batch([frame])[0], truth) for name, frame, truth in frames[source]]
+        print(f"  {source}: {len(out[source])} frames", file=sys.stderr)
+    return out
+
+
+def score(evidence: dict, trust) -> dict:
+    """Per source and over the pitch sources: the figures of the module docstring."""
+    rows = {}
+    for source, items in evidence.items():
+        errs, ids, bounds, doubt, reasons = [], [], [], [], []
+        for _, ev, truth in items:
+            e = judge(ev, "auto", trust)
+            k = np.array(truth, np.float64)
+            errs.append(float(max_displacement_px(np.array([e.k1, e.k2]), k)))
+            ids.append(float(max_displacement_px(np.zeros(2), k)))
+            bounds.append(e.uncertainty_px)
+            doubt.append(e.doubtful)
+            reasons.append(e.reason)
+        rows[source] = _figures(np.array(errs), np.array(ids), np.array(bounds), np.array(doubt), reasons)
+    pitch = [s for s in evidence if s not in NOT_PITCH_SOURCES]
+    if pitch:
+        rows["all pitch views"] = _merge([rows[s] for s in pitch])
+    return rows
+
+
+def _figures(err, ident, bound, doubt, reasons) -> dict:
+    inside = err <= bound
+    return {"n": len(err), "median": float(np.median(err)), "p90": float(np.percentile(err, 90)),
+            "identity_median": float(np.median(ident)), "doubtful": float(doubt.mean()),
+            "doubtful_within_bound": float(doubt[inside].mean()) if inside.any() else math.nan,
+            "coverage": float(inside.mean()), "median_bound": float(np.median(bound)),
+            "left_would_help": float((doubt & (err < ident)).mean()),
+            "corrected_worse": float((~doubt & (err > ident)).mean()),
+            "reasons": {r: reasons.count(r) for r in sorted(set(reasons))},
+            "_raw": (err.tolist(), ident.tolist(), bound.tolist(), doubt.tolist(), reasons)}
+
+
+def _merge(rows: list[dict]) -> dict:
+    parts = [np.concatenate([np.asarray(r["_raw"][i]) for r in rows]) for i in range(4)]
+    reasons = sum((list(r["_raw"][4]) for r in rows), [])
+    return _figures(parts[0], parts[1], parts[2], parts[3].astype(bool), reasons)
+
+
+def markdown(rows: dict) -> str:
+    head = ("| source | n | median / p90 px | no lens px (median) | doubtful | doubtful within bound | coverage "
+            "| median bound px | left, would help | corrected, worse | reasons |\n" + "| --- |" + " ---: |" * 9 + " --- |")
+    lines = [head]
+    for source, r in rows.items():
+        reasons = ", ".join(f"{k} {v}" for k, v in r["reasons"].items())
+        lines.append(f"| {source} | {r['n']} | {r['median']:.1f} / {r['p90']:.1f} | {r['identity_median']:.0f} | "
+                     f"{100 * r['doubtful']:.0f} % | {100 * r['doubtful_within_bound']:.0f} % | {100 * r['coverage']:.0f} % | "
+                     f"{r['median_bound']:.1f} | {100 * r['left_would_help']:.0f} % | {100 * r['corrected_worse']:.0f} % | {reasons} |")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
+    parser.add_argument("--frames", type=Path, default=Path("/tmp/pitch_views_frames.pkl"))
+    parser.add_argument("--evidence", type=Path, default=None)
+    parser.add_argument("--trust", type=Path, default=None)
+    parser.add_argument("--sources", default="")
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args(argv)
+    frames = _cached(args.frames, lambda: build(args.data))
+    sources = [s for s in args.sources.split(",") if s] or list(frames)
+    evidence = _cached(args.evidence, lambda: collect(frames, sources))
+    evidence = {s: evidence[s] for s in sources if s in evidence}
+    trust = load_trust(args.trust) if args.trust else shipped_trust()
+    rows = score(evidence, trust)
+    print(markdown(rows))
+    if args.json:
+        args.json.write_text(json.dumps({s: {k: v for k, v in r.items() if k != "_raw"} for s, r in rows.items()}, indent=1) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
