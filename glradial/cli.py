@@ -29,7 +29,7 @@ from .commands import CliError, UsageError
 __all__ = ["main", "build_parser", "COMMANDS"]
 
 #: subcommands in the order ``glradial --help`` lists them
-COMMANDS = ("correct", "distort", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
+COMMANDS = ("correct", "distort", "live", "estimate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
 
 PROG = "glradial"
 

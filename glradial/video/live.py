@@ -19,10 +19,12 @@ Conventions:
   on the source's clock (None: the arrival time). A frame's number (``LiveFrame.index``, the
   OpenTrackIO ``sequenceNumber``) is ``round((timestamp - first timestamp) x rate)``: dropped
   frames leave gaps, the numbers stay those of the source.
-* Causal and bounded: one worker thread corrects frames in arrival order. At most ``max_delay``
-  frames wait for it; a push beyond that drops the oldest waiting frame, and a frame that has
-  already waited ``max_delay`` frame periods when its turn comes is dropped too (both counted in
-  :attr:`LiveStats.dropped`: a frame is dropped rather than the delay growing). A frame leaves
+* Causal and bounded: one worker thread corrects frames in arrival order. A frame whose turn
+  comes when it could no longer leave within ``max_delay`` frame periods (its wait so far plus the
+  recent time a correction takes) is dropped, and a push finding :data:`MAX_WAITING` frames already
+  waiting drops the oldest: both counted in :attr:`LiveStats.dropped` (a frame is dropped rather
+  than the delay growing; a burst, e.g. the frames a network source decodes at once after probing,
+  passes whole when the worker can take it in time). A frame leaves
   when the caller takes it (:meth:`pull`, or :meth:`left` after the caller's own output); its
   delay (leaving time - push time, in frame periods of ``rate``) is recorded, and one above
   ``max_delay`` counts as late (:attr:`LiveStats.late`). Nothing waits for a shot's end.
@@ -60,6 +62,10 @@ __all__ = ["LiveCorrector", "LiveFrame", "LiveStats", "DEFAULT_MAX_DELAY"]
 DEFAULT_MAX_DELAY = 2
 #: thumbnails for the cut detector (px): what :class:`glradial.video.cuts.ShotDetector` reads
 THUMB_SIZE = (64, 36)
+#: frames waiting for the worker at most (memory); a frame is dropped sooner when it would be late
+MAX_WAITING = 16
+#: weight of the latest correction in the running mean of the time one takes
+COST_WEIGHT = 0.2
 #: OpenTrackIO lens objects kept per lens (a stream changes lens only between shots or on a zoom)
 LENS_OBJECTS = 64
 
@@ -172,6 +178,7 @@ class LiveCorrector:
         self._error: BaseException | None = None
         self._first: float | None = None
         self._last_index = -1
+        self._cost = 0.0  # running mean of a correction's time (s)
         self._thread = threading.Thread(target=self._work, name="glradial-live-correct", daemon=True)
         self._thread.start()
 
@@ -194,7 +201,7 @@ class LiveCorrector:
             index = max(round((stamp - self._first) * self.rate), self._last_index + 1)
             self._last_index = index
             self.stats.pushed += 1
-            if len(self._waiting) >= self.max_delay:
+            if len(self._waiting) >= MAX_WAITING:
                 self._waiting.popleft()
                 self.stats.dropped += 1
             self._waiting.append((frame, stamp if timestamp is not None else stamp - self._first, arrived, index))
@@ -274,7 +281,7 @@ class LiveCorrector:
                 if self._stopped or not self._waiting:
                     return None
                 item = self._waiting.popleft()
-                if (time.monotonic() - item[2]) * float(self.rate) > self.max_delay:
+                if (time.monotonic() - item[2] + self._cost) * float(self.rate) > self.max_delay:
                     self.stats.dropped += 1
                     continue
                 return item
@@ -282,7 +289,9 @@ class LiveCorrector:
     def _work(self) -> None:
         try:
             while (item := self._next()) is not None:
+                started = time.monotonic()
                 done = self._correct(*item)
+                self._cost += COST_WEIGHT * (time.monotonic() - started - self._cost)
                 with self._cond:
                     while len(self._ready) >= self.max_delay and not self._stopped:
                         self._cond.wait(0.05)
