@@ -57,7 +57,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                       help="a frame leaves within this many frame periods of its arrival, or is dropped (default 2)")
     live.add_argument("--idle-timeout", type=positive_float, default=5.0, metavar="S",
                       help="a network input ends after this many seconds without data (default 5)")
-    live.add_argument("--realtime", action="store_true", help="play a file INPUT at its own frame rate, as a live source")
+    live.add_argument("--realtime", action="store_true", help="hand out the frames of a file (or stdin) INPUT at their own rate (timestamps), as a live source would")
     live.add_argument("--every", type=positive_int, default=None, metavar="N",
                       help="with --auto: sample every N-th frame of a shot for its evidence (frames; default 10)")
     live.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",

@@ -179,6 +179,8 @@ class LiveCorrector:
         self._first: float | None = None
         self._last_index = -1
         self._cost = 0.0  # running mean of a correction's time (s)
+        if camera is not None and self.lens is not None:
+            self._sample(0, 0.0, self._state(0, None))  # the schema validator and the lens object, made now
         self._thread = threading.Thread(target=self._work, name="glradial-live-correct", daemon=True)
         self._thread.start()
 
@@ -291,7 +293,8 @@ class LiveCorrector:
             while (item := self._next()) is not None:
                 started = time.monotonic()
                 done = self._correct(*item)
-                self._cost += COST_WEIGHT * (time.monotonic() - started - self._cost)
+                if self.stats.corrected:  # the first builds maps and opens things: no measure of the rest
+                    self._cost += COST_WEIGHT * (time.monotonic() - started - self._cost)
                 with self._cond:
                     while len(self._ready) >= self.max_delay and not self._stopped:
                         self._cond.wait(0.05)
