@@ -57,7 +57,7 @@ def bundled_frame_path() -> Path:
     """The real broadcast frame shipped in the package (the one ``glradial demo-real`` uses)."""
     from importlib import resources
 
-    from glradial.commands.demo_real import FRAME_NAME
+    from glradial.commands.demo import FRAME_NAME
 
     return Path(str(resources.files("glradial.data").joinpath(FRAME_NAME)))
 

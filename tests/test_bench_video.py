@@ -6,7 +6,7 @@ import importlib.util
 from pathlib import Path
 
 import glradial
-from glradial.commands.demo_real import FRAME_NAME
+from glradial.commands.demo import FRAME_NAME
 from glradial.media.image_io import read_image
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -88,7 +88,7 @@ def test_bundled_reference_lines_lie_on_painted_lines():
     along each line the frame is brighter than 5 px to both sides nearly everywhere (players
     crossing it are the exceptions), and 12 px beside it almost nowhere: an independent check of
     the measured end points and of the frame's own lens that was removed."""
-    from glradial.commands.demo_real import bundled_frame
+    from glradial.commands.demo import bundled_frame
 
     frame, lines, _own = bundled_frame()
     for name, ends in lines.items():
@@ -104,7 +104,7 @@ def test_distorted_reference_lines_follow_the_distorted_paint():
     the scaled original) lie on the paint that glradial.distort moved there: the image path (the
     GLSL/CPU remap) and the point path (lensfuncs) agree; the chord between the ends does not."""
     from glradial import Lens, distort
-    from glradial.commands.demo_real import bundled_frame, line_positions
+    from glradial.commands.demo import bundled_frame, line_positions
 
     frame, lines, _own = bundled_frame()
     size = (frame.shape[1], frame.shape[0])
