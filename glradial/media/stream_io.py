@@ -33,7 +33,7 @@ from typing import Iterator
 
 import av
 
-from .video_io import EncodeOptions, VideoInfo, VideoWriter, _bit_depth
+from .video_io import EncodeOptions, VideoInfo, VideoWriter, _bit_depth, _error
 
 __all__ = ["LiveSource", "StreamWriter", "open_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
 
@@ -103,7 +103,8 @@ class LiveSource:
         except av.ExitError:
             raise ValueError(f"live input {source!r}: no data within {self.idle_timeout:g} s") from None
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"cannot read live input {source!r}: {' '.join(str(err).split())}") from None
+            raise ValueError(f"cannot read live input {_error(source, err)} (not a stream FFmpeg knows, "
+                             "or no video in it)") from None
         if not self._container.streams.video:
             self._container.close()
             raise ValueError(f"live input {source!r} holds no video stream")
@@ -130,8 +131,7 @@ class LiveSource:
             self.ended = "eof"
             raise StopIteration from None
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"live input {self.source!r}: {' '.join(str(err).split())} "
-                             f"(after {self.frames_read} decoded frames)") from None
+            raise ValueError(f"live input {_error(self.source, err)} (after {self.frames_read} decoded frames)") from None
 
     def _first_frames(self) -> list[av.VideoFrame]:
         while True:
