@@ -73,7 +73,8 @@ def make_clip(path: Path, size: tuple[int, int], rate: int, seconds: float, k1: 
     scale = lens.fit_scale(size, "crop", "distort")
     frames = int(round(seconds * rate))
     info = VideoInfo.of(size, rate, codec="libx264")
-    with VideoWriter(path, info, options=EncodeOptions(crf=18, preset="veryfast"), overwrite=True) as writer:
+    made = path.with_name("made_" + path.name)
+    with VideoWriter(made, info, options=EncodeOptions(crf=18, preset="veryfast"), overwrite=True) as writer:
         for i in range(frames):
             t = i / max(frames - 1, 1)
             crop_w = int(width * (0.92 - 0.08 * t))
@@ -82,6 +83,10 @@ def make_clip(path: Path, size: tuple[int, int], rate: int, seconds: float, k1: 
             y0 = (height - crop_h) // 2
             view = cv2.resize(flat[y0:y0 + crop_h, x0:x0 + crop_w], size, interpolation=cv2.INTER_AREA)
             writer.write(glradial.distort(view, lens, fit=scale, backend="cpu"))
+    # remuxed once by ffmpeg as its sender will: its timestamps then stay those of the file (ffmpeg
+    # shifts a stream that starts at 0), so output frames are matched to input frames by pts
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(made), "-c", "copy", "-f", "mpegts", str(path)], check=True)
+    made.unlink()
     return path
 
 
@@ -150,13 +155,15 @@ def run_fixed_udp(clip: Path, work: Path, k1: float, k2: float, frames: int) -> 
         thread = threading.Thread(target=receive, daemon=True)
         thread.start()
         command = [f"udp://127.0.0.1:{video_port}", str(out), "-y", "--k1", str(k1), "--k2", str(k2), "--idle-timeout", "3",
-                   "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10", "-q"]
+                   "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10"]
         print("  glradial live " + " ".join(command), flush=True)
         process = _live(command)
         lines: list[str] = []
         reader = threading.Thread(target=lambda: lines.extend(iter(process.stderr.readline, "")), daemon=True)
         reader.start()
-        time.sleep(4.0)  # imports, then av.open binds the socket
+        while not any("waiting for" in line for line in lines):
+            time.sleep(0.05)
+        time.sleep(1.0)  # av.open binds the socket just after the line
         subprocess.run(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts",
                         f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True)
         process.wait(timeout=120)
@@ -175,25 +182,49 @@ def run_fixed_udp(clip: Path, work: Path, k1: float, k2: float, frames: int) -> 
     return {**report, "sent": frames, "samples": len(samples), "psnr_min": min(psnr), "psnr_median": float(np.median(psnr))}
 
 
-def run_capacity(clip: Path, work: Path, k1: float, k2: float) -> dict:
-    """Flat out, in this process: frames out per second through the live threads."""
+def run_capacity(clip: Path, work: Path, k1: float, k2: float, backend: str = "cpu", frames: int = 150) -> dict:
+    """Flat out, in this process: the clip's first ``frames`` frames decoded beforehand, then pushed
+    into the corrector as soon as fewer than 2 are in flight (nothing dropped), corrected on its
+    worker thread, encoded (x264 ultrafast) on this one: frames out per second."""
+    from itertools import islice
+
     from glradial.lens.lens import Lens
     from glradial.media.stream_io import LiveSource, open_live_output
     from glradial.media.video_io import EncodeOptions
     from glradial.video.live import LiveCorrector
-    from glradial.video.live_stream import run_live
 
     source = LiveSource(str(clip))
     info = source.info
+    decoded = list(islice(source.frames(), frames))
+    time_base = source.stream.time_base
+    source.close()
     writer = open_live_output(str(work / "capacity.ts"), info, options=EncodeOptions(preset="ultrafast"), overwrite=True)
-    corrector = LiveCorrector(Lens(k1, k2), info.size, info.rate, max_delay=10**6, codec=info.codec, frames=writer)
+    corrector = LiveCorrector(Lens(k1, k2), info.size, info.rate, max_delay=10**6, codec=info.codec, frames=writer,
+                              backend=backend)
+
+    def feed() -> None:
+        try:
+            push_all()
+        finally:
+            corrector.finish()
+
+    def push_all() -> None:
+        for frame in decoded:
+            while corrector.stats.pushed - corrector.stats.left >= 2:
+                time.sleep(0.0005)
+            corrector.push(frame, float(frame.pts * time_base))
+
     start = time.perf_counter()
-    run_live(source, writer, corrector)
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    while (item := corrector.pull(None, leave=False)) is not None:
+        writer.write(item.image, item.pts)
+        corrector.left(item)
     elapsed = time.perf_counter() - start
     corrector.close()
     writer.close()
     written = writer.frames_written
-    return {"read": source.frames_read, "written": written, "fps": written / elapsed, "ratio": written / elapsed / float(info.rate)}
+    return {"read": len(decoded), "written": written, "fps": written / elapsed, "ratio": written / elapsed / float(info.rate)}
 
 
 def run_auto_stdin(clip: Path, work: Path, k1: float, k2: float, size: tuple[int, int]) -> dict:
@@ -229,6 +260,7 @@ def main() -> None:
     parser.add_argument("--auto-rate", type=int, default=25, help="frame rate of the --auto run")
     parser.add_argument("--k1", type=float, default=-0.2)
     parser.add_argument("--k2", type=float, default=0.03)
+    parser.add_argument("--backends", default="cpu", help="capacity runs: cpu (planar YUV), gl (RGB through GLSL; llvmpipe here)")
     parser.add_argument("--skip", default="", help="comma-separated runs to skip: fixed, capacity, auto")
     parser.add_argument("--work", type=Path, default=Path("/tmp/glradial_bench_live"))
     args = parser.parse_args()
@@ -246,10 +278,10 @@ def main() -> None:
                   f"(read {r['read']}, dropped {r['dropped']}, late {r['late']}); samples received {r['samples']}/{r['written']} = "
                   f"{r['samples'] / max(r['written'], 1):.1%}; delay p50 {r['p50']:.2f} p95 {r['p95']:.2f} max {r['max']:.2f} frames; "
                   f"PSNR vs cv2.undistort min {r['psnr_min']:.1f} median {r['psnr_median']:.1f} dB", flush=True)
-        if "capacity" not in skip:
-            r = run_capacity(clip, args.work, k1, k2)
-            print(f"capacity, fixed lens, {args.rate}p: {r['fps']:.1f} fps flat out = {r['ratio']:.2f} x the stream rate "
-                  f"({r['written']} of {r['read']} frames)", flush=True)
+        for backend in ([] if "capacity" in skip else args.backends.split(",")):
+            r = run_capacity(clip, args.work, k1, k2, backend)
+            print(f"capacity, fixed lens, {args.rate}p, backend {backend}: {r['fps']:.1f} fps flat out = {r['ratio']:.2f} x "
+                  f"the stream rate ({r['written']} of {r['read']} frames)", flush=True)
     if "auto" not in skip:
         clip = make_clip(args.work / f"clip_{tag}_{args.auto_rate}p.ts", size, args.auto_rate, args.seconds, k1, k2)
         frames = int(round(args.seconds * args.auto_rate))

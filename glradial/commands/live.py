@@ -112,7 +112,20 @@ def _open_output(args: argparse.Namespace, info):
     return open_live_output(args.output, info, options=_encode_options(args, info, False), overwrite=args.overwrite)
 
 
-def _corrector(args: argparse.Namespace, info, writer, camera):
+def _warm_estimator(args: argparse.Namespace):
+    """``--auto``'s estimator, loaded and run once on a blank frame before the input is opened (the
+    model session and the first call's set-up would otherwise hold up the first shot's lens)."""
+    import numpy as np
+
+    from ..video.live_lens import SAMPLE_WIDTH
+    from ..video.video_pipeline import default_estimator
+
+    estimator = default_estimator(args.model, args.method)
+    estimator(np.full((SAMPLE_WIDTH * 9 // 16, SAMPLE_WIDTH, 3), 96, np.uint8))
+    return estimator
+
+
+def _corrector(args: argparse.Namespace, info, writer, camera, estimator=None):
     from ..export.engines import MODEL_NAMES
     from ..video.live import LiveCorrector
 
@@ -120,12 +133,10 @@ def _corrector(args: argparse.Namespace, info, writer, camera):
                   interpolation=args.interpolation, backend=args.backend, codec=info.codec, frames=writer)
     if not args.auto:
         return LiveCorrector(lens_from_args(args, info.size), info.size, info.rate, **common)
-    from ..video.video_pipeline import default_estimator
-
     auto = {name: getattr(args, name) for name in ("every", "apply_doubtful", "until_sure") if getattr(args, name) is not None}
     if args.max_uncertainty is not None:
         auto["doubtful_px"] = args.max_uncertainty
-    return LiveCorrector("auto", info.size, info.rate, estimator=default_estimator(args.model, args.method), auto=auto, **common)
+    return LiveCorrector("auto", info.size, info.rate, estimator=estimator, auto=auto, **common)
 
 
 def _status_printer(quiet: bool):
@@ -144,13 +155,14 @@ def run(args: argparse.Namespace) -> int:
     if not getattr(args, "quiet", False) and "://" in args.input:
         sys.stderr.write(f"glradial live: waiting for {args.input} (up to {args.idle_timeout:g} s)\n")
         sys.stderr.flush()
+    estimator = _warm_estimator(args) if args.auto else None
     source = LiveSource(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
     info = source.info
     camera = camera_from_args(args, info.size, info.rate, info.timecode) if opentrackio_wanted(args) else None
     writer = _open_output(args, info)
     sender = samples = corrector = None
     try:
-        corrector = _corrector(args, info, writer, camera)
+        corrector = _corrector(args, info, writer, camera, estimator)
         if args.send:
             from ..export.opentrackio_udp import ENCODING_CBOR, ENCODING_JSON, SampleSender, parse_address
 
