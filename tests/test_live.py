@@ -244,7 +244,7 @@ def test_api_auto_passes_a_shot_through_until_it_has_a_lens():
     camera = Camera(SIZE, 9.59, 10.0, rate=RATE)
     images = [_image(1)] * 12 + [_image(2)] * 12
     with LiveCorrector("auto", SIZE, RATE, max_delay=20, camera=camera, estimator=lambda frame: (K1, K2),
-                       auto={"every": 4, "apply_doubtful": True}) as live:
+                       auto={"every": 4, "apply_doubtful": True, "worker": "thread"}) as live:
         out = []
         for i, image in enumerate(images):
             live.push(image, i / RATE)

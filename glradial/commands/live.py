@@ -112,31 +112,31 @@ def _open_output(args: argparse.Namespace, info):
     return open_live_output(args.output, info, options=_encode_options(args, info, False), overwrite=args.overwrite)
 
 
-def _warm_estimator(args: argparse.Namespace):
-    """``--auto``'s estimator, loaded and run once on a blank frame before the input is opened (the
-    model session and the first call's set-up would otherwise hold up the first shot's lens)."""
-    import numpy as np
+def _online_lens(args: argparse.Namespace):
+    """``--auto``'s online lens, its worker started and its estimator loaded before the input is
+    opened (the model's session and the first call's set-up would otherwise hold up the first shot)."""
+    from ..video.live_lens import BundledEstimator, OnlineShotLens
 
-    from ..video.live_lens import SAMPLE_WIDTH
-    from ..video.video_pipeline import default_estimator
-
-    estimator = default_estimator(args.model, args.method)
-    estimator(np.full((SAMPLE_WIDTH * 9 // 16, SAMPLE_WIDTH, 3), 96, np.uint8))
-    return estimator
-
-
-def _corrector(args: argparse.Namespace, info, writer, camera, estimator=None):
-    from ..export.engines import MODEL_NAMES
-    from ..video.live import LiveCorrector
-
-    common = dict(max_delay=args.max_delay, camera=camera, model=MODEL_NAMES[args.distortion_model], fit=args.fit,
-                  interpolation=args.interpolation, backend=args.backend, codec=info.codec, frames=writer)
-    if not args.auto:
-        return LiveCorrector(lens_from_args(args, info.size), info.size, info.rate, **common)
     auto = {name: getattr(args, name) for name in ("every", "apply_doubtful", "until_sure") if getattr(args, name) is not None}
     if args.max_uncertainty is not None:
         auto["doubtful_px"] = args.max_uncertainty
-    return LiveCorrector("auto", info.size, info.rate, estimator=estimator, auto=auto, **common)
+    online = OnlineShotLens(BundledEstimator(args.model, args.method), **auto)
+    try:
+        online.wait_ready()
+    except BaseException:
+        online.close()
+        raise
+    return online
+
+
+def _corrector(args: argparse.Namespace, info, writer, camera, online=None):
+    from ..export.engines import MODEL_NAMES
+    from ..video.live import LiveCorrector
+
+    lens = online if online is not None else lens_from_args(args, info.size)
+    return LiveCorrector(lens, info.size, info.rate, max_delay=args.max_delay, camera=camera,
+                         model=MODEL_NAMES[args.distortion_model], fit=args.fit, interpolation=args.interpolation,
+                         backend=args.backend, codec=info.codec, frames=writer)
 
 
 def _status_printer(quiet: bool):
@@ -148,31 +148,54 @@ def _status_printer(quiet: bool):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..media.stream_io import LiveSource
-    from ..video.live_stream import SampleFile, run_live
+    from ..video.live_stream import run_live
 
     _check_options(args)
+    opened: list = []  # what to close if the set-up fails: (object, how)
+    try:
+        online = _online_lens(args) if args.auto else None
+        opened.append((online, "close"))
+        source = _open_source(args)
+        opened.append((source, "close"))
+        info = source.info
+        camera = camera_from_args(args, info.size, info.rate, info.timecode) if opentrackio_wanted(args) else None
+        writer = _open_output(args, info)
+        opened.append((writer, "abort"))
+        corrector = _corrector(args, info, writer, camera, online)
+        opened.append((corrector, "close"))
+        sender, samples = _sample_outputs(args)
+    except BaseException:
+        for thing, how in reversed(opened):
+            if thing is not None:
+                getattr(thing, how)()
+        raise
+    return _stream(args, source, writer, corrector, sender, samples, run_live)
+
+
+def _open_source(args: argparse.Namespace):
+    from ..media.stream_io import LiveSource
+
     if not getattr(args, "quiet", False) and "://" in args.input:
         sys.stderr.write(f"glradial live: waiting for {args.input} (up to {args.idle_timeout:g} s)\n")
         sys.stderr.flush()
-    estimator = _warm_estimator(args) if args.auto else None
-    source = LiveSource(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
-    info = source.info
-    camera = camera_from_args(args, info.size, info.rate, info.timecode) if opentrackio_wanted(args) else None
-    writer = _open_output(args, info)
-    sender = samples = corrector = None
-    try:
-        corrector = _corrector(args, info, writer, camera, estimator)
-        if args.send:
-            from ..export.opentrackio_udp import ENCODING_CBOR, ENCODING_JSON, SampleSender, parse_address
+    return LiveSource(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
 
-            sender = SampleSender(parse_address(args.send), ENCODING_CBOR if args.cbor else ENCODING_JSON)
-        samples = SampleFile(args.opentrackio, args.cbor) if args.opentrackio else None
+
+def _sample_outputs(args: argparse.Namespace):
+    """The UDP sender of ``--send`` and the file of ``--opentrackio`` (None where not asked for)."""
+    from ..video.live_stream import SampleFile
+
+    sender = None
+    if args.send:
+        from ..export.opentrackio_udp import ENCODING_CBOR, ENCODING_JSON, SampleSender, parse_address
+
+        sender = SampleSender(parse_address(args.send), ENCODING_CBOR if args.cbor else ENCODING_JSON)
+    try:
+        return sender, SampleFile(args.opentrackio, args.cbor) if args.opentrackio else None
     except BaseException:
-        writer.abort()
-        source.close()
+        if sender is not None:
+            sender.close()
         raise
-    return _stream(args, source, writer, corrector, sender, samples, run_live)
 
 
 def _stream(args, source, writer, corrector, sender, samples, run_live) -> int:

@@ -53,7 +53,7 @@ import numpy as np
 from ..lens.lens import Lens, as_lens
 from ..media.frames import to_rgb8
 from ..media.video_io import VideoInfo, frame_planes, yuv_layout
-from .live_lens import SAMPLE_WIDTH, LensState, OnlineShotLens
+from .live_lens import SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
 from .video_pipeline import _FrameCorrector
 
 __all__ = ["LiveCorrector", "LiveFrame", "LiveStats", "DEFAULT_MAX_DELAY"]
@@ -141,10 +141,13 @@ class LiveCorrector:
     ``interpolation``, ``backend`` as :func:`glradial.correct` (``"cpu"`` keeps planar YUV frames
     in YUV); ``codec``: the source's codec (the chroma siting of planar frames); ``frames``: an
     object with ``planar_frame()``/``stamp()`` (a :class:`~glradial.media.video_io.VideoWriter`) to
-    make the corrected planar frames, so that they are ready for it; ``estimator`` and ``auto``
-    (keywords of :class:`~glradial.video.live_lens.OnlineShotLens`) for ``"auto"``."""
+    make the corrected planar frames, so that they are ready for it; ``estimator`` (default
+    :class:`~glradial.video.live_lens.BundledEstimator`) and ``auto`` (keywords of
+    :class:`~glradial.video.live_lens.OnlineShotLens`, e.g. ``worker="thread"`` for an estimator
+    that cannot be pickled) for ``"auto"``, whose worker is started and waited for here; or an
+    OnlineShotLens made beforehand as ``lens`` (closed with this corrector)."""
 
-    def __init__(self, lens: Lens | tuple[float, float] | str, size: tuple[int, int], rate: float | Fraction, *,
+    def __init__(self, lens: Lens | tuple[float, float] | str | OnlineShotLens, size: tuple[int, int], rate: float | Fraction, *,
                  max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None, fit: str = "same",
                  interpolation: str = "linear", backend: str = "cpu", codec: str = "", frames=None,
                  estimator: Callable | None = None, auto: dict | None = None) -> None:
@@ -155,14 +158,17 @@ class LiveCorrector:
         self.camera, self.model, self.codec, self.frames = camera, model, codec, frames
         self._corrector = _FrameCorrector(backend, fit, interpolation)
         self._online: OnlineShotLens | None = None
-        if isinstance(lens, str):
+        if isinstance(lens, OnlineShotLens):
+            self._online, self.lens = lens, None
+        elif isinstance(lens, str):
             if lens != "auto":
-                raise ValueError(f"lens must be a Lens, (k1, k2) or 'auto', got {lens!r}")
-            if estimator is None:
-                from .video_pipeline import default_estimator
-
-                estimator = default_estimator()
-            self._online = OnlineShotLens(estimator, self.size, **(auto or {}))
+                raise ValueError(f"lens must be a Lens, (k1, k2), 'auto' or an OnlineShotLens, got {lens!r}")
+            self._online = OnlineShotLens(estimator or BundledEstimator(), **(auto or {}))
+            try:
+                self._online.wait_ready()
+            except BaseException:
+                self._online.close()
+                raise
             self.lens = None
         else:
             self.lens = as_lens(lens)
