@@ -231,14 +231,25 @@ def run_auto_stdin(clip: Path, work: Path, k1: float, k2: float, size: tuple[int
     from glradial.lens.metrics import max_displacement_px
 
     out, samples_path = work / f"auto_{clip.stem}.ts", work / f"auto_{clip.stem}.jsonl"
-    command = ["-", str(out), "-y", "--auto", "--opentrackio", str(samples_path), "--sensor", "2/3-inch", "--focal-mm", "10", "-q"]
+    command = ["-", str(out), "-y", "--auto", "--opentrackio", str(samples_path), "--sensor", "2/3-inch", "--focal-mm", "10"]
     print(f"  ffmpeg -re -i {clip.name} -c copy -f mpegts - | glradial live " + " ".join(command), flush=True)
+    read_end, write_end = os.pipe()
+    process = _live(command, stdin=read_end)
+    os.close(read_end)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(process.stderr.readline, "")), daemon=True)
+    reader.start()
+    while not any("waiting for" in line for line in lines):  # its worker is ready: send from now on
+        if process.poll() is not None:
+            break
+        time.sleep(0.05)
     sender = subprocess.Popen(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts", "-"],
-                              stdout=subprocess.PIPE)
-    process = _live(command, stdin=sender.stdout)
-    sender.stdout.close()
-    stderr = process.communicate(timeout=300)[1]
+                              stdout=write_end)
+    os.close(write_end)
     sender.wait()
+    process.wait(timeout=300)
+    reader.join(timeout=5)
+    stderr = "".join(lines)
     if process.returncode != 0:
         raise RuntimeError(stderr)
     report = _report(stderr)

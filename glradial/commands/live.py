@@ -175,8 +175,9 @@ def run(args: argparse.Namespace) -> int:
 def _open_source(args: argparse.Namespace):
     from ..media.stream_io import LiveSource
 
-    if not getattr(args, "quiet", False) and "://" in args.input:
-        sys.stderr.write(f"glradial live: waiting for {args.input} (up to {args.idle_timeout:g} s)\n")
+    if not getattr(args, "quiet", False):  # the set-up is done: a sender may start now
+        wait = f" (up to {args.idle_timeout:g} s)" if "://" in args.input else ""
+        sys.stderr.write(f"glradial live: waiting for {'stdin' if args.input == '-' else args.input}{wait}\n")
         sys.stderr.flush()
     return LiveSource(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
 
