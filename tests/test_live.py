@@ -258,3 +258,42 @@ def test_api_auto_passes_a_shot_through_until_it_has_a_lens():
     assert later.state.applied.k1 == pytest.approx(K1) and later.state.applied.k2 == pytest.approx(K2)
     assert _psnr(later.image, correct(images[10], later.state.applied, backend="cpu")) > 60
     assert out[12].state.shot == 1 and out[12].state.reason == "pending"
+
+
+def test_auto_through_stdin_reads_the_shot_lens(tmp_path):
+    """``--auto`` end to end (its worker process, the bundled estimator): a real broadcast frame
+    with its own lens removed, the known lens applied, panned for 2 s at 640x360 and piped in at its
+    own rate: one sample per written frame, and once the shot's first fit has landed the samples'
+    lens lies within 8 px (max displacement at 1920 wide) of the applied one."""
+    from importlib import resources
+
+    import glradial
+    from glradial.lens.metrics import max_displacement_px
+    from glradial.media.image_io import read_image
+    from glradial.media.video_io import EncodeOptions, VideoInfo, VideoWriter
+
+    data = resources.files("glradial.data")
+    own = json.loads(data.joinpath("usl_broadcast_0195.json").read_text())["own_lens"]
+    flat = glradial.correct(read_image(Path(str(data.joinpath("usl_broadcast_0195.jpg"))), order="rgb"),
+                            glradial.Lens(own["k1"], own["k2"]), fit="crop", backend="cpu")
+    lens, size = glradial.Lens(K1, K2), (640, 360)
+    clip = tmp_path / "pan.ts"
+    with VideoWriter(clip, VideoInfo.of(size, RATE, codec="libx264"), options=EncodeOptions(crf=18, preset="ultrafast")) as writer:
+        for i in range(RATE * SECONDS):
+            x0 = 40 + 4 * i
+            view = cv2.resize(flat[40:40 + 608, x0:x0 + 1080], size, interpolation=cv2.INTER_AREA)
+            writer.write(glradial.distort(view, lens, fit=lens.fit_scale(size, "crop", "distort"), backend="cpu"))
+    samples_path = tmp_path / "s.jsonl"
+    with open(clip, "rb") as pipe:
+        process = _live("-", str(tmp_path / "out.ts"), "--auto", "--realtime", "-q", "--opentrackio", str(samples_path),
+                        "--sensor", "2/3-inch", "--focal-mm", "10", stdin=pipe)
+        stderr = process.communicate(timeout=120)[1]
+    assert process.returncode == 0, stderr
+    counts = _report(stderr)
+    samples = [json.loads(line) for line in samples_path.read_text().splitlines()]
+    assert len(samples) == counts["written"] >= 0.8 * RATE * SECONDS
+    fitted = [s["custom"]["glradial"] for s in samples if "uncertainty_px" in s["custom"]["glradial"]]
+    assert fitted, "no shot fit landed within the clip"
+    errors = max_displacement_px(np.array([[g["k1"], g["k2"]] for g in fitted]), np.array([K1, K2]))
+    assert np.max(errors) <= 8.0
+    assert all(g["shot"] == 0 for g in fitted)
