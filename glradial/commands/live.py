@@ -6,10 +6,17 @@ import argparse
 import signal
 import sys
 
-from ..lens.options import METHODS
+from ..lens.options import METHODS, UNTIL_SURE
 from . import UsageError, lens_from_args, lens_given, positive_float, positive_int
 from .engine_options import add_opentrackio_options, camera_from_args, check_opentrackio_output, opentrackio_wanted
-from .remapping import add_encode_options, add_render_options, check_encode_options, refuse_same_file, reject_for
+from .remapping import (
+    add_encode_options,
+    add_render_options,
+    add_shot_lens_options,
+    check_encode_options,
+    refuse_same_file,
+    reject_for,
+)
 
 DESCRIPTION = """\
 Correct a live stream as it arrives and hand the lens to a graphics engine with every frame.
@@ -58,14 +65,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     live.add_argument("--idle-timeout", type=positive_float, default=5.0, metavar="S",
                       help="a network input ends after this many seconds without data (default 5)")
     live.add_argument("--realtime", action="store_true", help="hand out the frames of a file (or stdin) INPUT at their own rate (timestamps), as a live source would")
-    live.add_argument("--every", type=positive_int, default=None, metavar="N",
-                      help="with --auto: sample every N-th frame of a shot for its evidence (frames; default 10)")
-    live.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
-                      help="with --auto: a shot less sure than this is doubtful (px at 1920 wide, ~p90; default 10)")
-    live.add_argument("--apply-doubtful", action="store_const", const=True, default=None,
-                      help="with --auto: apply a doubtful shot's lens too (default: it passes through, flagged)")
-    live.add_argument("--until-sure", choices=("pass", "last"), default=None,
-                      help="with --auto: a shot not (yet) sure passes through (pass, default) or keeps the last sure lens (last)")
+    auto = parser.add_argument_group("with --auto")
+    add_shot_lens_options(auto)
+    auto.add_argument("--until-sure", choices=UNTIL_SURE, default=None,
+                      help="a shot not (yet) sure passes through (pass, default) or keeps the last sure lens (last); flagged doubtful either way")
     add_render_options(parser, "output scale: same = centre scale kept (as cv2.undistort), crop = zoom in until every "
                        "output pixel has a source, full = zoom out until the whole input is visible (default: same)")
     add_encode_options(parser)

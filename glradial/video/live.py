@@ -20,11 +20,13 @@ Conventions:
   OpenTrackIO ``sequenceNumber``) is ``round((timestamp - first timestamp) x rate)``: dropped
   frames leave gaps, the numbers stay those of the source.
 * Causal and bounded: one worker thread corrects frames in arrival order. A frame whose turn
-  comes when it could no longer leave within ``max_delay`` frame periods (its wait so far plus the
-  recent time a correction takes) is dropped, and a push finding :data:`MAX_WAITING` frames already
-  waiting drops the oldest: both counted in :attr:`LiveStats.dropped` (a frame is dropped rather
-  than the delay growing; a burst, e.g. the frames a network source decodes at once after probing,
-  passes whole when the worker can take it in time). A frame leaves
+  comes after it has waited ``max_delay`` frame periods is dropped; so is one that could no longer
+  leave in time (its wait plus the median time of the last :data:`COSTS_KEPT` corrections) while a
+  newer frame waits behind it (the newest is always tried: the correction keeps going, and keeps
+  being measured, however slow it gets); a push finding :data:`MAX_WAITING` frames waiting drops
+  the oldest. All are counted in :attr:`LiveStats.dropped` (a frame is dropped rather than the
+  delay growing; a burst, e.g. the frames a network source decodes at once after probing, passes
+  whole when the worker can take it in time). A frame leaves
   when the caller takes it (:meth:`pull`, or :meth:`left` after the caller's own output); its
   delay (leaving time - push time, in frame periods of ``rate``) is recorded, and one above
   ``max_delay`` counts as late (:attr:`LiveStats.late`). Nothing waits for a shot's end.
@@ -64,8 +66,8 @@ DEFAULT_MAX_DELAY = 2
 THUMB_SIZE = (64, 36)
 #: frames waiting for the worker at most (memory); a frame is dropped sooner when it would be late
 MAX_WAITING = 16
-#: weight of the latest correction in the running mean of the time one takes
-COST_WEIGHT = 0.2
+#: corrections whose median time predicts the next one's
+COSTS_KEPT = 9
 #: OpenTrackIO lens objects kept per lens (a stream changes lens only between shots or on a zoom)
 LENS_OBJECTS = 64
 
@@ -184,7 +186,7 @@ class LiveCorrector:
         self._error: BaseException | None = None
         self._first: float | None = None
         self._last_index = -1
-        self._cost = 0.0  # running mean of a correction's time (s)
+        self._costs: deque = deque(maxlen=COSTS_KEPT)  # the last corrections' times (s)
         if camera is not None and self.lens is not None:
             self._sample(0, 0.0, self._state(0, None))  # the schema validator and the lens object, made now
         self._thread = threading.Thread(target=self._work, name="glradial-live-correct", daemon=True)
@@ -289,7 +291,10 @@ class LiveCorrector:
                 if self._stopped or not self._waiting:
                     return None
                 item = self._waiting.popleft()
-                if (time.monotonic() - item[2] + self._cost) * float(self.rate) > self.max_delay:
+                age = time.monotonic() - item[2]
+                cost = float(np.median(self._costs)) if self._costs else 0.0
+                if age * float(self.rate) > self.max_delay or (
+                        self._waiting and (age + cost) * float(self.rate) > self.max_delay):
                     self.stats.dropped += 1
                     continue
                 return item
@@ -300,7 +305,7 @@ class LiveCorrector:
                 started = time.monotonic()
                 done = self._correct(*item)
                 if self.stats.corrected:  # the first builds maps and opens things: no measure of the rest
-                    self._cost += COST_WEIGHT * (time.monotonic() - started - self._cost)
+                    self._costs.append(time.monotonic() - started)
                 with self._cond:
                     while len(self._ready) >= self.max_delay and not self._stopped:
                         self._cond.wait(0.05)

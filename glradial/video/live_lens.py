@@ -39,19 +39,15 @@ from typing import Callable
 import numpy as np
 
 from ..lens.lens import Lens, corner_radius
-from ..lens.options import check_choice
+from ..lens.options import LIVE_WORKERS, UNTIL_SURE, check_choice
 from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX
 from .shot_evidence import ShotCollector
 from .shot_fit import fit_shot
 from .shot_track import ESTIMATE_EVERY, EVERY, SAMPLES_PER_STRIDE
 
-__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "UNTIL_SURE", "WORKERS", "SAMPLE_WIDTH", "DUTY"]
+__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY"]
 
-#: what a shot's frames get until its lens is sure: "pass" (uncorrected) or "last" (the last sure lens)
-UNTIL_SURE = ("pass", "last")
-#: where the shot evidence and fit run: a separate process (default) or a thread
-WORKERS = ("process", "thread")
 #: seconds :meth:`OnlineShotLens.wait_ready` waits for the worker's estimator by default
 READY_TIMEOUT_S = 120.0
 #: sampled frames are handed to the shot evidence at most this wide (px): the per-frame estimator
@@ -165,7 +161,7 @@ class OnlineShotLens:
         self._ready = self._busy = False
         self._rest_until = 0.0
         args = (estimator, int(estimate_every), float(doubtful_px), float(duty))
-        if check_choice("worker", worker, WORKERS) == "process":
+        if check_choice("worker", worker, LIVE_WORKERS) == "process":
             context = multiprocessing.get_context("spawn")  # no fork of a process with threads
             self._connection, theirs = context.Pipe()
             self._worker = context.Process(target=_serve, args=(theirs, *args), name="glradial-live-lens", daemon=True)
