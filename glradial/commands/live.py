@@ -166,6 +166,7 @@ def run(args: argparse.Namespace) -> int:
         opened.append((writer, "abort"))
         corrector = _corrector(args, info, writer, camera, online)
         opened.append((corrector, "close"))
+        corrector.warm_up(source.first_frame)
         sender, samples = _sample_outputs(args)
     except BaseException:
         for thing, how in reversed(opened):

@@ -112,9 +112,12 @@ class LiveSource:
         self.stream.thread_type = "AUTO"
         self.frames_read = 0
         self.ended = ""
+        self._flushed = False
         self._packets = self._container.demux(self.stream)
         self._pending = self._first_frames()
-        self.info = self._info(self._pending[0])
+        #: the first decoded frame (also the first :meth:`frames` hands out): what the stream's frames are like
+        self.first_frame = self._pending[0]
+        self.info = self._info(self.first_frame)
 
     def _decode_next(self) -> list[av.VideoFrame]:
         """The frames of the next packet ([] for none); StopIteration at the end of the input."""
@@ -124,14 +127,22 @@ class LiveSource:
         except StopIteration:
             self.ended = self.ended or "eof"
             raise
-        except av.ExitError:
-            self.ended = "idle"
-            raise StopIteration from None
-        except av.EOFError:
-            self.ended = "eof"
-            raise StopIteration from None
+        except (av.ExitError, av.EOFError) as end:
+            self.ended = "idle" if isinstance(end, av.ExitError) else "eof"
+            return self._flush()
         except (av.FFmpegError, UnicodeDecodeError) as err:
             raise ValueError(f"live input {_error(self.source, err)} (after {self.frames_read} decoded frames)") from None
+
+    def _flush(self) -> list[av.VideoFrame]:
+        """The frames the decoder still holds (its threads keep a few) once no packet will come,
+        then StopIteration on the next call."""
+        if self._flushed:
+            raise StopIteration
+        self._flushed = True
+        try:
+            return list(self.stream.codec_context.decode(None))
+        except (av.FFmpegError, ValueError):
+            return []
 
     def _first_frames(self) -> list[av.VideoFrame]:
         while True:

@@ -44,7 +44,7 @@ import threading
 import time
 import uuid
 from collections import OrderedDict, deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from fractions import Fraction
 from typing import Callable
 
@@ -93,7 +93,8 @@ class LiveFrame:
 class LiveStats:
     """Counts of a live run: frames ``pushed``, ``dropped`` (before correction: the input outran
     it), ``corrected``, ``left`` (taken by the caller) and ``late`` (left more than ``max_delay``
-    frame periods after arriving); ``delays`` the delay of every frame that left (frame periods)."""
+    frame periods after arriving); ``delays`` the delay of every frame that left (frame periods),
+    ``dropped_at`` the numbers of the dropped frames."""
 
     rate: float
     max_delay: int
@@ -103,7 +104,13 @@ class LiveStats:
     left: int = 0
     late: int = 0
     delays: list[float] = field(default_factory=list)
+    dropped_at: list[int] = field(default_factory=list)
     started: float = field(default_factory=time.monotonic)
+
+    def drop(self, index: int) -> None:
+        """Count frame ``index`` (its number on the source's clock) as dropped."""
+        self.dropped += 1
+        self.dropped_at.append(index)
 
     def delay_percentile(self, q: float) -> float:
         """The ``q``-th percentile (0-100) of the delays (frame periods; NaN before any frame left)."""
@@ -133,6 +140,35 @@ class _NewFrames:
     def stamp(self, frame: av.VideoFrame, pts: int | None) -> av.VideoFrame:
         frame.pts = pts
         return frame
+
+
+class _MapsAhead:
+    """Builds the maps of a lens not seen before on a helper thread (a dry run of the correction of a
+    frame, which fills the CPU path's map cache, :func:`glradial.remapping.remap.cpu_maps`), so
+    that the worker switches to a new ``--auto`` lens only once its maps are there: a new lens then
+    costs the stream no frame. ``corrector()`` makes a corrector like the worker's."""
+
+    def __init__(self, corrector: Callable[[], _FrameCorrector], size: tuple[int, int]) -> None:
+        self._corrector, self.size = corrector, size
+        self._built: deque = deque(maxlen=4)
+        self._thread: threading.Thread | None = None
+
+    def ready(self, lens: Lens, frame) -> bool:
+        """Whether ``lens``'s maps are built; if not, and no build is running, start one on ``frame``."""
+        if lens in self._built:
+            return True
+        if self._thread is None or not self._thread.is_alive():
+            self._thread = threading.Thread(target=self._build, args=(lens, frame), name="glradial-live-maps", daemon=True)
+            self._thread.start()
+        return False
+
+    def _build(self, lens: Lens, frame) -> None:
+        corrector = self._corrector()
+        if isinstance(frame, av.VideoFrame):
+            corrector.planar(frame, lens, _NewFrames(self.size, frame.format.name), None)
+        else:
+            corrector(frame, lens)
+        self._built.append(lens)
 
 
 class LiveCorrector:
@@ -187,6 +223,8 @@ class LiveCorrector:
         self._first: float | None = None
         self._last_index = -1
         self._costs: deque = deque(maxlen=COSTS_KEPT)  # the last corrections' times (s)
+        self._applied: Lens | None = None  # --auto: the lens applied now
+        self._ahead = _MapsAhead(self._twin, self.size)
         if camera is not None and self.lens is not None:
             self._sample(0, 0.0, self._state(0, None))  # the schema validator and the lens object, made now
         self._thread = threading.Thread(target=self._work, name="glradial-live-correct", daemon=True)
@@ -212,8 +250,7 @@ class LiveCorrector:
             self._last_index = index
             self.stats.pushed += 1
             if len(self._waiting) >= MAX_WAITING:
-                self._waiting.popleft()
-                self.stats.dropped += 1
+                self.stats.drop(self._waiting.popleft()[3])
             self._waiting.append((frame, stamp if timestamp is not None else stamp - self._first, arrived, index))
             self._cond.notify_all()
 
@@ -295,7 +332,7 @@ class LiveCorrector:
                 cost = float(np.median(self._costs)) if self._costs else 0.0
                 if age * float(self.rate) > self.max_delay or (
                         self._waiting and (age + cost) * float(self.rate) > self.max_delay):
-                    self.stats.dropped += 1
+                    self.stats.drop(item[3])
                     continue
                 return item
 
@@ -320,17 +357,42 @@ class LiveCorrector:
                 self._done = True
                 self._cond.notify_all()
 
+    def warm_up(self, frame: np.ndarray | av.VideoFrame) -> None:
+        """Build the given lens's maps (and the planar set-up) on ``frame``, one like those to come,
+        before the stream starts, so that the first frame costs no more than the others (the frames
+        behind it would otherwise wait for its maps, and be dropped). Call it before the first
+        :meth:`push`; a no-op for ``"auto"`` (its lenses are built ahead as they come) and the GL backend."""
+        if self.lens is None or self._corrector.backend != "cpu" or self.stats.pushed:
+            return
+        if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
+            frame = frame.to_ndarray(format="rgb24")
+        if isinstance(frame, av.VideoFrame):
+            self._corrector.planar(frame, self.lens, _NewFrames(self.size, frame.format.name), None)
+        else:
+            self._corrector(frame, self.lens)
+
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None
         if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
             frame = frame.to_ndarray(format="rgb24")
         state = self._state(index, frame)
+        if self._online is not None and self._corrector.backend == "cpu":  # a new lens: once its maps are built
+            wanted = state.applied
+            if wanted is None or wanted == self._applied or self._ahead.ready(wanted, frame):
+                self._applied = wanted
+            state = replace(state, applied=self._applied)
         if isinstance(frame, av.VideoFrame):
             image = self._corrector.planar(frame, state.applied, self.frames, pts)
         else:
             image = frame if state.applied is None else self._corrector(frame, state.applied)
         sample = self._sample(index, timestamp, state) if self.camera is not None else None
         return LiveFrame(index, timestamp, pts, image, state, sample, arrived)
+
+    def _twin(self) -> _FrameCorrector:
+        """A corrector like the worker's (same options and planes), for :class:`_MapsAhead`."""
+        twin = _FrameCorrector(self._corrector.backend, self._corrector.fit, self._corrector.interpolation)
+        twin.lattices, twin.black = getattr(self._corrector, "lattices", None), getattr(self._corrector, "black", None)
+        return twin
 
     def _takes_planes(self, frame: av.VideoFrame) -> bool:
         """Whether planar frames are corrected in YUV (decided on the first frame)."""
