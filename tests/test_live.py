@@ -297,3 +297,26 @@ def test_auto_through_stdin_reads_the_shot_lens(tmp_path):
     errors = max_displacement_px(np.array([[g["k1"], g["k2"]] for g in fitted]), np.array([K1, K2]))
     assert np.max(errors) <= 8.0
     assert all(g["shot"] == 0 for g in fitted)
+
+
+@pytest.mark.parametrize("argv, status, message", [
+    (["udp://127.0.0.1:9", "{exists}", "--k1", "-0.1"], 1, "already exists"),
+    (["ftp://host/x", "{out}", "--k1", "-0.1"], 1, "unknown URL scheme 'ftp'"),
+    (["-", "rtmp://host/x", "--k1", "-0.1"], 1, "must be udp://"),
+    (["{missing}", "{out}", "--k1", "-0.1"], 1, "does not exist"),
+    (["{exists}", "{exists}", "--k1", "-0.1", "-y"], 2, "is INPUT"),
+    (["-", "{out}", "--k1", "-0.1", "--auto"], 2, "give the lens one way"),
+    (["-", "{out}"], 2, "give the lens"),
+    (["-", "{out}", "--k1", "-0.1", "--every", "5"], 2, "--every needs --auto"),
+    (["-", "{out}", "--k1", "-0.1", "--send", "127.0.0.1:9"], 2, "--focal-mm"),
+    (["-", "{out}", "--k1", "-0.1", "--rate", "25"], 2, "--rate is for files"),
+])
+def test_bad_options_are_refused_before_waiting_for_the_input(tmp_path, capsys, argv, status, message):
+    from glradial.cli import main
+
+    exists = tmp_path / "exists.ts"
+    exists.write_bytes(b"x")
+    names = {"exists": str(exists), "out": str(tmp_path / "out.ts"), "missing": str(tmp_path / "missing.ts")}
+    assert main(["live", *[a.format(**names) for a in argv]]) == status  # refused before the input is opened
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "out.ts").exists()

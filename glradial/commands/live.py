@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+from pathlib import Path
 
 from ..lens.options import METHODS, UNTIL_SURE
 from . import UsageError, lens_from_args, lens_given, positive_float, positive_int
@@ -16,6 +17,7 @@ from .remapping import (
     check_encode_options,
     refuse_same_file,
     reject_for,
+    same_file,
 )
 
 DESCRIPTION = """\
@@ -91,6 +93,23 @@ def _check_options(args: argparse.Namespace) -> None:
         raise UsageError("--alpha is for files ('glradial correct')")
     check_encode_options(args)
     check_opentrackio_output(args)
+    _check_ends(args)
+
+
+def _check_ends(args: argparse.Namespace) -> None:
+    """INPUT and OUTPUT before anything waits for the input: a kind of input glradial reads, an
+    input file that exists, an output URL it writes, an output file that may be written and is not INPUT."""
+    from ..media.stream_io import check_live_output, source_kind
+
+    if source_kind(args.input) == "file" and not Path(args.input).is_file():
+        raise FileNotFoundError(f"input {args.input!r} does not exist (live inputs: '-', a URL, a V4L2 device or a file)")
+    if check_live_output(args.output) == "file":
+        from ..media.atomic import check_output_folder
+        from ..media.video_io import check_video_overwrite
+
+        check_video_overwrite(check_output_folder(args.output), args.overwrite)
+        if source_kind(args.input) == "file" and same_file(Path(args.input), Path(args.output)):
+            raise UsageError(f"OUTPUT {args.output!r} is INPUT: write the corrected stream elsewhere")
     if args.opentrackio:
         refuse_same_file(args.opentrackio, "--opentrackio", *[p for p in (args.input, args.output) if p != "-" and "://" not in p])
 

@@ -35,7 +35,7 @@ import av
 
 from .video_io import EncodeOptions, VideoInfo, VideoWriter, _bit_depth, _error
 
-__all__ = ["LiveSource", "StreamWriter", "open_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
+__all__ = ["LiveSource", "StreamWriter", "open_live_output", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
 
 #: URL schemes read as network streams (ended by ``idle_timeout``)
 NETWORK_SCHEMES = ("udp", "rtp", "srt", "tcp", "rtsp", "rtmp", "http", "https")
@@ -222,14 +222,21 @@ class StreamWriter(VideoWriter):
             raise
 
 
+def check_live_output(target: str) -> str:
+    """``"stdout"``, ``"udp"`` or ``"file"`` for an OUTPUT text; ``ValueError`` for another URL."""
+    if target == "-":
+        return "stdout"
+    scheme, sep, _ = target.partition("://")
+    if not sep:
+        return "file"
+    if scheme.lower() != "udp":
+        raise ValueError(f"output {target!r}: a live output URL must be udp://HOST:PORT (MPEG-TS), or give a file or '-'")
+    return "udp"
+
+
 def open_live_output(target: str, info: VideoInfo, *, options: EncodeOptions = EncodeOptions(),
                      overwrite: bool = False) -> VideoWriter:
     """The writer of OUTPUT ``target`` (module docstring) for frames like ``info``."""
-    if target == "-":
-        return StreamWriter(target, info, options=options)
-    scheme, sep, _ = target.partition("://")
-    if sep:
-        if scheme.lower() != "udp":
-            raise ValueError(f"output {target!r}: a live output URL must be udp://HOST:PORT (MPEG-TS), or give a file or '-'")
-        return StreamWriter(target, info, options=options)
-    return VideoWriter(target, info, options=options, overwrite=overwrite)
+    if check_live_output(target) == "file":
+        return VideoWriter(target, info, options=options, overwrite=overwrite)
+    return StreamWriter(target, info, options=options)
