@@ -66,6 +66,10 @@ DEFAULT_MAX_DELAY = 2
 THUMB_SIZE = (64, 36)
 #: frames waiting for the worker at most (memory); a frame is dropped sooner when it would be late
 MAX_WAITING = 16
+#: corrected frames that wait for the caller at most: one (the worker corrects the next while the
+#: caller encodes this one); a slow caller holds the worker back, and the frames behind it are then
+#: dropped at the input rather than corrected and left to age
+READY_SLOTS = 1
 #: corrections whose median time predicts the next one's
 COSTS_KEPT = 9
 #: OpenTrackIO lens objects kept per lens (a stream changes lens only between shots or on a zoom)
@@ -344,7 +348,7 @@ class LiveCorrector:
                 if self.stats.corrected:  # the first builds maps and opens things: no measure of the rest
                     self._costs.append(time.monotonic() - started)
                 with self._cond:
-                    while len(self._ready) >= self.max_delay and not self._stopped:
+                    while len(self._ready) >= READY_SLOTS and not self._stopped:
                         self._cond.wait(0.05)
                     self._ready.append(done)
                     self.stats.corrected += 1
