@@ -43,7 +43,7 @@ NETWORK_SCHEMES = ("udp", "rtp", "srt", "tcp", "rtsp", "rtmp", "http", "https")
 STREAM_OUTPUT_FORMAT = "mpegts"
 #: datagram size of a ``udp://`` output: 7 MPEG-TS packets of 188 bytes (the usual IPTV size)
 UDP_PACKET_SIZE = 1316
-#: how long (microseconds) and how many bytes FFmpeg reads a network stream before the first frame
+#: how long (microseconds) and how many bytes FFmpeg reads a network stream or a pipe before the first frame
 #: is handed out (its defaults, 5 s and 5 MB, would hold back seconds of frames and then release
 #: them at once): enough for a key frame of a stream with a 1 s GOP at up to 32 Mb/s
 PROBE_US = 100_000
@@ -68,15 +68,16 @@ def source_kind(source: str) -> str:
 
 def _open_arguments(source: str, kind: str, idle_timeout: float) -> tuple[str, dict]:
     """The URL and the keywords of ``av.open`` for ``source`` of ``kind``."""
+    probe = {"analyzeduration": str(PROBE_US), "probesize": str(PROBE_BYTES)}
     if kind == "stdin":
-        return "pipe:0", {}
+        return "pipe:0", {"container_options": probe}
     if kind == "device":
         return source, {"format": "v4l2"}
     if kind == "file":
         if not Path(source).is_file():
             raise FileNotFoundError(f"input {source!r} does not exist (live inputs: '-', a URL, a V4L2 device or a file)")
         return source, {}
-    options = {"analyzeduration": str(PROBE_US), "probesize": str(PROBE_BYTES)}
+    options = dict(probe)
     if source.lower().startswith("udp://"):
         options.update(overrun_nonfatal="1", fifo_size=str(UDP_FIFO_PACKETS))
     return source, {"container_options": options, "timeout": (idle_timeout, idle_timeout)}
