@@ -32,7 +32,11 @@ Conventions:
   ``max_delay`` counts as late (:attr:`LiveStats.late`). Nothing waits for a shot's end.
 * The lens: a :class:`glradial.Lens` (or ``(k1, k2)``) for every frame, or ``"auto"``: the lens of
   each shot read from the frames seen so far (:class:`glradial.video.live_lens.OnlineShotLens`,
-  with its doubt policy: a shot not (yet) sure passes through, flagged doubtful).
+  with its doubt policy: a shot not (yet) sure passes through, flagged doubtful; a new lens is
+  applied once its maps are built on a helper thread, and ``LiveFrame.state.applied`` says which
+  lens a frame got). Its worker is a separate process started with ``spawn``: a script that makes
+  an ``"auto"`` corrector needs the ``if __name__ == "__main__":`` guard, or passes
+  ``auto={"worker": "thread"}``.
 * ``camera`` (:class:`glradial.export.opentrackio.Camera`): each frame gets its OpenTrackIO sample
   (:func:`glradial.export.opentrackio.frame_sample`), with ``custom.glradial`` k1, k2 (the lens
   reported: the estimate even where it is not applied), uncertainty and doubt as for files.
