@@ -320,3 +320,27 @@ def test_bad_options_are_refused_before_waiting_for_the_input(tmp_path, capsys, 
     assert main(["live", *[a.format(**names) for a in argv]]) == status  # refused before the input is opened
     assert message in capsys.readouterr().err
     assert not (tmp_path / "out.ts").exists()
+
+
+def test_nut_on_stdin_to_mpeg_ts_over_udp(clip, tmp_path):
+    """A NUT stream on stdin (FFmpeg probes it), the corrected stream out as MPEG-TS over UDP,
+    received by ffmpeg on loopback: every frame arrives, at the input's size."""
+    port = _free_port()
+    received = tmp_path / "received.ts"
+    receiver = subprocess.Popen(["ffmpeg", "-v", "error", "-y", "-i", f"udp://127.0.0.1:{port}?timeout=3000000", "-c", "copy",
+                                 str(received)])
+    nut = subprocess.Popen(["ffmpeg", "-v", "error", "-i", str(clip), "-c", "copy", "-f", "nut", "-"], stdout=subprocess.PIPE)
+    time.sleep(0.5)  # the receiver's socket
+    process = _live("-", f"udp://127.0.0.1:{port}", "--k1", str(K1), "--realtime", "-q", stdin=nut.stdout)
+    nut.stdout.close()
+    stderr = process.communicate(timeout=60)[1]
+    nut.wait(timeout=10)
+    receiver.wait(timeout=30)
+    assert process.returncode == 0, stderr
+    counts = _report(stderr)
+    assert counts["read"] == RATE * SECONDS and counts["written"] + counts["dropped"] == counts["read"]
+    probed = subprocess.run(["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v", "-show_entries",
+                             "stream=nb_read_frames,width,height", "-of", "csv=p=0", str(received)],
+                            capture_output=True, text=True, check=True)
+    width, height, frames = (int(v) for v in probed.stdout.strip().splitlines()[0].split(","))
+    assert (width, height) == SIZE and frames == counts["written"]
