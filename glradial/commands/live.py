@@ -242,7 +242,12 @@ def _stream(args, source, writer, corrector, sender, samples, run_live) -> int:
         if samples is not None:
             samples.abort()
     else:
-        writer.close()
+        try:
+            writer.close()
+        except BaseException:
+            if samples is not None:
+                samples.abort()
+            raise
         if samples is not None:
             samples.close()
     if status is not None and sys.stderr.isatty():
