@@ -27,13 +27,14 @@ from __future__ import annotations
 
 import contextlib
 import time
+from dataclasses import replace
 from fractions import Fraction
 from pathlib import Path
 from typing import Iterator
 
 import av
 
-from .video_io import EncodeOptions, VideoInfo, VideoWriter, _bit_depth, _error
+from .video_io import EncodeOptions, VideoInfo, VideoWriter
 
 __all__ = ["LiveSource", "StreamWriter", "open_live_output", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
 
@@ -51,6 +52,11 @@ PROBE_BYTES = 500_000
 #: FFmpeg's input FIFO for a UDP source (packets of 188 bytes): about 2 s of a 20 Mb/s stream, so
 #: that a short stall of the reader loses nothing
 UDP_FIFO_PACKETS = 50_000
+
+
+def _said(source: str, err: BaseException) -> str:
+    """``'SOURCE': what FFmpeg said`` on one line (its strerror where it has one)."""
+    return f"{source!r}: {' '.join(str(getattr(err, 'strerror', None) or err).split())}"
 
 
 def source_kind(source: str) -> str:
@@ -104,7 +110,7 @@ class LiveSource:
         except av.ExitError:
             raise ValueError(f"live input {source!r}: no data within {self.idle_timeout:g} s") from None
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"cannot read live input {_error(source, err)} (not a stream FFmpeg knows, "
+            raise ValueError(f"cannot read live input {_said(source, err)} (not a stream FFmpeg knows, "
                              "or no video in it)") from None
         if not self._container.streams.video:
             self._container.close()
@@ -132,7 +138,7 @@ class LiveSource:
             self.ended = "idle" if isinstance(end, av.ExitError) else "eof"
             return self._flush()
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"live input {_error(self.source, err)} (after {self.frames_read} decoded frames)") from None
+            raise ValueError(f"live input {_said(self.source, err)} (after {self.frames_read} decoded frames)") from None
 
     def _flush(self) -> list[av.VideoFrame]:
         """The frames the decoder still holds (its threads keep a few) once no packet will come,
@@ -160,10 +166,9 @@ class LiveSource:
         stream, context = self.stream, self.stream.codec_context
         rate = stream.average_rate or stream.guessed_rate or stream.base_rate or Fraction(25)
         timecode = stream.metadata.get("timecode") or self._container.metadata.get("timecode")
-        pix_fmt = first.format.name
-        return VideoInfo(
-            size=(first.width, first.height), rate=Fraction(rate), frame_count=-1, codec=context.name, pix_fmt=pix_fmt,
-            bit_depth=_bit_depth(pix_fmt), time_base=Fraction(stream.time_base) if stream.time_base else Fraction(1, 90000),
+        shape = VideoInfo.of((first.width, first.height), Fraction(rate), codec=context.name, pix_fmt=first.format.name)
+        return replace(
+            shape, time_base=Fraction(stream.time_base) if stream.time_base else Fraction(1, 90000),
             timecode=timecode, color_primaries=int(first.color_primaries), color_trc=int(first.color_trc),
             colorspace=int(first.colorspace), color_range=int(first.color_range), interlaced=bool(first.interlaced_frame),
             field_order=int(getattr(context, "field_order", 0) or 0), bit_rate=int(context.bit_rate or 0),

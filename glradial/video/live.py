@@ -60,7 +60,7 @@ from ..lens.lens import Lens, as_lens
 from ..media.frames import to_rgb8
 from ..media.video_io import VideoInfo, frame_planes, yuv_layout
 from .live_lens import SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
-from .video_pipeline import _FrameCorrector
+from .video_pipeline import FrameCorrector
 
 __all__ = ["LiveCorrector", "LiveFrame", "LiveStats", "DEFAULT_MAX_DELAY"]
 
@@ -156,7 +156,7 @@ class _MapsAhead:
     that the worker switches to a new ``--auto`` lens only once its maps are there: a new lens then
     costs the stream no frame. ``corrector()`` makes a corrector like the worker's."""
 
-    def __init__(self, corrector: Callable[[], _FrameCorrector], size: tuple[int, int]) -> None:
+    def __init__(self, corrector: Callable[[], FrameCorrector], size: tuple[int, int]) -> None:
         self._corrector, self.size = corrector, size
         self._built: deque = deque(maxlen=4)
         self._thread: threading.Thread | None = None
@@ -202,7 +202,7 @@ class LiveCorrector:
         info = VideoInfo.of(size, rate, codec=codec)
         self.size, self.rate, self.max_delay = info.size, info.rate, int(max_delay)
         self.camera, self.model, self.codec, self.frames = camera, model, codec, frames
-        self._corrector = _FrameCorrector(backend, fit, interpolation)
+        self._corrector = FrameCorrector(backend, fit, interpolation)
         self._online: OnlineShotLens | None = None
         if isinstance(lens, OnlineShotLens):
             self._online, self.lens = lens, None
@@ -396,9 +396,9 @@ class LiveCorrector:
         sample = self._sample(index, timestamp, state) if self.camera is not None else None
         return LiveFrame(index, timestamp, pts, image, state, sample, arrived)
 
-    def _twin(self) -> _FrameCorrector:
+    def _twin(self) -> FrameCorrector:
         """A corrector like the worker's (same options and planes), for :class:`_MapsAhead`."""
-        twin = _FrameCorrector(self._corrector.backend, self._corrector.fit, self._corrector.interpolation)
+        twin = FrameCorrector(self._corrector.backend, self._corrector.fit, self._corrector.interpolation)
         twin.lattices, twin.black = getattr(self._corrector, "lattices", None), getattr(self._corrector, "black", None)
         return twin
 
