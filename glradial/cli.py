@@ -30,7 +30,7 @@ from .commands import CliError, UsageError
 __all__ = ["main", "build_parser", "COMMANDS", "messages_to_stderr"]
 
 #: subcommands in the order ``glradial --help`` lists them
-COMMANDS = ("correct", "distort", "estimate", "calibrate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
+COMMANDS = ("correct", "distort", "live", "estimate", "calibrate", "convert", "stmap", "crops", "stadium", "demo", "evaluate")
 
 PROG = "glradial"
 

@@ -332,7 +332,7 @@ def test_every_option_is_documented():
 def test_every_command_is_installed():
     parser = build_parser()
     subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    assert set(subparsers.choices) == {"correct", "distort", "estimate", "calibrate", "convert", "stmap", "crops", "stadium", "demo", "evaluate"}
+    assert set(subparsers.choices) == {"correct", "distort", "live", "estimate", "calibrate", "convert", "stmap", "crops", "stadium", "demo", "evaluate"}
     for name, sub in subparsers.choices.items():
         assert "unavailable" not in (sub.description or ""), (name, sub.description)
 

@@ -7,12 +7,13 @@ import sys
 from pathlib import Path
 
 from ..lens.options import METHODS
-from . import UsageError, lens_given, positive_float, positive_int, show_progress
+from . import UsageError, lens_given, show_progress
 from .engine_options import add_opentrackio_options, opentrackio_hook, opentrackio_wanted, write_track_opentrackio
 from .remapping import (
     add_encode_options,
     add_remap_parser,
     add_render_options,
+    add_shot_lens_options,
     check_encode_options,
     check_paths,
     refuse_same_file,
@@ -63,12 +64,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     add_encode_options(parser)
     video = parser.add_argument_group("video with --auto")
-    video.add_argument("--every", type=positive_int, default=None, metavar="N",
-                       help="read the evidence of every N-th frame of each shot, plus each shot's first frame (frames; default 10)")
-    video.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
-                       help="a shot whose lens is less sure than this is doubtful (px at 1920 wide, ~p90; default 10)")
-    video.add_argument("--apply-doubtful", action="store_const", const=True, default=None,
-                       help="correct a doubtful image or shot too (default: it passes through uncorrected and is reported)")
+    add_shot_lens_options(video)
     video.add_argument("--sidecar", metavar="PATH",
                        help="per-frame lens file: .csv or .json (default: OUTPUT.lens.csv)")
     add_opentrackio_options(parser)

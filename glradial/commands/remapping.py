@@ -24,7 +24,7 @@ __all__ = [
     "bitrate", "frame_rate", "add_remap_parser", "add_io_arguments", "add_render_options", "add_encode_options", "check_paths",
     "reject_for", "check_encode_options", "image_transform", "run_with_lens", "remap_image_file", "remap_folder",
     "remap_video", "same_file", "summary", "video_alpha", "folder_images", "ALPHA_CHOICES",
-    "VIDEO_OPTIONS", "RemapHook",
+    "VIDEO_OPTIONS", "RemapHook", "add_shot_lens_options",
 ]
 
 #: ``--alpha``: auto = premultiplied for OpenEXR (its convention), straight for everything else
@@ -127,6 +127,19 @@ def add_encode_options(parser: argparse.ArgumentParser) -> argparse._ArgumentGro
                         "frames. Interlaced frames are remapped field by field (each field on its own half-height "
                         "geometry) and written with the same field order and flags (default: auto)")
     return encode
+
+
+def add_shot_lens_options(group: argparse._ArgumentGroup) -> None:
+    """``--every --max-uncertainty --apply-doubtful``: how ``--auto`` reads a video's shots and its
+    doubt policy (``correct --auto``, ``live --auto``)."""
+    from . import positive_float, positive_int
+
+    group.add_argument("--every", type=positive_int, default=None, metavar="N",
+                       help="read the evidence of every N-th frame of each shot, plus each shot's first frame (frames; default 10)")
+    group.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
+                       help="a shot whose lens is less sure than this is doubtful (px at 1920 wide, ~p90; default 10)")
+    group.add_argument("--apply-doubtful", action="store_const", const=True, default=None,
+                       help="correct a doubtful image or shot too (default: it passes through uncorrected and is reported)")
 
 
 def reject_for(args: argparse.Namespace, names: tuple[str, ...], what: str) -> None:

@@ -23,6 +23,7 @@ A sample carries:
 from __future__ import annotations
 
 import json
+import math
 import os
 import uuid
 from dataclasses import dataclass
@@ -40,7 +41,7 @@ from .overscan import overscan_factor
 
 __all__ = [
     "PROTOCOL", "SENSOR_PRESETS", "Camera", "lens_object", "track_samples", "validate_sample", "encode_sample",
-    "write_samples", "parse_timecode", "timecode_at", "require_cbor2",
+    "write_samples", "parse_timecode", "timecode_at", "require_cbor2", "frame_sample",
 ]
 
 PROTOCOL = {"name": "OpenTrackIO", "version": [1, 0, 1]}
@@ -211,21 +212,53 @@ def track_samples(
     static = _static(camera, len(lenses), overscan_max)
     samples = []
     for i, glradial_lens in enumerate(lenses):
-        lens, fit_error = objects[glradial_lens]
-        extra = {"k1": glradial_lens.k1, "k2": glradial_lens.k2, "uncertainty_px": _number(uncertainty_px, i),
-                 "doubtful": bool(doubtful[i]) if doubtful is not None else None,
-                 "shot": int(shots[i]) if shots is not None else None, "fit_max_error_px": fit_error}
-        status = "lens given" if uncertainty_px is None else ("lens estimated: DOUBTFUL" if extra["doubtful"] else "lens estimated")
-        sample = {
-            "protocol": PROTOCOL, "sampleId": uuid.uuid4().urn, "sourceId": source_id, "sourceNumber": 1,
-            "static": static, "timing": _timing(camera, i),
-            "tracker": {"notes": "glradial lens (custom.glradial: width-normalised k1, k2; uncertainty_px at 1920 wide, "
-                                 "~p90 of the maximum displacement error)", "recording": False, "status": status},
-            "lens": lens, "custom": {"glradial": {k: v for k, v in extra.items() if v is not None}},
-        }
-        validate_sample(sample)
-        samples.append(sample)
+        extra = {"uncertainty_px": _number(uncertainty_px, i), "doubtful": bool(doubtful[i]) if doubtful is not None else None,
+                 "shot": int(shots[i]) if shots is not None else None}
+        samples.append(_sample(glradial_lens, objects[glradial_lens], static, _timing(camera, i), source_id,
+                               estimated=uncertainty_px is not None, **extra))
     return samples
+
+
+def _sample(glradial_lens: Lens, lens_and_error: tuple[dict, float | None], static: dict, timing: dict, source_id: str, *,
+            estimated: bool, uncertainty_px: float | None, doubtful: bool | None, shot: int | None) -> dict:
+    """One validated sample (``estimated``: the status says the lens is estimated, DOUBTFUL or not)."""
+    lens, fit_error = lens_and_error
+    extra = {"k1": glradial_lens.k1, "k2": glradial_lens.k2, "uncertainty_px": uncertainty_px, "doubtful": doubtful,
+             "shot": shot, "fit_max_error_px": fit_error}
+    status = "lens given" if not estimated else ("lens estimated: DOUBTFUL" if doubtful else "lens estimated")
+    sample = {
+        "protocol": PROTOCOL, "sampleId": uuid.uuid4().urn, "sourceId": source_id, "sourceNumber": 1,
+        "static": static, "timing": timing,
+        "tracker": {"notes": "glradial lens (custom.glradial: width-normalised k1, k2; uncertainty_px at 1920 wide, "
+                             "~p90 of the maximum displacement error)", "recording": False, "status": status},
+        "lens": lens, "custom": {"glradial": {k: v for k, v in extra.items() if v is not None}},
+    }
+    validate_sample(sample)
+    return sample
+
+
+def frame_sample(lens: Lens, camera: Camera, index: int, source_id: str, *, model: str = MODEL_UD,
+                 uncertainty_px: float | None = None, doubtful: bool | None = None, shot: int | None = None,
+                 timestamp_s: float | None = None, lens_and_error: tuple[dict, float | None] | None = None) -> dict:
+    """The validated sample of one frame of a stream (a live source: no duration, the overscan its
+    own lens's), frame ``index`` counted from the stream's first (its ``sequenceNumber`` and, with
+    ``camera.timecode`` the first frame's, its timecode). ``timestamp_s``: the frame's presentation
+    time on the input's clock (seconds, >= 0), stated as ``timing.sampleTimestamp`` (the stream's
+    clock, not PTP time). ``uncertainty_px`` (px at 1920) given: the lens is estimated (status
+    "lens estimated", "...: DOUBTFUL" with ``doubtful``). ``lens_and_error``: :func:`lens_object`
+    of ``lens`` when the caller caches it (a stream keeps one lens for many frames)."""
+    lens_and_error = lens_and_error or lens_object(lens, camera, model=model)
+    static = _static(camera, None, lens_and_error[0]["distortion"][0]["overscan"])
+    timing = _timing(camera, int(index))
+    if timestamp_s is not None:
+        if not timestamp_s >= 0:
+            raise ValueError(f"timestamp_s must be >= 0 seconds, got {timestamp_s!r}")
+        seconds = int(timestamp_s)
+        timing["sampleTimestamp"] = {"seconds": seconds, "nanoseconds": min(int(round((timestamp_s - seconds) * 1e9)), 999_999_999)}
+    known = uncertainty_px is not None and math.isfinite(uncertainty_px)
+    return _sample(lens, lens_and_error, static, timing, source_id, estimated=uncertainty_px is not None,
+                   uncertainty_px=float(uncertainty_px) if known else None,
+                   doubtful=None if doubtful is None else bool(doubtful), shot=None if shot is None else int(shot))
 
 
 @lru_cache(maxsize=1)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 from typing import Iterable
 
 __all__ = ["IDENTIFIER", "ENCODING_JSON", "ENCODING_CBOR", "MAX_SEGMENT", "fletcher16", "packets", "Packet", "parse_packet",
-           "send_payloads", "parse_address"]
+           "send_payloads", "parse_address", "SampleSender"]
 
 IDENTIFIER = b"OTrk"
 ENCODING_JSON = 0x01
@@ -104,19 +104,47 @@ def parse_address(text: str) -> tuple[str, int]:
     return host, int(port)
 
 
+class SampleSender:
+    """Sends payloads one at a time, as they are made (a live stream's samples), to ``address``
+    ``(host, port)`` with sequence numbers 1, 2, ... (wrapping at 65535); :attr:`sent` counts the
+    payloads sent, :attr:`datagrams` the datagrams. A send the network refuses (no route, a full
+    buffer) raises ``OSError`` naming the address."""
+
+    def __init__(self, address: tuple[str, int], encoding: int = ENCODING_JSON) -> None:
+        self.address, self.encoding = address, encoding
+        self.sent = self.datagrams = 0
+        self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+    def send(self, payload: bytes) -> None:
+        try:
+            for datagram in packets(payload, self.sent % 0xFFFF + 1, self.encoding):
+                self._socket.sendto(datagram, self.address)
+                self.datagrams += 1
+        except OSError as err:
+            raise OSError(f"cannot send OpenTrackIO packets to {self.address[0]}:{self.address[1]}: {err.strerror or err}") from None
+        self.sent += 1
+
+    def close(self) -> None:
+        self._socket.close()
+
+    def __enter__(self) -> "SampleSender":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
 def send_payloads(payloads: Iterable[bytes], address: tuple[str, int], *, encoding: int = ENCODING_JSON,
                   rate: float | None = None) -> int:
     """Send each payload as packets to ``address`` with sequence numbers 1, 2, ... (wrapping at
     65535), paced at ``rate`` payloads per second (None: as fast as possible); returns the number of
     datagrams sent."""
-    sent, start = 0, time.monotonic()
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+    start = time.monotonic()
+    with SampleSender(address, encoding) as sender:
         for index, payload in enumerate(payloads):
             if rate:
                 delay = start + index / rate - time.monotonic()
                 if delay > 0:
                     time.sleep(delay)
-            for datagram in packets(payload, index % 0xFFFF + 1, encoding):
-                sock.sendto(datagram, address)
-                sent += 1
-    return sent
+            sender.send(payload)
+    return sender.datagrams

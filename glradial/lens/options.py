@@ -52,6 +52,11 @@ DISTORTION_MODELS: tuple[str, ...] = ("U-D", "D-U")
 #: horizontal siting of subsampled chroma samples: co-sited with the even luma columns ("left":
 #: MPEG-2, H.264, HEVC, BT.601/709 4:2:2) or midway between two ("center": JPEG/MJPEG)
 CHROMA_SITINGS: tuple[str, ...] = ("left", "center")
+#: what a live stream's shot gets until its lens is sure (glradial.video.live_lens): passed through
+#: uncorrected ("pass") or the last sure lens of an earlier shot ("last"); flagged doubtful either way
+UNTIL_SURE: tuple[str, ...] = ("pass", "last")
+#: where live --auto's shot evidence and fit run: a separate process or a thread
+LIVE_WORKERS: tuple[str, ...] = ("process", "thread")
 
 
 def real_number(name: str, value: object) -> float:

@@ -634,6 +634,9 @@ class VideoWriter:
     for anything FFmpeg fails to write (full disk ...).
     """
 
+    #: the container format to write (None: FFmpeg's choice by the name's extension)
+    container_format: str | None = None
+
     def __init__(
         self,
         path: str | os.PathLike,
@@ -675,7 +678,7 @@ class VideoWriter:
     def _open(self, tmp: str, streams) -> None:
         info = self.info
         try:
-            self._container = av.open(tmp, "w", format="image2" if self.sequence else None)
+            self._container = av.open(tmp, "w", format="image2" if self.sequence else self.container_format)
         except (av.FFmpegError, ValueError) as err:
             raise ValueError(f"FFmpeg cannot write {_error(self.path, err)} (unknown or unsupported output format)") from None
         codec = _encoder(self._codec_choice())

@@ -88,7 +88,7 @@ def default_estimator(model: str | os.PathLike | None = None, method: str | None
 track_video = track_shots
 
 
-class _FrameCorrector:
+class FrameCorrector:
     """Corrects frames on the pipeline's worker thread: ``backend`` "gl" makes a
     :class:`~glradial.remapping.remap.Remapper` with its own context on first use there (falling back to the
     CPU for frames beyond its texture limit) and :meth:`release` frees it on that thread."""
@@ -230,7 +230,7 @@ def correct_video(
     frames are remapped field by field (:mod:`glradial.remapping.fields`) and written with that field order.
     Planar YUV written in its own pix_fmt is corrected in YUV (:func:`correction_space`: the CPU
     backend, progressive; source-less pixels black in the source's range), anything else in RGB."""
-    corrector = _FrameCorrector(backend, fit, interpolation, direction, **remap_options)
+    corrector = FrameCorrector(backend, fit, interpolation, direction, **remap_options)
     with VideoReader(source, order="rgb", copy_streams=True, rate=rate, alpha=True) as reader:
         info = _with_fields(reader.info, field_order)
         corrector.interlaced = info.fields != "progressive"
