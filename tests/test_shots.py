@@ -345,3 +345,28 @@ def test_the_lens_track_follows_a_zoom_past_its_last_sample():
     still = _log_zoom_at(here, [0, 10, 20, 30, 40], [0.0] * 5)
     assert np.all(still == 0.0)
     assert np.allclose(_log_zoom_at(here[:5], [0], [0.2]), 0.2)  # one sample: its zoom throughout
+
+
+def test_a_shot_is_judged_by_benefit_like_a_frame():
+    """Known answers of the shot-level benefit verdict: a joint fit doubtful only for stating more than
+    doubtful_px is applied when its bound stays below its lens's own shift from the identity (a strong
+    barrel: correcting helps even at the bound), stays doubtful when the bound reaches the uncorrected
+    frame (a near-pinhole lens), and other reasons (fold_over) stand."""
+    from types import SimpleNamespace
+
+    from glradial.video.shot_fit import ShotLens, judged_by_benefit
+
+    no_samples = SimpleNamespace(samples=[])
+
+    def shot(k1: float, bound: float, reason: str = "uncertain") -> ShotLens:
+        return ShotLens((k1, 0.0), 0.0, bound, True, reason, 3, 0, 1.0, False, "joint")
+
+    strong, weak = -0.3, -0.01
+    shift_strong = float(max_displacement_px(np.array([strong, manifold_k2(strong)]), np.zeros(2)))
+    shift_weak = float(max_displacement_px(np.array([weak, manifold_k2(weak)]), np.zeros(2)))
+    assert shift_weak < 15.0 < shift_strong  # the two cases are what they claim to be
+    applied = judged_by_benefit(shot(strong, 15.0), no_samples)
+    assert not applied.doubtful and applied.reason == "" and applied.uncertainty_px == 15.0
+    assert judged_by_benefit(shot(strong, shift_strong + 1.0), no_samples).doubtful
+    assert judged_by_benefit(shot(weak, 15.0), no_samples).doubtful
+    assert judged_by_benefit(shot(strong, 15.0, "fold_over"), no_samples).reason == "fold_over"

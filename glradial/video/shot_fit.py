@@ -63,7 +63,7 @@ threshold or when they say so themselves), ``uncertain`` (bound above the run's 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -78,6 +78,7 @@ from ..estimation.line_fit import (
     STRAIGHT_RMS,
 )
 from ..estimation.lines import LineEvidence
+from ..estimation.trust import shift_px
 from ..lens.lens import Lens
 from ..lens.lensfuncs import undistort_radius_exact
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px
@@ -477,9 +478,15 @@ def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometr
 
 def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
     """The lens of one shot from all its evidence (see the module docstring). ``doubtful_px``: a
-    bound above it makes the shot doubtful; ``radius``: the frame's corner radius (lens units)."""
+    bound above it makes the shot doubtful unless correcting helps even at the bound
+    (:func:`judged_by_benefit`); ``radius``: the frame's corner radius (lens units)."""
     if not evidence.samples:
         raise ValueError("a shot needs at least one sampled frame")
+    return judged_by_benefit(_chosen(evidence, doubtful_px, radius), evidence)
+
+
+def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> ShotLens:
+    """The joint fit or the frames' median (:func:`fit_shot`), before the benefit verdict."""
     shot = joint_fit(evidence, doubtful_px=doubtful_px, radius=radius)
     if shot is None:
         return _fallback(evidence, doubtful_px)
@@ -492,6 +499,27 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
             return frames
     fallback = _fallback(evidence, doubtful_px, "uncertain")
     return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if shot.zooming else 1.0) < shot.uncertainty_px else shot
+
+
+def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
+    """Doubt by benefit for a shot, as for a frame (:func:`glradial.estimation.trust.benefit_doubt`):
+    a shot that is doubtful only because its bound exceeds ``doubtful_px`` (``uncertain``,
+    ``no_geometry``) is sure when that bound stays below the smallest shift of its lens from the
+    identity over its samples (px at 1920): correcting helps even if the lens is off by the whole
+    bound. A 150 px barrel read stating 15 px is applied; a near-pinhole one stating 15 px is not.
+    Other reasons (``fold_over``, the frames' own doubt) stand, and so does a frames-only bound when
+    the per-frame estimates state none of their own (it is then :data:`NO_GEOMETRY_PX`, not a
+    calibrated bound)."""
+    if not shot.doubtful or shot.reason not in ("uncertain", "no_geometry"):
+        return shot
+    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    if shot.source == "frames" and not (estimates and all(hasattr(e, "uncertainty_px") for e in estimates)):
+        return shot
+    lenses = np.atleast_2d(shot.lens_at(evidence.log_zooms() if shot.zooming else np.zeros(1)))
+    smallest_shift = min(shift_px((float(k1), float(k2))) for k1, k2 in lenses)
+    if shot.uncertainty_px < smallest_shift:
+        return replace(shot, doubtful=False, reason="")
+    return shot
 
 
 def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
