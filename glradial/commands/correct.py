@@ -37,7 +37,7 @@ for an off-centre principal point and non-square pixels; or --lens FILE, e.g. an
 calibration), read per frame from a lens track (--lens-track) or estimated (--auto, centred model). For a video, --auto detects shot
 cuts and fits one lens per shot from the pitch lines of every Nth frame and the frame-to-frame
 motion between them (a zooming shot's lens follows the zoom); a doubtful shot (too little geometry,
-or uncertainty above --max-uncertainty) is reported and passed through uncorrected unless
+or uncertainty above --max-uncertainty that also reaches the uncorrected frame) is reported and passed through uncorrected unless
 --apply-doubtful; the per-frame lens goes to a sidecar (OUTPUT.lens.csv by default; format in docs/CLI.md),
 which can be edited and fed back with --lens-track. Outputs appear only when complete; an existing
 OUTPUT is replaced only with -y."""

@@ -137,7 +137,8 @@ def add_shot_lens_options(group: argparse._ArgumentGroup) -> None:
     group.add_argument("--every", type=positive_int, default=None, metavar="N",
                        help="read the evidence of every N-th frame of each shot, plus each shot's first frame (frames; default 10)")
     group.add_argument("--max-uncertainty", type=positive_float, default=None, metavar="PX",
-                       help="a shot whose lens is less sure than this is doubtful (px at 1920 wide, ~p90; default 10)")
+                       help="a shot whose lens is less sure than this is doubtful, unless even its bound leaves the frame better "
+                            "than uncorrected (px at 1920 wide, ~p90; default 10)")
     group.add_argument("--apply-doubtful", action="store_const", const=True, default=None,
                        help="correct a doubtful image or shot too (default: it passes through uncorrected and is reported)")
 
