@@ -26,6 +26,7 @@ from __future__ import annotations
 import socket
 import struct
 import time
+from contextlib import closing
 from dataclasses import dataclass
 from typing import Iterable
 
@@ -125,13 +126,8 @@ class SampleSender:
         self.sent += 1
 
     def close(self) -> None:
+        """Close the socket (``contextlib.closing`` makes a sender a context manager)."""
         self._socket.close()
-
-    def __enter__(self) -> "SampleSender":
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
 
 def send_payloads(payloads: Iterable[bytes], address: tuple[str, int], *, encoding: int = ENCODING_JSON,
@@ -140,7 +136,7 @@ def send_payloads(payloads: Iterable[bytes], address: tuple[str, int], *, encodi
     65535), paced at ``rate`` payloads per second (None: as fast as possible); returns the number of
     datagrams sent."""
     start = time.monotonic()
-    with SampleSender(address, encoding) as sender:
+    with closing(SampleSender(address, encoding)) as sender:
         for index, payload in enumerate(payloads):
             if rate:
                 delay = start + index / rate - time.monotonic()

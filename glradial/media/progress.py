@@ -8,6 +8,7 @@ terminal; ``glradial -q`` disables it), so piped or logged output stays clean.
 from __future__ import annotations
 
 import sys
+from contextlib import AbstractContextManager
 from typing import IO
 
 from tqdm import tqdm
@@ -15,7 +16,7 @@ from tqdm import tqdm
 __all__ = ["Progress"]
 
 
-class Progress:
+class Progress(AbstractContextManager):
     """``Progress(total, label)``; call :meth:`update` per unit of work, :meth:`close` at the end.
 
     ``total`` may be ``None`` or ``<= 0`` (unknown): the bar then shows a count and a rate only.
@@ -46,9 +47,6 @@ class Progress:
 
     def close(self) -> None:
         self._bar.close()
-
-    def __enter__(self) -> "Progress":
-        return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
