@@ -58,7 +58,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimation.estimator import Estimator
+    from ..camera.pitch_lens import Estimator
     from ..media.frames import to_rgb8
 
     if opentrackio_wanted(args) and len(args.inputs) != 1:
@@ -74,7 +74,8 @@ def run(args: argparse.Namespace) -> int:
 
             # the estimator loaded above (its --threads), not a second one per video
             stride = {"every": args.every} if args.every is not None else {}
-            track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method),
+            # per-frame video estimates skip the pitch camera fit (200-400 ms a frame; docs/CAMERA.md)
+            track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method, pitch=False),
                                 progress=show_progress(args), **stride)
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             if opentrackio_wanted(args):
