@@ -22,9 +22,11 @@ CNN and the line fit; ``auto`` there is what ``glradial.estimate`` answered befo
 was fed back), and ``auto+pitch``, the public ``glradial.estimate(method="auto")``
 (:mod:`glradial.camera.pitch_lens`: the camera fit's lens where the pitch template fits, the estimation
 layer's ``auto`` elsewhere), with the share of samples it answered from the pitch and how often its
-stated bound covered its self-consistent error there. ``--no-pitch`` (or a checkout without
+stated bound covered its self-consistent error there; ``pitch alone``: the camera fit's lens alone where
+it fits (``auto`` elsewhere), with the bound of ``lens_bound_px``. ``--no-pitch`` (or a checkout without
 ``glradial.camera.pitch_lens``) leaves it out. ``--dump FILE`` writes one JSON line per scored sample
-and method (clip, frame, applied lens, error, stated bound, source, the camera fit's marking RMS).
+and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS; the
+unmodified frame's readings too, with ``truth`` null).
 """
 
 from __future__ import annotations
@@ -89,23 +91,27 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
     out = {method: judge(evidence, method) for method in ("net", "lines", "auto")}
     if pitch:
         from glradial.camera.calibrate import calibrate
-        from glradial.camera.pitch_lens import pitch_lens
+        from glradial.camera.pitch_lens import lens_bound_px, pitch_lens
+        from glradial.estimation.lens_estimate import LensEstimate
 
         camera = calibrate(frame)  # what glradial.estimate(method="auto") runs beside the estimation layer's auto
         out["auto+pitch"] = pitch_lens(camera, out["auto"])
+        # the camera fit's lens alone where it fits (auto elsewhere): what the bound of pitch_lens_bound.py calibrates
+        out["pitch alone"] = out["auto"] if camera.doubtful else LensEstimate(
+            camera.lens.k1, camera.lens.k2, uncertainty_px=lens_bound_px(camera), method="pitch")
         out["rms"] = camera.rms_px
     return out
 
 
 def _print(errors: dict) -> None:
-    print(f"{'group':12s} {'method':10s} {'n':>4s} {'self-cons. median':>18s} {'p90':>6s} {'in-frame median':>16s} "
+    print(f"{'group':12s} {'method':11s} {'n':>4s} {'self-cons. median':>18s} {'p90':>6s} {'in-frame median':>16s} "
           f"{'raw median':>11s} {'from pitch':>10s} {'bound covers':>12s}")
     for (group, method), values in sorted(errors.items()):
         v = np.array([row[:3] for row in values])
         pitched = [row for row in values if row[3] == "pitch"]
-        share = f"{len(pitched) / len(values):10.1%}" if method == "auto+pitch" else " " * 10
+        share = f"{len(pitched) / len(values):10.1%}" if method in ("auto+pitch", "pitch alone") else " " * 10
         covers = f"{np.mean([r[0] <= r[4] for r in pitched]):12.1%}" if pitched else " " * 12
-        print(f"{group:12s} {method:10s} {len(v):4d} {np.median(v[:, 0]):18.2f} {np.percentile(v[:, 0], 90):6.1f} "
+        print(f"{group:12s} {method:11s} {len(v):4d} {np.median(v[:, 0]):18.2f} {np.percentile(v[:, 0], 90):6.1f} "
               f"{np.median(v[:, 2]):16.2f} {np.median(v[:, 1]):11.2f} {share} {covers}")
 
 
@@ -140,6 +146,10 @@ def main() -> None:
                 continue
             if sample["truth"] is None:
                 own[sample["frame"], method] = (e.k1, e.k2)
+                if dump:  # the reading of the unmodified frame, which the scoring composes with the applied lens
+                    dump.write(json.dumps({"clip": sample["clip"], "frame": sample["frame"], "truth": None, "method": method,
+                                           "source": e.method, "k": [e.k1, e.k2], "bound_px": e.uncertainty_px,
+                                           "camera_rms_px": found.get("rms")}) + "\n")
                 continue
             err, in_frame = exact_error_px((e.k1, e.k2), sample["truth"], own[sample["frame"], method])
             raw = float(max_displacement_px(np.array([e.k1, e.k2]), np.array(sample["truth"])))
