@@ -9,7 +9,10 @@ on the same frame: ``cv2.GaussianBlur`` (sigma 1) of the 1080p frame, a cheap pe
 every video pipeline pays, to put the numbers in scale on whatever machine runs this. Then, on a
 real broadcast frame upscaled to 1080p (``--pitch``, default the USL frame of
 ../shared/data/real_football/, or a synthetic pitch drawing when absent), the line detection, the
-fit, and ``estimate(method="lines")`` / ``"auto"``, with the same peer ratio.
+fit, and ``estimate(method="lines")`` / ``"auto"``, with the same peer ratio; ``auto`` is timed twice:
+the estimation layer's (the CNN and the line fit, ``pitch=False``: what ``auto`` was before the pitch
+camera fit was fed back, and what video still uses) and the public ``glradial.Estimator``'s, which also
+runs the camera fit (:mod:`glradial.camera.pitch_lens`; its answer's source is printed).
 Targets (issues 5, 17): net <= 15 ms per 1080p frame, auto <= 40 ms, on one thread.
 """
 
@@ -25,7 +28,8 @@ import cv2
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial.estimation.estimator import Estimator, default_model_path  # noqa: E402
+from glradial.camera.pitch_lens import Estimator  # noqa: E402
+from glradial.estimation.estimator import default_model_path  # noqa: E402
 from glradial.estimation.line_fit import fit_lines  # noqa: E402
 from glradial.estimation.lines import detect_chains  # noqa: E402
 
@@ -76,11 +80,15 @@ def main() -> None:
         evidence = detect_chains(pitch)
         fit = _median_ms(lambda: fit_lines(evidence, prior=net_pitch), args.frames)
         lines = _median_ms(lambda: est.estimate(pitch, method="lines"), args.frames)
-        auto = _median_ms(lambda: est.estimate(pitch, method="auto"), args.frames)
+        auto = _median_ms(lambda: est.estimate(pitch, method="auto", pitch=False), args.frames)
+        auto_pitch = _median_ms(lambda: est.estimate(pitch, method="auto"), args.frames)
+        source = est.estimate(pitch, method="auto").method
         net = _median_ms(lambda: est.estimate(pitch, method="net"), args.frames)
         print(f"threads {threads}, 1080p pitch frame ({len(evidence.chains)} chains): detect {detect:.2f} ms + fit {fit:.2f} ms; "
               f"estimate(net) {net:.2f} ms, (lines) {lines:.2f} ms, (auto) {auto:.2f} ms; ratios to the blur peer "
               f"{net / blur:.2f} / {lines / blur:.2f} / {auto / blur:.2f}")
+        print(f"threads {threads}, same frame: estimate(auto) with the pitch camera fit {auto_pitch:.2f} ms (answered from "
+              f"{source}), {auto_pitch / auto:.2f} x auto without it; ratio to the blur peer {auto_pitch / blur:.2f}")
 
 
 if __name__ == "__main__":

@@ -1,6 +1,7 @@
 """Self-consistent error of net / lines / auto on the Bundesliga broadcast frames (validation only).
 
-Usage: ``python bench/bundesliga_consistency.py [--frames DIR] [--cache /tmp/bundesliga.pkl] [--checkout PATH]``
+Usage: ``python bench/bundesliga_consistency.py [--frames DIR] [--cache /tmp/bundesliga.pkl] [--checkout PATH]
+[--no-pitch] [--dump FILE]``
 
 Each frame of ``DIR`` (../shared/data/broadcast_bundesliga: 640 x 640 files of 16:9 frames) is
 resized to 1280 x 720 (bicubic) and distorted with 2 paper and 2 extended lenses
@@ -15,11 +16,23 @@ runs to the corner radius in ideal radii, beyond the picture under a pincushion 
 against the applied lens alone ("raw"). Frames, lenses and CNN readings are cached in
 ``--cache``; ``--checkout`` runs another checkout (one that has ``self_consistent_map``) on the same
 cache.
+
+Methods: ``net``, ``lines`` and ``auto`` of the estimation layer (``glradial.estimation.estimator``: the
+CNN and the line fit; ``auto`` there is what ``glradial.estimate`` answered before the pitch camera fit
+was fed back), and ``auto+pitch``, the public ``glradial.estimate(method="auto")``
+(:mod:`glradial.camera.pitch_lens`: the camera fit's lens where the pitch template fits, the estimation
+layer's ``auto`` elsewhere), with the share of samples it answered from the pitch and how often its
+stated bound covered its self-consistent error there; ``pitch alone``: the camera fit's lens alone where
+it fits (``auto`` elsewhere), with the bound of ``lens_bound_px``. ``--no-pitch`` (or a checkout without
+``glradial.camera.pitch_lens``) leaves it out. ``--dump FILE`` writes one JSON line per scored sample
+and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS; the
+unmodified frame's readings too, with ``truth`` null).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import pickle
 import sys
 from pathlib import Path
@@ -70,40 +83,87 @@ def exact_error_px(k: tuple[float, float], applied: tuple[float, float], own: tu
     return float(d[r <= CORNER_RADIUS_16_9].max()), float(d[inside].max())
 
 
+def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
+    """``{method: LensEstimate}`` of one frame (and the camera fit's marking RMS under ``"rms"``)."""
+    from glradial.estimation.lens_estimate import judge
+
+    evidence = estimator.evidence_batch([frame])[0]  # what estimate() judges, gathered once for the three methods
+    out = {method: judge(evidence, method) for method in ("net", "lines", "auto")}
+    if pitch:
+        from glradial.camera.calibrate import calibrate
+        from glradial.camera.pitch_lens import lens_bound_px, pitch_lens
+        from glradial.estimation.lens_estimate import LensEstimate
+
+        camera = calibrate(frame)  # what glradial.estimate(method="auto") runs beside the estimation layer's auto
+        out["auto+pitch"] = pitch_lens(camera, out["auto"])
+        # the camera fit's lens alone where it fits (auto elsewhere): what the bound of pitch_lens_bound.py calibrates
+        out["pitch alone"] = out["auto"] if camera.doubtful else LensEstimate(
+            camera.lens.k1, camera.lens.k2, uncertainty_px=lens_bound_px(camera), method="pitch")
+        out["rms"] = camera.rms_px
+    return out
+
+
+def _print(errors: dict) -> None:
+    print(f"{'group':12s} {'method':11s} {'n':>4s} {'self-cons. median':>18s} {'p90':>6s} {'in-frame median':>16s} "
+          f"{'raw median':>11s} {'from pitch':>10s} {'bound covers':>12s}")
+    for (group, method), values in sorted(errors.items()):
+        v = np.array([row[:3] for row in values])
+        pitched = [row for row in values if row[3] == "pitch"]
+        share = f"{len(pitched) / len(values):10.1%}" if method in ("auto+pitch", "pitch alone") else " " * 10
+        covers = f"{np.mean([r[0] <= r[4] for r in pitched]):12.1%}" if pitched else " " * 12
+        print(f"{group:12s} {method:11s} {len(v):4d} {np.median(v[:, 0]):18.2f} {np.percentile(v[:, 0], 90):6.1f} "
+              f"{np.median(v[:, 2]):16.2f} {np.median(v[:, 1]):11.2f} {share} {covers}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--frames", default=str(ROOT.parent / "shared/data/broadcast_bundesliga"))
     parser.add_argument("--cache", default="/tmp/bundesliga.pkl")
     parser.add_argument("--checkout", default=str(ROOT))
+    parser.add_argument("--no-pitch", action="store_true", help="leave out auto+pitch (the camera fit's lens)")
+    parser.add_argument("--dump", help="write per-sample results (JSON lines) here")
     args = parser.parse_args()
     sys.path.insert(0, args.checkout)
     from glradial.estimation.estimator import Estimator
     from glradial.lens.metrics import max_displacement_px
 
+    try:
+        import glradial.camera.pitch_lens  # noqa: F401
+        pitch = not args.no_pitch
+    except ImportError:  # a checkout from before the lens was fed back
+        pitch = False
     estimator = Estimator(threads=1)
 
     cache = Path(args.cache)
     samples = pickle.loads(cache.read_bytes()) if cache.is_file() else _build(Path(args.frames), cache)
     own: dict = {}
     errors: dict = {}
+    dump = open(args.dump, "w") if args.dump else None
     for sample in samples:  # each frame's unmodified reading comes first
-        for method in ("net", "lines", "auto"):
-            e = estimator.estimate(sample["image"], method=method)
+        found = _readings(estimator, sample["image"], pitch)
+        for method, e in found.items():
+            if method == "rms":
+                continue
             if sample["truth"] is None:
                 own[sample["frame"], method] = (e.k1, e.k2)
+                if dump:  # the reading of the unmodified frame, which the scoring composes with the applied lens
+                    dump.write(json.dumps({"clip": sample["clip"], "frame": sample["frame"], "truth": None, "method": method,
+                                           "source": e.method, "k": [e.k1, e.k2], "bound_px": e.uncertainty_px,
+                                           "camera_rms_px": found.get("rms")}) + "\n")
                 continue
             err, in_frame = exact_error_px((e.k1, e.k2), sample["truth"], own[sample["frame"], method])
             raw = float(max_displacement_px(np.array([e.k1, e.k2]), np.array(sample["truth"])))
             k1 = sample["truth"][0]
             groups = (sample["clip"], "all") + (("k1 <= -0.6",) if k1 <= -0.6 else ()) + (("k1 > 0.1",) if k1 > 0.1 else ())
             for group in groups:
-                errors.setdefault((group, method), []).append((err, raw, in_frame))
-    print(f"{'group':12s} {'method':6s} {'n':>4s} {'self-cons. median':>18s} {'p90':>6s} {'in-frame median':>16s} "
-          f"{'raw median':>11s}")
-    for (group, method), values in sorted(errors.items()):
-        v = np.array(values)
-        print(f"{group:12s} {method:6s} {len(v):4d} {np.median(v[:, 0]):18.2f} {np.percentile(v[:, 0], 90):6.1f} "
-              f"{np.median(v[:, 2]):16.2f} {np.median(v[:, 1]):11.2f}")
+                errors.setdefault((group, method), []).append((err, raw, in_frame, e.method, e.uncertainty_px))
+            if dump:
+                dump.write(json.dumps({"clip": sample["clip"], "frame": sample["frame"], "truth": sample["truth"],
+                                       "method": method, "source": e.method, "k": [e.k1, e.k2], "error_px": err,
+                                       "bound_px": e.uncertainty_px, "camera_rms_px": found.get("rms")}) + "\n")
+    if dump:
+        dump.close()
+    _print(errors)
 
 
 if __name__ == "__main__":

@@ -1,6 +1,6 @@
 """Accuracy of the line fit (``method="lines"`` / ``"auto"``) per source, fast enough to iterate on.
 
-Usage: ``python bench/lines_accuracy.py [--cache /tmp/lines_accuracy.pkl] [--procedural 200] [--checkout DIR]``
+Usage: ``python bench/lines_accuracy.py [--cache /tmp/lines_accuracy.pkl] [--procedural 200] [--checkout DIR] [--pitch]``
 
 Builds the same samples as ``glradial evaluate --frames ../shared/data/real_football --procedural N
 --remove-own-lens`` (seed 0: 12 paper + 12 extended lenses per frame at ``fit="crop"``, 48 + 48 crops
@@ -12,6 +12,9 @@ percentile of the maximum displacement error (px at 1920) of ``lines`` and ``aut
 frames with a line fit, and the mean fit time. Groups: real frames (all lenses), real frames with
 ``k1 <= -0.6``, 640x360 panorama crops, procedural test crops. Validation data only: no tuning
 should be reported on the same samples without saying so (docs/LINES.md says which were used).
+``--pitch`` also scores ``auto+pitch``, the public ``glradial.estimate(method="auto")``
+(:mod:`glradial.camera.pitch_lens`: the pitch camera fit's lens where the template fits, ``auto``
+elsewhere), with the share of samples it answered from the pitch (``pitch %``).
 """
 
 from __future__ import annotations
@@ -87,6 +90,7 @@ def main() -> None:
     parser.add_argument("--procedural", type=int, default=200)
     parser.add_argument("--dump", help="write per-sample results (JSON lines) here")
     parser.add_argument("--checkout", default=str(ROOT), help="the glradial checkout whose code is measured")
+    parser.add_argument("--pitch", action="store_true", help="also score auto+pitch (the camera fit's lens fed back)")
     args = parser.parse_args()
     cache = Path(args.cache)
     if cache.is_file():
@@ -94,7 +98,8 @@ def main() -> None:
     else:
         samples = _build(Path(args.frames), args.procedural)
         cache.write_bytes(pickle.dumps(samples))
-    errors = {"lines": [], "auto": []}
+    errors: dict = {"lines": [], "auto": [], **({"auto+pitch": []} if args.pitch else {})}
+    pitched = []
     has_fit, times, rows = [], [], []
     estimator = Estimator(threads=1)
     for s in samples:
@@ -112,17 +117,30 @@ def main() -> None:
         has_fit.append(lines is not None)
         truth = np.array(s["truth"])
         for method in errors:
-            e = judge(evidence, method)
+            e = judge(evidence, method.split("+")[0])
+            if method == "auto+pitch":  # what glradial.estimate(method="auto") adds to the estimation layer's auto
+                from glradial.camera.calibrate import calibrate
+                from glradial.camera.pitch_lens import pitch_lens
+
+                camera = calibrate(frame)
+                auto, e = e, pitch_lens(camera, e)
+                pitched.append(e.method == "pitch")
+                readings = {"k_auto": [auto.k1, auto.k2], "bound_auto": auto.uncertainty_px, "k_auto_pitch": [e.k1, e.k2],
+                            "bound_auto_pitch": e.uncertainty_px, "camera_rms_px": camera.rms_px}
             errors[method].append(float(max_displacement_px(np.array([e.k1, e.k2]), truth)))
         rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else list(lines),
-                     "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1]})
-    print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}")
+                     "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1],
+                     **({"err_auto_pitch": errors["auto+pitch"][-1], "pitch": pitched[-1], **readings} if args.pitch else {})})
+    extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if args.pitch else ""
+    print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
     for name, idx in _groups(samples).items():
         if not idx:
             continue
         el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
         print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
-              f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}")
+              f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
+              + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
+                 f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if args.pitch else ""))
     if args.dump:
         import json
 

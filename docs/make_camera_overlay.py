@@ -17,7 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from glradial.camera.calibrate import calibrate  # noqa: E402
-from glradial.camera.drawing import overlay  # noqa: E402
+from glradial.camera.views import overlay  # noqa: E402
 from glradial.media.image_io import write_image  # noqa: E402
 
 

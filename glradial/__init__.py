@@ -17,8 +17,8 @@ __version__ = "0.1.0"
 if TYPE_CHECKING:
     from .camera.calibrate import calibrate
     from .camera.estimate import CameraEstimate
+    from .camera.pitch_lens import Estimator, estimate
     from .errors import Error, GLUnavailableError, LensTrackError, ModelLoadError, ShaderCompileError
-    from .estimation.estimator import Estimator, estimate
     from .estimation.lens_estimate import LensEstimate
     from .gl.shaderlib import shader_dir, shader_path
     from .lens.lens import Lens

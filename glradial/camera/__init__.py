@@ -16,6 +16,7 @@ if TYPE_CHECKING:
     from .estimate import REASONS, CameraEstimate
     from .first_guess import Candidate
     from .model import Camera, decompose_homography
+    from .pitch_lens import Estimator, lens_bound_px, pitch_lens
     from .views import random_camera, render_view
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

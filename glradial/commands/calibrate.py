@@ -82,7 +82,7 @@ def _check(args: argparse.Namespace) -> str:
 
 def run(args: argparse.Namespace) -> int:
     from ..camera.calibrate import calibrate
-    from ..camera.drawing import overlay, top_view
+    from ..camera.views import overlay, top_view
     from ..media.frames import to_rgb8
     from ..media.image_io import write_image
 

@@ -129,17 +129,14 @@ def _estimated_lens_for(args: argparse.Namespace):
 def _estimate_image(args: argparse.Namespace, image):
     """``--auto`` on an image: the estimate, printed with its stated uncertainty and doubt. A doubtful
     one is reported in one line on stderr and left unapplied (no lens) unless ``--apply-doubtful``."""
+    from ..camera.pitch_lens import Estimator
     from ..lens.lens import Lens, as_lens
     from ..media.frames import to_rgb8
-    from ..video.video_pipeline import default_estimator
 
-    if args.pixel_aspect is None:
-        estimate = default_estimator(args.model, args.method)(to_rgb8(image))
-    else:  # the squashed frame is read in square pixels; the estimate carries the aspect to the stored frame
-        from ..estimation.estimator import Estimator
-
-        estimator = Estimator(args.model) if args.model is not None else Estimator()
-        estimate = estimator.estimate(to_rgb8(image), method=args.method or "auto", pixel_aspect=args.pixel_aspect)
+    # as 'glradial estimate IMG': auto adds the pitch camera fit's lens where the template fits; a squashed
+    # frame (--pixel-aspect) is read in square pixels and the estimate carries the aspect to the stored frame
+    estimator = Estimator(args.model) if args.model is not None else Estimator()
+    estimate = estimator.estimate(to_rgb8(image), method=args.method or "auto", pixel_aspect=args.pixel_aspect or 1.0)
     lens = as_lens(estimate)
     method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
     reason = getattr(estimate, "reason", None)

@@ -12,7 +12,8 @@ from .engine_options import add_opentrackio_options, check_opentrackio_output, o
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT. How well (maximum displacement error, px of a 1920-wide
-frame): --method auto (default; the pitch-line fit where it is surer than the CNN) 1.1 px median on
+frame): --method auto (default; the pitch-line fit where it is surer than the CNN, combined with the
+lens of the whole-camera fit to the pitch template where that fits, docs/CAMERA.md) 1.1 px median on
 held-out stadium crops, 3.7-4.5 px median on real broadcast frames with known lenses (self-consistent);
 where no pitch line is found it falls back on the CNN, doubtful (33 px median on crops of a real
 panorama); --method net (the bundled CNN alone, ONNX on onnxruntime) 4.5 px on stadium crops;
@@ -21,13 +22,14 @@ read as RGB; the network sees its centred 16:9 view (the whole frame when it is 
 area interpolation, and its answer is converted to the image's own width-normalised lens; with auto
 or lines, the lens that straightens the frame's pitch lines and straight edges is fitted too. Prints one line per image: the path, k1 and
 k2 (width-normalised: image width = 1, origin at the image centre, p_d = p_u (1 + k1 r^2 + k2 r^4);
-negative k1 = barrel), the method that produced them (net or lines), the uncertainty (a 90 % bound
+negative k1 = barrel), the method that produced them (net, lines, or pitch where the camera fit took part), the uncertainty (a 90 % bound
 on the maximum displacement error, px of a 1920-wide frame), the line chains used and the doubt
 verdict (doubtful=0/1 and its reason: ok, blank_frame, noise_frame, not_a_pitch, too_few_lines,
 evidence_disagrees, weak_geometry; docs/LINES.md), or with --json one JSON object per line {"path",
 "k1", "k2", "pixel_aspect", "method", "uncertainty_px", "chains", "doubtful", "reason"}. Videos (anything FFmpeg reads that is not a still image; image sequences as
 frame_%04d.png): shot cuts are detected and one lens is fitted per shot from the evidence of every
---every-th frame, as 'glradial correct --auto' does; prints one line per shot (first and last frame,
+--every-th frame, as 'glradial correct --auto' does (without the camera fit, which would cost
+200-400 ms a frame); prints one line per shot (first and last frame,
 median k1, k2, the uncertainty in px at 1920 wide, the per-frame methods, and for a doubtful shot
 DOUBTFUL(reason) and not-applied), or per frame with --per-frame, or one JSON document per video
 with --json."""
@@ -58,7 +60,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimation.estimator import Estimator
+    from ..camera.pitch_lens import Estimator
     from ..media.frames import to_rgb8
 
     if opentrackio_wanted(args) and len(args.inputs) != 1:
@@ -74,7 +76,8 @@ def run(args: argparse.Namespace) -> int:
 
             # the estimator loaded above (its --threads), not a second one per video
             stride = {"every": args.every} if args.every is not None else {}
-            track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method),
+            # per-frame video estimates skip the pitch camera fit (200-400 ms a frame; docs/CAMERA.md)
+            track = track_video(path, lambda frame: estimator.estimate(frame, method=args.method, pitch=False),
                                 progress=show_progress(args), **stride)
             print(track_report(track, path, per_frame=args.per_frame, as_json=args.json), flush=True)
             if opentrackio_wanted(args):

@@ -34,8 +34,9 @@ INTERPOLATIONS: tuple[str, ...] = ("nearest", "linear", "cubic")
 BACKENDS: tuple[str, ...] = ("auto", "gl", "cpu")
 #: values of the estimators' ``method`` argument
 METHODS: tuple[str, ...] = ("auto", "net", "lines")
-#: values of ``LensEstimate.method`` (which method produced the numbers)
-SOURCES: tuple[str, ...] = ("net", "lines")
+#: values of ``LensEstimate.method`` (which method produced the numbers): the CNN, the line fit, or the
+#: joint camera fit to the pitch template (``method="auto"`` where the template fits: glradial.camera.pitch_lens)
+SOURCES: tuple[str, ...] = ("net", "lines", "pitch")
 #: how a 4-channel frame stores alpha (glradial.remapping.alpha)
 ALPHAS: tuple[str, ...] = ("straight", "premultiplied")
 #: a video's field order: the stream's ("auto"), or forced (glradial.remapping.fields)
