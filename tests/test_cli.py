@@ -199,7 +199,7 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr("glradial.camera.pitch_lens.Estimator.estimate", lambda self, frame, method="auto", pixel_aspect=1.0: Lens(-0.2, 0.03))
+    monkeypatch.setattr("glradial.camera.pitch_lens.Estimator.estimate", lambda self, frame, method="auto", pixel_aspect=1.0, pitch=False: Lens(-0.2, 0.03))
     source, out = tmp_path / "in.png", tmp_path / "out.png"
     write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
     assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0

@@ -21,7 +21,6 @@ import pytest
 
 import glradial
 from glradial.estimation.estimator import Estimator, default_model_path, view_box, view_to_frame
-from glradial.estimation.estimator import estimate as estimate_lines
 from glradial.estimation.lens_estimate import LensEstimate, judge
 from glradial.estimation.trust import REASONS, TRUST_FILE, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
 from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
@@ -122,9 +121,7 @@ def test_a_squashed_frame_is_estimated_with_its_pixel_aspect():
         cv2.line(img, (-100, int(y - a * 640)), (1380, int(y + a * 640)), WHITE, 3, cv2.LINE_AA)
     k = (-0.3, float(manifold_k2(-0.3)))
     squashed = cv2.resize(apply_lens(img, *k), (640, 640), interpolation=cv2.INTER_AREA)
-    # the estimation layer's estimate: glradial.estimate also fits a pitch camera, which these seven
-    # random lines fool (docs/CAMERA.md, "The lens fed back"; tests/test_pitch_lens.py tests that path)
-    est = estimate_lines(squashed, pixel_aspect=16 / 9)
+    est = glradial.estimate(squashed, pixel_aspect=16 / 9)
     assert est.pixel_aspect == pytest.approx(16 / 9) and est.method == "lines"
     assert error_px(est, k) < 2.0
     with pytest.raises(ValueError, match="pixel_aspect"):
@@ -151,11 +148,10 @@ def test_cli_pixel_aspect_reads_a_squashed_frame(tmp_path, capsys):
     k = (-0.3, float(manifold_k2(-0.3)))
     path = tmp_path / "squashed.png"
     write_image(path, _squashed_pitch(k)[..., ::-1].copy())
-    # --method lines: the line fit this file tests (auto also fits a pitch camera, which these random lines fool)
-    assert main(["estimate", str(path), "--json", "--method", "lines", "--pixel-aspect", str(16 / 9)]) == 0
+    assert main(["estimate", str(path), "--json", "--pixel-aspect", str(16 / 9)]) == 0
     row = json.loads(capsys.readouterr().out)
     assert row["pixel_aspect"] == pytest.approx(16 / 9) and error_px(glradial.Lens(row["k1"], row["k2"]), k) < 2.0
-    assert main(["correct", str(path), str(tmp_path / "out.png"), "--auto", "--method", "lines", "--pixel-aspect", str(16 / 9)]) == 0
+    assert main(["correct", str(path), str(tmp_path / "out.png"), "--auto", "--pixel-aspect", str(16 / 9)]) == 0
     assert f"k1={row['k1']:.6f}" in capsys.readouterr().out
     assert main(["estimate", str(path), "--pixel-aspect", "-2"]) == 2
     assert "--pixel-aspect" in capsys.readouterr().err
@@ -202,7 +198,7 @@ def test_pitch_templates_with_little_geometry_are_read_within_their_bound_or_dou
     k = (-0.3, float(manifold_k2(-0.3)))
     frame = apply_lens(_pitch_view(TEMPLATES[name]), *k)
     for method in ("auto", "lines"):
-        est = estimate_lines(frame, method=method)  # the estimation layer's (glradial.estimate adds a pitch camera fit)
+        est = glradial.estimate(frame, method=method)
         assert all(math.isfinite(v) for v in (est.k1, est.k2, est.uncertainty_px))
         assert est.doubtful or error_px(est, k) <= est.uncertainty_px, (name, method, est, error_px(est, k))
         if name == "a circle, no lines":  # no straight line: the CNN alone on a bare pitch, doubtful

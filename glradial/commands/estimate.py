@@ -12,8 +12,8 @@ from .engine_options import add_opentrackio_options, check_opentrackio_output, o
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT. How well (maximum displacement error, px of a 1920-wide
-frame): --method auto (default; the pitch-line fit where it is surer than the CNN, combined with the
-lens of the whole-camera fit to the pitch template where that fits, docs/CAMERA.md) 1.1 px median on
+frame): --method auto (default; the pitch-line fit where it is surer than the CNN; with --pitch,
+combined with the lens of the whole-camera fit to the pitch template where that fits, docs/CAMERA.md) 1.1 px median on
 held-out stadium crops, 3.7-4.5 px median on real broadcast frames with known lenses (self-consistent);
 where no pitch line is found it falls back on the CNN, doubtful (33 px median on crops of a real
 panorama); --method net (the bundled CNN alone, ONNX on onnxruntime) 4.5 px on stadium crops;
@@ -50,6 +50,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--method", choices=METHODS, default="auto",
                         help="auto (default: the line fit when it is surer than the CNN), net (the CNN alone) or "
                              "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
+    parser.add_argument("--pitch", action="store_true", help="images, with --method auto: also fit the whole camera to the pitch template and combine its lens "
+                             "with the line fit/CNN answer where the template fits "
+                           "(docs/CAMERA.md: 3.75 -> 3.40 px on the Bundesliga clips; 200-400 ms more per frame)")
     parser.add_argument("--pixel-aspect", type=positive_float, metavar="FY/FX",
                         help="images: the pixel aspect fy / fx of a frame stored squashed (e.g. 16/9 for a 16:9 "
                              "picture stored 640x640; default 1: square pixels); the lens printed applies to the "
@@ -88,7 +91,7 @@ def run(args: argparse.Namespace) -> int:
                 write_track_opentrackio(args, track, info)
             continue
         image = to_rgb8(read_image(path))
-        lens = estimator.estimate(image, method=args.method, pixel_aspect=args.pixel_aspect or 1.0)
+        lens = estimator.estimate(image, method=args.method, pixel_aspect=args.pixel_aspect or 1.0, pitch=args.pitch)
         if args.json:
             print(json.dumps({"path": path, **lens.as_dict()}), flush=True)
         else:
