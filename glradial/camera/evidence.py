@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from ..estimation.lines import BORDER_MARGIN, bright_ridges, content_box, gray_copy
-from ..estimation.trust import GREEN_HUE, GREEN_MIN_SATURATION, GREEN_MIN_VALUE
+from ..estimation.trust import pitch_green
 
 #: Largest width (px) of the copy the white lines are detected on.
 DETECT_WIDTH = 960
@@ -62,17 +62,11 @@ def _grass_mask(frame: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, 
     if frame.ndim != 3:
         return np.ones(shape, np.uint8), 0.0
     small = cv2.resize(frame, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
-    hsv = cv2.cvtColor(small, cv2.COLOR_RGB2HSV)
-    lo = np.array([GREEN_HUE[0], GREEN_MIN_SATURATION, GREEN_MIN_VALUE], np.uint8)
-    hi = np.array([GREEN_HUE[1], 255, 255], np.uint8)
-    band = cv2.inRange(hsv, lo, hi)
+    band, own = pitch_green(small, 2 * HUE_HALF_WINDOW + 1)
     share = float(np.count_nonzero(band)) / band.size
     if share < GREEN_FRAME_SHARE:
         return np.ones(shape, np.uint8), share
-    # this pitch's own green: the hue window around the band's peak (stands and boards are other hues)
-    hist = np.bincount(hsv[..., 0][band > 0], minlength=181).astype(np.float64)
-    peak = int(np.argmax(np.convolve(hist, np.ones(2 * HUE_HALF_WINDOW + 1), "same")))
-    green = band & cv2.inRange(hsv[..., 0], peak - HUE_HALF_WINDOW, peak + HUE_HALF_WINDOW)
+    green = own.astype(np.uint8)  # this pitch's own green (stands and boards are other hues)
     green = cv2.morphologyEx(green, cv2.MORPH_OPEN, np.ones((GRASS_OPEN, GRASS_OPEN), np.uint8))
     closed = cv2.morphologyEx(green, cv2.MORPH_CLOSE, np.ones((GRASS_CLOSE, GRASS_CLOSE), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)

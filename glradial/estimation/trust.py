@@ -167,17 +167,24 @@ class ViewFeatures(NamedTuple):
     grass_width: float = 0.0
 
 
-def _green_mask(view: np.ndarray) -> tuple[np.ndarray, float]:
-    """The view's pixels in its dominant :data:`GREEN_WINDOW`-wide hue window of the pitch-green band
-    (saturated, not dark), and their share of the view."""
+def pitch_green(rgb: np.ndarray, window: int = GREEN_WINDOW) -> tuple[np.ndarray, np.ndarray]:
+    """``(band, green)``, boolean masks of a uint8 RGB image: its pixels in the pitch-green band
+    (:data:`GREEN_HUE`, saturated, not dark), and those of them in the band's dominant hue window
+    ``window`` OpenCV hue units wide (the pitch's own green; stands and boards are other hues)."""
     import cv2
 
-    hsv = cv2.cvtColor(view, cv2.COLOR_RGB2HSV)
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
     h, s, v = hsv[..., 0], hsv[..., 1], hsv[..., 2]
     band = (h >= GREEN_HUE[0]) & (h <= GREEN_HUE[1]) & (s >= GREEN_MIN_SATURATION) & (v >= GREEN_MIN_VALUE)
-    hist = np.convolve(np.bincount(h[band], minlength=181).astype(np.float64), np.ones(GREEN_WINDOW), "valid")
-    low = int(np.argmax(hist))
-    return band & (h >= low) & (h < low + GREEN_WINDOW), float(hist[low]) / max(h.size, 1)
+    low = int(np.argmax(np.convolve(np.bincount(h[band], minlength=181).astype(np.float64), np.ones(window), "valid")))
+    return band, band & (h >= low) & (h < low + window)
+
+
+def _green_mask(view: np.ndarray) -> tuple[np.ndarray, float]:
+    """The view's pixels in its dominant :data:`GREEN_WINDOW`-wide hue window of the pitch-green band
+    (:func:`pitch_green`), and their share of the view."""
+    green = pitch_green(view)[1]
+    return green, float(np.count_nonzero(green)) / max(green.size, 1)
 
 
 def grass_region(mask: np.ndarray) -> tuple[float, float]:
