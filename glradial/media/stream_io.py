@@ -27,14 +27,12 @@ from __future__ import annotations
 
 import contextlib
 import time
-from dataclasses import replace
-from fractions import Fraction
 from pathlib import Path
 from typing import Iterator
 
 import av
 
-from .video_io import EncodeOptions, VideoInfo, VideoWriter
+from .video_io import EncodeOptions, VideoInfo, VideoWriter, frame_tags, stream_info
 
 __all__ = ["LiveSource", "StreamWriter", "open_live_output", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
 
@@ -124,7 +122,9 @@ class LiveSource:
         self._pending = self._first_frames()
         #: the first decoded frame (also the first :meth:`frames` hands out): what the stream's frames are like
         self.first_frame = self._pending[0]
-        self.info = self._info(self.first_frame)
+        first = self.first_frame
+        self.info = stream_info(self._container, self.stream, frame_tags(first), size=(first.width, first.height),
+                                pix_fmt=first.format.name)
 
     def _decode_next(self) -> list[av.VideoFrame]:
         """The frames of the next packet ([] for none); StopIteration at the end of the input."""
@@ -161,18 +161,6 @@ class LiveSource:
                 raise ValueError(f"live input {self.source!r}: {why}") from None
             if frames:
                 return frames
-
-    def _info(self, first: av.VideoFrame) -> VideoInfo:
-        stream, context = self.stream, self.stream.codec_context
-        rate = stream.average_rate or stream.guessed_rate or stream.base_rate or Fraction(25)
-        timecode = stream.metadata.get("timecode") or self._container.metadata.get("timecode")
-        shape = VideoInfo.of((first.width, first.height), Fraction(rate), codec=context.name, pix_fmt=first.format.name)
-        return replace(
-            shape, time_base=Fraction(stream.time_base) if stream.time_base else Fraction(1, 90000),
-            timecode=timecode, color_primaries=int(first.color_primaries), color_trc=int(first.color_trc),
-            colorspace=int(first.colorspace), color_range=int(first.color_range), interlaced=bool(first.interlaced_frame),
-            field_order=int(getattr(context, "field_order", 0) or 0), bit_rate=int(context.bit_rate or 0),
-        )
 
     def frames(self) -> Iterator[av.VideoFrame]:
         """The decoded frames, as they arrive (paced at their timestamps with ``realtime``)."""

@@ -333,30 +333,7 @@ class VideoReader:
         stream = self._container.streams.video[0]
         stream.thread_type = "AUTO"
         self.stream = stream
-        context = stream.codec_context
-        rate_found = stream.average_rate or stream.guessed_rate or stream.base_rate
-        timecode = stream.metadata.get("timecode") or self._container.metadata.get("timecode")
-        for other in self._container.streams:
-            timecode = timecode or other.metadata.get("timecode")
-        pix_fmt = context.pix_fmt or "yuv420p"
-        tags = _first_frame_tags(self.path, options)
-        self.info = VideoInfo(
-            size=(int(context.width), int(context.height)),
-            rate=Fraction(rate_found) if rate_found else SEQUENCE_RATE,
-            frame_count=int(stream.frames) if stream.frames and stream.frames > 0 else -1,
-            codec=context.name,
-            pix_fmt=pix_fmt,
-            bit_depth=_bit_depth(pix_fmt),
-            time_base=Fraction(stream.time_base) if stream.time_base else Fraction(1, 90000),
-            timecode=timecode,
-            color_primaries=tags[0],
-            color_trc=tags[1],
-            colorspace=tags[2],
-            color_range=tags[3],
-            interlaced=tags[4],
-            field_order=int(getattr(context, "field_order", 0) or 0),
-            bit_rate=int(context.bit_rate or stream.bit_rate or 0) if hasattr(stream, "bit_rate") else int(context.bit_rate or 0),
-        )
+        self.info = stream_info(self._container, stream, _first_frame_tags(self.path, options))
         if self.info.size[0] <= 0 or self.info.size[1] <= 0:
             self._container.close()
             raise ValueError(f"cannot read video {str(self.path)!r}: its video stream has no frame size")
@@ -465,14 +442,53 @@ class VideoReader:
         self.close()
 
 
-def _first_frame_tags(path: Path, options: dict) -> tuple[int, int, int, int, bool]:
-    """Colour tags (primaries, transfer, matrix, range) and the interlaced flag of the first decoded
-    frame: what the bitstream says (the decoder context before decoding may report defaults instead)."""
+FrameTags = tuple[int, int, int, int, bool]
+
+
+def frame_tags(frame: av.VideoFrame) -> FrameTags:
+    """A decoded frame's colour tags (primaries, transfer, matrix, range: FFmpeg's enum values) and
+    its interlaced flag: what the bitstream says (the decoder context may report defaults before
+    anything is decoded)."""
+    return (int(frame.color_primaries), int(frame.color_trc), int(frame.colorspace), int(frame.color_range),
+            bool(frame.interlaced_frame))
+
+
+def stream_info(container: av.container.InputContainer, stream: av.VideoStream, tags: FrameTags, *,
+                size: tuple[int, int] | None = None, pix_fmt: str | None = None) -> VideoInfo:
+    """The :class:`VideoInfo` of an opened video ``stream`` of ``container``, with the first frame's
+    ``tags`` (:func:`frame_tags`); ``size`` and ``pix_fmt`` default to the decoder's (a live source
+    passes its first frame's). The rate falls back to :data:`SEQUENCE_RATE` where the stream states
+    none; ``frame_count`` is -1 where the header does not give it (a live stream has none)."""
+    context = stream.codec_context
+    rate = stream.average_rate or stream.guessed_rate or stream.base_rate
+    timecode = stream.metadata.get("timecode") or container.metadata.get("timecode")
+    for other in container.streams:
+        timecode = timecode or other.metadata.get("timecode")
+    pix_fmt = pix_fmt or context.pix_fmt or "yuv420p"
+    return VideoInfo(
+        size=size or (int(context.width), int(context.height)),
+        rate=Fraction(rate) if rate else SEQUENCE_RATE,
+        frame_count=int(stream.frames) if stream.frames and stream.frames > 0 else -1,
+        codec=context.name,
+        pix_fmt=pix_fmt,
+        bit_depth=_bit_depth(pix_fmt),
+        time_base=Fraction(stream.time_base) if stream.time_base else Fraction(1, 90000),
+        timecode=timecode,
+        color_primaries=tags[0],
+        color_trc=tags[1],
+        colorspace=tags[2],
+        color_range=tags[3],
+        interlaced=tags[4],
+        field_order=int(getattr(context, "field_order", 0) or 0),
+        bit_rate=int(context.bit_rate or getattr(stream, "bit_rate", 0) or 0),
+    )
+
+
+def _first_frame_tags(path: Path, options: dict) -> FrameTags:
+    """:func:`frame_tags` of the file's first decoded frame (unspecified where none decodes)."""
     try:
         with av.open(str(path), "r", options=options) as container:
-            frame = next(container.decode(video=0))
-            return (int(frame.color_primaries), int(frame.color_trc), int(frame.colorspace), int(frame.color_range),
-                    bool(frame.interlaced_frame))
+            return frame_tags(next(container.decode(video=0)))
     except (av.FFmpegError, StopIteration, UnicodeDecodeError):
         return _UNSPECIFIED, _UNSPECIFIED, _UNSPECIFIED, 0, False
 
