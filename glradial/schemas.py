@@ -31,12 +31,27 @@ def schema(name: str) -> dict:
     return json.loads(resources.files("glradial.data").joinpath(f"{name}.schema.json").read_text(encoding="utf-8"))
 
 
+def _inline_local_refs(node: Any, defs: dict) -> Any:
+    """``node`` with every ``{"$ref": "#/$defs/<name>"}`` replaced by that definition (the shipped
+    schemas have no recursive definitions): jsonschema then validates without resolving a reference
+    per row, about twice as fast on a 20,000-row lens track."""
+    if isinstance(node, list):
+        return [_inline_local_refs(item, defs) for item in node]
+    if not isinstance(node, dict):
+        return node
+    ref = node.get("$ref", "")
+    if ref.startswith("#/$defs/") and len(node) == 1:
+        return _inline_local_refs(defs[ref.removeprefix("#/$defs/")], defs)
+    return {key: _inline_local_refs(value, defs) for key, value in node.items()}
+
+
 @functools.lru_cache(maxsize=None)
 def _validator(name: str, part: str | None):
     import jsonschema
 
     whole = schema(name)
-    target = whole if part is None else {"$defs": whole["$defs"], "$ref": f"#/$defs/{part}"}
+    defs = whole.get("$defs", {})
+    target = _inline_local_refs(whole if part is None else defs[part], defs)
     return jsonschema.Draft202012Validator(target)
 
 
@@ -55,7 +70,10 @@ def validate(document: Any, name: str, source: str, part: str | None = None,
     outside an object's properties are named with the accepted ones."""
     import jsonschema
 
-    error = jsonschema.exceptions.best_match(_validator(name, part).iter_errors(document))
+    validator = _validator(name, part)
+    if validator.is_valid(document):  # the common case, without collecting every error
+        return
+    error = jsonschema.exceptions.best_match(validator.iter_errors(document))
     if error is None:
         return
     where = _field(error.absolute_path)
