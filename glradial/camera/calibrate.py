@@ -125,7 +125,13 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     if first_guess is not None:
         first_guess = _check_first_guess(first_guess)
     rgb = to_rgb8(frame)
-    lines = line_points(rgb)
+    return calibrate_points(rgb, line_points(rgb), pitch, first_guess, previous)
+
+
+def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, first_guess: list[np.ndarray] | None,
+                     previous: Camera | CameraEstimate | None) -> CameraEstimate:
+    """:func:`calibrate` of the uint8 RGB frame ``rgb`` whose white-line points ``lines``
+    (:func:`glradial.camera.white_lines.line_points`) are already extracted (arguments checked)."""
     if len(lines.xy) < camera_trust()["min_points"]:
         return judge(None, len(lines.xy))
     fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)

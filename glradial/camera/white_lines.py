@@ -17,9 +17,10 @@
   bring no evidence; compact blobs (players, the ball) are dropped. Pixels of the work copy, x right,
   y down; a line is ``(a, b, c)`` with ``a x + b y + c = 0`` and ``a² + b² = 1``.
 
-Grass is the pitch green of :func:`glradial.estimation.trust.pitch_green` (defined once there): its
-band for the work copy's mask (judged once box-blurred over :data:`GRASS_BLUR` px: grass is green over
-an area, noise is not), the band's dominant hue window (this pitch's own green) for the pitch region.
+Grass is the pitch's own green of :func:`glradial.estimation.trust.pitch_green` (defined once there):
+the dominant hue window, :data:`HUE_HALF_WINDOW` either side, of its pitch-green band, so stands and
+boards of other greens and yellows are not grass; for the work copy's mask judged once box-blurred over
+:data:`GRASS_BLUR` px (grass is green over an area, noise is not).
 """
 
 from __future__ import annotations
@@ -195,7 +196,7 @@ def work_copy(frame_rgb: np.ndarray) -> tuple[np.ndarray, float]:
 def line_mask(small_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """``(mask, field, grass share)``: the white-line mask and the field (uint8 0/1: mostly grass
     around) of a work copy (module docstring)."""
-    grass = pitch_green(cv2.blur(small_rgb, (GRASS_BLUR, GRASS_BLUR)))[0].astype(np.float32)
+    grass = pitch_green(cv2.blur(small_rgb, (GRASS_BLUR, GRASS_BLUR)), 2 * HUE_HALF_WINDOW + 1)[1].astype(np.float32)
     around = cv2.blur(grass, (GRASS_WINDOW, GRASS_WINDOW))
     gray = cv2.cvtColor(small_rgb, cv2.COLOR_RGB2GRAY)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (TOPHAT_DISC, TOPHAT_DISC))
