@@ -13,8 +13,8 @@ Fit (:func:`fit_shot_lens`): over the shot's sure frames (not doubtful), a robus
 squares of the lens's radial map (:func:`glradial.lens.metrics.radial_map`) at radii up to the 16:9
 corner, in px of a 1920-wide frame (the unit of :func:`glradial.lens.metrics.max_displacement_px`),
 each frame weighted by the inverse of its lens bound (:func:`glradial.camera.pitch_lens.lens_bound_px`,
-relative to the shot's median), plain least squares first, then under a Cauchy loss at the scale
-of the residuals' spread (at least :data:`ROBUST_PX` px): a frame whose own
+relative to the shot's median), plain least squares first, then under a Huber loss at the scale of
+the residuals' spread (:data:`HUBER_SPREAD`, at least :data:`ROBUST_PX` px): a frame whose own
 lens is far off (a bad fit that was still judged sure) barely moves the shot's. At least
 ``MIN_FRAMES[0]`` sure frames, else no shot model.
 
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Iterable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -46,16 +46,18 @@ from .refine import refine
 from .white_lines import LinePoints, line_points
 
 #: Sure frames a shot needs for a shot model of degree 0 (constant), 1 and 2 in ``ln(f / f_ref)``.
-MIN_FRAMES = (3, 5, 8)
+MIN_FRAMES = (3, 4, 8)
 #: Zoom range (largest sure focal length over the smallest) a shot needs for degree 1 and for degree
-#: 2 (a 10 % zoom barely changes a broadcast lens: a slope would be noise).
-ZOOM_RANGES = (1.1, 1.3)
+#: 2. Low: at the wide end a broadcast zoom's distortion moves a 1920-wide frame's corner by several px
+#: over a 5 % zoom; and within the range the frames span, a slope or a bend fitted to noise costs
+#: little (the model is only read at the frames' own focal lengths).
+ZOOM_RANGES = (1.02, 1.2)
 #: Radii (lens units) at which the shot model's radial map is compared with each frame's.
 FIT_RADII = np.linspace(0.0, CORNER_RADIUS_16_9, 7)[1:]
-#: Smallest Cauchy scale (px at 1920) of the robust fit (else 1.4826 times the median frame's RMS
-#: residual after a plain fit): frames whose lens differs from the model by several times the scale
-#: count little.
-ROBUST_PX = 1.0
+#: The robust fit's Huber scale: ``HUBER_SPREAD`` times the median frame's RMS residual after a plain
+#: fit, at least ``ROBUST_PX`` (px at 1920). Frames within it count fully (noise: as efficient as plain
+#: least squares), frames beyond it in proportion to the inverse of their distance (a wrong frame).
+ROBUST_PX, HUBER_SPREAD = 0.5, 1.5
 #: Gates (px at 1280) of the refit with the shot lens, and how many times it runs.
 REFIT_GATES = (6.0, 3.0)
 REFIT_PASSES = 2
@@ -127,10 +129,10 @@ def fit_shot_lens(estimates: Iterable[CameraEstimate]) -> ShotLens | None:
     start = np.zeros((2, powers.shape[1]))
     start[:, 0] = np.median(k, axis=0)
     # plain least squares first (a robust loss from a far start would call the frames it cannot yet
-    # explain outliers), then the robust loss at a scale of the residuals' spread
+    # explain outliers), then the robust loss at the scale of the residuals' spread
     p = least_squares(residuals, start.ravel(), x_scale="jac").x
     spread = np.median(np.sqrt(np.mean(residuals(p).reshape(len(sure), -1) ** 2, axis=1)))
-    p = least_squares(residuals, p, loss="cauchy", f_scale=max(ROBUST_PX, 1.4826 * spread),
+    p = least_squares(residuals, p, loss="huber", f_scale=max(ROBUST_PX, HUBER_SPREAD * spread),
                       x_scale="jac").x.reshape(2, -1)
     return ShotLens(tuple(float(c) for c in p[0]), tuple(float(c) for c in p[1]), f_ref,
                     (float(focal.min()), float(focal.max())), len(sure))
@@ -151,7 +153,10 @@ def refit_with_lens(estimate: CameraEstimate, lines: LinePoints, shot: ShotLens,
             return estimate
         cam = fit.camera
     refit = judge(fit, len(lines.xy))
-    return estimate if refit.doubtful else refit
+    if refit.doubtful:
+        return estimate
+    # the lens at the focal length the last pass ended on (it moved by a small fraction of a percent)
+    return replace(refit, camera=Camera(cam.rotation, cam.position, cam.focal, cam.size, shot.lens_at(cam.focal)))
 
 
 @dataclass
