@@ -43,7 +43,8 @@ COARSE_NFEV = 30
 NO_CAMERA_PX = 1280.0
 
 
-def _check_pitch(pitch: object) -> PitchTemplate:
+def check_pitch(pitch: object) -> PitchTemplate:
+    """``pitch``, or the default 105 x 68 m :class:`PitchTemplate` for ``None``; ``TypeError`` otherwise."""
     if pitch is None:
         return PitchTemplate()
     if not isinstance(pitch, PitchTemplate):
@@ -121,7 +122,7 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     """
     if not isinstance(frame, np.ndarray):
         raise TypeError(f"frame must be a numpy image array, got {type(frame).__name__}")
-    pitch = _check_pitch(pitch)
+    pitch = check_pitch(pitch)
     if first_guess is not None:
         first_guess = _check_first_guess(first_guess)
     rgb = to_rgb8(frame)

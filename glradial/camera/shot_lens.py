@@ -38,7 +38,7 @@ from ..lens.lens import Lens
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, radial_map
 from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
-from .calibrate import FINE_POINTS, _check_pitch, calibrate_points, judge
+from .calibrate import FINE_POINTS, calibrate_points, check_pitch, judge
 from .estimate import CameraEstimate
 from .model import Camera
 from .pitch_lens import lens_bound_px
@@ -170,7 +170,7 @@ class ShotCalibrator:
     _lines: list[LinePoints] = field(default_factory=list, repr=False)
 
     def __post_init__(self) -> None:
-        self.pitch = _check_pitch(self.pitch)
+        self.pitch = check_pitch(self.pitch)
 
     def add(self, frame: np.ndarray) -> CameraEstimate:
         """The frame's own estimate (as :func:`glradial.calibrate`, tracking from the shot's previous
