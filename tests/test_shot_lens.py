@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 
-import cv2
 import numpy as np
 import pytest
 
@@ -80,6 +79,8 @@ def test_the_model_is_as_simple_as_the_shot_allows():
     assert ShotLens((-0.1,), (0.01,), 1.5, (1.5, 1.5), 3).lens_at(2.0) == Lens(-0.1, 0.01)
     with pytest.raises(ValueError, match="focal"):
         model.lens_at(0.0)
+    with pytest.raises(TypeError, match=r"estimates\[1\]"):
+        fit_shot_lens([_estimate(zoom[0], zoom[0].lens), (-0.1, 0.01)])
 
 
 def _noisy_frames(cams: list[Camera], seed: int, sigma: float):
@@ -145,4 +146,3 @@ def test_calibrate_shot_rejects_what_is_not_a_frame():
         glradial.calibrate_shot([np.zeros((4, 4), np.uint8).tolist()])
     with pytest.raises(TypeError, match="pitch"):
         glradial.calibrate_shot([], pitch=(105, 68))
-    assert cv2 is not None

@@ -111,7 +111,11 @@ def _degree(frames: int, zoom: float) -> int:
 def fit_shot_lens(estimates: Iterable[CameraEstimate]) -> ShotLens | None:
     """The shot's lens model from its frames' estimates (module docstring); ``None`` with fewer than
     ``MIN_FRAMES[0]`` sure frames."""
-    sure = [e for e in estimates if isinstance(e, CameraEstimate) and not e.doubtful and e.camera is not None]
+    estimates = list(estimates)
+    for i, e in enumerate(estimates):
+        if not isinstance(e, CameraEstimate):
+            raise TypeError(f"estimates[{i}] must be a glradial.CameraEstimate, got {e!r}")
+    sure = [e for e in estimates if not e.doubtful and e.camera is not None]
     if len(sure) < MIN_FRAMES[0]:
         return None
     focal = np.array([e.focal for e in sure])
