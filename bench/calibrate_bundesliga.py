@@ -1,7 +1,7 @@
 """``glradial.calibrate`` on the shared Bundesliga frames, scored against the hand-labelled keypoints
 (validation only: nothing is fitted on these frames or labels).
 
-Usage: ``python bench/calibrate_bundesliga.py [--frames DIR] [--json OUT] [--limit N]``
+Usage: ``python bench/calibrate_bundesliga.py [--frames DIR] [--json OUT] [--limit N] [--shots]``
 
 Each 640 x 640 file (a squashed 16:9 frame) is resized to 1280 x 720 (bicubic), calibrated with the
 default first guess, and the 32 template keypoints are projected with the estimate (lens included).
@@ -12,6 +12,11 @@ frames within 5 and 10 px (a declined frame is a miss), the coverage of the stat
 homography fitted to the frame's own labels leaves (label noise, lens, pitch size). A last row repeats
 "all" without the frames whose labels are inconsistent (floor above :data:`CONSISTENT_PX`). The
 pitch's half turn is resolved by the method (main camera on the near touchline), so no flipped scoring is needed.
+
+``--shots``: the frames of one segment (``CLIP_SEGMENT_FRAME`` names) are sparse samples of the same
+main camera (same lens, changing zoom), so each segment goes through :class:`glradial.ShotCalibrator`
+as one shot (frames in index order; tracking from the previous sure frame, falling back to a fresh
+search); two tables: each frame's own camera and the shot model's (nothing is fitted on the labels).
 """
 
 from __future__ import annotations
@@ -43,46 +48,92 @@ def _floor(kp_m: np.ndarray, labels: np.ndarray) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    import cv2
 
     sys.path.insert(0, str(ROOT))
     from glradial.camera.calibrate import calibrate
-    from glradial.pitch import PitchTemplate
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--frames", type=Path, default=DATA)
     parser.add_argument("--json", type=Path, help="write the per-frame rows here")
     parser.add_argument("--limit", type=int, default=0)
+    parser.add_argument("--shots", action="store_true",
+                        help="calibrate each segment (CLIP_SEGMENT) as one shot (glradial.calibrate_shot, frames in index "
+                             "order): each frame's own camera, tracked, against the shot's lens as a function of the zoom")
     parser.add_argument("--calibrate-clip", metavar="CLIP",
                         help="calibrate the bound's quantile on this clip's answered frames (split conformal, 90 %%) "
                              "and write it to glradial/data/camera_trust.json; the other clip checks it")
     args = parser.parse_args(argv)
     labels = json.loads((args.frames / "keypoints" / "keypoints.json").read_text())
-    kp = PitchTemplate().keypoints()
-    rows = []
     names = sorted(labels["frames"])[: args.limit or None]
+    if args.shots:
+        own, shot = _shot_rows(args.frames, labels, names)
+        print("Each frame's own camera, tracked through its segment:")
+        _report(own)
+        print("\nWith the segment's lens as a function of the zoom (glradial.calibrate_shot):")
+        _report(shot)
+        return 0
+    rows = []
     for name in names:
-        img = cv2.imread(str(args.frames / f"{name}.jpg"))[:, :, ::-1]
-        img = cv2.resize(img, (1280, 720), interpolation=cv2.INTER_CUBIC)
-        lab = np.array([[np.nan, np.nan] if v is None else v for v in labels["frames"][name]], float)
+        img = _image(args.frames, name)
         t = time.perf_counter()
-        est = calibrate(np.ascontiguousarray(img))
-        dt = time.perf_counter() - t
-        ok = np.isfinite(lab).all(1)
-        rms = float("nan")
-        if est.camera is not None:
-            p = est.project(kp)
-            d = np.linalg.norm(p[ok] - lab[ok], axis=1)
-            rms = float(np.sqrt(np.mean(np.where(np.isfinite(d), d, 1e4) ** 2)))
-        rows.append({"frame": name, "clip": name.split("_")[0], "answered": not est.doubtful, "reason": est.reason,
-                     "rms_px": rms, "bound_px": est.uncertainty_px, "rms_fit_px": est.rms_px, "floor_px": _floor(kp, lab), "seconds": dt})
-        print(f"{name}\t{est.reason}\trms={rms:.2f}\tbound={est.uncertainty_px:.2f}\t{dt:.2f}s", file=sys.stderr, flush=True)
+        est = calibrate(img)
+        rows.append(_row(name, est, labels, time.perf_counter() - t))
     _report(rows)
     if args.calibrate_clip:
         _calibrate(rows, args.calibrate_clip)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0
+
+
+def _image(folder: Path, name: str) -> np.ndarray:
+    """The frame ``name`` resized to 1280 x 720 (bicubic), RGB."""
+    import cv2
+
+    img = cv2.imread(str(folder / f"{name}.jpg"))[:, :, ::-1]
+    return np.ascontiguousarray(cv2.resize(img, (1280, 720), interpolation=cv2.INTER_CUBIC))
+
+
+def _row(name: str, est, labels: dict, seconds: float) -> dict:
+    """The scored row of frame ``name``'s estimate against its labels (module docstring)."""
+    from glradial.pitch import PitchTemplate
+
+    kp = PitchTemplate().keypoints()
+    lab = np.array([[np.nan, np.nan] if v is None else v for v in labels["frames"][name]], float)
+    ok = np.isfinite(lab).all(1)
+    rms = float("nan")
+    if est.camera is not None:
+        d = np.linalg.norm(est.project(kp)[ok] - lab[ok], axis=1)
+        rms = float(np.sqrt(np.mean(np.where(np.isfinite(d), d, 1e4) ** 2)))
+    print(f"{name}\t{est.reason}\trms={rms:.2f}\tbound={est.uncertainty_px:.2f}\t{seconds:.2f}s", file=sys.stderr, flush=True)
+    return {"frame": name, "clip": name.split("_")[0], "answered": not est.doubtful, "reason": est.reason,
+            "rms_px": rms, "bound_px": est.uncertainty_px, "rms_fit_px": est.rms_px, "floor_px": _floor(kp, lab), "seconds": seconds}
+
+
+def _shot_rows(folder: Path, labels: dict, names: list[str]) -> tuple[list[dict], list[dict]]:
+    """``--shots``: each segment (``CLIP_SEGMENT``) through :class:`glradial.ShotCalibrator`, its
+    frames in index order; the rows of each frame's own estimate and of the shot model's."""
+    from glradial.camera.shot_lens import ShotCalibrator
+
+    segments: dict[str, list[str]] = {}
+    for name in names:
+        segments.setdefault(name.rsplit("_", 1)[0], []).append(name)
+    own, shot = [], []
+    for segment, members in sorted(segments.items()):
+        members.sort(key=lambda n: int(n.rsplit("_", 1)[1]))
+        calibrator = ShotCalibrator()
+        t = time.perf_counter()
+        for name in members:
+            calibrator.add(_image(folder, name))
+        done = calibrator.finish()
+        dt = (time.perf_counter() - t) / len(members)
+        model = done.lens_model
+        print(f"{segment}: {len(members)} frames, shot model "
+              f"{'none' if model is None else f'degree {model.degree} from {model.frames} frames'}", file=sys.stderr)
+        for name, mine, est in zip(members, done.frame_estimates, done.estimates):
+            own.append(_row(name, mine, labels, dt))
+            shot.append(_row(name, est, labels, dt))
+    return own, shot
 
 
 def _calibrate(rows: list[dict], clip: str) -> None:

@@ -18,6 +18,7 @@ if TYPE_CHECKING:
     from .camera.calibrate import calibrate
     from .camera.estimate import CameraEstimate
     from .camera.pitch_lens import Estimator, estimate
+    from .camera.shot_lens import ShotCalibration, ShotCalibrator, ShotLens, calibrate_shot
     from .errors import Error, GLUnavailableError, LensTrackError, ModelLoadError, ShaderCompileError
     from .estimation.lens_estimate import LensEstimate
     from .gl.shaderlib import shader_dir, shader_path

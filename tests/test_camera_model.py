@@ -111,3 +111,15 @@ def test_bad_camera_arguments_are_named(kwargs, word):
 def test_bad_points_are_named():
     with pytest.raises(ValueError, match="points"):
         CAMERAS[0].project(np.zeros((4, 4)))
+
+
+def test_one_decomposition_serves_the_camera_and_the_first_guess():
+    # the first guess's batched pinhole reading and decompose_homography agree with the known cameras
+    from glradial.camera.line_hypotheses import camera_of
+
+    h = np.stack([cam.homography * s for cam, s in zip(CAMERAS, (1.0, -2.5, 1e-3))])
+    for cam, hk in zip(CAMERAS, h):
+        focal, centre, metric = camera_of(hk[None], cam.size)
+        assert metric[0] and focal[0] == pytest.approx(cam.focal, rel=1e-9)
+        np.testing.assert_allclose(centre[0], cam.position, atol=1e-6)
+        assert decompose_homography(hk, cam.size).focal == pytest.approx(float(focal[0]), rel=1e-12)

@@ -1,6 +1,6 @@
 """``calibrate``: the whole camera of one frame (lens, focal length, pose) from the pitch markings.
 
-Steps: the white-line points (:mod:`glradial.camera.evidence`); first guesses, either given (plane
+Steps: the white-line points (:func:`glradial.camera.white_lines.line_points`); first guesses, either given (plane
 homographies to the frame's undistorted pixels, best first, e.g. a dedicated first-guess search), the
 previous frame's camera (tracking a video: one start, shorter gates), or by default the line and
 circle hypotheses of :mod:`glradial.camera.first_guess`, with glradial's dictionary of synthetic views
@@ -19,11 +19,11 @@ import numpy as np
 from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
 from .estimate import CameraEstimate, camera_trust
-from .evidence import WhiteLines, white_lines
 from .first_guess import first_guess as search
 from .first_views import first_views
 from .model import Camera, decompose_homography
 from .refine import Fit, refine
+from .white_lines import LinePoints, line_points
 
 #: Spacing (m) of the template points the first-guess search takes.
 SEARCH_STEP = 0.25
@@ -43,7 +43,8 @@ COARSE_NFEV = 30
 NO_CAMERA_PX = 1280.0
 
 
-def _check_pitch(pitch: object) -> PitchTemplate:
+def check_pitch(pitch: object) -> PitchTemplate:
+    """``pitch``, or the default 105 x 68 m :class:`PitchTemplate` for ``None``; ``TypeError`` otherwise."""
     if pitch is None:
         return PitchTemplate()
     if not isinstance(pitch, PitchTemplate):
@@ -51,7 +52,7 @@ def _check_pitch(pitch: object) -> PitchTemplate:
     return pitch
 
 
-def _starts(lines: WhiteLines, pitch: PitchTemplate, first_guess, previous, rgb: np.ndarray | None = None) -> list[Camera]:
+def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb: np.ndarray | None = None) -> list[Camera]:
     if previous is not None:
         cam = previous.camera if isinstance(previous, CameraEstimate) else previous
         if not isinstance(cam, Camera):
@@ -121,11 +122,17 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     """
     if not isinstance(frame, np.ndarray):
         raise TypeError(f"frame must be a numpy image array, got {type(frame).__name__}")
-    pitch = _check_pitch(pitch)
+    pitch = check_pitch(pitch)
     if first_guess is not None:
         first_guess = _check_first_guess(first_guess)
     rgb = to_rgb8(frame)
-    lines = white_lines(rgb)
+    return calibrate_points(rgb, line_points(rgb), pitch, first_guess, previous)
+
+
+def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, first_guess: list[np.ndarray] | None,
+                     previous: Camera | CameraEstimate | None) -> CameraEstimate:
+    """:func:`calibrate` of the uint8 RGB frame ``rgb`` whose white-line points ``lines``
+    (:func:`glradial.camera.white_lines.line_points`) are already extracted (arguments checked)."""
     if len(lines.xy) < camera_trust()["min_points"]:
         return judge(None, len(lines.xy))
     fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)

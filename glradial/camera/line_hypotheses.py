@@ -19,6 +19,7 @@ import itertools
 
 import numpy as np
 
+from .model import plane_views
 from .white_lines import Line
 
 #: A template line: at least this many template points share one x (or y), and they stand for at
@@ -207,20 +208,11 @@ def front_facing(h: np.ndarray, centre: np.ndarray) -> np.ndarray:
 
 def _pinhole(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(focal, metric, m)``: the focal length (image widths, NaN where none fits) of homographies
-    ``h`` read as views with a centred principal point and square pixels, whether their two pitch axes
-    then map to orthogonal rays of equal length, and ``K⁻¹ h`` in width-normalised image coordinates."""
-    width, height = size
-    g = h.copy()
-    g[:, 0] = (h[:, 0] - (width - 1) / 2 * h[:, 2]) / width
-    g[:, 1] = (h[:, 1] - (height - 1) / 2 * h[:, 2]) / width
-    a1, b1, c1 = g[:, 0, 0], g[:, 1, 0], g[:, 2, 0]
-    a2, b2, c2 = g[:, 0, 1], g[:, 1, 1], g[:, 2, 1]
-    u1, u2 = a1 * a2 + b1 * b2, a1 * a1 + b1 * b1 - a2 * a2 - b2 * b2
-    v1, v2 = c1 * c2, c1 * c1 - c2 * c2
+    ``h`` read as views with a centred principal point and square pixels
+    (:func:`glradial.camera.model.plane_views`), whether their two pitch axes then map to orthogonal
+    rays of equal length, and the scaled ``[r1 r2 t]`` (up to sign) of each."""
+    focal, g = plane_views(h, size)
     with np.errstate(all="ignore"):
-        w = -(u1 * v1 + u2 * v2) / (u1 * u1 + u2 * u2)  # 1 / focal^2, least squares
-        focal = np.where(w > 0, 1 / np.sqrt(np.abs(w)), np.nan)
-        g[:, :2] /= focal[:, None, None]
         n1 = np.sqrt(np.sum(g[:, :, 0] ** 2, axis=1))
         n2 = np.sqrt(np.sum(g[:, :, 1] ** 2, axis=1))
         cosine = np.abs(np.sum(g[:, :, 0] * g[:, :, 1], axis=1)) / (n1 * n2)
@@ -236,10 +228,9 @@ def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndar
     focal, metric, m = _pinhole(h, size)
     with np.errstate(all="ignore"):
         r1, r2, t = m[:, :, 0], m[:, :, 1], m[:, :, 2]
-        scale = 2 / (np.linalg.norm(r1, axis=1) + np.linalg.norm(r2, axis=1))
         # sign: the pitch point seen at the image centre, m⁻¹ e3 ∝ row0 × row1, lies in front
         seen = np.cross(m[:, 0], m[:, 1])
-        scale = scale * np.sign(np.sum(m[:, 2] * seen, axis=1) * seen[:, 2])
+        scale = np.sign(np.sum(m[:, 2] * seen, axis=1) * seen[:, 2])
         r1, r2, t = r1 * scale[:, None], r2 * scale[:, None], t * scale[:, None]
         r3 = np.cross(r1, r2)
         centre = -np.stack([np.sum(r1 * t, axis=1), np.sum(r2 * t, axis=1), np.sum(r3 * t, axis=1)], axis=1)

@@ -199,29 +199,47 @@ def intrinsics(focal: float, size: tuple[int, int]) -> np.ndarray:
     return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
 
+def plane_views(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Zhang's reading of plane homographies ``h`` (N x 3 x 3, pitch ``(x, y, 1)`` -> undistorted pixels
+    of a ``size`` frame) with the principal point at the centre and square pixels known: ``(focal, m)``,
+    the focal length in image widths (N; NaN where ``1 / f²`` comes out not positive) and
+    ``m = diag(1/f, 1/f, 1) K₁⁻¹ h`` (N x 3 x 3; ``K₁`` the intrinsics of focal 1) scaled so that
+    ``|m₁| + |m₂| = 2``: up to one common sign, the columns ``r1, r2, t`` of the camera's ``[R | t]``.
+
+    The two constraints ``r1 . r2 = 0`` and ``|r1| = |r2|`` are solved for ``1 / f²`` by least squares
+    (unscaled: scaling each to unit weight lets an ill-conditioned one decide, and loses line
+    hypotheses of clear views). The one decomposition of a homography in glradial:
+    :func:`decompose_homography` and the first guess's plausibility test use it."""
+    width, height = frame_size(size)
+    a = np.array(h, dtype=np.float64, copy=True)
+    a[:, 0] = (a[:, 0] - (width - 1) / 2.0 * a[:, 2]) / width
+    a[:, 1] = (a[:, 1] - (height - 1) / 2.0 * a[:, 2]) / width
+    (h11, h12), (h21, h22), (h31, h32) = a[:, 0, :2].T, a[:, 1, :2].T, a[:, 2, :2].T
+    rows = np.stack([np.stack([h11 * h12 + h21 * h22, h31 * h32], axis=-1),
+                     np.stack([h11 ** 2 + h21 ** 2 - h12 ** 2 - h22 ** 2, h31 ** 2 - h32 ** 2], axis=-1)], axis=1)
+    with np.errstate(all="ignore"):
+        w = -np.sum(rows[..., 0] * rows[..., 1], axis=1) / np.maximum(np.sum(rows[..., 0] ** 2, axis=1), 1e-300)
+        focal = np.where(np.isfinite(w) & (w > 0), 1.0 / np.sqrt(np.abs(w)), np.nan)
+        a[:, :2] /= focal[:, None, None]
+        a /= (0.5 * (np.linalg.norm(a[:, :, 0], axis=1) + np.linalg.norm(a[:, :, 1], axis=1)))[:, None, None]
+    return focal, a
+
+
 def decompose_homography(h: object, size: tuple[int, int], lens: Lens | None = None) -> Camera | None:
     """The camera (focal, rotation, position) of a plane homography ``h`` (pitch ``(x, y, 1)`` ->
     undistorted pixels of a ``size`` frame), principal point at the centre and square pixels known
-    (Zhang's constraints ``r1 . r2 = 0``, ``|r1| = |r2|`` solved for ``1 / f²`` by least squares).
+    (:func:`plane_views`).
 
     The camera above the pitch is kept; of the half-turn pair, the one with ``position.y < 0``.
     ``None`` when ``h`` is no view of a plane from above (``1 / f² <= 0``, singular, or mirrored)."""
     size = frame_size(size)
     hm = _matrix("h", h, (3, 3))
-    # pixels -> lens units (width 1, origin at the principal point): a = λ diag(f, f, 1) [r1 r2 t]
-    a = np.linalg.inv(intrinsics(1.0, size)) @ hm
-    (h11, h12, _), (h21, h22, _), (h31, h32, _) = a
-    rows = np.array([[h11 * h12 + h21 * h22, h31 * h32], [h11 ** 2 + h21 ** 2 - h12 ** 2 - h22 ** 2, h31 ** 2 - h32 ** 2]])
-    scale = np.abs(rows).sum(axis=1, keepdims=True) + 1e-300
-    rows = rows / scale
-    w = -float(rows[:, 0] @ rows[:, 1]) / max(float(rows[:, 0] @ rows[:, 0]), 1e-300)
-    if not math.isfinite(w) or w <= 0.0:
+    focal, m = plane_views(hm[None], size)
+    f = float(focal[0])
+    if not math.isfinite(f) or not np.all(np.isfinite(m)):
         return None
-    f = 1.0 / math.sqrt(w)
-    m = np.diag([1.0 / f, 1.0 / f, 1.0]) @ a
-    lam = 2.0 / (np.linalg.norm(m[:, 0]) + np.linalg.norm(m[:, 1]))
     for sign in (1.0, -1.0):
-        r1, r2, t = sign * lam * m[:, 0], sign * lam * m[:, 1], sign * lam * m[:, 2]
+        r1, r2, t = sign * m[0, :, 0], sign * m[0, :, 1], sign * m[0, :, 2]
         u, _, vt = np.linalg.svd(np.column_stack([r1, r2, np.cross(r1, r2)]))
         rot = u @ vt
         if np.linalg.det(rot) < 0:

@@ -1,6 +1,6 @@
 """The joint refinement of pose, focal length and lens against the pitch markings (ICP style).
 
-Evidence: white-line points of the distorted frame (:mod:`glradial.camera.evidence`). Model: the
+Evidence: white-line points of the distorted frame (:func:`glradial.camera.white_lines.line_points`). Model: the
 template's elements sampled every :data:`SAMPLE_STEP` metres and projected through the camera, lens
 included (:meth:`glradial.camera.model.Camera.project`). Each round assigns every evidence point to its
 nearest projected marking segment (within a gate that shrinks round by round, and with a line
@@ -27,8 +27,8 @@ from scipy.spatial.transform import Rotation
 from ..lens.lens import Lens
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
-from .evidence import DETECT_WIDTH
 from .model import Camera, project_many
+from .white_lines import DETECT_WIDTH
 
 #: Residuals are in px of a frame this wide.
 REFERENCE_WIDTH = 1280.0

@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 
 from ..lens.lens import Lens
+from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
 from .model import Camera
 
@@ -150,3 +151,32 @@ def random_camera(rng: np.random.Generator, size: tuple[int, int] = (1280, 720),
     k1 = rng.uniform(-0.35, 0.05) if lens else 0.0
     k2 = 0.019 * k1 + 0.805 * k1 * k1
     return Camera.look_at(position, target, hfov, size, Lens(k1, k2), roll=rng.uniform(-1, 1))
+
+
+#: Horizontal fields of view (degrees) of :func:`zoom_cameras`' lens at its wide and tele ends.
+ZOOM_LENS_HFOV = (56.0, 20.0)
+
+
+def zoom_cameras(rng: np.random.Generator, frames: int, size: tuple[int, int] = (1280, 720),
+                 zoom: float = 2.0) -> list[Camera]:
+    """``frames`` cameras of one main-camera zoom shot with a lens that follows the zoom: a fixed
+    position (as :func:`random_camera`), the aim drifting between two pitch points, the horizontal
+    field of view narrowing from 40-56 degrees by ``zoom`` times in focal length (geometric steps), and
+    the lens's ``k1`` going from barrel at the wide end (-0.30..-0.15 at :data:`ZOOM_LENS_HFOV` [0])
+    toward pincushion at the tele end (-0.02..0.06 at ``ZOOM_LENS_HFOV[1]``) linearly in the field of
+    view (degrees), ``k2`` on the Lopez-Antequera manifold."""
+    position = np.array([rng.uniform(-10, 10), -34.0 - rng.uniform(20, 45), rng.uniform(12, 28)])
+    centre = np.array([(-1.0, 0.0, 1.0)[rng.integers(3)] * rng.uniform(30, 40), rng.uniform(-6, 6)])
+    start, end = centre + rng.uniform(-8, 8, 2), centre + rng.uniform(-8, 8, 2)
+    hfov_wide = rng.uniform(40, 56)
+    focal = np.geomspace(0.5 / math.tan(math.radians(hfov_wide / 2)),
+                         zoom * 0.5 / math.tan(math.radians(hfov_wide / 2)), frames)
+    hfov = np.degrees(2 * np.arctan(0.5 / focal))
+    k1_wide, k1_tele = rng.uniform(-0.30, -0.15), rng.uniform(-0.02, 0.06)
+    out = []
+    for i, h in enumerate(hfov):
+        t = i / max(frames - 1, 1)
+        k1 = k1_tele + (k1_wide - k1_tele) * (h - ZOOM_LENS_HFOV[1]) / (ZOOM_LENS_HFOV[0] - ZOOM_LENS_HFOV[1])
+        out.append(Camera.look_at(position, (1 - t) * start + t * end, float(h), size,
+                                  Lens(float(k1), float(manifold_k2(k1)))))
+    return out

@@ -1,15 +1,26 @@
-"""White pitch-line evidence of a broadcast frame, for the camera's first guess: a mask of the painted
-lines on the grass, its pixels, the straight lines through them and where pairs of them meet.
+"""The white pitch lines of a broadcast frame, the one extraction the camera uses, in two forms:
 
-Convention: everything here is in pixels of the **work copy**, the frame resized (area
-interpolation) to :data:`WORK_WIDTH` pixels wide with its aspect kept; pixel centres at integers,
-x right, y down. A line is ``(a, b, c)`` with ``a x + b y + c = 0`` and ``a² + b² = 1``.
+* :func:`line_points` (:class:`LinePoints`), what the camera is **fitted** to: sub-pixel centres of
+  bright thin ridges (the line detector's Hessian ridges,
+  :func:`glradial.estimation.lines.bright_ridges`) on a copy at most :data:`DETECT_WIDTH` px wide,
+  brighter than their neighbourhood by :data:`WHITE_CONTRAST` grey levels, kept on the pitch region
+  (:func:`pitch_region`: the largest area of the pitch's own green, closed over its lines and
+  players); letterboxes and a border margin are masked. Points are returned in pixels of the
+  **distorted frame at its own resolution** (centres at integers), with their line direction
+  (radians in [0, pi)).
+* :func:`white_lines` (:class:`WhiteLines`), what the first guess **searches**: a mask of the painted
+  lines on the grass of the **work copy**, the frame resized (area interpolation) to
+  :data:`WORK_WIDTH` px wide with its aspect kept, its pixels, the straight lines through them and
+  where pairs of them meet. A line pixel is brighter than its surroundings by :data:`TOPHAT_MIN` grey
+  levels (a white top-hat with a disc wider than a painted line at the work scale) and lies where
+  enough of its neighbourhood is grass (:data:`GRASS_SHARE`), so the stands, ad boards and the sky
+  bring no evidence; compact blobs (players, the ball) are dropped. Pixels of the work copy, x right,
+  y down; a line is ``(a, b, c)`` with ``a x + b y + c = 0`` and ``a² + b² = 1``.
 
-The mask: grass is green (hue 30..90 on OpenCV's 0..180 scale, saturated, not dark, once blurred
-over a few pixels); a line pixel is brighter than its surroundings by :data:`TOPHAT_MIN` grey levels
-(a white top-hat with a disc wider than a painted line at the work scale) and lies where enough of
-its neighbourhood is grass (:data:`GRASS_SHARE`), so the stands, ad boards and the sky bring no
-evidence; compact blobs (players, the ball) are dropped.
+Grass is the pitch's own green of :func:`glradial.estimation.trust.pitch_green` (defined once there):
+the dominant hue window, :data:`HUE_HALF_WINDOW` either side, of its pitch-green band, so stands and
+boards of other greens and yellows are not grass; for the work copy's mask judged once box-blurred over
+:data:`GRASS_BLUR` px (grass is green over an area, noise is not).
 """
 
 from __future__ import annotations
@@ -19,13 +30,29 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from ..estimation.lines import BORDER_MARGIN, bright_ridges, content_box, gray_copy
+from ..estimation.trust import pitch_green
 from ..lens.lens import Lens
+
+#: Largest width (px) of the copy the white lines are detected on.
+DETECT_WIDTH = 960
+#: The pitch region: green closed over this many px (detection copy), then grown by this many...
+GRASS_CLOSE, GRASS_GROW = 15, 7
+#: Speckle (px, detection copy) removed before: greenish crowd pixels.
+GRASS_OPEN = 5
+#: Half width (OpenCV hue units, 2 degrees each) of the pitch's own green around the hue peak.
+HUE_HALF_WINDOW = 7
+#: ...required only of frames where at least this share of the pixels is green.
+GREEN_FRAME_SHARE = 0.15
+#: A white line is this many grey levels (0..255) brighter than the mean of a :data:`BACKGROUND_BOX` px
+#: box around it (detection copy): mowing stripes and grain are not.
+WHITE_CONTRAST = 14.0
+BACKGROUND_BOX = 21
+
 
 #: Width (px) of the work copy. The first guess needs lines, not detail: 640 px keeps a 12 cm line at
 #: 60 m from a 1280-px wide shot about one pixel wide, and the whole search within its time budget.
 WORK_WIDTH = 640
-#: Grass: OpenCV HSV hue range (0..180), smallest saturation and value (0..255).
-GRASS_HUE, GRASS_MIN_SAT, GRASS_MIN_VAL = (30, 90), 50, 40
 #: Grass is judged on a box-blurred copy (side, px): grass is green over an area, noise is not.
 GRASS_BLUR = 5
 #: Side (px) of the window in which a line pixel needs :data:`GRASS_SHARE` of grass around it.
@@ -57,6 +84,72 @@ HULL_MARGIN = 3.0
 
 
 @dataclass(frozen=True)
+class LinePoints:
+    """White-line points of one frame, what the camera is fitted to: ``xy`` (N x 2 pixels of the ``size = (W, H)`` frame), ``angle``
+    (N, line direction in radians, [0, pi)), ``green`` (share of pitch-green pixels)."""
+
+    xy: np.ndarray
+    angle: np.ndarray
+    size: tuple[int, int]
+    green: float
+
+    def thinned(self, count: int) -> "LinePoints":
+        """At most ``count`` of the points, evenly spread over the list (a bounded fitting cost)."""
+        if len(self.xy) <= count:
+            return self
+        keep = np.linspace(0, len(self.xy) - 1, count).round().astype(np.intp)
+        return LinePoints(self.xy[keep], self.angle[keep], self.size, self.green)
+
+
+def pitch_region(frame: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, float]:
+    """uint8 mask (detection size) of the pitch: the largest connected region of pitch green, closed
+    over its lines and players (:data:`GRASS_CLOSE` px) and grown by :data:`GRASS_GROW` px so the
+    lines at its edge count; and the green share of the frame. All ones when the frame is not green
+    enough to tell."""
+    if frame.ndim != 3:
+        return np.ones(shape, np.uint8), 0.0
+    small = cv2.resize(frame, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
+    band, own = pitch_green(small, 2 * HUE_HALF_WINDOW + 1)
+    share = float(np.count_nonzero(band)) / band.size
+    if share < GREEN_FRAME_SHARE:
+        return np.ones(shape, np.uint8), share
+    green = own.astype(np.uint8)  # this pitch's own green (stands and boards are other hues)
+    green = cv2.morphologyEx(green, cv2.MORPH_OPEN, np.ones((GRASS_OPEN, GRASS_OPEN), np.uint8))
+    closed = cv2.morphologyEx(green, cv2.MORPH_CLOSE, np.ones((GRASS_CLOSE, GRASS_CLOSE), np.uint8))
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
+    if count < 2:
+        return np.ones(shape, np.uint8), share
+    largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+    pitch = (labels == largest).astype(np.uint8)
+    return cv2.dilate(pitch, np.ones((GRASS_GROW, GRASS_GROW), np.uint8)), share
+
+
+def line_points(frame: np.ndarray) -> LinePoints:
+    """The white-line points (:class:`LinePoints`) of a uint8 frame: sub-pixel ridge centres on the
+    pitch region of a copy at most :data:`DETECT_WIDTH` px wide, in pixels of the frame itself (module
+    docstring)."""
+    if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim not in (2, 3):
+        raise TypeError(f"frame must be a uint8 H×W or H×W×3 array, got {type(frame).__name__} "
+                        f"{getattr(frame, 'dtype', '')} {getattr(frame, 'shape', '')}")
+    height_full, width_full = frame.shape[:2]
+    gray = gray_copy(frame if frame.ndim == 2 else frame[..., :3], DETECT_WIDTH)
+    height, width = gray.shape
+    x0, y0, x1, y1 = content_box(gray)
+    grass, share = pitch_region(frame[..., :3] if frame.ndim == 3 else frame, (height, width))
+    valid = np.zeros((height, width), np.uint8)
+    m = BORDER_MARGIN
+    valid[y0 + m: y1 - m, x0 + m: x1 - m] = 1
+    x, y, angle = bright_ridges(gray, valid & grass)
+    background = cv2.blur(gray, (BACKGROUND_BOX, BACKGROUND_BOX))
+    r, c = np.clip(np.rint(y).astype(np.intp), 0, height - 1), np.clip(np.rint(x).astype(np.intp), 0, width - 1)
+    white = gray[r, c] - background[r, c] > WHITE_CONTRAST
+    x, y, angle = x[white], y[white], angle[white]
+    s = width_full / width
+    xy = np.stack([(x + 0.5) * s - 0.5, (y + 0.5) * s - 0.5], axis=1)
+    return LinePoints(xy, angle, (width_full, height_full), share)
+
+
+@dataclass(frozen=True)
 class Line:
     """A straight line of the mask: ``abc`` its normalised equation, ``ends`` (2 x 2) the extreme
     support pixels along it, ``support`` the length (px) its mask pixels cover."""
@@ -76,7 +169,7 @@ class Line:
 
 @dataclass(frozen=True)
 class WhiteLines:
-    """Line evidence of one frame: ``mask`` (uint8 0/1, work copy), ``field`` (uint8 0/1, where lines
+    """Line evidence of one frame for the first guess: ``mask`` (uint8 0/1, work copy), ``field`` (uint8 0/1, where lines
     could be seen: mostly grass around), ``grass`` (the share of the work copy that is grass),
     ``points`` (N x 2 float64, the mask's pixels), ``scale`` (frame px per work px) and ``lines``
     (its straight lines, :class:`Line`, longest support first)."""
@@ -103,9 +196,7 @@ def work_copy(frame_rgb: np.ndarray) -> tuple[np.ndarray, float]:
 def line_mask(small_rgb: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
     """``(mask, field, grass share)``: the white-line mask and the field (uint8 0/1: mostly grass
     around) of a work copy (module docstring)."""
-    hsv = cv2.cvtColor(cv2.blur(small_rgb, (GRASS_BLUR, GRASS_BLUR)), cv2.COLOR_RGB2HSV)
-    hue, sat, val = hsv[..., 0], hsv[..., 1], hsv[..., 2]
-    grass = ((hue > GRASS_HUE[0]) & (hue < GRASS_HUE[1]) & (sat > GRASS_MIN_SAT) & (val > GRASS_MIN_VAL)).astype(np.float32)
+    grass = pitch_green(cv2.blur(small_rgb, (GRASS_BLUR, GRASS_BLUR)), 2 * HUE_HALF_WINDOW + 1)[1].astype(np.float32)
     around = cv2.blur(grass, (GRASS_WINDOW, GRASS_WINDOW))
     gray = cv2.cvtColor(small_rgb, cv2.COLOR_RGB2GRAY)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (TOPHAT_DISC, TOPHAT_DISC))

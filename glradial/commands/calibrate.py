@@ -20,7 +20,10 @@ toward the goal on the right of the main camera, y toward the far touchline, z u
 degrees) and the pitch->frame homography. Each answer states a 90 % bound on the reprojection error of
 the markings (px of a 1280-wide frame) and a doubt verdict (doubtful=0/1 and its reason: ok,
 no_markings, too_few_markings, weak_geometry, poor_fit); a doubtful frame's numbers must not be used.
-Videos: one camera per frame, each frame starting from the previous frame's camera (tracking).
+Videos: one camera per frame, each frame starting from the previous sure frame's camera of its shot
+(tracking); per shot (cuts detected), one lens as a function of the measured focal length (the zoom),
+and each sure frame's pose and focal length refit with that lens at its zoom (lens_from=shot; a frame
+whose refit is doubtful keeps its own lens, lens_from=frame). A video's rows come at each shot's end.
 docs/CAMERA.md says what it can and cannot do."""
 
 
@@ -49,15 +52,16 @@ def _frames(path: str, kind: str, progress):
             bar.update(1)
 
 
-def _line(path: str, index: int, est) -> str:
+def _line(path: str, index: int, est, more: dict) -> str:
     d = est.as_dict()
+    shot = "".join(f"\t{k}={more[k]}" for k in ("shot", "lens_from") if k in more)
     if est.camera is None:
-        return f"{path}\tframe={index}\tdoubtful=1\treason={est.reason}"
+        return f"{path}\tframe={index}{shot}\tdoubtful=1\treason={est.reason}"
     x, y, z = d["position_m"]
     return (f"{path}\tframe={index}\tk1={d['k1']:.6f}\tk2={d['k2']:.6f}\tfocal={d['focal']:.5f}\t"
             f"focal_px={d['focal_px']:.1f}\thfov={d['hfov_deg']:.3f}deg\tposition=({x:.2f},{y:.2f},{z:.2f})m\t"
             f"pan={d['pan_deg']:.3f}\ttilt={d['tilt_deg']:.3f}\troll={d['roll_deg']:.3f}\t"
-            f"uncertainty={est.uncertainty_px:.2f}px\tmarkings={len(est.markings)}\tdoubtful={int(est.doubtful)}\treason={est.reason}")
+            f"uncertainty={est.uncertainty_px:.2f}px\tmarkings={len(est.markings)}{shot}\tdoubtful={int(est.doubtful)}\treason={est.reason}")
 
 
 def _check(args: argparse.Namespace) -> str:
@@ -80,6 +84,29 @@ def _check(args: argparse.Namespace) -> str:
     return kind
 
 
+def _video_estimates(frames, emit):
+    """Calibrate a video's frames shot by shot (cuts: :class:`glradial.video.cuts.ShotDetector`), each
+    shot with its lens as a function of the zoom (:class:`glradial.camera.shot_lens.ShotCalibrator`);
+    ``emit(index, estimate, shot, from_shot)`` per frame at each shot's end. Yields each frame (RGB)."""
+    from ..camera.shot_lens import ShotCalibrator
+    from ..video.cuts import ShotDetector
+
+    detector, calibrator, shot, first = ShotDetector(), ShotCalibrator(), 0, 0
+
+    def flush() -> None:
+        done = calibrator.finish()
+        for i, (est, from_shot) in enumerate(zip(done.estimates, done.from_shot)):
+            emit(first + i, est, shot, from_shot, done.lens_model)
+
+    for index, frame in enumerate(frames):
+        if detector.update(frame) and index > 0:
+            flush()
+            shot, first = shot + 1, index
+        calibrator.add(frame)
+        yield frame
+    flush()
+
+
 def run(args: argparse.Namespace) -> int:
     from ..camera.calibrate import calibrate
     from ..camera.views import overlay, top_view
@@ -87,14 +114,23 @@ def run(args: argparse.Namespace) -> int:
     from ..media.image_io import write_image
 
     kind = _check(args)
-    estimates, previous, last = [], None, None
-    for index, frame in enumerate(_frames(args.input, kind, show_progress(args))):
-        last = to_rgb8(frame)
-        est = calibrate(last, previous=previous)
-        previous = est if not est.doubtful else None
+    estimates, extra, last = [], [], None
+
+    def emit(index: int, est, shot: int | None = None, from_shot: bool = False, model=None) -> None:
         estimates.append(est)
-        print(json.dumps({"path": args.input, "frame": index, **est.as_dict()}) if args.json else _line(args.input, index, est),
-              flush=True)
+        more = {} if shot is None else {"shot": shot, "lens_from": "shot" if from_shot else "frame",
+                                        "shot_lens": None if model is None else model.as_dict()}
+        extra.append(more)
+        print(json.dumps({"path": args.input, "frame": index, **more, **est.as_dict()}) if args.json
+              else _line(args.input, index, est, more), flush=True)
+
+    frames = (to_rgb8(f) for f in _frames(args.input, kind, show_progress(args)))
+    if kind == "image":
+        for index, last in enumerate(frames):
+            emit(index, calibrate(last))
+    else:
+        for last in _video_estimates(frames, emit):
+            pass
     if not estimates:
         raise UsageError(f"{args.input!r} holds no frame")
     final = estimates[-1]
@@ -104,11 +140,11 @@ def run(args: argparse.Namespace) -> int:
                 raise UsageError(f"no camera in the last frame ({final.reason}): nothing to draw for {out!r}")
             write_image(out, draw(last, final.camera))
     if opentrackio_wanted(args):
-        _write_opentrackio(args, estimates, (last.shape[1], last.shape[0]))
+        _write_opentrackio(args, estimates, extra, (last.shape[1], last.shape[0]))
     return 0
 
 
-def _write_opentrackio(args: argparse.Namespace, estimates, size: tuple[int, int]) -> None:
+def _write_opentrackio(args: argparse.Namespace, estimates, extra, size: tuple[int, int]) -> None:
     """One OpenTrackIO sample per frame with the measured focal length (mm, from the sensor width) and
     the camera's transform (pitch metres; OpenTrackIO pan/tilt/roll); a frame with no camera is left
     out, a doubtful one is flagged."""
@@ -134,7 +170,8 @@ def _write_opentrackio(args: argparse.Namespace, estimates, size: tuple[int, int
         sample["transforms"] = [{"translation": {"x": x, "y": y, "z": z},
                                  "rotation": {"pan": -pan, "tilt": -tilt, "roll": roll}, "id": "camera"}]
         sample["custom"]["glradial"].update({"frame": i, "calibration_uncertainty_px_1280": e.uncertainty_px,
-                                             "calibration_reason": e.reason})
+                                             "calibration_reason": e.reason,
+                                             **{k: extra[i][k] for k in ("shot", "lens_from") if k in extra[i]}})
         validate_sample(sample)
         samples.append(sample)
     if args.opentrackio:
