@@ -37,7 +37,8 @@ estimate is doubtful when correcting with it cannot be shown to help.
     own calibrated bound (``q_soft``), whichever answer (the fit's or the CNN's) states less.
     The bound reaches the uncorrected frame: ``evidence_disagrees`` (the line fit and the CNN are
     more than ``disagree_max_px`` apart, and the answer not taken is at least that far from the
-    identity lens: were it the truth, correcting would not help), ``weak_geometry`` (the identity lens
+    identity lens: were it the truth, correcting would not help; unless the answer's own bound is
+    under half its shift, so that correcting helps whatever truth the bound admits), ``weak_geometry`` (the identity lens
     lies within the stated bound of the answer: ``uncertainty_px`` at least the answer's own maximum
     displacement, :func:`shift_px`); else ``ok``. A frame with 200 px of barrel read 12 px off is
     corrected; a near-pinhole frame whose lens is within its bound is left alone (leaving it costs
