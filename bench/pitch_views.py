@@ -25,7 +25,8 @@ Validation sets (validation only: nothing is trained or tuned on them for the fi
   validation-split procedural stadiums the trust records do not use (high cameras as above) through
   strong lenses whose principal point is 4-8 % of the width off centre (the shared wide camera's is
   about 6.5 %), which the centred two-coefficient model cannot represent; scored against the
-  centred lens that best straightens the frame (:func:`centred_fit`).
+  centred lens a checkerboard calibration with the principal point fixed at the centre reports
+  (:func:`centred_fit`, as the wide camera's lens was measured).
 * negatives: ``test_patterns`` (ffmpeg testsrc2, smptehdbars, mandelbrot; true lens none),
   ``road`` (the road photo and the chessboard photo of the calibrated road camera,
   docs/eval/road_camera.json), ``blank_noise`` (a flat frame and three noise frames; lens none).
@@ -146,30 +147,35 @@ def _procedural(n_per: int = 8) -> list[tuple[str, np.ndarray, tuple]]:
     return out
 
 
-def centred_fit(lens, size: tuple[int, int] = SIZE, grid: tuple[int, int] = (32, 18)) -> tuple[float, float]:
-    """The centred ``(k1, k2)`` that best straightens what an off-centre ``lens`` (a
-    :class:`glradial.Lens` with ``cx, cy``) shows: least squares, in distorted pixels over a grid
-    across the frame, of the centred lens applied to the true undistorted points under a free
-    homography (a straight line stays straight under any homography, so a line fit cannot tell them
-    apart; a checkerboard calibration's free focal length and pose absorb them too)."""
-    from scipy.optimize import least_squares
-
-    from glradial.lens.lens import Lens
+def centred_fit(lens, size: tuple[int, int] = SIZE, views: int = 12) -> tuple[float, float]:
+    """The centred ``(k1, k2)`` a checkerboard calibration reports for an off-centre ``lens`` (a
+    :class:`glradial.Lens` with ``cx, cy``), as the shared wide camera's was measured: OpenCV
+    ``calibrateCamera`` with the principal point fixed at the centre, square pixels, no tangential
+    terms, k3 = 0, on ``views`` planar 13 x 7 grids seen by a pinhole (hfov 70 deg) in poses that
+    together cover the frame, their points moved by ``lens``; converted to width-normalised units
+    (``k1 = k1_cv (W / f)^2``, ``k2 = k2_cv (W / f)^4``). A centred lens gives itself back."""
+    import cv2
 
     width, height = size
-    gx, gy = np.meshgrid(np.linspace(0, width - 1, grid[0]), np.linspace(0, height - 1, grid[1]))
-    seen = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    flat = lens.undistort_points(seen, size)
-    keep = np.all(np.isfinite(flat), axis=1)
-    seen, centre = seen[keep], np.array([(width - 1) / 2, (height - 1) / 2])
-    flat = np.c_[(flat[keep] - centre) / width, np.ones(int(keep.sum()))]
-
-    def residual(x: np.ndarray) -> np.ndarray:
-        moved = flat @ np.array([[1 + x[2], x[3], x[4]], [x[5], 1 + x[6], x[7]], [x[8], x[9], 1.0]]).T
-        points = moved[:, :2] / moved[:, 2:] * width + centre
-        return (Lens(x[0], x[1]).distort_points(points, size) - seen).ravel() / width
-
-    return tuple(float(v) for v in least_squares(residual, np.r_[lens.k1, lens.k2, np.zeros(8)]).x[:2])
+    focal = width / (2.0 * math.tan(math.radians(35.0)))
+    camera = np.array([[focal, 0.0, (width - 1) / 2], [0.0, focal, (height - 1) / 2], [0.0, 0.0, 1.0]])
+    gx, gy = np.meshgrid(np.linspace(-0.6, 0.6, 13), np.linspace(-0.3, 0.3, 7))
+    board = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1).astype(np.float32)
+    rng = np.random.default_rng(3)
+    objects, images = [], []
+    for _ in range(views):
+        rvec = rng.uniform(-0.35, 0.35, 3) * np.array([1.0, 1.0, 0.3])
+        tvec = np.array([rng.uniform(-0.35, 0.35), rng.uniform(-0.2, 0.2), rng.uniform(0.9, 1.3)])
+        flat = cv2.projectPoints(board, rvec, tvec, camera, None)[0].reshape(-1, 2)
+        seen = lens.distort_points(flat, size)
+        inside = np.all((seen >= 0) & (seen <= [width - 1, height - 1]), axis=1)
+        if inside.sum() >= 20:
+            objects.append(board[inside])
+            images.append(seen[inside].astype(np.float32).reshape(-1, 1, 2))
+    flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_ASPECT_RATIO
+             | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
+    _, k, dist, _, _ = cv2.calibrateCamera(objects, images, size, camera.copy(), np.zeros(5), flags=flags)
+    return float(dist.ravel()[0] * (width / k[0, 0]) ** 2), float(dist.ravel()[1] * (width / k[0, 0]) ** 4)
 
 
 def _offcentre(n_per: int = 8) -> list[tuple[str, np.ndarray, tuple]]:
