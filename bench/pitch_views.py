@@ -21,6 +21,12 @@ Validation sets (validation only: nothing is trained or tuned on them for the fi
   own reading (k1 -0.023 / +0.029 / +0.024 on the manifold, docs/eval/shots.md).
 * ``procedural_high``: 8 views each of five held-out procedural stadiums seen from high tribune or
   main-stand cameras (15-49 m up), three of them at night (floodlights), hfov 55-90 deg, tilted down.
+* ``offcentre`` (a diagnostic, not counted among the pitch views): 8 views each of six
+  validation-split procedural stadiums the trust records do not use (high cameras as above) through
+  strong lenses whose principal point is 4-8 % of the width off centre (the shared wide camera's is
+  about 6.5 %), which the centred two-coefficient model cannot represent; scored against the
+  centred lens a checkerboard calibration with the principal point fixed at the centre reports
+  (:func:`centred_fit`, as the wide camera's lens was measured).
 * negatives: ``test_patterns`` (ffmpeg testsrc2, smptehdbars, mandelbrot; true lens none),
   ``road`` (the road photo and the chessboard photo of the calibrated road camera,
   docs/eval/road_camera.json), ``blank_noise`` (a flat frame and three noise frames; lens none).
@@ -64,8 +70,10 @@ OWN_K1 = {"football360_cam_0000000": -0.023, "football360_cam_0012000": 0.029, "
 HIGH_STADIUMS = ((179, None), (219, None), (319, None), (39, None), (389, None))
 SIZE = (1280, 720)
 NEGATIVE_SOURCES = ("test_patterns", "road", "blank_noise")
-#: grass without a pitch (no painted lines): reported, not counted among the pitch views
-NOT_PITCH_SOURCES = ("field_views",) + NEGATIVE_SOURCES
+#: grass without a pitch (no painted lines), and lenses off the model: reported, not counted among the pitch views
+NOT_PITCH_SOURCES = ("field_views", "offcentre") + NEGATIVE_SOURCES
+#: the off-centre diagnostic: validation-split stadiums from this seed, views each, offset range (width units)
+OFFCENTRE_SEED, OFFCENTRE_STADIUMS, OFFCENTRE_OFFSET = 48, 6, (0.04, 0.08)
 
 
 def _lens_draws(n: int, seed: int, k1_range=(-0.70, -0.15)) -> list[tuple[float, float]]:
@@ -139,27 +147,97 @@ def _procedural(n_per: int = 8) -> list[tuple[str, np.ndarray, tuple]]:
     return out
 
 
-def build(data: Path) -> dict[str, list[tuple[str, np.ndarray, tuple | None]]]:
-    """Every source's ``(name, uint8 RGB frame, true lens or None)``."""
+def centred_fit(lens, size: tuple[int, int] = SIZE, views: int = 12) -> tuple[float, float]:
+    """The centred ``(k1, k2)`` a checkerboard calibration reports for an off-centre ``lens`` (a
+    :class:`glradial.Lens` with ``cx, cy``), as the shared wide camera's was measured: OpenCV
+    ``calibrateCamera`` with the principal point fixed at the centre, square pixels, no tangential
+    terms, k3 = 0, on ``views`` planar 13 x 7 grids seen by a pinhole (hfov 70 deg) in poses that
+    together cover the frame, their points moved by ``lens``; converted to width-normalised units
+    (``k1 = k1_cv (W / f)^2``, ``k2 = k2_cv (W / f)^4``). A centred lens gives itself back."""
+    import cv2
+
+    width, height = size
+    focal = width / (2.0 * math.tan(math.radians(35.0)))
+    camera = np.array([[focal, 0.0, (width - 1) / 2], [0.0, focal, (height - 1) / 2], [0.0, 0.0, 1.0]])
+    gx, gy = np.meshgrid(np.linspace(-0.6, 0.6, 13), np.linspace(-0.3, 0.3, 7))
+    board = np.stack([gx.ravel(), gy.ravel(), np.zeros(gx.size)], axis=1).astype(np.float32)
+    rng = np.random.default_rng(3)
+    objects, images = [], []
+    for _ in range(views):
+        rvec = rng.uniform(-0.35, 0.35, 3) * np.array([1.0, 1.0, 0.3])
+        tvec = np.array([rng.uniform(-0.35, 0.35), rng.uniform(-0.2, 0.2), rng.uniform(0.9, 1.3)])
+        flat = cv2.projectPoints(board, rvec, tvec, camera, None)[0].reshape(-1, 2)
+        seen = lens.distort_points(flat, size)
+        inside = np.all((seen >= 0) & (seen <= [width - 1, height - 1]), axis=1)
+        if inside.sum() >= 20:
+            objects.append(board[inside])
+            images.append(seen[inside].astype(np.float32).reshape(-1, 1, 2))
+    flags = (cv2.CALIB_USE_INTRINSIC_GUESS | cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_FIX_ASPECT_RATIO
+             | cv2.CALIB_ZERO_TANGENT_DIST | cv2.CALIB_FIX_K3)
+    _, k, dist, _, _ = cv2.calibrateCamera(objects, images, size, camera.copy(), np.zeros(5), flags=flags)
+    return float(dist.ravel()[0] * (width / k[0, 0]) ** 2), float(dist.ravel()[1] * (width / k[0, 0]) ** 4)
+
+
+def _offcentre(n_per: int = 8) -> list[tuple[str, np.ndarray, tuple]]:
+    from glradial import distort
+    from glradial.lens.lens import Lens
+    from glradial.synthesis.crops import CropParams, CropRenderer
+    from glradial.synthesis.stadium import stadium_panorama
+    from glradial.synthesis.stadium_style import split_seeds
+
+    out = []
+    for j, seed in enumerate(split_seeds("val", OFFCENTRE_STADIUMS, start=OFFCENTRE_SEED)):
+        rng = np.random.default_rng(900 + j)
+        lenses = []
+        for k1, k2 in _lens_draws(n_per, 950 + j, (-0.8, -0.1)):
+            radius, angle = rng.uniform(*OFFCENTRE_OFFSET), rng.uniform(0.0, 2.0 * math.pi)
+            lenses.append(Lens(k1, k2, float(radius * math.cos(angle)), float(radius * math.sin(angle))))
+        params = [CropParams(float(rng.uniform(-40.0, 40.0)), float(rng.uniform(-30.0, -8.0)), float(rng.uniform(-1.5, 1.5)),
+                             float(rng.uniform(55.0, 90.0)), 0.0, 0.0) for _ in lenses]
+        with CropRenderer(stadium_panorama(seed, size=(4096, 2048)), size=SIZE, supersample=2) as renderer:
+            frames = renderer.render(params)[..., :3]
+        for i, (lens, frame) in enumerate(zip(lenses, frames)):
+            out.append((f"stadium{seed}/{i}", distort(np.ascontiguousarray(frame), lens, fit="crop"), centred_fit(lens)))
+    return out
+
+
+def builders(data: Path) -> dict:
+    """Every source's builder: a callable giving its ``(name, uint8 RGB frame, true lens or None)``."""
     from glradial.evaluation.real_eval import load_calibrated, read_rgb
 
-    stadium = read_rgb(data / "real_football" / "stadium_01_1k_tonemapped.jpg")
-    field = read_rgb(data / "panorama_field_2048x1024.jpg")
-    _, road_frames, road_lens = load_calibrated(ROOT / "docs" / "eval" / "road_camera.json")
-    rng = np.random.default_rng(7)
+    def negatives(kind: str):
+        if kind == "test_patterns":
+            return [(s, _ffmpeg(s), (0.0, 0.0)) for s in ("testsrc2", "smptehdbars", "mandelbrot")]
+        if kind == "road":
+            _, road_frames, road_lens = load_calibrated(ROOT / "docs" / "eval" / "road_camera.json")
+            return [(f"road{i}", f, (road_lens.k1, road_lens.k2)) for i, f in enumerate(road_frames)]
+        rng = np.random.default_rng(7)
+        return [("blank", np.full((SIZE[1], SIZE[0], 3), 90, np.uint8), (0.0, 0.0))] + [
+            (f"noise{i}", rng.integers(0, 256, (SIZE[1], SIZE[0], 3), dtype=np.uint8), (0.0, 0.0)) for i in range(3)]
+
+    def panorama_views(name: str, n: int, seed: int, tilt: tuple[float, float]):
+        pano = read_rgb(data / name)
+        return [(f"view{i}", f, k) for i, (f, k) in enumerate(_views(pano, n, seed, hfov=(60.0, 90.0), tilt=tilt))]
+
     return {
-        "wide_camera": _wide_camera(data),
-        "real_stadium_views": [(f"view{i}", f, k) for i, (f, k) in
-                               enumerate(_views(stadium, 24, 100, hfov=(60.0, 90.0), tilt=(-10.0, 8.0)))],
-        "field_views": [(f"view{i}", f, k) for i, (f, k) in
-                        enumerate(_views(field, 12, 200, hfov=(60.0, 90.0), tilt=(-12.0, 5.0)))],
-        "real_frames": _real_frames(data),
-        "procedural_high": _procedural(),
-        "test_patterns": [(s, _ffmpeg(s), (0.0, 0.0)) for s in ("testsrc2", "smptehdbars", "mandelbrot")],
-        "road": [(f"road{i}", f, (road_lens.k1, road_lens.k2)) for i, f in enumerate(road_frames)],
-        "blank_noise": [("blank", np.full((SIZE[1], SIZE[0], 3), 90, np.uint8), (0.0, 0.0))]
-        + [(f"noise{i}", rng.integers(0, 256, (SIZE[1], SIZE[0], 3), dtype=np.uint8), (0.0, 0.0)) for i in range(3)],
+        "wide_camera": lambda: _wide_camera(data),
+        "real_stadium_views": lambda: panorama_views("real_football/stadium_01_1k_tonemapped.jpg", 24, 100, (-10.0, 8.0)),
+        "field_views": lambda: panorama_views("panorama_field_2048x1024.jpg", 12, 200, (-12.0, 5.0)),
+        "real_frames": lambda: _real_frames(data),
+        "procedural_high": _procedural,
+        "offcentre": _offcentre,
+        **{kind: (lambda kind=kind: negatives(kind)) for kind in NEGATIVE_SOURCES},
     }
+
+
+def build(data: Path, frames: dict | None = None) -> dict[str, list[tuple[str, np.ndarray, tuple | None]]]:
+    """Every source's ``(name, uint8 RGB frame, true lens or None)``; sources already in ``frames``
+    (a cache) are kept as they are."""
+    frames = dict(frames or {})
+    for source, make in builders(data).items():
+        if source not in frames:
+            frames[source] = make()
+    return frames
 
 
 def _cached(path: Path | None, make):
@@ -244,9 +322,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--sources", default="")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
-    frames = _cached(args.frames, lambda: build(args.data))
+    cached = _cached(args.frames, lambda: build(args.data))
+    frames = build(args.data, cached)
+    if args.frames is not None and len(frames) > len(cached):  # a source added since the cache was made
+        with open(args.frames, "wb") as f:
+            pickle.dump(frames, f)
     sources = [s for s in args.sources.split(",") if s] or list(frames)
     evidence = _cached(args.evidence, lambda: collect(frames, sources))
+    missing = [s for s in sources if s not in evidence]
+    if missing:
+        evidence.update(collect(frames, missing))
+        if args.evidence is not None:
+            with open(args.evidence, "wb") as f:
+                pickle.dump(evidence, f)
     evidence = {s: evidence[s] for s in sources if s in evidence}
     trust = load_trust(args.trust) if args.trust else shipped_trust()
     rows = score(evidence, trust)

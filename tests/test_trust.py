@@ -22,7 +22,7 @@ import pytest
 import glradial
 from glradial.estimation.estimator import Estimator, default_model_path, view_box, view_to_frame
 from glradial.estimation.lens_estimate import LensEstimate, judge
-from glradial.estimation.trust import REASONS, TRUST_FILE, FrameEvidence, TrustModel, anything_bound, load_trust, shipped_trust, view_features
+from glradial.estimation.trust import REASONS, TRUST_FILE, FrameEvidence, TrustModel, anything_bound, load_trust, shift_px, shipped_trust, view_features
 from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
 from glradial.evaluation.real_eval import applied_lenses, self_consistent_map, self_consistent_truth
 from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px, radial_map
@@ -264,7 +264,10 @@ def test_reasons_follow_the_rules():
         (FrameEvidence(near, **{**pitch, "edge_density": 0.3}), "noise_frame"),
         (FrameEvidence(near, **{**pitch, "grass": 0.02}), "not_a_pitch"),  # a tuft of green
         (FrameEvidence(near, **pitch), "too_few_lines"),  # the CNN alone: its 80 px bound reaches its 69 px of lens
-        (FrameEvidence(near, (0.1, 0.0), 3.0, 6, 6, **pitch), "evidence_disagrees"),
+        # 36 px of pincushion read within 20 px, the CNN a 69 px barrel: the bound alone would let it
+        # be corrected, but not all it admits is helped (2 x 20 > 36), and were the CNN right it would not be
+        (FrameEvidence(near, (0.1, 0.0), 20.0, 6, 6, **pitch), "evidence_disagrees"),
+        (FrameEvidence(near, (0.1, 0.0), 3.0, 6, 6, **pitch), "ok"),  # within 3.6 px: helped whatever the truth in it
         (FrameEvidence(near, near, 26.0, 2, 3, **pitch), "ok"),  # bound 26.1 < 69 px of lens: correcting helps
         (FrameEvidence(near, near, 3.0, 6, 6, **pitch), "ok"),
     ]
@@ -314,8 +317,29 @@ def test_doubt_by_benefit_known_answers():
     # helps even if the CNN (145 px of lens) were right; a CNN near pinhole makes it doubtful
     both = FrameEvidence(_lens(-0.45), _lens(-0.7), 12.0, 8, 8, **pitch)
     assert both.disagreement_px > 42.0 and judge(both, "auto", trust).reason == "ok"
-    pinhole = replace(both, net=_lens(-0.05))
+    pinhole = replace(both, net=_lens(-0.05), lines=_lens(-0.45), sigma_px=80.0)
+    shift = shift_px(_lens(-0.45))  # 145 px: the 80 px bound excludes no lens, yet a lens within it may be nearer none
+    assert pinhole.disagreement_px > 42.0 and 80.0 < shift <= 160.0
     assert judge(pinhole, "auto", trust).reason == "evidence_disagrees"
+    # a bound under half the answer's shift shows that correcting helps whatever truth it admits:
+    # the disagreement no longer makes it doubtful (the CNN's near-pinhole reading lies outside it)
+    sure = replace(pinhole, sigma_px=60.0)
+    assert judge(sure, "auto", trust).reason == "ok" and sure.disagreement_px > 60.0
+    assert judge(replace(pinhole, lines=_lens(-0.7), sigma_px=12.0), "auto", trust).reason == "ok"
+
+
+def test_a_bound_under_half_the_shift_admits_only_lenses_that_correcting_helps():
+    """The oracle of the rule above: lenses drawn anywhere within the bound of an answer whose bound is
+    under half its own shift are all nearer the answer than the identity lens (max displacement at
+    1920 is a norm of ``(k1, k2)``, checked here on the lenses themselves, not assumed)."""
+    rng = np.random.default_rng(5)
+    for k1, bound in [(-0.6, 80.0), (-0.3, 45.0), (0.2, 30.0), (-0.15, 25.0)]:
+        answer = np.array(_lens(k1))
+        assert 2.0 * bound < shift_px(tuple(answer))
+        draws = answer + rng.uniform(-0.6, 0.6, (20000, 2)) * np.array([1.0, 1.5])
+        near = draws[max_displacement_px(draws, answer) <= bound]
+        assert len(near) > 100
+        assert np.all(max_displacement_px(near, answer) < max_displacement_px(near, np.zeros(2)))
 
 
 def test_a_pitch_is_its_grass_region_not_its_share_of_the_frame():

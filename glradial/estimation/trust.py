@@ -37,7 +37,8 @@ estimate is doubtful when correcting with it cannot be shown to help.
     own calibrated bound (``q_soft``), whichever answer (the fit's or the CNN's) states less.
     The bound reaches the uncorrected frame: ``evidence_disagrees`` (the line fit and the CNN are
     more than ``disagree_max_px`` apart, and the answer not taken is at least that far from the
-    identity lens: were it the truth, correcting would not help), ``weak_geometry`` (the identity lens
+    identity lens: were it the truth, correcting would not help; unless the answer's own bound is
+    under half its shift, so that correcting helps whatever truth the bound admits), ``weak_geometry`` (the identity lens
     lies within the stated bound of the answer: ``uncertainty_px`` at least the answer's own maximum
     displacement, :func:`shift_px`); else ``ok``. A frame with 200 px of barrel read 12 px off is
     corrected; a near-pinhole frame whose lens is within its bound is left alone (leaving it costs
@@ -246,9 +247,12 @@ def benefit_doubt(lens: tuple[float, float], bound: float, evidence: FrameEviden
     shown to help); ``"evidence_disagrees"`` when, with ``other_answer`` (a line fit was run), the
     line fit and the CNN are more than ``disagree_max_px`` apart and correcting with ``lens`` would
     not help if the other answer were the truth (their disagreement is at least the other answer's
-    own shift); else ``"ok"``."""
+    own shift), unless the bound itself shows that correcting helps whatever truth it admits (twice
+    the bound below the answer's shift: the displacement metric is a norm, so every lens within the
+    bound is nearer the answer than the identity); else ``"ok"``."""
     shift = shift_px(lens)
-    if other_answer and evidence.lines is not None and evidence.disagreement_px > disagree_max_px:
+    sure = 2.0 * bound < shift  # every lens within the bound is nearer the answer than no lens
+    if other_answer and evidence.lines is not None and evidence.disagreement_px > disagree_max_px and not sure:
         other = evidence.net if tuple(lens) == tuple(evidence.lines) else evidence.lines
         if evidence.disagreement_px >= shift_px(other):
             return "evidence_disagrees"
