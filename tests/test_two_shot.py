@@ -1,0 +1,144 @@
+"""Issue 35's two-shot clips: a picture with a lens of its own used as a pinhole source
+(``ShotSpec.source_lens``/``source_centre``), and the frames right after a cut into a zoom.
+
+Oracles: OpenCV's own distortion model (``cv2.projectPoints`` with the camera matrix ``fx = fy =
+width``, so its coefficients are glradial's width-normalised ones) draws the straight lines of a
+distorted picture independently of glradial; a clip's frames carry a known lens by construction
+(:mod:`glradial.video.clips`, checked against ``glradial.correct`` in tests/test_shots.py); ffprobe
+says which frames are B-frames.
+"""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+
+import cv2
+import numpy as np
+import pytest
+
+from glradial.lens.lens import Lens
+from glradial.lens.metrics import manifold_k2, max_displacement_px
+from glradial.video.clips import ShotSpec, render_clip, render_shot
+
+SIZE = (480, 270)
+#: the picture's own lens and its centre (widths from the picture's centre), as strong and as far
+#: off centre as the real wide camera's (scripts/make_clips.py: -0.51 / +0.23 about (0.019, -0.093))
+OWN = (-0.5, 0.25)
+CENTRE = (0.03, -0.06)
+
+
+def _distorted_grid(size: tuple[int, int], lens: tuple[float, float], centre: tuple[float, float]) -> np.ndarray:
+    """A picture of straight lines (9 upright ones in red, 7 level ones in green, in the pinhole view)
+    seen through ``lens`` about ``centre``, drawn by OpenCV's forward model: each line's points
+    projected with ``cv2.projectPoints`` (fx = fy = width, principal point the centre) and joined by
+    short segments."""
+    width, height = size
+    camera = np.array([[width, 0, width / 2 - 0.5 + centre[0] * width],
+                       [0, width, height / 2 - 0.5 + centre[1] * width], [0, 0, 1]], np.float64)
+    coefficients = np.array([lens[0], lens[1], 0.0, 0.0], np.float64)
+    picture = np.zeros((height, width, 3), np.uint8)
+    t = np.linspace(-1.0, 1.0, 400)
+    families = [(0, [np.stack([np.full_like(t, x), t * 0.6], 1) for x in np.linspace(-0.72, 0.72, 9)]),
+                (1, [np.stack([t * 0.8, np.full_like(t, y)], 1) for y in np.linspace(-0.42, 0.42, 7)])]
+    for channel, lines in families:  # pinhole points (x/z, y/z) in width units about the principal point
+        layer = np.zeros((height, width), np.uint8)
+        for line in lines:
+            points = np.concatenate([line, np.ones((len(line), 1))], 1)
+            pixels, _ = cv2.projectPoints(points, np.zeros(3), np.zeros(3), camera, coefficients)
+            cv2.polylines(layer, [np.round(pixels.reshape(-1, 2) * 16).astype(np.int32)], False, 255, 4, cv2.LINE_AA, shift=4)
+        picture[..., channel] = layer
+    return picture
+
+
+def _straightness_px(frame: np.ndarray) -> float:
+    """The largest RMS distance (px) of a line's centre points from their straight-line fit, over
+    the long lines of ``frame`` (red: upright lines, centre per row; green: level ones, per column)."""
+    worst = 0.0
+    for channel in (0, 1):
+        plane = frame[..., channel].astype(np.float64)
+        count, labels = cv2.connectedComponents((plane > 64).astype(np.uint8))
+        for label in range(1, count):
+            weight = np.where(labels == label, plane, 0.0)
+            if channel == 1:
+                weight = weight.T
+            rows = np.flatnonzero(weight.sum(axis=1) > 0)
+            if len(rows) < 60:
+                continue
+            cols = (weight[rows] * np.arange(weight.shape[1])).sum(axis=1) / weight[rows].sum(axis=1)
+            points = np.stack([cols, rows], 1)[5:-5]  # line ends: cut by the frame's edge
+            centred = points - points.mean(axis=0)
+            normal = np.linalg.svd(centred, full_matrices=False)[2][1]
+            worst = max(worst, float(np.sqrt(np.mean((centred @ normal) ** 2))))
+    return worst
+
+
+def test_a_picture_with_its_own_lens_renders_as_a_pinhole_one():
+    """A picture of a grid of straight lines seen through a strong off-centre lens (OpenCV's model):
+    rendered with that lens as its ``source_lens``/``source_centre`` and no clip lens, every line
+    of the frame is straight again (to a small fraction of a px); rendered as if it
+    were pinhole, the same lines bend by several px. With a clip lens on top, the frame corrected by
+    the clip's truth is straight too: the truth is the clip's lens, the picture's own removed."""
+    import glradial
+
+    picture = _distorted_grid((960, 540), OWN, CENTRE)
+    own = ShotSpec(picture, 1, (0.0, 0.0, 1.0), (0.0, 0.0, 1.0), (0.0, 0.0), source_lens=OWN, source_centre=CENTRE)
+    naive = ShotSpec(picture, 1, (0.0, 0.0, 1.0), (0.0, 0.0, 1.0), (0.0, 0.0))
+    straight = _straightness_px(next(render_shot(own, SIZE))[0])
+    bent = _straightness_px(next(render_shot(naive, SIZE))[0])
+    assert straight < 0.25 and bent > 4.0, (straight, bent)  # centre ignored: 1.1 px; k1 0.05 off: 0.3 px
+    through = ShotSpec(picture, 1, (3.0, -2.0, 1.1), (3.0, -2.0, 1.1), (-0.3, -0.3), source_lens=OWN, source_centre=CENTRE)
+    frame, lens, _ = next(render_shot(through, SIZE))
+    assert _straightness_px(frame) > 4 * straight
+    assert _straightness_px(glradial.correct(frame, *lens, backend="cpu")) < 0.5
+
+
+def _encode(path, frames: np.ndarray) -> None:
+    """H.264 with B-frames and no key frame forced at a cut (a fixed-GOP broadcast encode)."""
+    height, width = frames.shape[1:3]
+    subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{width}x{height}",
+                    "-r", "25", "-i", "-", "-c:v", "libx264", "-crf", "14", "-x264-params",
+                    "keyint=60:bframes=3:scenecut=0", "-pix_fmt", "yuv420p", str(path)], input=frames.tobytes(), check=True)
+
+
+def _decoded(path) -> list[int]:
+    """The frames the sparse decode of pass 1 decodes."""
+    from glradial.media.video_io import VideoReader, frame_timestamps
+
+    order = frame_timestamps(path)
+    with VideoReader(path, order="rgb", max_width=64) as reader:
+        reader.skip_nonreference()
+        return [int(np.searchsorted(order, item.pts)) for item in reader.items()]
+
+
+@pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="needs ffmpeg (make setup installs it)")
+def test_the_frames_right_after_a_cut_carry_the_new_zoom_lens(gl_ctx, tmp_path):
+    """A static shot (k1 -0.35) cut to a fast zoom-in (1.0 -> 1.8x over 14 frames, k1 -0.45 ->
+    -0.12, about 10 px of lens change per frame at 1920) whose first frame the sparse decode skips:
+    the cut is placed on it, and the frames from the cut to the shot's first decoded frame carry the
+    zoom's lens at their own zoom (within 6 px of the truth, the zoom test's tolerance in
+    tests/test_shots.py), not the first decoded frame's (which would be off by more than that)."""
+    import glradial
+    from glradial.video.video_pipeline import track_video
+
+    stadium = glradial.stadium_panorama(3, (2048, 1024))
+    guess = Lens(-0.2, float(manifold_k2(-0.2)))
+    for first in range(9, 14):  # the first shot's length: the cut must fall on a frame the decode skips
+        shots = [ShotSpec(stadium, first, (0.0, -8.0, 1.0), (0.0, -8.0, 1.0), (-0.35, -0.35), hfov_deg=45, panorama=True),
+                 ShotSpec(stadium, 14, (25.0, -10.0, 1.0), (25.0, -10.0, 1.8), (-0.45, -0.12), hfov_deg=50, panorama=True)]
+        frames, truth = render_clip(shots, SIZE)
+        path = tmp_path / f"cut{first}.mp4"
+        _encode(path, frames)
+        decoded = _decoded(path)
+        if first not in decoded:
+            break
+    else:
+        pytest.fail(f"the cut fell on a decoded frame at every length tried ({decoded})")
+    sample = min(i for i in decoded if i > first)
+    track = track_video(path, lambda _frame: guess, every=2, progress=False)
+    assert list(np.flatnonzero(np.diff(track.shot)) + 1) == [first]
+    error = max_displacement_px(track.lens, truth.lens)
+    near = slice(first, sample)
+    held = max_displacement_px(truth.lens[sample], truth.lens[near])  # the first decoded frame's lens, held
+    assert held.max() > 6.0 and error[near].max() < 6.0, (error[first:sample + 3], held)
+    assert error[first:first + 3].max() < 6.0, error[first:first + 3]
