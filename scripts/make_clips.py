@@ -141,13 +141,14 @@ def static_clips(data: Path, n: int, seed: int = 2, seeds: tuple[int, ...] = (23
 
 
 #: the real wide camera (``../shared/data/real_wide_camera``): its lens, width-normalised, and the
-#: lens's centre (widths from the frame's centre), measured by the plumb-line method on five lines of
-#: frame 0 (``scripts/plumb_lines.py``: straight to 0.54 px RMS at 1536 wide; the README's centred
-#: checkerboard lens -0.6615/+0.4098 leaves 2.0 px RMS, 2.6 px on the near touchline), and the
-#: frames used (0 s and 8 s: the players move, the camera does not)
+#: lens's centre (widths from the frame's centre, y down), measured by the plumb-line method on seven
+#: lines of frame 0 (``scripts/plumb_lines.py``: straight to 0.57 px RMS at 1536 wide, 11.7 px with no
+#: lens; the README's centred checkerboard lens -0.6615/+0.4098 leaves 1.9 px, 2.6 px on the near
+#: touchline; known to a few px on these clips, docs/eval/shots.md), and the frames used (0 s and
+#: 8 s: the players move, the camera does not)
 WIDE_VIDEO = "wide_pitch_camera.mp4"
-WIDE_LENS = (-0.5056, 0.2314)
-WIDE_CENTRE = (0.0190, -0.0925)
+WIDE_LENS = (-0.5241, 0.2481)
+WIDE_CENTRE = (0.0159, -0.0816)
 WIDE_FRAMES = (0, 200)
 #: the wide frames are used at a third of their 3072 px width (area filter: the lens is width-normalised)
 WIDE_WIDTH = 1024
@@ -181,7 +182,8 @@ def two_shot_clips(data: Path, wide: Path, n: int) -> dict[str, list[ShotSpec]]:
       rendering (``source_lens``; its field of view, 60 deg assumed, only sets how far a tilt turns:
       a homography of a pinhole picture is one, so the truth stays the clip's lens).
 
-    ``two_shot_pw``: the panorama's main stand, cut to a zoom over the wide camera; ``_wp``: the wide
+    ``two_shot_pp``: the panorama's other stand, cut to a zoom over its main stand (the one clip whose
+    truth is exact); ``two_shot_pw``: the panorama's main stand, cut to a zoom over the wide camera; ``_wp``: the wide
     camera, cut to a zoom over the panorama's other stand; ``_ww``: the wide camera's near touchline
     at 8 s, cut to a zoom over the pitch at 0 s (one camera, two framings). And, with the
     pictures' own lens unknown (the football360 views were rendered through a lens of their own),
@@ -202,6 +204,7 @@ def two_shot_clips(data: Path, wide: Path, n: int) -> dict[str, list[ShotSpec]]:
     clips = {f"two_shot_{name}": [ShotSpec(views[a], n, k1=static), ShotSpec(views[b], n, (0, 0, 1.0), (0, 0, 1.6), zoom)]
              for name, (a, b) in zip("abc", ((0, 2), (1, 0), (2, 1)))}
     clips.update({
+        "two_shot_pp": [stand(95.0, 1.0, static), stand(-90.0, 1.6, zoom)],
         "two_shot_pw": [stand(-90.0, 1.0, static), camera(0, (8.0, -12.0, 1.0), (8.0, -12.0, 1.6), zoom)],
         "two_shot_wp": [camera(0, (0.0, -10.0, 1.0), None, static), stand(95.0, 1.6, zoom)],
         "two_shot_ww": [camera(1, (-10.0, -14.0, 1.1), None, static), camera(0, (0.0, -10.0, 1.0), (0.0, -10.0, 1.6), zoom)],

@@ -142,3 +142,24 @@ def test_the_frames_right_after_a_cut_carry_the_new_zoom_lens(gl_ctx, tmp_path):
     held = max_displacement_px(truth.lens[sample], truth.lens[near])  # the first decoded frame's lens, held
     assert held.max() > 6.0 and error[near].max() < 6.0, (error[first:sample + 3], held)
     assert error[first:first + 3].max() < 6.0, error[first:first + 3]
+
+
+def test_a_zoom_read_from_its_frames_alone_stays_doubtful():
+    """A shot without geometry (no chains, no pan) is read from its per-frame estimates: one lens.
+    Static, a 30 px bound below its lens's 100+ px shift is applied (correcting helps even at the
+    bound); zooming by 50 % (the lens follows the zoom, which one lens cannot), the same estimates
+    and bound stay doubtful, ``no_geometry``, passed through: their bound covers only the zooms they
+    were read at."""
+    from glradial.estimation.lens_estimate import LensEstimate
+    from glradial.video.shot_fit import ShotEvidence, ShotSample, fit_shot
+
+    k1 = -0.3
+    lens = (k1, float(manifold_k2(k1)))
+    shift = float(max_displacement_px(np.asarray(lens), np.zeros(2)))
+    samples = [ShotSample(10 * i, None, LensEstimate(*lens, uncertainty_px=30.0, method="net") if i % 3 == 0 else None)
+               for i in range(5)]
+    static = fit_shot(ShotEvidence(samples, [], [0.0] * 5))
+    zooming = fit_shot(ShotEvidence(samples, [], list(np.linspace(0.0, np.log(1.5), 5))))
+    assert shift > 3 * 30.0
+    assert static.source == "frames" and static.uncertainty_px == pytest.approx(30.0) and not static.doubtful, static
+    assert zooming.source == "frames" and zooming.doubtful and zooming.reason == "no_geometry", zooming
