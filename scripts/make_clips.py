@@ -2,15 +2,18 @@
 with the lens following the zoom) over real pictures and procedural stadiums, cut together, each
 with its per-frame ground truth beside it (``CLIP.mp4.truth.csv``, :func:`glradial.video.clips.write_clip`).
 
-Real sources (validation only, never training): the three pinhole stadium views and the stadium
-panorama of ``../shared/data/real_football/`` (rendered pinhole views, though the line fit reads them
-at k1 -0.025/+0.028/+0.012, docs/eval/shots.md, and an equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
+Real sources (validation only, never training): the three football360 stadium views and the
+stadium panorama of ``../shared/data/real_football/`` (views rendered through a lens of their own,
+not published, which the line fit reads at k1 -0.025/+0.028/+0.012, docs/eval/shots.md; and an
+equirectangular panorama, whose crops have no lens); with ``--set twoshot`` also the real wide
+camera of ``../shared/data/real_wide_camera/`` (its own lens, measured by ``scripts/plumb_lines.py``,
+removed while rendering); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
 
-Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--frames 50]
-[--set main|check|static|twoshot]`` (``check``: held-out clips, other lenses and paths, other stadiums;
-``static``: static shots only, more calibration shots for the static shots' bound, see
-``bench/eval_shots.py``; ``twoshot``: one clip, a static shot, a cut and a zoom whose lens follows
-it, over real frames); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
+Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--wide
+../shared/data/real_wide_camera] [--frames 50] [--set main|check|static|twoshot]`` (``check``:
+held-out clips, other lenses and paths, other stadiums; ``static``: static shots only, more
+calibration shots for the static shots' bound, see ``bench/eval_shots.py``; ``twoshot``: issue 35's
+clips, a static shot, a cut and a zoom whose lens follows it, over real frames, :func:`two_shot_clips`); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
 of each shot) and the clips.
 """
 
