@@ -93,6 +93,18 @@ def test_a_picture_with_its_own_lens_renders_as_a_pinhole_one():
     assert _straightness_px(glradial.correct(frame, *lens, backend="cpu")) < 0.5
 
 
+def test_a_source_lens_is_checked():
+    """Bad input: a source lens or centre that is not two finite numbers, and a source lens that
+    folds over inside the view (its forward model turns back: pixels beyond the fold would be
+    sampled from the wrong place, silently), are ValueErrors naming the argument and the value."""
+    picture = np.zeros((90, 160, 3), np.uint8)
+    for name, value in (("source_lens", (float("nan"), 0.0)), ("source_centre", (0.1,)), ("source_lens", (-0.5, "0"))):
+        with pytest.raises(ValueError, match=f"{name} must be two finite numbers, got"):
+            next(render_shot(ShotSpec(picture, 1, **{name: value}), (64, 36)))
+    with pytest.raises(ValueError, match=r"source_lens \(-2.0, 0.0\) folds over at radius 0.408"):  # 1 + 3 k1 r^2 = 0
+        next(render_shot(ShotSpec(picture, 1, source_lens=(-2.0, 0.0)), (64, 36)))
+
+
 def _encode(path, frames: np.ndarray) -> None:
     """H.264 with B-frames and no key frame forced at a cut (a fixed-GOP broadcast encode)."""
     height, width = frames.shape[1:3]

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from ..lens.lens import pixels_to_lens
-from ..lens.lensfuncs import distort_point, undistort_point_exact
+from ..lens.lensfuncs import distort_point, fold_radius, undistort_point_exact
 from ..lens.metrics import manifold_k2
 from ..synthesis.crops import camera_rotation, ray_to_lonlat
 
@@ -106,7 +106,12 @@ def _source_pixels(spec: ShotSpec, rays: np.ndarray) -> tuple[np.ndarray, np.nda
     z = np.maximum(rays[..., 2], 1e-9)
     x, y = rays[..., 0] / z * focal, rays[..., 1] / z * focal  # px from the picture's centre, pinhole
     if any(spec.source_lens) or any(spec.source_centre):  # the picture's own lens about its principal point
-        p_d = (distort_point(np.stack([x, y], axis=-1) / w, *spec.source_lens) + np.asarray(spec.source_centre)) * w
+        pinhole = np.stack([x, y], axis=-1) / w
+        fold = fold_radius(*spec.source_lens)
+        if np.max(np.hypot(pinhole[..., 0], pinhole[..., 1])) >= fold:
+            raise ValueError(f"source_lens {spec.source_lens!r} folds over at radius {fold:.3f} (widths) inside the "
+                             "view: the picture cannot show it; zoom in or tilt towards its centre")
+        p_d = (distort_point(pinhole, *spec.source_lens) + np.asarray(spec.source_centre)) * w
         x, y = p_d[..., 0], p_d[..., 1]
     return x + w / 2 - 0.5, y + h / 2 - 0.5
 
@@ -136,6 +141,10 @@ def render_shot(spec: ShotSpec, size: tuple[int, int]):
     """Yield ``(frame, (k1, k2), zoom)`` for every frame of the shot (uint8 RGB ``size`` = (W, H))."""
     if spec.frames < 1:
         raise ValueError(f"a shot needs at least one frame, got frames={spec.frames}")
+    for name in ("source_lens", "source_centre"):
+        value = getattr(spec, name)
+        if len(value) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in value):
+            raise ValueError(f"{name} must be two finite numbers, got {value!r}")
     margin = _margin(spec, size)
     for i in range(spec.frames):
         pan, tilt, zoom = spec.camera(i)
