@@ -1,7 +1,8 @@
 """Measure a real picture's own radial lens by the plumb-line method, independently of glradial's
 estimator: hand-picked stretches of lines that are straight in the world (pitch markings), refined
-to sub-pixel ridge points in the picture, and the centred lens ``(k1, k2)`` (width-normalised,
-DESIGN.md) that makes them straight, by least squares. Nothing of :mod:`glradial.estimation` is used
+to sub-pixel ridge points in the picture, and the lens ``(k1, k2)`` (width-normalised, DESIGN.md;
+about the picture's centre, or about a centre fitted too) that makes them straight, by least
+squares. Nothing of :mod:`glradial.estimation` is used
 (no chain detection, no priors, no CNN): only the lens model itself
 (:func:`glradial.lens.lensfuncs.undistort_point_exact`).
 
@@ -12,7 +13,8 @@ centres at integers, drawn by eye a few px from the painted line; a line may ski
 e.g. a goal's net; a video's frame is named by ``video``, ``frame`` and the ``width`` it is
 measured at; ``free_centre``: the lens's centre is fitted too, else it is the picture's centre).
 
-Run: ``python scripts/plumb_lines.py [--data ../shared/data/real_football] [--overlay DIR]``: prints
+Run: ``python scripts/plumb_lines.py [--data ../shared/data/real_football] [--wide
+../shared/data/real_wide_camera] [--overlay DIR]``: prints
 each picture's lens, its 1-sigma and the lines' RMS straightness (px) before and after.
 """
 
@@ -95,7 +97,7 @@ def measure(picture: np.ndarray, drawn: list[list[list[float]]], free_centre: bo
     used and the RMS straightness before (no lens) and after (px)."""
     grey = cv2.cvtColor(picture, cv2.COLOR_RGB2GRAY).astype(np.float32)
     size = (picture.shape[1], picture.shape[0])
-    lines = [np.concatenate([_clean(ridge_points(grey, tuple(seg))) for seg in line]) for line in drawn]
+    lines = [np.concatenate([_clean(ridge_points(grey, tuple(seg))) for seg in line]) for line in drawn if line]
     lines = [p for p in lines if len(p) >= 8]
     names = ("k1", "k2", "cx", "cy")[: 4 if free_centre else 2]
     fit = least_squares(lambda lens: straightness(lines, lens, size), np.zeros(len(names)), x_scale=0.05)
