@@ -2,15 +2,18 @@
 with the lens following the zoom) over real pictures and procedural stadiums, cut together, each
 with its per-frame ground truth beside it (``CLIP.mp4.truth.csv``, :func:`glradial.video.clips.write_clip`).
 
-Real sources (validation only, never training): the three pinhole stadium views and the stadium
-panorama of ``../shared/data/real_football/`` (rendered pinhole views, though the line fit reads them
-at k1 -0.025/+0.028/+0.012, docs/eval/shots.md, and an equirectangular panorama); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
+Real sources (validation only, never training): the three football360 stadium views and the
+stadium panorama of ``../shared/data/real_football/`` (views rendered through a lens of their own,
+not published, which the line fit reads at k1 -0.025/+0.028/+0.012, docs/eval/shots.md; and an
+equirectangular panorama, whose crops have no lens); with ``--set twoshot`` also the real wide
+camera of ``../shared/data/real_wide_camera/`` (its own lens, measured by ``scripts/plumb_lines.py``,
+removed while rendering); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
 
-Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--frames 50]
-[--set main|check|static|twoshot]`` (``check``: held-out clips, other lenses and paths, other stadiums;
-``static``: static shots only, more calibration shots for the static shots' bound, see
-``bench/eval_shots.py``; ``twoshot``: one clip, a static shot, a cut and a zoom whose lens follows
-it, over real frames); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
+Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--wide
+../shared/data/real_wide_camera] [--frames 50] [--set main|check|static|twoshot]`` (``check``:
+held-out clips, other lenses and paths, other stadiums; ``static``: static shots only, more
+calibration shots for the static shots' bound, see ``bench/eval_shots.py``; ``twoshot``: issue 35's
+clips, a static shot, a cut and a zoom whose lens follows it, over real frames, :func:`two_shot_clips`); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
 of each shot) and the clips.
 """
 
@@ -140,14 +143,76 @@ def static_clips(data: Path, n: int, seed: int = 2, seeds: tuple[int, ...] = (23
     return clips
 
 
-def two_shot_clips(data: Path, n: int) -> dict[str, list[ShotSpec]]:
-    """Issue 35's clip from real frames: a static shot (k1 -0.5), a cut, then a 1.0 -> 1.6x zoom-in
-    whose lens follows the zoom (k1 -0.35 -> -0.10); three clips, each real view once static and
-    once zoomed (``two_shot_a``: views 0 then 2, ``_b``: 1 then 0, ``_c``: 2 then 1)."""
+#: the real wide camera (``../shared/data/real_wide_camera``): its lens, width-normalised, and the
+#: lens's centre (widths from the frame's centre, y down), measured by the plumb-line method on seven
+#: lines of frame 0 (``scripts/plumb_lines.py``: straight to 0.57 px RMS at 1536 wide, 11.7 px with no
+#: lens; the README's centred checkerboard lens -0.6615/+0.4098 leaves 1.9 px, 2.6 px on the near
+#: touchline; known to a few px on these clips, docs/eval/shots.md), and the frames used (0 s and
+#: 8 s: the players move, the camera does not)
+WIDE_VIDEO = "wide_pitch_camera.mp4"
+WIDE_LENS = (-0.5241, 0.2481)
+WIDE_CENTRE = (0.0159, -0.0816)
+WIDE_FRAMES = (0, 200)
+#: the wide frames are used at a third of their 3072 px width (area filter: the lens is width-normalised)
+WIDE_WIDTH = 1024
+
+
+def wide_frames(folder: Path) -> list[np.ndarray]:
+    """The real wide camera's frames :data:`WIDE_FRAMES`, RGB, :data:`WIDE_WIDTH` wide."""
+    from glradial.media.video_io import VideoReader
+
+    out = []
+    with VideoReader(folder / WIDE_VIDEO, order="rgb") as reader:
+        for index, image in enumerate(reader):
+            if index in WIDE_FRAMES:
+                height = round(image.shape[0] * WIDE_WIDTH / image.shape[1])
+                out.append(cv2.resize(image, (WIDE_WIDTH, height), interpolation=cv2.INTER_AREA))
+            if index >= max(WIDE_FRAMES):
+                break
+    if len(out) != len(WIDE_FRAMES):
+        raise SystemExit(f"{folder / WIDE_VIDEO} has fewer than {max(WIDE_FRAMES) + 1} frames")
+    return out
+
+
+def two_shot_clips(data: Path, wide: Path, n: int) -> dict[str, list[ShotSpec]]:
+    """Issue 35's clips from real frames: a static shot (k1 -0.5), a cut, then a 1.0 -> 1.6x zoom-in
+    whose lens follows the zoom (k1 -0.35 -> -0.10). Sources whose own lens is known:
+
+    * pinhole crops of the real stadium panorama (no lens of their own; 1024 px around, so soft,
+      few pitch lines);
+    * the real wide camera's frames, their own lens (:data:`WIDE_LENS` about :data:`WIDE_CENTRE`,
+      measured by the plumb-line method, not by the estimator scored) removed exactly while
+      rendering (``source_lens``; its field of view, 60 deg assumed, only sets how far a tilt turns:
+      a homography of a pinhole picture is one, so the truth stays the clip's lens).
+
+    ``two_shot_pp``: the panorama's other stand, cut to a zoom over its main stand (the one clip whose
+    truth is exact); ``two_shot_pw``: the panorama's main stand, cut to a zoom over the wide camera; ``_wp``: the wide
+    camera, cut to a zoom over the panorama's other stand; ``_ww``: the wide camera's near touchline
+    at 8 s, cut to a zoom over the pitch at 0 s (one camera, two framings). And, with the
+    pictures' own lens unknown (the football360 views were rendered through a lens of their own),
+    ``two_shot_a``/``_b``/``_c``: each football360 view once static and once zoomed (views 0 then 2,
+    1 then 0, 2 then 1)."""
     views = [_read(data / name) for name in VIEWS]
-    return {f"two_shot_{name}": [ShotSpec(views[a], n, k1=(-0.5, -0.5)),
-                                 ShotSpec(views[b], n, (0, 0, 1.0), (0, 0, 1.6), (-0.35, -0.10))]
-            for name, (a, b) in zip("abc", ((0, 2), (1, 0), (2, 1)))}
+    frames = wide_frames(wide)
+    pano = _read(data / PANORAMA)
+    static, zoom = (-0.5, -0.5), (-0.35, -0.10)
+
+    def camera(frame: int, start: tuple, end: tuple | None, k1: tuple) -> ShotSpec:
+        return ShotSpec(frames[frame], n, start, end or start, k1, hfov_deg=60.0, source_lens=WIDE_LENS,
+                        source_centre=WIDE_CENTRE)
+
+    def stand(pan: float, end_zoom: float, k1: tuple) -> ShotSpec:
+        return ShotSpec(pano, n, (pan, -8.0, 1.0), (pan, -8.0, end_zoom), k1, hfov_deg=70.0, panorama=True)
+
+    clips = {f"two_shot_{name}": [ShotSpec(views[a], n, k1=static), ShotSpec(views[b], n, (0, 0, 1.0), (0, 0, 1.6), zoom)]
+             for name, (a, b) in zip("abc", ((0, 2), (1, 0), (2, 1)))}
+    clips.update({
+        "two_shot_pp": [stand(95.0, 1.0, static), stand(-90.0, 1.6, zoom)],
+        "two_shot_pw": [stand(-90.0, 1.0, static), camera(0, (8.0, -12.0, 1.0), (8.0, -12.0, 1.6), zoom)],
+        "two_shot_wp": [camera(0, (0.0, -10.0, 1.0), None, static), stand(95.0, 1.6, zoom)],
+        "two_shot_ww": [camera(1, (-10.0, -14.0, 1.1), None, static), camera(0, (0.0, -10.0, 1.0), (0.0, -10.0, 1.6), zoom)],
+    })
+    return clips
 
 
 def _digest(picture: np.ndarray) -> str:
@@ -158,6 +223,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("out", type=Path)
     parser.add_argument("--data", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/real_football")
+    parser.add_argument("--wide", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/real_wide_camera",
+                        help="the real wide camera's folder (--set twoshot)")
     parser.add_argument("--frames", type=int, default=50, help="frames per shot (default 50: 2 s)")
     parser.add_argument("--set", choices=("main", "check", "static", "twoshot"), default="main",
                         help="main: the calibration and report clips; check: held-out real clips and other stadiums; "
@@ -169,7 +236,7 @@ def main() -> None:
     if args.set == "main":
         sets = (("real", real_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames)))
     elif args.set == "twoshot":
-        sets = (("real", two_shot_clips(args.data, args.frames)),)
+        sets = (("real", two_shot_clips(args.data, args.wide, args.frames)),)
     elif args.set == "check":
         sets = (("real", check_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames, (5, 17))))
     else:
@@ -181,7 +248,7 @@ def main() -> None:
         for name, shots in clips.items():
             frames, truth = render_clip(shots, SIZE)
             write_clip(args.out / f"{name}.mp4", frames, truth)
-            sources = [names.get(_digest(shot.source), "procedural") for shot in shots]
+            sources = [names.get(_digest(shot.source), WIDE_VIDEO if any(shot.source_lens) else "procedural") for shot in shots]
             manifest[name] = {"group": group, "shots": len(shots), "frames": len(frames), "sources": sources}
             print(f"{name}: {len(shots)} shots, {len(frames)} frames", flush=True)
     (args.out / "manifest.json").write_text(json.dumps(manifest, indent=1) + "\n")

@@ -336,12 +336,16 @@ def test_batched_evaluation_equals_the_per_pair_definition():
 
 def test_the_lens_track_follows_a_zoom_past_its_last_sample():
     """Frames after a shot's last sample (up to a stride) continue the zoom at the last two samples'
-    rate instead of keeping the last sample's zoom (known answer: a zoom linear in frames)."""
+    rate instead of keeping the last sample's zoom, and frames before its first sample (a cut placed
+    on frames the sparse decode skipped) at the first two samples' rate (known answer: a zoom linear
+    in frames)."""
     from glradial.video.shot_track import _log_zoom_at
 
     here = np.arange(0, 50)
     z = _log_zoom_at(here, [0, 10, 20, 30, 40], [0.0, 0.1, 0.2, 0.3, 0.4])
     assert np.allclose(z, here / 100.0)
+    late = _log_zoom_at(here, [3, 13, 23, 33, 43], [0.03, 0.13, 0.23, 0.33, 0.43])  # first decoded 3 frames after the cut
+    assert np.allclose(late, here / 100.0)
     still = _log_zoom_at(here, [0, 10, 20, 30, 40], [0.0] * 5)
     assert np.all(still == 0.0)
     assert np.allclose(_log_zoom_at(here[:5], [0], [0.2]), 0.2)  # one sample: its zoom throughout

@@ -8,8 +8,12 @@ Rendering is independent of glradial's correctors: every output pixel (distorted
 exact inverse of the lens (:func:`glradial.lens.lensfuncs.undistort_point_exact`) to the pinhole image,
 then to a ray of the camera, rotated, and looked up in the source (``cv2.remap``, bilinear).
 
-Conventions: a still is treated as an undistorted pinhole picture whose horizontal field of view is
-``source_hfov_deg``; the virtual camera's field of view is that divided by ``zoom`` (times a margin
+Conventions: a still is treated as a pinhole picture whose horizontal field of view is
+``hfov_deg``, seen through its own radial lens ``source_lens`` (width-normalised ``(k1, k2)`` about
+the picture's centre; default none): a real camera's frame with a calibrated lens (e.g. the
+checkerboard lens of ``../shared/data/real_wide_camera``) is then used as the pinhole picture it
+shows, its own lens removed exactly (:func:`glradial.lens.lensfuncs.distort_point` maps the pinhole
+point to the picture's pixel), so the clip's truth is its whole lens; the virtual camera's field of view is that divided by ``zoom`` (times a margin
 chosen so that the frame never leaves the picture). Angles in degrees; pan to the right and tilt
 up are positive (:func:`glradial.synthesis.crops.camera_rotation`). The lens is width-normalised ``(k1, k2)`` (DESIGN.md).
 """
@@ -25,7 +29,7 @@ import cv2
 import numpy as np
 
 from ..lens.lens import pixels_to_lens
-from ..lens.lensfuncs import undistort_point_exact
+from ..lens.lensfuncs import distort_point, fold_radius, undistort_point_exact
 from ..lens.metrics import manifold_k2
 from ..synthesis.crops import camera_rotation, ray_to_lonlat
 
@@ -37,8 +41,11 @@ class ShotSpec:
     """One shot: ``frames`` long over ``source`` (uint8 RGB still or equirectangular panorama,
     ``panorama=True``), the camera moving linearly from ``start`` to ``end`` ``(pan_deg, tilt_deg,
     zoom)``, the lens ``k1`` going from ``k1[0]`` to ``k1[1]`` linearly in log zoom, ``k2`` the manifold
-    value plus ``k2_offset``. For a still, ``hfov_deg`` is the picture's assumed field of view; for a
-    panorama, the camera's at zoom 1."""
+    value plus ``k2_offset``. For a still, ``hfov_deg`` is the picture's assumed field of view (it
+    only matters for pans and tilts: a zoom about the centre is a scale), ``source_lens`` its own
+    lens (width-normalised ``(k1, k2)``, removed exactly while rendering) and ``source_centre`` that
+    lens's centre, the camera's principal point (widths from the picture's centre, y down); for a
+    panorama, the camera's field of view at zoom 1."""
 
     source: np.ndarray
     frames: int
@@ -48,6 +55,8 @@ class ShotSpec:
     k2_offset: float = 0.0
     hfov_deg: float = 60.0
     panorama: bool = False
+    source_lens: tuple[float, float] = (0.0, 0.0)
+    source_centre: tuple[float, float] = (0.0, 0.0)
 
     def camera(self, i: int) -> tuple[float, float, float]:
         """``(pan_deg, tilt_deg, zoom)`` of frame ``i`` (zoom interpolated geometrically)."""
@@ -95,7 +104,16 @@ def _source_pixels(spec: ShotSpec, rays: np.ndarray) -> tuple[np.ndarray, np.nda
         return ((lon / (2 * math.pi) + 0.5) * w - 0.5) % w, (0.5 - lat / math.pi) * h - 0.5
     focal = 0.5 * w / math.tan(math.radians(spec.hfov_deg) / 2)
     z = np.maximum(rays[..., 2], 1e-9)
-    return rays[..., 0] / z * focal + w / 2 - 0.5, rays[..., 1] / z * focal + h / 2 - 0.5
+    x, y = rays[..., 0] / z * focal, rays[..., 1] / z * focal  # px from the picture's centre, pinhole
+    if any(spec.source_lens) or any(spec.source_centre):  # the picture's own lens about its principal point
+        pinhole = np.stack([x, y], axis=-1) / w
+        fold = fold_radius(*spec.source_lens)
+        if np.max(np.hypot(pinhole[..., 0], pinhole[..., 1])) >= fold:
+            raise ValueError(f"source_lens {spec.source_lens!r} folds over at radius {fold:.3f} (widths) inside the "
+                             "view: the picture cannot show it; zoom in or tilt towards its centre")
+        p_d = (distort_point(pinhole, *spec.source_lens) + np.asarray(spec.source_centre)) * w
+        x, y = p_d[..., 0], p_d[..., 1]
+    return x + w / 2 - 0.5, y + h / 2 - 0.5
 
 
 def _margin(spec: ShotSpec, size: tuple[int, int]) -> float:
@@ -123,6 +141,10 @@ def render_shot(spec: ShotSpec, size: tuple[int, int]):
     """Yield ``(frame, (k1, k2), zoom)`` for every frame of the shot (uint8 RGB ``size`` = (W, H))."""
     if spec.frames < 1:
         raise ValueError(f"a shot needs at least one frame, got frames={spec.frames}")
+    for name in ("source_lens", "source_centre"):
+        value = getattr(spec, name)
+        if len(value) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in value):
+            raise ValueError(f"{name} must be two finite numbers, got {value!r}")
     margin = _margin(spec, size)
     for i in range(spec.frames):
         pan, tilt, zoom = spec.camera(i)

@@ -509,11 +509,16 @@ def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
     bound. A 150 px barrel read stating 15 px is applied; a near-pinhole one stating 15 px is not.
     Other reasons (``fold_over``, the frames' own doubt) stand, and so does a frames-only bound when
     the per-frame estimates state none of their own (it is then :data:`NO_GEOMETRY_PX`, not a
-    calibrated bound)."""
+    calibrated bound), or when the shot zooms: its frames' one lens cannot follow the zoom, and
+    their bound covers only the zooms they were read at (a zoom over the real stadium panorama,
+    read at 20-60 px stating 52, was applied where it made the zoom's end worse than uncorrected,
+    docs/eval/shots.md)."""
     if not shot.doubtful or shot.reason not in ("uncertain", "no_geometry"):
         return shot
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     if shot.source == "frames" and not (estimates and all(hasattr(e, "uncertainty_px") for e in estimates)):
+        return shot
+    if shot.source == "frames" and evidence.camera() == "zoom":
         return shot
     lenses = np.atleast_2d(shot.lens_at(evidence.log_zooms() if shot.zooming else np.zeros(1)))
     smallest_shift = min(shift_px((float(k1), float(k2))) for k1, k2 in lenses)

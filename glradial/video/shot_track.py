@@ -237,12 +237,18 @@ def _log_zoom_at(here: np.ndarray, frames, zooms) -> np.ndarray:
     """The log zoom of frames ``here`` from the sampled ``frames``' ``zooms``: linear between samples
     and, past the last sample (up to a stride of frames before the shot ends), continued at the last
     two samples' rate: a zoom does not stop at the last sample (held there, a zoom-in's last frames
-    kept the lens of up to a stride before, 19 px off on issue 35's two-shot clip)."""
+    kept the lens of up to a stride before, 19 px off on issue 35's two-shot clip). Likewise before
+    the first sample, at the first two samples' rate: the frames between a cut and the shot's first
+    decoded frame (a cut placed on frames the sparse decode skips, :class:`CutCheck`) are the first
+    frames of the new shot, and a zoom was already under way there."""
     frames, zooms = np.asarray(frames, np.float64), np.asarray(zooms, np.float64)
     z = np.interp(here, frames, zooms)
     if len(frames) >= 2 and frames[-1] > frames[-2]:
         after = here > frames[-1]
         z[after] = zooms[-1] + (zooms[-1] - zooms[-2]) / (frames[-1] - frames[-2]) * (here[after] - frames[-1])
+    if len(frames) >= 2 and frames[1] > frames[0]:
+        before = here < frames[0]
+        z[before] = zooms[0] - (zooms[1] - zooms[0]) / (frames[1] - frames[0]) * (frames[0] - here[before])
     return z
 
 
