@@ -20,6 +20,7 @@ from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
 from .estimate import CameraEstimate, camera_trust
 from .first_guess import first_guess as search
+from .first_guess import strong_lens
 from .first_views import first_views
 from .model import Camera, decompose_homography
 from .refine import Fit, refine
@@ -135,14 +136,24 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
     (:func:`glradial.camera.white_lines.line_points`) are already extracted (arguments checked)."""
     if len(lines.xy) < camera_trust()["min_points"]:
         return judge(None, len(lines.xy))
-    fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
     if previous is not None:
+        fine_lines = lines.thinned(FINE_POINTS)
         tracked = judge(refine(_starts(lines, pitch, None, previous)[0], fine_lines.xy, fine_lines.angle, pitch,
                                gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
         if not tracked.doubtful:
             return tracked
+    judged = judge(_search_fit(_starts(lines, pitch, first_guess, None, rgb), lines, pitch), len(lines.xy))
+    if judged.doubtful and first_guess is None:
+        judged = _strong_lens_retry(rgb, lines, pitch, judged)
+    return judged
+
+
+def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -> Fit | None:
+    """The best fit from ``starts``: a coarse stage (lens held at each start's) from every start, the
+    :data:`FINE_STARTS` best of them refined with the lens free."""
+    fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
     coarse = []
-    for cam in _starts(lines, pitch, first_guess, None, rgb):
+    for cam in starts:
         fit = refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
                      support_xy=lines.xy, hold_position=1, max_nfev=COARSE_NFEV)
         if fit is not None:
@@ -154,4 +165,22 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
     fine = [refine(f.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
                    support_xy=lines.xy) for f in coarse]
     fits = [f for f in fine if f is not None]
-    return judge(max(fits, key=_score) if fits else None, len(lines.xy))
+    return max(fits, key=_score) if fits else None
+
+
+def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, judged: CameraEstimate) -> CameraEstimate:
+    """A strongly distorted frame (:func:`glradial.camera.first_guess.strong_lens`): the first guess
+    searched on the frame undistorted with the line fit's lens, each start given that lens, then the
+    same refinement in the distorted frame (the lens held in the coarse stage, free in the fine one).
+    Its answer replaces the doubtful ``judged`` only when it is sure."""
+    lens = strong_lens(rgb)
+    if lens is None:
+        return judged
+    points, labels = pitch.sampled_points(SEARCH_STEP)
+    starts = []
+    for c in search(rgb, points, labels, lens=(lens.k1, lens.k2)):
+        cam = decompose_homography(c.homography, lines.size)
+        if cam is not None:
+            starts.append(Camera(cam.rotation, cam.position, cam.focal, cam.size, lens))
+    retried = judge(_search_fit(starts, lines, pitch), len(lines.xy))
+    return judged if retried.doubtful else retried

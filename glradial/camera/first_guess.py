@@ -32,7 +32,9 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..estimation.estimator import estimate
 from ..lens.lens import Lens
+from ..lens.metrics import max_displacement_px
 from .circle_hypotheses import circle_homographies, ellipses, template_radius
 from .line_hypotheses import camera_of, line_homographies, plausible, template_lines
 from .white_lines import WhiteLines, hull, pair_vanishing_points, white_lines
@@ -67,6 +69,11 @@ ICP_MAX_POINTS, ICP_SPACING_M = 2500, 0.5
 #: is kept when it is still a plausible main camera, its coverage score reaches MIN_SCORE px (work
 #: copy) and MIN_SHARE of its projected marking on the field lies on the evidence.
 MIN_GRASS, MIN_SCORE, MIN_SHARE = 0.15, 60.0, 0.5
+#: A lens read from the frame's lines is strong when it moves some point of a 16:9 frame by at least
+#: this many px at 1920 (:func:`glradial.lens.metrics.max_displacement_px` against no lens): frame-long
+#: lines then bend by more than the ICP's last bands on the 640-px work copy, so the search, which
+#: fits straight lines, is run on the frame undistorted with it (:func:`strong_lens`).
+STRONG_LENS_PX = 30.0
 
 
 @dataclass(frozen=True)
@@ -381,3 +388,20 @@ def _spacing(points: np.ndarray) -> float:
     """Median distance (m) between template points and their nearest neighbour."""
     d, _ = cKDTree(points).query(points, k=2)
     return float(np.median(d[:, 1]))
+
+
+def strong_lens(frame_rgb: np.ndarray) -> Lens | None:
+    """The lens the estimation layer's line fit (:func:`glradial.estimation.estimator.estimate`,
+    ``method="lines"``) reads in a uint8 RGB frame when it is strong (:data:`STRONG_LENS_PX`) and
+    usable on the frame, else ``None``. Its doubt verdict is not used: the reading is only where the
+    camera fit starts (``first_guess(..., lens=)`` and the refinement's initial lens), and the
+    camera's own doubt policy judges the result."""
+    reading = estimate(frame_rgb, "lines")
+    lens = Lens(float(reading.k1), float(reading.k2))
+    if float(max_displacement_px(np.array([lens.k1, lens.k2]), np.zeros(2))) < STRONG_LENS_PX:
+        return None
+    try:
+        lens.check_frame((frame_rgb.shape[1], frame_rgb.shape[0]))
+    except ValueError:
+        return None
+    return lens
