@@ -170,17 +170,25 @@ def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -
 
 def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, judged: CameraEstimate) -> CameraEstimate:
     """A strongly distorted frame (:func:`glradial.camera.first_guess.strong_lens`): the first guess
-    searched on the frame undistorted with the line fit's lens, each start given that lens, then the
+    searched on the frame undistorted with the line fit's lens (the dictionary of views on the
+    undistorted line points where that finds nothing), each start given that lens, then the
     same refinement in the distorted frame (the lens held in the coarse stage, free in the fine one).
-    Its answer replaces the doubtful ``judged`` only when it is sure."""
+    Its answer replaces the doubtful ``judged`` when it is sure, or doubtful too but with a camera
+    that more evidence points lie on (a doubtful answer says more then; it is still not applied)."""
     lens = strong_lens(rgb)
     if lens is None:
         return judged
     points, labels = pitch.sampled_points(SEARCH_STEP)
+    homographies = [c.homography for c in search(rgb, points, labels, lens=(lens.k1, lens.k2))]
+    if not homographies:
+        flat = lens.undistort_points(lines.xy, lines.size)
+        homographies = first_views(flat[np.isfinite(flat).all(1)], lines.size, pitch)
     starts = []
-    for c in search(rgb, points, labels, lens=(lens.k1, lens.k2)):
-        cam = decompose_homography(c.homography, lines.size)
+    for h in homographies:
+        cam = decompose_homography(h, lines.size)
         if cam is not None:
             starts.append(Camera(cam.rotation, cam.position, cam.focal, cam.size, lens))
     retried = judge(_search_fit(starts, lines, pitch), len(lines.xy))
-    return judged if retried.doubtful else retried
+    if not retried.doubtful or (retried.camera is not None and retried.inliers > judged.inliers):
+        return retried
+    return judged

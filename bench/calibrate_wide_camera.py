@@ -1,0 +1,90 @@
+"""``glradial.calibrate`` and ``glradial.estimate`` on the shared real wide camera (validation only).
+
+Usage: ``python bench/calibrate_wide_camera.py [--frames N] [--json OUT]``
+
+Frames: the ``wide_camera`` source of ``bench/pitch_views.py`` (N = 30 frames spread over
+``../shared/data/real_wide_camera/wide_pitch_camera.mp4``, reduced to 1536 x 864). Truth: the
+checkerboard lens (k1 -0.6615, k2 +0.4098, centred; the camera's real principal point is off centre,
+so a centred model keeps a misfit of a few px). Per frame: the camera's verdict, its lens's error
+(max displacement at 1920 wide, :func:`glradial.lens.metrics.max_displacement_px`) against the
+checkerboard lens and the camera lens's own bound (:func:`glradial.camera.pitch_lens.lens_bound_px`),
+the focal length and field of view (a static camera: they should agree across frames), and what
+``glradial.estimate(frame)`` (the default ``method="auto"``) reads: its error, bound and verdict.
+Nothing is fitted here.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "bench"))
+
+
+def _row(name: str, frame: np.ndarray, truth: tuple) -> dict:
+    import glradial
+    from glradial.camera.pitch_lens import lens_bound_px
+    from glradial.lens.metrics import max_displacement_px
+
+    k_true = np.array(truth, float)
+    cam = glradial.calibrate(frame)
+    row = {"frame": name, "reason": cam.reason, "sure": not cam.doubtful, "rms_px": cam.rms_px if cam.camera else None,
+           "support": cam.support, "markings": list(cam.markings)}
+    if cam.camera is not None:
+        err = float(max_displacement_px(np.array([cam.lens.k1, cam.lens.k2]), k_true))
+        row.update(k1=cam.lens.k1, k2=cam.lens.k2, lens_err_px=err, lens_bound_px=lens_bound_px(cam),
+                   focal=cam.focal, hfov_deg=cam.hfov_deg, position_m=cam.position.tolist())
+    est = glradial.estimate(frame)
+    row.update(est_method=est.method, est_err_px=float(max_displacement_px(np.array([est.k1, est.k2]), k_true)),
+               est_bound_px=est.uncertainty_px, est_doubtful=est.doubtful, est_reason=est.reason)
+    return row
+
+
+def report(rows: list[dict]) -> dict:
+    sure = [r for r in rows if r["sure"]]
+    out = {"frames": len(rows), "sure": len(sure), "reasons": {}}
+    for r in rows:
+        out["reasons"][r["reason"]] = out["reasons"].get(r["reason"], 0) + 1
+    if sure:
+        err = np.array([r["lens_err_px"] for r in sure])
+        hfov = np.array([r["hfov_deg"] for r in sure])
+        out.update(camera_lens_err_median_px=float(np.median(err)), camera_lens_err_max_px=float(err.max()),
+                   camera_bound_covers=float(np.mean([r["lens_err_px"] <= r["lens_bound_px"] for r in sure])),
+                   camera_bound_median_px=float(np.median([r["lens_bound_px"] for r in sure])),
+                   hfov_median_deg=float(np.median(hfov)), hfov_sd_deg=float(hfov.std()),
+                   focal_rel_sd=float(np.std([r["focal"] for r in sure]) / np.mean([r["focal"] for r in sure])))
+    est = np.array([r["est_err_px"] for r in rows])
+    out.update(estimate_err_median_px=float(np.median(est)), estimate_err_p90_px=float(np.percentile(est, 90)),
+               estimate_doubtful=float(np.mean([r["est_doubtful"] for r in rows])),
+               estimate_bound_covers=float(np.mean([r["est_err_px"] <= r["est_bound_px"] for r in rows])),
+               estimate_bound_median_px=float(np.median([r["est_bound_px"] for r in rows])),
+               estimate_from_pitch=int(sum(r["est_method"] == "pitch" for r in rows)))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    from pitch_views import _wide_camera
+
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument("--json", type=Path, help="write every frame's row here")
+    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
+    args = parser.parse_args(argv)
+    rows = []
+    for name, frame, truth in _wide_camera(args.data, args.frames):
+        rows.append(_row(name, frame, truth))
+        print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+    print(json.dumps(report(rows), indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
