@@ -11,6 +11,12 @@ checkerboard lens and the camera lens's own bound (:func:`glradial.camera.pitch_
 the focal length and field of view (a static camera: they should agree across frames), and what
 ``glradial.estimate(frame)`` (the default ``method="auto"``) reads: its error, bound and verdict.
 Nothing is fitted here.
+
+``--twin``: procedural twins of this camera (a diagnostic of what the centred lens model costs): the
+pitch rendered by :func:`glradial.camera.views.render_view` through the pose frame 0's fit reads
+(rotation; position (-1.0, -48.8, 7.5) m and field of view 72.4 degrees, what most frames agree on),
+the checkerboard lens applied about the centre or about a principal point moved by ``(cx, cy)``
+widths (the pinhole image translated, then distorted about the moved point), three textures each.
 """
 
 from __future__ import annotations
@@ -46,6 +52,45 @@ def _row(name: str, frame: np.ndarray, truth: tuple) -> dict:
     return row
 
 
+#: Principal-point offsets (widths) of the twins: centred, the plumb-line centre of frame 0
+#: (scripts/plumb_lines.py, free centre), a smaller vertical one, a horizontal one.
+TWIN_OFFSETS = ((0.0, 0.0), (0.016, -0.082), (0.0, -0.06), (0.03, 0.0))
+
+
+def twins(frame0: np.ndarray, truth: tuple) -> list[dict]:
+    """The ``--twin`` rows (module docstring)."""
+    import math
+
+    import cv2
+
+    import glradial
+    from glradial.camera.model import Camera
+    from glradial.camera.views import render_view
+    from glradial.lens.metrics import max_displacement_px
+
+    height, width = frame0.shape[:2]
+    size = (width, height)
+    rotation = glradial.calibrate(frame0).camera.rotation
+    scale = glradial.Lens(*truth).fit_scale(size, "crop", "distort")
+    focal = 1 / (2 * math.tan(math.radians(72.4 / 2)))
+    rows = []
+    for seed in (1, 2, 3):
+        canvas = Camera(rotation, np.array([-1.0, -48.8, 7.5]), focal / scale, size)
+        pinhole = render_view(canvas, seed=seed).frame
+        for cx, cy in TWIN_OFFSETS:
+            img = cv2.warpAffine(pinhole, np.float32([[1, 0, cx * width], [0, 1, cy * width]]), size,
+                                 borderMode=cv2.BORDER_REPLICATE)
+            mx, my = glradial.Lens(*truth, cx, cy).maps(size, direction="distort", scale=scale)
+            cam = glradial.calibrate(cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+            row = {"seed": seed, "centre": [cx, cy], "reason": cam.reason, "support": cam.support, "rms_px": cam.rms_px}
+            if cam.camera is not None:
+                row.update(lens_err_px=float(max_displacement_px(np.array([cam.lens.k1, cam.lens.k2]), np.array(truth))),
+                           hfov_deg=cam.hfov_deg)
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    return rows
+
+
 def report(rows: list[dict]) -> dict:
     sure = [r for r in rows if r["sure"]]
     out = {"frames": len(rows), "sure": len(sure), "reasons": {}}
@@ -74,10 +119,15 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--frames", type=int, default=30)
     parser.add_argument("--json", type=Path, help="write every frame's row here")
+    parser.add_argument("--twin", action="store_true", help="procedural twins of the camera instead (module docstring)")
     parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
     args = parser.parse_args(argv)
+    frames = _wide_camera(args.data, args.frames)
+    if args.twin:
+        twins(frames[0][1], frames[0][2])
+        return 0
     rows = []
-    for name, frame, truth in _wide_camera(args.data, args.frames):
+    for name, frame, truth in frames:
         rows.append(_row(name, frame, truth))
         print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     if args.json:
