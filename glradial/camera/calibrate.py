@@ -7,6 +7,9 @@ circle hypotheses of :mod:`glradial.camera.first_guess`, with glradial's diction
 (:mod:`glradial.camera.first_views`) where that search finds nothing; each decomposed into a camera
 (:func:`glradial.camera.model.decompose_homography`) and refined (:func:`glradial.camera.refine.refine`);
 the fit with the most inliers is judged (:mod:`glradial.camera.estimate`'s doubt policy and bound).
+A doubtful answer of glradial's own search on a frame whose line-fit lens is strong
+(:func:`glradial.camera.first_guess.strong_lens`) is retried from a search on the frame undistorted
+with that lens, the starts carrying it (:func:`_strong_lens_retry`).
 """
 
 from __future__ import annotations
