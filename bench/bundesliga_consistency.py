@@ -25,7 +25,8 @@ layer's ``auto`` elsewhere), with the share of samples it answered from the pitc
 stated bound covered its self-consistent error there; ``pitch alone``: the camera fit's lens alone where
 it fits (``auto`` elsewhere), with the bound of ``lens_bound_px``. ``--no-pitch`` (or a checkout without
 ``glradial.camera.pitch_lens``) leaves it out. ``--dump FILE`` writes one JSON line per scored sample
-and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS; the
+and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS, its
+reason, markings, support, field of view and lens; the
 unmodified frame's readings too, with ``truth`` null).
 """
 
@@ -100,6 +101,8 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
         out["pitch alone"] = out["auto"] if camera.doubtful else LensEstimate(
             camera.lens.k1, camera.lens.k2, uncertainty_px=lens_bound_px(camera), method="pitch")
         out["rms"] = camera.rms_px
+        out["camera"] = {"reason": camera.reason, "markings": len(camera.markings), "support": camera.support,
+                         "hfov_deg": camera.hfov_deg, "k": None if camera.lens is None else [camera.lens.k1, camera.lens.k2]}
     return out
 
 
@@ -142,14 +145,14 @@ def main() -> None:
     for sample in samples:  # each frame's unmodified reading comes first
         found = _readings(estimator, sample["image"], pitch)
         for method, e in found.items():
-            if method == "rms":
+            if method in ("rms", "camera"):
                 continue
             if sample["truth"] is None:
                 own[sample["frame"], method] = (e.k1, e.k2)
                 if dump:  # the reading of the unmodified frame, which the scoring composes with the applied lens
                     dump.write(json.dumps({"clip": sample["clip"], "frame": sample["frame"], "truth": None, "method": method,
                                            "source": e.method, "k": [e.k1, e.k2], "bound_px": e.uncertainty_px,
-                                           "camera_rms_px": found.get("rms")}) + "\n")
+                                           "camera_rms_px": found.get("rms"), "camera": found.get("camera")}) + "\n")
                 continue
             err, in_frame = exact_error_px((e.k1, e.k2), sample["truth"], own[sample["frame"], method])
             raw = float(max_displacement_px(np.array([e.k1, e.k2]), np.array(sample["truth"])))
@@ -160,7 +163,8 @@ def main() -> None:
             if dump:
                 dump.write(json.dumps({"clip": sample["clip"], "frame": sample["frame"], "truth": sample["truth"],
                                        "method": method, "source": e.method, "k": [e.k1, e.k2], "error_px": err,
-                                       "bound_px": e.uncertainty_px, "camera_rms_px": found.get("rms")}) + "\n")
+                                       "bound_px": e.uncertainty_px, "camera_rms_px": found.get("rms"),
+                                       "camera": found.get("camera")}) + "\n")
     if dump:
         dump.close()
     _print(errors)

@@ -88,6 +88,21 @@ def _check_first_guess(first_guess: object) -> list[np.ndarray]:
     return hs
 
 
+def _reason(fit: Fit, t: dict) -> str:
+    """Why ``fit`` is doubtful under the thresholds ``t`` (``"ok"`` when it is not)."""
+    if fit.inliers < t["min_points"] or len(fit.elements) < t["min_elements"]:
+        return "too_few_markings"
+    if fit.spread < t["min_spread"]:
+        return "weak_geometry"  # one family of parallel image lines: nothing fixes the metric
+    if not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
+        return "weak_geometry"
+    if fit.camera.position[2] < t["min_height_m"] or fit.camera.hfov_deg > t["max_hfov_deg"]:
+        return "poor_fit"  # a camera on the grass or wider than a broadcast lens: lines fitted, not a pitch
+    if fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
+        return "poor_fit"
+    return "ok"
+
+
 def judge(fit: Fit | None, points: int) -> CameraEstimate:
     """The estimate of a refined fit (or of none) under the doubt policy of ``camera_trust.json``."""
     t = camera_trust()
@@ -95,14 +110,7 @@ def judge(fit: Fit | None, points: int) -> CameraEstimate:
         reason = "no_markings" if points < t["min_points"] else "poor_fit"
         return CameraEstimate(None, NO_CAMERA_PX, True, reason)
     bound = t["quantile"] * max(fit.rms_px, t["floor_px"])
-    if fit.inliers < t["min_points"] or len(fit.elements) < t["min_elements"]:
-        reason = "too_few_markings"
-    elif not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
-        reason = "weak_geometry"
-    elif fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
-        reason = "poor_fit"
-    else:
-        reason = "ok"
+    reason = _reason(fit, t)
     return CameraEstimate(fit.camera, bound, reason != "ok", reason, fit.elements, fit.rms_px, fit.inliers, fit.support,
                           fit.log_focal_sd)
 

@@ -89,7 +89,10 @@ class Fit:
     ``log_focal_sd`` (standard deviation of log focal from the last round's Jacobian; infinite where
     the markings seen do not fix it), ``cost`` (the robust cost per evidence point), ``support`` (the
     share of the markings projected inside the frame that have an evidence point within
-    :data:`SUPPORT_PX`: low when the camera draws markings where the frame has none)."""
+    :data:`SUPPORT_PX`: low when the camera draws markings where the frame has none), ``spread`` (how
+    far the inliers' line directions are from one direction: ``1 - |mean(exp(2i angle))|``, 0 when every
+    inlier runs the same way, e.g. parallel lines only; about 1 for two perpendicular families or a
+    circle)."""
 
     camera: Camera
     rms_px: float
@@ -99,6 +102,7 @@ class Fit:
     log_focal_sd: float
     cost: float
     support: float = 0.0
+    spread: float = 1.0
 
 
 def _camera(x: np.ndarray, base: Camera) -> Camera:
@@ -249,8 +253,9 @@ def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result, s
     except np.linalg.LinAlgError:
         sd = math.inf
     rms = float(np.sqrt(np.mean(inl ** 2))) if len(inl) else math.inf
+    spread = 1.0 - float(abs(np.mean(np.exp(2j * angle[use])))) if use.any() else 0.0
     return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1),
-               support(camera, samples, support_xy))
+               support(camera, samples, support_xy), spread)
 
 
 def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
