@@ -91,15 +91,16 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
     evidence = estimator.evidence_batch([frame])[0]  # what estimate() judges, gathered once for the three methods
     out = {method: judge(evidence, method) for method in ("net", "lines", "auto")}
     if pitch:
+        from glradial.camera import pitch_lens as pl
         from glradial.camera.calibrate import calibrate
-        from glradial.camera.pitch_lens import lens_bound_px, pitch_lens
         from glradial.estimation.lens_estimate import LensEstimate
 
         camera = calibrate(frame)  # what glradial.estimate(method="auto") runs beside the estimation layer's auto
-        out["auto+pitch"] = pitch_lens(camera, out["auto"])
+        out["auto+pitch"] = pl.pitch_lens(camera, out["auto"])
         # the camera fit's lens alone where it fits (auto elsewhere): what the bound of pitch_lens_bound.py calibrates
+        lens = camera.lens if camera.doubtful or not hasattr(pl, "camera_lens") else pl.camera_lens(camera)
         out["pitch alone"] = out["auto"] if camera.doubtful else LensEstimate(
-            camera.lens.k1, camera.lens.k2, uncertainty_px=lens_bound_px(camera), method="pitch")
+            lens.k1, lens.k2, uncertainty_px=pl.lens_bound_px(camera), method="pitch")
         out["rms"] = camera.rms_px
         out["camera"] = {"reason": camera.reason, "markings": len(camera.markings), "support": camera.support,
                          "hfov_deg": camera.hfov_deg, "k": None if camera.lens is None else [camera.lens.k1, camera.lens.k2]}

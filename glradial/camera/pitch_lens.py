@@ -1,37 +1,40 @@
 """The lens of a frame from both kinds of evidence: the joint camera fit to the pitch template
-(:func:`glradial.camera.calibrate.calibrate`) where the template fits, combined with today's estimator
-(the CNN and the line fit, :mod:`glradial.estimation.estimator`); today's estimator alone where it does not.
+(:func:`glradial.camera.calibrate.calibrate`) where the template fits, combined with the estimation
+layer's reading (the CNN and the line fit, :mod:`glradial.estimation.estimator`); the estimation
+layer's reading alone where it does not.
 
 ``method="auto"`` of :func:`estimate` and :class:`Estimator` (what ``glradial.estimate`` and
-``glradial.Estimator`` are; a subclass of the estimation layer's ``Estimator``) with ``pitch=True``
-(``glradial estimate IMG --pitch``) runs both. When the
-camera is not doubtful, the answer is a :class:`glradial.LensEstimate` with ``method="pitch"``: the
-camera fit's lens ``k_p`` (bound ``b_p``, :func:`lens_bound_px`) and the estimation layer's reading
-``k_a`` (its own bound ``b_a``) weighted by the inverse squares of their bounds,
-``k = (k_p / b_p^2 + k_a / b_a^2) / (1 / b_p^2 + 1 / b_a^2)`` (width-normalised ``(k1, k2)``), stating
-the same weights' mean of the two bounds. Both bounds are 90 % bounds on the maximum displacement
-error over the 16:9 frame (px of a 1920-wide frame, :func:`glradial.lens.metrics.max_displacement_px`;
-not the camera's bound on the markings' reprojection, another quantity). The radial map is linear in
-``(k1, k2)`` and that error is a norm, so the combination's error is at most the weighted mean of the
-two errors, and its stated bound holds whenever both bounds do. ``chains`` is the number of template
-markings the camera fit used. When the camera is doubtful, the estimation layer's answer is returned
-unchanged. ``"net"`` and ``"lines"`` never run the camera fit.
+``glradial.Estimator`` are; a subclass of the estimation layer's ``Estimator``) runs both by default
+(``pitch=True``; ``glradial estimate IMG``, ``correct IMG --auto``). When the camera is not doubtful,
+the answer is a :class:`glradial.LensEstimate` with ``method="pitch"``:
+``k = w k_p + (1 - w) k_a`` (width-normalised ``(k1, k2)``), ``k_p`` the camera's lens
+(:func:`camera_lens`, bound ``b_p``: :func:`lens_bound_px`), ``k_a`` the estimation layer's reading
+(bound ``b_a``, doubtful or not: its doubt is by benefit and its bound stays calibrated), stating
+``w b_p + (1 - w) b_a``, ``w`` = ``lens_weight`` (0.4, ``glradial/data/camera_trust.json``). Both
+bounds are 90 % bounds on the maximum displacement error over the 16:9 frame (px of a 1920-wide frame,
+:func:`glradial.lens.metrics.max_displacement_px`; not the camera's bound on the markings'
+reprojection, another quantity). The radial map is linear in ``(k1, k2)`` and that error is a norm,
+so the combination's error is at most ``w e_p + (1 - w) e_a``, and its stated bound holds whenever
+both bounds do. It is doubtful by benefit as the estimation layer's answers are
+(``"weak_geometry"`` where the stated bound reaches the identity lens:
+:func:`glradial.estimation.trust.shift_px`). ``chains`` is the number of template markings the camera
+fit used. When the camera is doubtful, or the estimation layer found no pitch evidence at all (blank,
+noise, no grass: the camera fit is then not run), the estimation layer's answer is returned
+unchanged; ``pitch=False`` gives it always, bit for bit. ``"net"`` and ``"lines"`` never run the camera fit.
 
-Why combined and not the camera's lens alone: on real frames the camera fit's lens is not the
-stronger evidence everywhere (docs/CAMERA.md, "The lens fed back": better on one Bundesliga clip, worse
-on the other and on a real_football frame); its bound, calibrated on real frames, says so, and the
-weights follow the bounds.
+**The camera's lens** is the Lopez-Antequera manifold lens nearest the fit's ``(k1, k2)`` over the
+radii to the 16:9 corner (:func:`manifold_lens`): the markings a broadcast frame shows rarely reach its
+corners, so the fit's ``k2`` trades against ``k1`` along a ridge (measured on the Bundesliga frames:
+``k2`` from 0.02 to 0.43 on frames of one camera); the manifold fixes it. Its bound is split-conformal:
+``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), both in
+``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_bound.py``).
 
-Why opt-in (``pitch=False`` by default): measured, it moves the Bundesliga clips' self-consistent
-median from 3.75 to 3.40 px (goal 3) and leaves real_football and procedural crops where they were,
-but it costs 200-400 ms a frame (7-10x today's ``auto``), reads worse where a pincushion lens was
-applied (k1 > 0.1: 5.6 -> 6.6 px), and the camera fit is fooled by line drawings that are not a pitch
-(seven random lines on grass, two parallel template lines: the combined bound failed on the latter).
-Until the camera's doubt check rejects those, the default stays the estimation layer's ``auto``.
-
-The camera's lens bound is split-conformal: ``lens_quantile`` times the fit's marking RMS (px at 1280,
-at least ``lens_floor_px``), both in ``glradial/data/camera_trust.json`` with the calibration they
-come from (``bench/pitch_lens_bound.py``).
+**Why a fixed weight and not the bounds' inverse variance**: per-frame weights make the answer jump
+between two readings that disagree by a frame-wide offset (the line fit reads a larger ``k2`` on the
+Bundesliga frames), which costs more than the bounds' per-frame information gains: measured
+self-consistently (docs/CAMERA.md, "The lens fed back"), inverse-variance weights leave the Bundesliga
+median at 3.4 px, a fixed weight brings it under 3. ``lens_weight`` minimises the self-consistent
+median of Bundesliga clip 2e57b9 (a 0.1 grid); clip 42ba34 is held out.
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.estimator.Estimator` stays
@@ -47,45 +50,74 @@ import numpy as np
 from ..estimation.estimator import Estimator as LinesEstimator
 from ..estimation.estimator import default_estimator, square_pixels
 from ..estimation.lens_estimate import LensEstimate, check_method
+from ..estimation.trust import NO_EVIDENCE_REASONS, shift_px
+from ..lens.lens import Lens
+from ..lens.metrics import manifold_k2, max_displacement
 from ..lens.options import Method
 from ..media.frames import to_rgb8
 from .calibrate import calibrate
 from .estimate import CameraEstimate, camera_trust
 
 
+def manifold_lens(lens: Lens) -> Lens:
+    """The lens on the Lopez-Antequera manifold (``k2 = manifold_k2(k1)``) nearest ``lens`` in max
+    displacement over the radii to the 16:9 corner (:func:`glradial.lens.metrics.max_displacement`),
+    ``k1`` to 1e-4 (a coarse then a fine grid: the max of ``|d1 r^3 + d2 r^5|`` is not smooth in ``k1``)."""
+    k1 = float(lens.k1)
+    for half, n in ((1.0, 801), (0.0025, 101)):
+        k = np.linspace(k1 - half, k1 + half, n)
+        k1 = float(k[np.argmin(max_displacement(np.column_stack([k, manifold_k2(k)]), np.array([lens.k1, lens.k2])))])
+    return Lens(k1, float(manifold_k2(k1)))
+
+
+def camera_lens(camera: CameraEstimate) -> Lens:
+    """The lens ``camera``'s fit contributes (see the module docstring, "The camera's lens"): the manifold
+    lens nearest the fit's ``(k1, k2)`` (:func:`manifold_lens`)."""
+    return manifold_lens(camera.lens)
+
+
 def lens_bound_px(camera: CameraEstimate) -> float:
-    """90 % bound (px at 1920) on the max-displacement error of ``camera``'s lens: ``lens_quantile``
-    times its marking RMS (px at 1280, at least ``lens_floor_px``; ``glradial/data/camera_trust.json``)."""
+    """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`: ``lens_quantile``
+    times ``camera``'s marking RMS (px at 1280, at least ``lens_floor_px``; ``glradial/data/camera_trust.json``)."""
     t = camera_trust()
     return float(t["lens_quantile"] * max(camera.rms_px, t["lens_floor_px"]))
 
 
 def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
-    """The camera fit's lens combined with ``fallback`` (the estimation layer's reading of the same
-    frame) by inverse-variance weights from their bounds, as a :class:`LensEstimate` with
-    ``method="pitch"`` and ``fallback``'s pixel aspect (see the module docstring), when ``camera`` is
-    not doubtful; else ``fallback`` unchanged."""
+    """The camera fit's lens (:func:`camera_lens`) combined with ``fallback`` (the estimation layer's
+    reading of the same frame), as a :class:`LensEstimate` with ``method="pitch"`` and ``fallback``'s pixel
+    aspect, when ``camera`` is not doubtful (see the module docstring); else ``fallback`` unchanged.
+    The camera weighs ``lens_weight`` (``camera_trust.json``); the answer is doubtful
+    (``"weak_geometry"``) where its stated bound reaches the identity lens, as the estimation layer's."""
     if not isinstance(camera, CameraEstimate):
         raise TypeError(f"camera must be a glradial.CameraEstimate, got {type(camera).__name__}")
     if not isinstance(fallback, LensEstimate):
         raise TypeError(f"fallback must be a glradial.LensEstimate, got {type(fallback).__name__}")
-    if camera.doubtful or camera.camera is None:
+    if camera.doubtful or camera.camera is None or not _may_be_a_pitch(fallback):
         return fallback
-    lens, bound = camera.lens, lens_bound_px(camera)
-    w_pitch, w_other = bound ** -2, fallback.uncertainty_px ** -2
-    total = w_pitch + w_other
-    k1 = (w_pitch * lens.k1 + w_other * fallback.k1) / total
-    k2 = (w_pitch * lens.k2 + w_other * fallback.k2) / total
-    return LensEstimate(k1, k2, pixel_aspect=fallback.pixel_aspect,
-                        uncertainty_px=(w_pitch * bound + w_other * fallback.uncertainty_px) / total,
-                        method="pitch", chains=len(camera.markings), doubtful=False, reason="ok")
+    lens, bound = camera_lens(camera), lens_bound_px(camera)
+    w = float(camera_trust()["lens_weight"])
+    k = (w * lens.k1 + (1 - w) * fallback.k1, w * lens.k2 + (1 - w) * fallback.k2)
+    stated = w * bound + (1 - w) * fallback.uncertainty_px
+    sure = stated < shift_px(k)  # doubt by benefit, as the estimation layer's: the identity lens within the bound
+    return LensEstimate(*k, pixel_aspect=fallback.pixel_aspect, uncertainty_px=stated, method="pitch",
+                        chains=len(camera.markings), doubtful=not sure, reason="ok" if sure else "weak_geometry")
+
+
+def _may_be_a_pitch(reading: LensEstimate) -> bool:
+    """False where the estimation layer found no pitch evidence at all (a blank or noise frame, no
+    grass: :data:`glradial.estimation.trust.NO_EVIDENCE_REASONS`): the camera fit is not run there."""
+    return reading.reason not in NO_EVIDENCE_REASONS
 
 
 def _with_pitch(frames: list, found: list[LensEstimate]) -> list[LensEstimate]:
     """Each estimate replaced by its frame's camera-fit lens where the template fits (the frame
-    restored to square pixels as the estimator did)."""
+    restored to square pixels as the estimator did); frames with no pitch evidence skip the fit."""
     out = []
     for frame, est in zip(frames, found):
+        if not _may_be_a_pitch(est):
+            out.append(est)
+            continue
         rgb = to_rgb8(frame, clip=False)
         if est.pixel_aspect != 1.0:
             rgb = square_pixels(rgb, est.pixel_aspect)
@@ -104,13 +136,13 @@ def _as_list(frames: object) -> object:
 
 
 class Estimator(LinesEstimator):
-    """:class:`glradial.estimation.estimator.Estimator` (same arguments) whose ``method="auto"`` with
-    ``pitch=True`` adds the pitch camera fit's lens where the template fits (see the module docstring).
-    ``pitch=False`` (the default) is the estimation layer's ``auto``, unchanged: the camera fit costs
-    200-400 ms a frame and is opt-in (module docstring, "Why opt-in")."""
+    """:class:`glradial.estimation.estimator.Estimator` (same arguments) whose ``method="auto"`` adds the
+    pitch camera fit's lens where the template fits (``pitch=True``, the default; see the module
+    docstring). ``pitch=False`` is the estimation layer's ``auto``, unchanged (what video uses: the
+    camera fit costs 0.2-0.4 s a frame)."""
 
     def estimate_batch(self, frames: Sequence[np.ndarray], method: Method = "auto", pixel_aspect: float = 1.0,
-                       *, pitch: bool = False) -> list[LensEstimate]:
+                       *, pitch: bool = True) -> list[LensEstimate]:
         """:meth:`glradial.estimation.estimator.Estimator.estimate_batch`, then, for ``method="auto"`` and ``pitch``, the camera fit."""
         frames = _as_list(frames)
         found = super().estimate_batch(frames, method, pixel_aspect)  # type: ignore[arg-type]
@@ -119,17 +151,17 @@ class Estimator(LinesEstimator):
         return _with_pitch(list(frames), found)  # type: ignore[call-overload]
 
     def estimate(self, frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0,
-                 *, pitch: bool = False) -> LensEstimate:
+                 *, pitch: bool = True) -> LensEstimate:
         """Estimate one frame's lens (as :meth:`estimate_batch`)."""
         return self.estimate_batch([frame], method, pixel_aspect, pitch=pitch)[0]
 
     __call__ = estimate
 
 
-def estimate(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0, *, pitch: bool = False) -> LensEstimate:
-    """Estimate the radial lens of one RGB frame (``glradial.estimate``): ``"auto"`` (default) as the
-    estimation layer's, and with ``pitch=True`` combined with the pitch camera fit's lens where the
-    template fits (the CNN/line-fit answer alone elsewhere); ``"net"`` and
+def estimate(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0, *, pitch: bool = True) -> LensEstimate:
+    """Estimate the radial lens of one RGB frame (``glradial.estimate``): ``"auto"`` (default) is the
+    estimation layer's reading combined with the pitch camera fit's lens where the template fits (the
+    CNN/line-fit answer alone elsewhere, and always with ``pitch=False``); ``"net"`` and
     ``"lines"`` as :func:`glradial.estimation.estimator.estimate`. ``pixel_aspect`` for frames stored
     with non-square pixels. Uses the shared bundled estimator."""
     check_method(method)

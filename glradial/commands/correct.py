@@ -56,9 +56,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
-    lens.add_argument("--pitch", action="store_const", const=True, default=None,
-                      help="with --auto on images: also fit the whole camera to the pitch template and combine its lens with the line fit/CNN answer where the template fits "
-                           "(docs/CAMERA.md: 3.75 -> 3.40 px on the Bundesliga clips; 200-400 ms more per frame)")
+    lens.add_argument("--pitch", action=argparse.BooleanOptionalAction, default=None,
+                      help="with --auto on images (the default there): also fit the whole camera to the pitch template and combine its "
+                           "lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 2.9 px on the "
+                           "Bundesliga clips; about 0.2-0.4 s more per frame); --no-pitch: the line fit/CNN answer alone")
     lens.add_argument("--method", choices=METHODS,
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
     add_render_options(
@@ -106,7 +107,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError("--auto on a folder is not supported: estimate each image with 'glradial estimate', or give the lens")
     if args.auto and args.pixel_aspect is not None and kind != "image":
         raise UsageError(f"--auto --pixel-aspect is for images; {args.input!r} is a {kind}")
-    if args.pitch and kind != "image":
+    if args.pitch is not None and kind != "image":
         raise UsageError(f"--pitch is for images (a video's shots are read without the camera fit); {args.input!r} is a {kind}")
     hook = opentrackio_hook(args, kind)
     if kind == "image" and args.auto:
@@ -142,7 +143,7 @@ def _estimate_image(args: argparse.Namespace, image):
     # frame (--pixel-aspect) is read in square pixels and the estimate carries the aspect to the stored frame
     estimator = Estimator(args.model) if args.model is not None else Estimator()
     estimate = estimator.estimate(to_rgb8(image), method=args.method or "auto", pixel_aspect=args.pixel_aspect or 1.0,
-                                  pitch=bool(args.pitch))
+                                  pitch=args.pitch is not False)
     lens = as_lens(estimate)
     method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
     reason = getattr(estimate, "reason", None)

@@ -50,9 +50,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--method", choices=METHODS, default="auto",
                         help="auto (default: the line fit when it is surer than the CNN), net (the CNN alone) or "
                              "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
-    parser.add_argument("--pitch", action="store_true", help="images, with --method auto: also fit the whole camera to the pitch template and combine its lens "
-                             "with the line fit/CNN answer where the template fits "
-                           "(docs/CAMERA.md: 3.75 -> 3.40 px on the Bundesliga clips; 200-400 ms more per frame)")
+    parser.add_argument("--pitch", action=argparse.BooleanOptionalAction, default=True,
+                        help="images, with --method auto (default on): also fit the whole camera to the pitch template and combine "
+                             "its lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 2.9 px on the "
+                             "Bundesliga clips; about 0.2-0.4 s more per frame); --no-pitch: the line fit/CNN answer alone (videos always)")
     parser.add_argument("--pixel-aspect", type=positive_float, metavar="FY/FX",
                         help="images: the pixel aspect fy / fx of a frame stored squashed (e.g. 16/9 for a 16:9 "
                              "picture stored 640x640; default 1: square pixels); the lens printed applies to the "
