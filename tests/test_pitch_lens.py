@@ -127,8 +127,15 @@ def test_pitch_lens_policy():
     bound = pl.lens_bound_px(sure)  # 0.5 px RMS: a bound between the fallback's 9 px and none
     assert min(bound, 9.0) <= got.uncertainty_px <= max(bound, 9.0)
     assert min(-0.2, -0.1) <= got.k1 <= max(-0.2, -0.1) and min(0.03, 0.01) <= got.k2 <= max(0.03, 0.01)
+    w = camera_trust()["lens_weight"]
+    lens = pl.manifold_lens(cam.lens)
+    assert (got.k1, got.k2) == pytest.approx((w * lens.k1 + (1 - w) * -0.1, w * lens.k2 + (1 - w) * 0.01), abs=1e-12)
+    # a reading doubtful by benefit keeps its weight (its bound is calibrated); a combined bound that reaches
+    # the identity lens makes the answer doubtful by benefit too
     unsure = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="lines", doubtful=True, reason="evidence_disagrees")
-    assert pl.pitch_lens(sure, unsure).k1 == pytest.approx(pl.manifold_lens(cam.lens).k1, abs=1e-6)  # a doubtful reading weighs nothing
+    got = pl.pitch_lens(sure, unsure)
+    assert got.k1 == pytest.approx(w * lens.k1 + (1 - w) * 0.2, abs=1e-12)
+    assert got.uncertainty_px > 1e5 and got.doubtful and got.reason == "weak_geometry" and got.method == "pitch"
     no_pitch = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="net", doubtful=True, reason="not_a_pitch")
     assert pl.pitch_lens(sure, no_pitch) is no_pitch  # the estimation layer saw no pitch: its answer stands
     with pytest.raises(TypeError, match="camera"):
