@@ -127,3 +127,18 @@ def test_doubt_rules_known_answers(rendered_fit):
     too_wide = Camera(low.rotation, low.position, wide_focal, low.size, low.lens)
     assert too_wide.hfov_deg > t["max_hfov_deg"]
     assert cal.judge(replace(fit, camera=too_wide), points).reason == "poor_fit"
+
+
+def test_a_degenerate_icp_step_keeps_the_last_homography():
+    """The first guess's ICP on a homography that sends template points to infinity (a NaN in the
+    linear system) stops refitting instead of raising (numpy's eigh does not converge on NaN): a
+    distorted real frame hit it, and glradial.estimate runs the camera fit by default."""
+    from glradial.camera import first_guess as fg
+
+    pm = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]])
+    normal = np.array([[0.0, 1.0]] * 4)
+    e = np.array([[0.1, 0.2], [0.9, 0.1], [0.2, 0.8], [0.7, 0.9]])
+    weight = np.ones(4)
+    assert fg._line_fit(pm, normal, e, np.array([1.0, np.nan, 1.0, 1.0]), weight) is None
+    h = fg._line_fit(pm, normal, e, np.ones(4), weight)
+    assert h.shape == (3, 3) and np.all(np.isfinite(h)) and np.linalg.norm(h) == pytest.approx(1.0)

@@ -203,13 +203,16 @@ def _distinct_best(h: np.ndarray, score: np.ndarray, size: tuple[int, int], n: i
     return chosen
 
 
-def _line_fit(pm: np.ndarray, normal: np.ndarray, e: np.ndarray, depth: np.ndarray, weight: np.ndarray) -> np.ndarray:
+def _line_fit(pm: np.ndarray, normal: np.ndarray, e: np.ndarray, depth: np.ndarray, weight: np.ndarray) -> np.ndarray | None:
     """The homography (normalised coordinates) minimising the weighted distances, along the image
     ``normal``, of the template points ``pm`` from the pixels ``e``: ``n . (h1 X, h2 X) - (n . e) h3 X``
-    is linear in ``h``, divided by the current ``depth`` (h3 X) it is the distance in pixels."""
+    is linear in ``h``, divided by the current ``depth`` (h3 X) it is the distance in pixels; ``None``
+    where the system is not finite."""
     x = np.column_stack([pm, np.ones(len(pm))])
     c = np.sum(normal * e, axis=1)
     a = np.hstack([normal[:, :1] * x, normal[:, 1:] * x, -c[:, None] * x]) * (np.sqrt(weight) / depth)[:, None]
+    if not np.all(np.isfinite(a)):  # a degenerate step (template points at the horizon): no refit
+        return None
     _, vecs = np.linalg.eigh(a.T @ a)
     return vecs[:, 0].reshape(3, 3)
 
@@ -220,7 +223,8 @@ def _normals(g: np.ndarray, pm: np.ndarray, tm: np.ndarray) -> tuple[np.ndarray,
     q, depth = _project(g[None], pm)
     ahead, _ = _project(g[None], pm + 1e-3 * tm)
     t = ahead[0] - q[0]
-    normal = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
+    with np.errstate(invalid="ignore"):  # NaN where a point projects to infinity; caught by _line_fit
+        normal = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
     return q[0], depth[0], normal
 
 
@@ -267,6 +271,8 @@ def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np
             r = np.sum((q - e) * normal, axis=1) * width / 2
             weight = 1 / (1 + (r / (ICP_CAUCHY * band)) ** 2)
             g_new = _line_fit(pm, normal, e, depth, weight)
+            if g_new is None:
+                break
             g = g_new * np.sign(np.sum(g_new * g))
         q, _, normal = _normals(g, pm, tm)
         r = np.sum((q - e) * normal, axis=1) * width / 2
