@@ -95,7 +95,8 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
         from glradial.camera.calibrate import calibrate
         from glradial.estimation.lens_estimate import LensEstimate
 
-        camera = calibrate(frame)  # what glradial.estimate(method="auto") runs beside the estimation layer's auto
+        # what glradial.estimate(method="auto") runs beside the estimation layer's auto
+        camera = pl.fit_camera(frame, out["auto"]) if hasattr(pl, "fit_camera") else calibrate(frame)
         out["auto+pitch"] = pl.pitch_lens(camera, out["auto"])
         # the camera fit's lens alone where it fits (auto elsewhere): what the bound of pitch_lens_bound.py calibrates
         lens = camera.lens if camera.doubtful or not hasattr(pl, "camera_lens") else pl.camera_lens(camera)

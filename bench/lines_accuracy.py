@@ -119,11 +119,11 @@ def main() -> None:
         for method in errors:
             e = judge(evidence, method.split("+")[0])
             if method == "auto+pitch":  # what glradial.estimate(method="auto") adds to the estimation layer's auto
+                from glradial.camera import pitch_lens as pl
                 from glradial.camera.calibrate import calibrate
-                from glradial.camera.pitch_lens import pitch_lens
 
-                camera = calibrate(frame)
-                auto, e = e, pitch_lens(camera, e)
+                camera = pl.fit_camera(frame, e) if hasattr(pl, "fit_camera") else calibrate(frame)
+                auto, e = e, pl.pitch_lens(camera, e)
                 pitched.append(e.method == "pitch")
                 readings = {"k_auto": [auto.k1, auto.k2], "bound_auto": auto.uncertainty_px, "k_auto_pitch": [e.k1, e.k2],
                             "bound_auto_pitch": e.uncertainty_px, "camera_rms_px": camera.rms_px}

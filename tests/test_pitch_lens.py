@@ -43,8 +43,8 @@ def _error_px(lens, truth: Lens) -> float:
 
 def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     est = glradial.estimate(view.frame)  # the default: the camera fit fed back
-    camera = calibrate(view.frame)
     old = lines_layer.estimate(view.frame)
+    camera = pl.fit_camera(view.frame, old)  # calibrate started from the estimation layer's lens
     assert not camera.doubtful and not old.doubtful
     lens = pl.camera_lens(camera)
     assert _error_px(camera.lens, view.camera.lens) <= LENS_TOLERANCE_PX
@@ -161,7 +161,7 @@ def test_squashed_view_and_the_command_line(view, tmp_path, capsys):
     squashed = cv2.resize(view.frame, (640, 640), interpolation=cv2.INTER_AREA)
     est = glradial.estimate(squashed, pixel_aspect=16 / 9, pitch=True)
     old = lines_layer.estimate(squashed, pixel_aspect=16 / 9)
-    expected = pl.pitch_lens(calibrate(lines_layer.square_pixels(squashed, 16 / 9)), old)
+    expected = pl.pitch_lens(pl.fit_camera(lines_layer.square_pixels(squashed, 16 / 9), old), old)
     assert est == expected and est.method == "pitch" and est.pixel_aspect == pytest.approx(16 / 9)
     path = tmp_path / "view.png"
     write_image(path, view.frame[..., ::-1].copy())
@@ -185,3 +185,17 @@ def test_pitch_is_for_images_on_the_command_line(tmp_path, capsys):
     for flag in ("--pitch", "--no-pitch"):
         assert main(["correct", "in.png", str(tmp_path / "o.png"), "--k1", "-0.1", flag]) == 2
         assert "--pitch needs --auto" in capsys.readouterr().err
+
+
+def test_calibrate_started_from_a_lens_reading():
+    """``calibrate(frame, lens=...)`` (what the feedback runs, started from the estimation layer's
+    reading): on a rendered strong-barrel view (k1 = -0.6 on the manifold) started from a reading 0.05
+    off in k1, the fit frees the lens and lands on the renderer's (issue 34's 1 px); a bad hint is a
+    TypeError naming the argument."""
+    k1 = -0.6
+    truth = Camera.look_at((3.0, -64.0, 18.0), (-25.0, 2.0), 48.0, (1280, 720), Lens(k1, float(manifold_k2(k1))))
+    frame = render_view(truth, seed=5).frame
+    est = calibrate(frame, lens=Lens(k1 + 0.05, float(manifold_k2(k1 + 0.05))))
+    assert not est.doubtful and _error_px(est.lens, truth.lens) <= LENS_TOLERANCE_PX
+    with pytest.raises(TypeError, match="lens"):
+        calibrate(frame, lens=(-0.6, 0.3))

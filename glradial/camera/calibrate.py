@@ -19,6 +19,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..lens.lens import Lens
 from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
 from .estimate import CameraEstimate, camera_trust
@@ -56,7 +57,8 @@ def check_pitch(pitch: object) -> PitchTemplate:
     return pitch
 
 
-def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb: np.ndarray | None = None) -> list[Camera]:
+def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb: np.ndarray | None = None,
+            lens: Lens | None = None) -> list[Camera]:
     if previous is not None:
         cam = previous.camera if isinstance(previous, CameraEstimate) else previous
         if not isinstance(cam, Camera):
@@ -64,14 +66,15 @@ def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb:
         return [cam.with_size(lines.size)]
     if first_guess is None:
         points, labels = pitch.sampled_points(SEARCH_STEP)
-        homographies = [c.homography for c in search(rgb, points, labels)] or first_views(lines.xy, lines.size, pitch)
+        guess = None if lens is None else (lens.k1, lens.k2)
+        homographies = [c.homography for c in search(rgb, points, labels, lens=guess)] or first_views(lines.xy, lines.size, pitch)
     else:
         homographies = list(first_guess)
     cams = []
     for h in homographies:
         cam = decompose_homography(h, lines.size)
         if cam is not None:
-            cams.append(cam)
+            cams.append(cam if lens is None else Camera(cam.rotation, cam.position, cam.focal, cam.size, lens))
     return cams
 
 
@@ -122,7 +125,7 @@ def _score(fit: Fit) -> float:  # on the coarse stage's thinned points and on th
 
 def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
               first_guess: Sequence[np.ndarray] | None = None,
-              previous: Camera | CameraEstimate | None = None) -> CameraEstimate:
+              previous: Camera | CameraEstimate | None = None, lens: Lens | None = None) -> CameraEstimate:
     """The camera of ``frame`` (uint8/uint16/float RGB or gray array, any size) from the markings of
     ``pitch`` (default: 105 x 68 m, :class:`glradial.pitch.PitchTemplate`).
 
@@ -130,19 +133,25 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     best first, instead of glradial's own search (:func:`glradial.camera.first_guess.first_guess`, then
     the dictionary of synthetic views where it finds nothing). ``previous``: the previous frame's camera (a
     video): refined from there with shorter gates, falling back to a fresh search when that fit is
-    doubtful. Never raises for a frame that shows no pitch: the estimate is then doubtful with a reason.
+    doubtful. ``lens``: a reading of the frame's lens (e.g. the estimation layer's,
+    :mod:`glradial.camera.pitch_lens`) that the search undistorts the white lines with and the coarse
+    stage holds (the fine stage frees it), in place of the strong-lens retry; default none (pinhole
+    starts, then the retry where the frame's lens is strong). Never raises for a frame that shows
+    no pitch: the estimate is then doubtful with a reason.
     """
     if not isinstance(frame, np.ndarray):
         raise TypeError(f"frame must be a numpy image array, got {type(frame).__name__}")
     pitch = check_pitch(pitch)
     if first_guess is not None:
         first_guess = _check_first_guess(first_guess)
+    if lens is not None and not isinstance(lens, Lens):
+        raise TypeError(f"lens must be a glradial.Lens or None, got {type(lens).__name__}")
     rgb = to_rgb8(frame)
-    return calibrate_points(rgb, line_points(rgb), pitch, first_guess, previous)
+    return calibrate_points(rgb, line_points(rgb), pitch, first_guess, previous, lens)
 
 
 def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, first_guess: list[np.ndarray] | None,
-                     previous: Camera | CameraEstimate | None) -> CameraEstimate:
+                     previous: Camera | CameraEstimate | None, lens: Lens | None = None) -> CameraEstimate:
     """:func:`calibrate` of the uint8 RGB frame ``rgb`` whose white-line points ``lines``
     (:func:`glradial.camera.white_lines.line_points`) are already extracted (arguments checked)."""
     if len(lines.xy) < camera_trust()["min_points"]:
@@ -153,8 +162,8 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
                                gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
         if not tracked.doubtful:
             return tracked
-    judged = judge(_search_fit(_starts(lines, pitch, first_guess, None, rgb), lines, pitch), len(lines.xy))
-    if judged.doubtful and first_guess is None:
+    judged = judge(_search_fit(_starts(lines, pitch, first_guess, None, rgb, lens), lines, pitch), len(lines.xy))
+    if judged.doubtful and first_guess is None and lens is None:  # a given lens reading already did what the retry does
         judged = _strong_lens_retry(rgb, lines, pitch, judged)
     return judged
 

@@ -104,6 +104,14 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
                         chains=len(camera.markings), doubtful=not sure, reason="ok" if sure else "weak_geometry")
 
 
+def fit_camera(rgb: np.ndarray, reading: LensEstimate) -> CameraEstimate:
+    """The camera fit of a square-pixel frame ``rgb`` that :func:`pitch_lens` combines with ``reading``
+    (the estimation layer's answer for it): :func:`glradial.camera.calibrate.calibrate` started from
+    that reading's lens (the search undistorts the white lines with it and the coarse stage holds it;
+    a strong barrel no longer hides the straight lines the search looks for)."""
+    return calibrate(rgb, lens=Lens(reading.k1, reading.k2))
+
+
 def _may_be_a_pitch(reading: LensEstimate) -> bool:
     """False where the estimation layer found no pitch evidence at all (a blank or noise frame, no
     grass: :data:`glradial.estimation.trust.NO_EVIDENCE_REASONS`): the camera fit is not run there."""
@@ -121,7 +129,7 @@ def _with_pitch(frames: list, found: list[LensEstimate]) -> list[LensEstimate]:
         rgb = to_rgb8(frame, clip=False)
         if est.pixel_aspect != 1.0:
             rgb = square_pixels(rgb, est.pixel_aspect)
-        out.append(pitch_lens(calibrate(rgb), est))
+        out.append(pitch_lens(fit_camera(rgb, est), est))
     return out
 
 
