@@ -10,7 +10,7 @@ the answer is a :class:`glradial.LensEstimate` with ``method="pitch"``:
 ``k = w k_p + (1 - w) k_a`` (width-normalised ``(k1, k2)``), ``k_p`` the camera's lens
 (:func:`camera_lens`, bound ``b_p``: :func:`lens_bound_px`), ``k_a`` the estimation layer's reading
 (bound ``b_a``, doubtful or not: its doubt is by benefit and its bound stays calibrated), stating
-``w b_p + (1 - w) b_a``, ``w`` = ``lens_weight`` (0.4, ``glradial/data/camera_trust.json``). Both
+``w b_p + (1 - w) b_a``, ``w`` = ``lens_weight`` (``glradial/data/camera_trust.json``). Both
 bounds are 90 % bounds on the maximum displacement error over the 16:9 frame (px of a 1920-wide frame,
 :func:`glradial.lens.metrics.max_displacement_px`; not the camera's bound on the markings'
 reprojection, another quantity). The radial map is linear in ``(k1, k2)`` and that error is a norm,
@@ -22,18 +22,20 @@ fit used. When the camera is doubtful, or the estimation layer found no pitch ev
 noise, no grass: the camera fit is then not run), the estimation layer's answer is returned
 unchanged; ``pitch=False`` gives it always, bit for bit. ``"net"`` and ``"lines"`` never run the camera fit.
 
+**The camera fit starts from the estimation layer's reading** (:func:`fit_camera`: ``calibrate(frame,
+lens=...)``): its search undistorts the white lines with that lens, so a barrel lens no longer hides the
+straight lines it looks for (docs/CAMERA.md has the figures).
+
 **The camera's lens** is the Lopez-Antequera manifold lens nearest the fit's ``(k1, k2)`` over the
 radii to the 16:9 corner (:func:`manifold_lens`): the markings a broadcast frame shows rarely reach its
-corners, so the fit's ``k2`` trades against ``k1`` along a ridge (measured on the Bundesliga frames:
-``k2`` from 0.02 to 0.43 on frames of one camera); the manifold fixes it. Its bound is split-conformal:
+corners, so the fit's ``k2`` trades against ``k1`` along a ridge; the manifold fixes it. Its bound is split-conformal:
 ``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), both in
 ``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_bound.py``).
 
 **Why a fixed weight and not the bounds' inverse variance**: per-frame weights make the answer jump
 between two readings that disagree by a frame-wide offset (the line fit reads a larger ``k2`` on the
-Bundesliga frames), which costs more than the bounds' per-frame information gains: measured
-self-consistently (docs/CAMERA.md, "The lens fed back"), inverse-variance weights leave the Bundesliga
-median at 3.4 px, a fixed weight brings it under 3. ``lens_weight`` minimises the self-consistent
+Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
+self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight`` minimises the self-consistent
 median of Bundesliga clip 2e57b9 (a 0.1 grid); clip 42ba34 is held out.
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and

@@ -12,8 +12,9 @@ from .engine_options import add_opentrackio_options, check_opentrackio_output, o
 
 DESCRIPTION = """\
 Estimate the radial lens of each INPUT. How well (maximum displacement error, px of a 1920-wide
-frame): --method auto (default; the pitch-line fit where it is surer than the CNN; with --pitch,
-combined with the lens of the whole-camera fit to the pitch template where that fits, docs/CAMERA.md) 1.1 px median on
+frame): --method auto (default; the pitch-line fit where it is surer than the CNN; on images combined
+with the lens of the whole-camera fit to the pitch template where that fits, --no-pitch to skip it,
+docs/CAMERA.md) 1.1 px median on
 held-out stadium crops, 3.7-4.5 px median on real broadcast frames with known lenses (self-consistent);
 where no pitch line is found it falls back on the CNN, doubtful (33 px median on crops of a real
 panorama); --method net (the bundled CNN alone, ONNX on onnxruntime) 4.5 px on stadium crops;
@@ -29,7 +30,7 @@ evidence_disagrees, weak_geometry; docs/LINES.md), or with --json one JSON objec
 "k1", "k2", "pixel_aspect", "method", "uncertainty_px", "chains", "doubtful", "reason"}. Videos (anything FFmpeg reads that is not a still image; image sequences as
 frame_%04d.png): shot cuts are detected and one lens is fitted per shot from the evidence of every
 --every-th frame, as 'glradial correct --auto' does (without the camera fit, which would cost
-200-400 ms a frame); prints one line per shot (first and last frame,
+0.2-0.3 s a frame); prints one line per shot (first and last frame,
 median k1, k2, the uncertainty in px at 1920 wide, the per-frame methods, and for a doubtful shot
 DOUBTFUL(reason) and not-applied), or per frame with --per-frame, or one JSON document per video
 with --json."""
@@ -52,8 +53,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                              "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
     parser.add_argument("--pitch", action=argparse.BooleanOptionalAction, default=True,
                         help="images, with --method auto (default on): also fit the whole camera to the pitch template and combine "
-                             "its lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 2.9 px on the "
-                             "Bundesliga clips; about 0.2-0.4 s more per frame); --no-pitch: the line fit/CNN answer alone (videos always)")
+                             "its lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 3.0 px on the "
+                             "Bundesliga clips; about 0.2-0.3 s more per frame); --no-pitch: the line fit/CNN answer alone (videos always)")
     parser.add_argument("--pixel-aspect", type=positive_float, metavar="FY/FX",
                         help="images: the pixel aspect fy / fx of a frame stored squashed (e.g. 16/9 for a 16:9 "
                              "picture stored 640x640; default 1: square pixels); the lens printed applies to the "
