@@ -58,7 +58,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
     lens.add_argument("--pitch", action=argparse.BooleanOptionalAction, default=None,
                       help="with --auto on images (the default there): also fit the whole camera to the pitch template and combine its "
-                           "lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 2.9 px on the "
+                           "lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 3.0 px on the "
                            "Bundesliga clips; about 0.2-0.3 s more per frame); --no-pitch: the line fit/CNN answer alone")
     lens.add_argument("--method", choices=METHODS,
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")

@@ -53,7 +53,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                              "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
     parser.add_argument("--pitch", action=argparse.BooleanOptionalAction, default=True,
                         help="images, with --method auto (default on): also fit the whole camera to the pitch template and combine "
-                             "its lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 2.9 px on the "
+                             "its lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 3.0 px on the "
                              "Bundesliga clips; about 0.2-0.3 s more per frame); --no-pitch: the line fit/CNN answer alone (videos always)")
     parser.add_argument("--pixel-aspect", type=positive_float, metavar="FY/FX",
                         help="images: the pixel aspect fy / fx of a frame stored squashed (e.g. 16/9 for a 16:9 "
