@@ -51,8 +51,7 @@ def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     assert _error_px(lens, view.camera.lens) <= LENS_TOLERANCE_PX  # the renderer's lens is on the manifold
     assert isinstance(est, LensEstimate) and est.method == "pitch" and not est.doubtful and est.reason == "ok"
     assert est.chains == len(camera.markings)
-    bound = pl.lens_bound_px(camera)
-    w = max(camera_trust()["lens_weight"], bound ** -2 / (bound ** -2 + old.uncertainty_px ** -2))
+    bound, w = pl.lens_bound_px(camera), camera_trust()["lens_weight"]
     assert 0 < w < 1
     assert est.k1 == pytest.approx(w * lens.k1 + (1 - w) * old.k1, abs=1e-12)
     assert est.k2 == pytest.approx(w * lens.k2 + (1 - w) * old.k2, abs=1e-12)
@@ -128,23 +127,15 @@ def test_pitch_lens_policy():
     bound = pl.lens_bound_px(sure)  # 0.5 px RMS: a bound between the fallback's 9 px and none
     assert min(bound, 9.0) <= got.uncertainty_px <= max(bound, 9.0)
     assert min(-0.2, -0.1) <= got.k1 <= max(-0.2, -0.1) and min(0.03, 0.01) <= got.k2 <= max(0.03, 0.01)
-    w = max(camera_trust()["lens_weight"], bound ** -2 / (bound ** -2 + 9.0 ** -2))
+    w = camera_trust()["lens_weight"]
     lens = pl.manifold_lens(cam.lens)
     assert (got.k1, got.k2) == pytest.approx((w * lens.k1 + (1 - w) * -0.1, w * lens.k2 + (1 - w) * 0.01), abs=1e-12)
-    # a reading twice as sure (inverse-variance share 0.2): the camera still weighs lens_weight
-    alike = LensEstimate(-0.1, 0.01, uncertainty_px=bound / 2, method="lines", chains=3)
-    w = camera_trust()["lens_weight"]
-    assert pl.pitch_lens(sure, alike).k1 == pytest.approx(w * lens.k1 + (1 - w) * -0.1, abs=1e-12)
-    # a reading whose bound is far wider (doubtful by benefit, its bound calibrated) weighs next to nothing
+    # a reading doubtful by benefit keeps its weight (its bound is calibrated); a combined bound that reaches
+    # the identity lens makes the answer doubtful by benefit too
     unsure = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="lines", doubtful=True, reason="evidence_disagrees")
     got = pl.pitch_lens(sure, unsure)
-    assert got.k1 == pytest.approx(lens.k1, abs=1e-6) and got.uncertainty_px == pytest.approx(bound, rel=1e-4)
-    assert not got.doubtful  # its bound does not reach the identity lens: 0.2 barrel moves the corners far more
-    # a combined bound that reaches the identity lens makes the answer doubtful by benefit, as the reading's
-    faint = LensEstimate(-0.005, 0.0, uncertainty_px=40.0, method="lines", chains=2, doubtful=True, reason="weak_geometry")
-    flat = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.01, 0.0))
-    got = pl.pitch_lens(CameraEstimate(flat, 20.0, False, "ok", ("halfway",), 2.0, 300, 0.95, 0.01), faint)
-    assert got.doubtful and got.reason == "weak_geometry" and got.method == "pitch"
+    assert got.k1 == pytest.approx(w * lens.k1 + (1 - w) * 0.2, abs=1e-12)
+    assert got.uncertainty_px > 1e5 and got.doubtful and got.reason == "weak_geometry" and got.method == "pitch"
     no_pitch = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="net", doubtful=True, reason="not_a_pitch")
     assert pl.pitch_lens(sure, no_pitch) is no_pitch  # the estimation layer saw no pitch: its answer stands
     with pytest.raises(TypeError, match="camera"):

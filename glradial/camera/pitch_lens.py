@@ -10,8 +10,7 @@ the answer is a :class:`glradial.LensEstimate` with ``method="pitch"``:
 ``k = w k_p + (1 - w) k_a`` (width-normalised ``(k1, k2)``), ``k_p`` the camera's lens
 (:func:`camera_lens`, bound ``b_p``: :func:`lens_bound_px`), ``k_a`` the estimation layer's reading
 (bound ``b_a``, doubtful or not: its doubt is by benefit and its bound stays calibrated), stating
-``w b_p + (1 - w) b_a``, ``w = max(lens_weight, b_p^-2 / (b_p^-2 + b_a^-2))`` (``lens_weight`` in
-``glradial/data/camera_trust.json``): a fixed share, more where the reading's bound is much the wider. Both
+``w b_p + (1 - w) b_a``, ``w`` = ``lens_weight`` (``glradial/data/camera_trust.json``). Both
 bounds are 90 % bounds on the maximum displacement error over the 16:9 frame (px of a 1920-wide frame,
 :func:`glradial.lens.metrics.max_displacement_px`; not the camera's bound on the markings'
 reprojection, another quantity). The radial map is linear in ``(k1, k2)`` and that error is a norm,
@@ -33,12 +32,11 @@ corners, so the fit's ``k2`` trades against ``k1`` along a ridge; the manifold f
 ``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), both in
 ``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_bound.py``).
 
-**Why a floor on the weight and not the bounds' inverse variance alone**: per-frame weights make the
-answer jump between two readings that disagree by a frame-wide offset (the line fit reads a larger
-``k2`` on the Bundesliga frames), which costs more than the bounds' per-frame information gains where
-both bounds are alike; the floor keeps the mix steady there (measured self-consistently,
-docs/CAMERA.md, "The lens fed back"). ``lens_weight`` minimises the self-consistent median of
-Bundesliga clip 2e57b9 (a 0.1 grid); clip 42ba34 is held out.
+**Why a fixed weight and not the bounds' inverse variance**: per-frame weights make the answer jump
+between two readings that disagree by a frame-wide offset (the line fit reads a larger ``k2`` on the
+Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
+self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight`` minimises the self-consistent
+median of Bundesliga clip 2e57b9 (a 0.1 grid); clip 42ba34 is held out.
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.estimator.Estimator` stays
@@ -91,8 +89,7 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
     """The camera fit's lens (:func:`camera_lens`) combined with ``fallback`` (the estimation layer's
     reading of the same frame), as a :class:`LensEstimate` with ``method="pitch"`` and ``fallback``'s pixel
     aspect, when ``camera`` is not doubtful (see the module docstring); else ``fallback`` unchanged.
-    The camera weighs ``lens_weight`` (``camera_trust.json``), or its inverse-variance weight from the two
-    bounds where that is larger; the answer is doubtful
+    The camera weighs ``lens_weight`` (``camera_trust.json``); the answer is doubtful
     (``"weak_geometry"``) where its stated bound reaches the identity lens, as the estimation layer's."""
     if not isinstance(camera, CameraEstimate):
         raise TypeError(f"camera must be a glradial.CameraEstimate, got {type(camera).__name__}")
@@ -101,8 +98,7 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
     if camera.doubtful or camera.camera is None or not _may_be_a_pitch(fallback):
         return fallback
     lens, bound = camera_lens(camera), lens_bound_px(camera)
-    # at least lens_weight; the inverse-variance weight where the reading's bound is much the wider
-    w = max(float(camera_trust()["lens_weight"]), bound ** -2 / (bound ** -2 + fallback.uncertainty_px ** -2))
+    w = float(camera_trust()["lens_weight"])
     k = (w * lens.k1 + (1 - w) * fallback.k1, w * lens.k2 + (1 - w) * fallback.k2)
     stated = w * bound + (1 - w) * fallback.uncertainty_px
     sure = stated < shift_px(k)  # doubt by benefit, as the estimation layer's: the identity lens within the bound
