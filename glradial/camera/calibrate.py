@@ -70,9 +70,15 @@ def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb:
         homographies = [c.homography for c in search(rgb, points, labels, lens=guess)] or first_views(lines.xy, lines.size, pitch)
     else:
         homographies = list(first_guess)
+    return _cameras(homographies, lines.size, lens)
+
+
+def _cameras(homographies: list[np.ndarray], size: tuple[int, int], lens: Lens | None) -> list[Camera]:
+    """The cameras of plane ``homographies`` (:func:`decompose_homography`; those that decompose), each
+    carrying ``lens`` (``None``: the decomposition's own, pinhole)."""
     cams = []
     for h in homographies:
-        cam = decompose_homography(h, lines.size)
+        cam = decompose_homography(h, size)
         if cam is not None:
             cams.append(cam if lens is None else Camera(cam.rotation, cam.position, cam.focal, cam.size, lens))
     return cams
@@ -203,12 +209,7 @@ def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate,
     if not homographies:
         flat = lens.undistort_points(lines.xy, lines.size)
         homographies = first_views(flat[np.isfinite(flat).all(1)], lines.size, pitch)
-    starts = []
-    for h in homographies:
-        cam = decompose_homography(h, lines.size)
-        if cam is not None:
-            starts.append(Camera(cam.rotation, cam.position, cam.focal, cam.size, lens))
-    retried = judge(_search_fit(starts, lines, pitch), len(lines.xy))
+    retried = judge(_search_fit(_cameras(homographies, lines.size, lens), lines, pitch), len(lines.xy))
     if not retried.doubtful or (retried.camera is not None and retried.inliers > judged.inliers):
         return retried
     return judged
