@@ -65,13 +65,12 @@ def _line(path: str, index: int, est, more: dict) -> str:
 
 
 def _check(args: argparse.Namespace) -> str:
-    from ..media.atomic import check_output_folder
-    from ..media.image_io import check_overwrite
+    from ..media.atomic import check_output_folder, check_overwrite
 
     kind = media_kind(args.input)
     for out in (args.overlay, args.topview):
         if out:
-            check_overwrite(check_output_folder(__import__("pathlib").Path(out)), args.overwrite)
+            check_overwrite(check_output_folder(out), args.overwrite)
     if args.focal_mm is not None:
         raise UsageError("calibrate measures the focal length: --focal-mm is not used")
     if opentrackio_wanted(args):

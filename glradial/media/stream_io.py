@@ -32,7 +32,7 @@ from typing import Iterator
 
 import av
 
-from .video_io import EncodeOptions, VideoInfo, VideoWriter, frame_tags, stream_info
+from .video_io import EncodeOptions, VideoInfo, VideoWriter, ffmpeg_error, frame_tags, stream_info
 
 __all__ = ["LiveSource", "StreamWriter", "open_live_output", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
 
@@ -50,11 +50,6 @@ PROBE_BYTES = 500_000
 #: FFmpeg's input FIFO for a UDP source (packets of 188 bytes): about 2 s of a 20 Mb/s stream, so
 #: that a short stall of the reader loses nothing
 UDP_FIFO_PACKETS = 50_000
-
-
-def _said(source: str, err: BaseException) -> str:
-    """``'SOURCE': what FFmpeg said`` on one line (its strerror where it has one)."""
-    return f"{source!r}: {' '.join(str(getattr(err, 'strerror', None) or err).split())}"
 
 
 def source_kind(source: str) -> str:
@@ -108,7 +103,7 @@ class LiveSource:
         except av.ExitError:
             raise ValueError(f"live input {source!r}: no data within {self.idle_timeout:g} s") from None
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"cannot read live input {_said(source, err)} (not a stream FFmpeg knows, "
+            raise ValueError(f"cannot read live input {ffmpeg_error(source, err)} (not a stream FFmpeg knows, "
                              "or no video in it)") from None
         if not self._container.streams.video:
             self._container.close()
@@ -138,7 +133,7 @@ class LiveSource:
             self.ended = "idle" if isinstance(end, av.ExitError) else "eof"
             return self._flush()
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"live input {_said(self.source, err)} (after {self.frames_read} decoded frames)") from None
+            raise ValueError(f"live input {ffmpeg_error(self.source, err)} (after {self.frames_read} decoded frames)") from None
 
     def _flush(self) -> list[av.VideoFrame]:
         """The frames the decoder still holds (its threads keep a few) once no packet will come,

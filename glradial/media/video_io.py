@@ -108,7 +108,8 @@ def check_video_overwrite(path: str | os.PathLike, overwrite: bool) -> None:
         raise FileExistsError(f"output files {str(path)!r} already exist (overwrite them with -y/--overwrite)")
 
 
-def _error(path: object, err: BaseException) -> str:
+def ffmpeg_error(path: object, err: BaseException) -> str:
+    """``'PATH': what FFmpeg said`` on one line (its strerror where it has one), for error messages."""
     text = " ".join(str(getattr(err, "strerror", None) or err).split())
     return f"{str(path)!r}: {text}"
 
@@ -326,7 +327,7 @@ class VideoReader:
         try:
             self._container = av.open(str(self.path), "r", options=options)
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"cannot read video {_error(self.path, err)}") from None
+            raise ValueError(f"cannot read video {ffmpeg_error(self.path, err)}") from None
         if not self._container.streams.video:
             self._container.close()
             raise ValueError(f"{str(self.path)!r} holds no video stream")
@@ -401,7 +402,7 @@ class VideoReader:
                                      frame if self.keep_decoded or self.planar else None)
         except av.FFmpegError as err:
             raise ValueError(
-                f"input {_error(self.path, err)} (truncated or corrupt after {self.frames_read} decoded frames)"
+                f"input {ffmpeg_error(self.path, err)} (truncated or corrupt after {self.frames_read} decoded frames)"
             ) from None
         if self.frames_read == 0:
             raise ValueError(f"cannot read video {str(self.path)!r}: no frame could be decoded")
@@ -696,7 +697,7 @@ class VideoWriter:
         try:
             self._container = av.open(tmp, "w", format="image2" if self.sequence else self.container_format)
         except (av.FFmpegError, ValueError) as err:
-            raise ValueError(f"FFmpeg cannot write {_error(self.path, err)} (unknown or unsupported output format)") from None
+            raise ValueError(f"FFmpeg cannot write {ffmpeg_error(self.path, err)} (unknown or unsupported output format)") from None
         codec = _encoder(self._codec_choice())
         stream = self._add_video_stream(codec)
         self._stream = stream
@@ -787,7 +788,7 @@ class VideoWriter:
                 self._container.start_encoding()
         except av.FFmpegError as err:
             preset = f", preset {self.options.preset!r}" if self.options.preset is not None else ""
-            raise ValueError(f"cannot encode {_error(self.path, err)} (codec {codec.name}, pix_fmt {self._stream.pix_fmt}{preset})") from None
+            raise ValueError(f"cannot encode {ffmpeg_error(self.path, err)} (codec {codec.name}, pix_fmt {self._stream.pix_fmt}{preset})") from None
 
     @property
     def codec(self) -> str:
@@ -861,7 +862,7 @@ class VideoWriter:
         try:
             self._container.mux(self._stream.encode(frame))
         except av.FFmpegError as err:
-            raise OSError(f"cannot write {_error(self.path, err)}") from None
+            raise OSError(f"cannot write {ffmpeg_error(self.path, err)}") from None
         self.frames_written += 1
 
     def mux(self, item: CopiedPacket) -> None:
@@ -874,7 +875,7 @@ class VideoWriter:
         try:
             self._container.mux(packet)
         except av.FFmpegError as err:
-            raise OSError(f"cannot write {_error(self.path, err)}") from None
+            raise OSError(f"cannot write {ffmpeg_error(self.path, err)}") from None
 
     def close(self) -> Path:
         """Flush the encoder, finish the file and move it into place; returns the target path."""
@@ -888,7 +889,7 @@ class VideoWriter:
                 self._copies = {}
         except av.FFmpegError as err:
             self.abort()
-            raise OSError(f"cannot write {_error(self.path, err)}") from None
+            raise OSError(f"cannot write {ffmpeg_error(self.path, err)}") from None
         except BaseException:
             self.abort()
             raise

@@ -53,9 +53,9 @@ from ..media.video_io import (
 )
 from .lens_track import LensTrack
 from .pipelined import Pipelined
-from .shot_track import ESTIMATE_WIDTH, EVERY, track_shots
+from .shot_track import EVERY, track_shots
 
-__all__ = ["LensTrack", "track_video", "correct_video", "correction_space", "default_estimator", "Pipelined", "ESTIMATE_WIDTH"]
+__all__ = ["LensTrack", "track_video", "correct_video", "correction_space", "default_estimator"]
 
 #: what the pipeline notes without failing (a header's frame count the stream does not hold);
 #: ``glradial`` shows its warnings on stderr
