@@ -149,8 +149,7 @@ def random_camera(rng: np.random.Generator, size: tuple[int, int] = (1280, 720),
     hfov = math.degrees(2 * math.atan(math.exp(rng.uniform(math.log(math.tan(math.radians(8))),
                                                               math.log(math.tan(math.radians(32)))))))
     k1 = rng.uniform(-0.35, 0.05) if lens else 0.0
-    k2 = 0.019 * k1 + 0.805 * k1 * k1
-    return Camera.look_at(position, target, hfov, size, Lens(k1, k2), roll=rng.uniform(-1, 1))
+    return Camera.look_at(position, target, hfov, size, Lens(k1, float(manifold_k2(k1))), roll=rng.uniform(-1, 1))
 
 
 #: Horizontal fields of view (degrees) of :func:`zoom_cameras`' lens at its wide and tele ends.

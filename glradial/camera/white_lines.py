@@ -86,42 +86,40 @@ HULL_MARGIN = 3.0
 @dataclass(frozen=True)
 class LinePoints:
     """White-line points of one frame, what the camera is fitted to: ``xy`` (N x 2 pixels of the ``size = (W, H)`` frame), ``angle``
-    (N, line direction in radians, [0, pi)), ``green`` (share of pitch-green pixels)."""
+    (N, line direction in radians, [0, pi))."""
 
     xy: np.ndarray
     angle: np.ndarray
     size: tuple[int, int]
-    green: float
 
     def thinned(self, count: int) -> "LinePoints":
         """At most ``count`` of the points, evenly spread over the list (a bounded fitting cost)."""
         if len(self.xy) <= count:
             return self
         keep = np.linspace(0, len(self.xy) - 1, count).round().astype(np.intp)
-        return LinePoints(self.xy[keep], self.angle[keep], self.size, self.green)
+        return LinePoints(self.xy[keep], self.angle[keep], self.size)
 
 
-def pitch_region(frame: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, float]:
+def pitch_region(frame: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """uint8 mask (detection size) of the pitch: the largest connected region of pitch green, closed
     over its lines and players (:data:`GRASS_CLOSE` px) and grown by :data:`GRASS_GROW` px so the
-    lines at its edge count; and the green share of the frame. All ones when the frame is not green
-    enough to tell."""
+    lines at its edge count. All ones when the frame is not green enough to tell (under
+    :data:`GREEN_FRAME_SHARE` of it pitch green)."""
     if frame.ndim != 3:
-        return np.ones(shape, np.uint8), 0.0
+        return np.ones(shape, np.uint8)
     small = cv2.resize(frame, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
     band, own = pitch_green(small, 2 * HUE_HALF_WINDOW + 1)
-    share = float(np.count_nonzero(band)) / band.size
-    if share < GREEN_FRAME_SHARE:
-        return np.ones(shape, np.uint8), share
+    if float(np.count_nonzero(band)) / band.size < GREEN_FRAME_SHARE:
+        return np.ones(shape, np.uint8)
     green = own.astype(np.uint8)  # this pitch's own green (stands and boards are other hues)
     green = cv2.morphologyEx(green, cv2.MORPH_OPEN, np.ones((GRASS_OPEN, GRASS_OPEN), np.uint8))
     closed = cv2.morphologyEx(green, cv2.MORPH_CLOSE, np.ones((GRASS_CLOSE, GRASS_CLOSE), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
     if count < 2:
-        return np.ones(shape, np.uint8), share
+        return np.ones(shape, np.uint8)
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     pitch = (labels == largest).astype(np.uint8)
-    return cv2.dilate(pitch, np.ones((GRASS_GROW, GRASS_GROW), np.uint8)), share
+    return cv2.dilate(pitch, np.ones((GRASS_GROW, GRASS_GROW), np.uint8))
 
 
 def line_points(frame: np.ndarray) -> LinePoints:
@@ -135,7 +133,7 @@ def line_points(frame: np.ndarray) -> LinePoints:
     gray = gray_copy(frame if frame.ndim == 2 else frame[..., :3], DETECT_WIDTH)
     height, width = gray.shape
     x0, y0, x1, y1 = content_box(gray)
-    grass, share = pitch_region(frame[..., :3] if frame.ndim == 3 else frame, (height, width))
+    grass = pitch_region(frame[..., :3] if frame.ndim == 3 else frame, (height, width))
     valid = np.zeros((height, width), np.uint8)
     m = BORDER_MARGIN
     valid[y0 + m: y1 - m, x0 + m: x1 - m] = 1
@@ -146,7 +144,7 @@ def line_points(frame: np.ndarray) -> LinePoints:
     x, y, angle = x[white], y[white], angle[white]
     s = width_full / width
     xy = np.stack([(x + 0.5) * s - 0.5, (y + 0.5) * s - 0.5], axis=1)
-    return LinePoints(xy, angle, (width_full, height_full), share)
+    return LinePoints(xy, angle, (width_full, height_full))
 
 
 @dataclass(frozen=True)
