@@ -69,10 +69,9 @@ def _blur_ms() -> float:
 
 
 def _frame(path: Path) -> np.ndarray:
-    image = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if image is None:
-        raise SystemExit(f"cannot read {path}")
-    return np.ascontiguousarray(cv2.resize(image, (1280, 720), interpolation=cv2.INTER_CUBIC)[:, :, ::-1])
+    from glradial.evaluation.real_eval import read_broadcast
+
+    return read_broadcast(path)
 
 
 def _lens_of(frame: np.ndarray, mode: str):

@@ -44,15 +44,13 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _build(folder: Path, cache: Path) -> list[dict]:
-    import cv2
-
-    from glradial.evaluation.real_eval import Evaluator, extended_lenses, paper_lenses
+    from glradial.evaluation.real_eval import Evaluator, extended_lenses, paper_lenses, read_broadcast
     from glradial.remapping.remap import distort
 
     evaluator = Evaluator(threads=1)
     out = []
     for i, path in enumerate(sorted(folder.glob("*.jpg"))):
-        image = cv2.resize(cv2.imread(str(path)), (1280, 720), interpolation=cv2.INTER_CUBIC)[:, :, ::-1].copy()
+        image = read_broadcast(path)
         lenses = paper_lenses(2, 7000 + i) + extended_lenses(2, 8000 + i)
         items = [(None, image)] + [((k1, k2), distort(image, k1, k2, fit="crop", backend="cpu")) for k1, k2 in lenses]
         for truth, frame in items:

@@ -88,10 +88,9 @@ def main(argv: list[str] | None = None) -> int:
 
 def _image(folder: Path, name: str) -> np.ndarray:
     """The frame ``name`` resized to 1280 x 720 (bicubic), RGB."""
-    import cv2
+    from glradial.evaluation.real_eval import read_broadcast
 
-    img = cv2.imread(str(folder / f"{name}.jpg"))[:, :, ::-1]
-    return np.ascontiguousarray(cv2.resize(img, (1280, 720), interpolation=cv2.INTER_CUBIC))
+    return read_broadcast(folder / f"{name}.jpg")
 
 
 def _row(name: str, est, labels: dict, seconds: float) -> dict:

@@ -44,9 +44,8 @@ def homography_rms(k: tuple[float, float] | None, points: np.ndarray, world: np.
 
 def readings(folder: Path) -> list[dict]:
     """Per labelled frame with at least 6 points: the lens readings and their homography RMS."""
-    import cv2
-
     import glradial
+    from glradial.evaluation.real_eval import read_broadcast
 
     labels = json.loads((folder / "keypoints" / "keypoints.json").read_text())
     pitch = np.array([entry["pitch_m"][:2] for entry in labels["keypoints"]], float)
@@ -57,7 +56,7 @@ def readings(folder: Path) -> list[dict]:
         if seen.sum() < 6:
             continue
         points, world = np.array([m for m in marks if m is not None], float), pitch[seen]
-        image = cv2.resize(cv2.imread(str(path)), (1280, 720), interpolation=cv2.INTER_CUBIC)[:, :, ::-1].copy()
+        image = read_broadcast(path)
         camera = glradial.calibrate(image)
         row = {"frame": path.stem, "clip": path.stem.split("_")[0], "none": homography_rms(None, points, world)}
         for name, lens in (("layer", glradial.estimate(image, pitch=False)), ("default", glradial.estimate(image)),
