@@ -21,9 +21,8 @@ import torch
 import torch.nn.functional as F
 
 from .augment import AugmentConfig, motion_kernel
+from .model import LUMA_WEIGHTS
 
-#: ITU-R BT.601 luma weights (OpenCV's RGB -> grey).
-GREY = (0.299, 0.587, 0.114)
 #: The JPEG standard's example quantisation tables (ITU-T T.81 Annex K), row-major 8 × 8.
 JPEG_LUMA = (16, 11, 10, 16, 24, 40, 51, 61, 12, 12, 14, 19, 26, 58, 60, 55, 14, 13, 16, 24, 40, 57, 69, 56,
              14, 17, 22, 29, 51, 87, 80, 62, 18, 22, 37, 56, 68, 109, 103, 77, 24, 35, 55, 64, 81, 104, 113, 92,
@@ -49,13 +48,10 @@ class DeviceAugment:
         self.blur_half = _half_width(config.blur_sigma[1])
         self.size = self.motion_bank.shape[-1]
         self.dct = _dct_matrix().to(self.device)
+        self.grey = torch.tensor(LUMA_WEIGHTS, device=self.device).view(1, 3, 1, 1)  # OpenCV's RGB -> grey
 
     def _uniform(self, count: int, low: float, high: float) -> torch.Tensor:
         return torch.rand(count, generator=self.generator, device=self.device) * (high - low) + low
-
-    def _chosen(self, count: int, p: float) -> torch.Tensor:
-        """Indices of the images an operation of probability ``p`` applies to."""
-        return torch.nonzero(torch.rand(count, generator=self.generator, device=self.device) < p).flatten()
 
     def augment(self, images: torch.Tensor, paired: bool = False) -> torch.Tensor:
         """A new augmented batch (input untouched); ``paired``: even ``N``, pairs share their draws."""
@@ -93,7 +89,7 @@ class DeviceAugment:
         """The operations of :meth:`draws`' draws ``d`` on ``x``, in :func:`net.augment.augment_batch`'s order."""
         gains = (d["gain"].unsqueeze(1) * d["cgain"]).view(-1, 3, 1, 1)
         x = _round((x / 255.0).pow(d["gamma"].view(-1, 1, 1, 1)) * gains * 255.0)
-        grey = _round((x * torch.tensor(GREY, device=x.device).view(1, 3, 1, 1)).sum(dim=1, keepdim=True))
+        grey = _round((x * self.grey).sum(dim=1, keepdim=True))
         sat = d["sat"].view(-1, 1, 1, 1)
         x = _round(x * sat + grey * (1.0 - sat))
         # every operation runs on the whole batch and is kept where drawn: no wait for the device
@@ -172,12 +168,19 @@ def _dct_matrix() -> torch.Tensor:
     return m.float()
 
 
+@lru_cache(maxsize=None)
+def _standard_tables(device: torch.device) -> torch.Tensor:
+    """The standard's luma and chroma tables as a ``1 × 2 × 64`` float tensor on ``device``, copied
+    there once (a copy per batch would make the host wait for the device)."""
+    return torch.tensor([JPEG_LUMA, JPEG_CHROMA], dtype=torch.float32, device=device).view(1, 2, 64)
+
+
 def quality_tables(quality: torch.Tensor) -> torch.Tensor:
     """``n × 2 × 8 × 8`` luma and chroma quantisation tables of JPEG qualities 1..100, scaled as the
     IJG library (libjpeg, OpenCV's encoder) scales the standard's tables."""
     q = quality.clamp(1, 100).float().view(-1, 1)
     scale = torch.where(q < 50, 5000.0 / q, 200.0 - 2.0 * q)
-    base = torch.tensor([JPEG_LUMA, JPEG_CHROMA], dtype=torch.float32, device=quality.device).view(1, 2, 64)
+    base = _standard_tables(quality.device)
     return ((base * scale.unsqueeze(-1) + 50.0) / 100.0).floor().clamp(1.0, 255.0).view(-1, 2, 8, 8)
 
 
