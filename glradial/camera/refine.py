@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -66,8 +67,10 @@ class Samples:
     labels: tuple[str, ...]
 
 
+@lru_cache(maxsize=16)
 def template_samples(pitch: PitchTemplate, step: float = SAMPLE_STEP) -> Samples:
-    """The markings of ``pitch`` as :class:`Samples` every ``step`` metres."""
+    """The markings of ``pitch`` as :class:`Samples` every ``step`` metres (built once per template
+    and step: every refinement of every frame reads them; the arrays are read-only)."""
     pts, elem, nxt, labels = [], [], [], []
     start = 0
     for i, (label, p) in enumerate(pitch.polylines(step)):
@@ -78,7 +81,10 @@ def template_samples(pitch: PitchTemplate, step: float = SAMPLE_STEP) -> Samples
         n[-1] = -1
         nxt.append(n)
         start += len(p)
-    return Samples(np.concatenate(pts), np.concatenate(elem), np.concatenate(nxt), tuple(labels))
+    arrays = [np.concatenate(pts), np.concatenate(elem), np.concatenate(nxt)]
+    for array in arrays:
+        array.flags.writeable = False
+    return Samples(*arrays, tuple(labels))
 
 
 @dataclass(frozen=True)
