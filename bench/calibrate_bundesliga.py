@@ -137,9 +137,9 @@ def _shot_rows(folder: Path, labels: dict, names: list[str]) -> tuple[list[dict]
 
 def _calibrate(rows: list[dict], clip: str) -> None:
     """Split-conformal quantile of keypoint RMS / max(fit RMS, floor) over ``clip``'s answered frames."""
-    import math
 
     from glradial.camera.estimate import CAMERA_TRUST_FILE, camera_trust
+    from glradial.evaluation.calibrate import conformal_quantile
     from glradial.media.atomic import atomic_write_text
 
     trust = dict(camera_trust())
@@ -149,7 +149,7 @@ def _calibrate(rows: list[dict], clip: str) -> None:
     n = len(scores)
     if n == 0:
         raise SystemExit(f"no answered frame in clip {clip!r}")
-    q = float(scores[min(n - 1, math.ceil((n + 1) * 0.9) - 1)])
+    q = conformal_quantile(scores)
     trust.update({"quantile": round(q, 3), "source": f"bench/calibrate_bundesliga.py --calibrate-clip {clip}: split-conformal "
                   f"90 % of keypoint RMS (hand labels) / fit RMS over its {n} answered frames with consistent labels "
                   f"(homography floor <= {CONSISTENT_PX} px)"})

@@ -104,13 +104,11 @@ def report(rows: list[dict]) -> dict:
 def calibrate_bound(rows: list[dict]) -> float:
     """Split-conformal quantile of marking error / max(fit RMS, floor) over answered views."""
     from glradial.camera.estimate import camera_trust
+    from glradial.evaluation.calibrate import conformal_quantile
 
     floor = camera_trust()["floor_px"]
-    scores = np.sort([r["marking_rms_px"] / max(r["rms_fit_px"], floor) for r in rows
-                      if r["answered"] and r.get("marking_rms_px") is not None])
-    n = len(scores)
-    k = min(n - 1, math.ceil((n + 1) * 0.9) - 1)
-    return float(scores[k])
+    return conformal_quantile([r["marking_rms_px"] / max(r["rms_fit_px"], floor) for r in rows
+                               if r["answered"] and r.get("marking_rms_px") is not None])
 
 
 def timing(n: int) -> None:

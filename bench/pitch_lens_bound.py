@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from pathlib import Path
 
@@ -35,14 +34,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+
+from glradial.evaluation.calibrate import conformal_quantile  # noqa: E402
+
 FLOOR_PX = 0.3
-
-
-def conformal_quantile(scores: np.ndarray, level: float = 0.9) -> float:
-    """The ``ceil(level (n + 1))``-th smallest score (the largest when that exceeds ``n``)."""
-    s = np.sort(np.asarray(scores, float))
-    k = min(len(s) - 1, math.ceil((len(s) + 1) * level) - 1)
-    return float(s[k])
 
 
 def procedural(path: Path) -> tuple[np.ndarray, np.ndarray]:
