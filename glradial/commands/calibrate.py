@@ -77,9 +77,7 @@ def _check(args: argparse.Namespace) -> str:
         if sensor_mm(args)[0] is None:
             raise UsageError("OpenTrackIO samples: give --sensor-width-mm MM (or --sensor 2/3-inch); the focal "
                              "length is measured")
-        args.focal_mm = 1.0  # placeholder for the shared option checks; every sample carries the measured focal
-        check_opentrackio_output(args)
-        args.focal_mm = None
+        check_opentrackio_output(args, focal_measured=True)
     return kind
 
 

@@ -85,21 +85,23 @@ def camera_from_args(args: argparse.Namespace, size: tuple[int, int], rate: Frac
     return Camera(size, width_mm, args.focal_mm, height_mm, rate=rate, timecode=timecode)
 
 
-def _camera_numbers(args: argparse.Namespace, what: str) -> tuple[float, float | None]:
-    """Sensor width and height (mm) of the options; ``UsageError`` naming what is missing."""
+def _camera_numbers(args: argparse.Namespace, what: str, focal_measured: bool = False) -> tuple[float, float | None]:
+    """Sensor width and height (mm) of the options; ``UsageError`` naming what is missing (the focal
+    length too, unless ``focal_measured``: a command that measures it)."""
     width_mm, height_mm = sensor_mm(args)
     missing = []
     if width_mm is None:
         missing.append("--sensor-width-mm MM (or --sensor 2/3-inch)")
-    if args.focal_mm is None:
+    if args.focal_mm is None and not focal_measured:
         missing.append("--focal-mm MM")
     if missing:
         raise UsageError(f"{what}: give {' and '.join(missing)} (glradial cannot know them from the picture)")
     return width_mm, height_mm
 
 
-def check_opentrackio_output(args: argparse.Namespace) -> None:
-    """Before any work: the options fit together, the file can be written (``-y`` to replace)."""
+def check_opentrackio_output(args: argparse.Namespace, *, focal_measured: bool = False) -> None:
+    """Before any work: the options fit together, the file can be written (``-y`` to replace);
+    ``focal_measured``: the command measures the focal length, ``--focal-mm`` is not asked for."""
     from ..media.atomic import check_output_folder, check_overwrite
 
     given = [name for name in ("distortion_model", "cbor") if getattr(args, name) not in (None, False, "U-D")]
@@ -109,7 +111,7 @@ def check_opentrackio_output(args: argparse.Namespace) -> None:
             names = ", ".join(f"--{n.replace('_', '-')}" for n in given + camera)
             raise UsageError(f"{names} need(s) --opentrackio FILE or --send HOST:PORT")
         return
-    _camera_numbers(args, "OpenTrackIO samples")
+    _camera_numbers(args, "OpenTrackIO samples", focal_measured)
     if args.send:
         from ..export.opentrackio_udp import parse_address
 
