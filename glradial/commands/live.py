@@ -142,13 +142,7 @@ def _online_lens(args: argparse.Namespace):
     auto = {name: getattr(args, name) for name in ("every", "apply_doubtful", "until_sure") if getattr(args, name) is not None}
     if args.max_uncertainty is not None:
         auto["doubtful_px"] = args.max_uncertainty
-    online = OnlineShotLens(BundledEstimator(args.model, args.method), **auto)
-    try:
-        online.wait_ready()
-    except BaseException:
-        online.close()
-        raise
-    return online
+    return OnlineShotLens.started(BundledEstimator(args.model, args.method), **auto)
 
 
 def _corrector(args: argparse.Namespace, info, writer, camera, online=None):

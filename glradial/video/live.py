@@ -171,12 +171,17 @@ class _MapsAhead:
         return False
 
     def _build(self, lens: Lens, frame) -> None:
-        corrector = self._corrector()
-        if isinstance(frame, av.VideoFrame):
-            corrector.planar(frame, lens, _NewFrames(self.size, frame.format.name), None)
-        else:
-            corrector(frame, lens)
+        _dry_run(self._corrector(), frame, lens, self.size)
         self._built.append(lens)
+
+
+def _dry_run(corrector: FrameCorrector, frame, lens: Lens, size: tuple[int, int]) -> None:
+    """Correct ``frame`` (an ``av.VideoFrame``, corrected in its planes, or an RGB array) with
+    ``lens`` and drop the result: ``corrector`` builds and caches its maps for that lens."""
+    if isinstance(frame, av.VideoFrame):
+        corrector.planar(frame, lens, _NewFrames(size, frame.format.name), None)
+    else:
+        corrector(frame, lens)
 
 
 class LiveCorrector:
@@ -209,13 +214,7 @@ class LiveCorrector:
         elif isinstance(lens, str):
             if lens != "auto":
                 raise ValueError(f"lens must be a Lens, (k1, k2), 'auto' or an OnlineShotLens, got {lens!r}")
-            self._online = OnlineShotLens(estimator or BundledEstimator(), **(auto or {}))
-            try:
-                self._online.wait_ready()
-            except BaseException:
-                self._online.close()
-                raise
-            self.lens = None
+            self._online, self.lens = OnlineShotLens.started(estimator or BundledEstimator(), **(auto or {})), None
         else:
             self.lens = as_lens(lens)
             self.lens.check_frame(self.size)  # a lens that folds over inside the frame is refused now
@@ -374,10 +373,7 @@ class LiveCorrector:
             return
         if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
             frame = frame.to_ndarray(format="rgb24")
-        if isinstance(frame, av.VideoFrame):
-            self._corrector.planar(frame, self.lens, _NewFrames(self.size, frame.format.name), None)
-        else:
-            self._corrector(frame, self.lens)
+        _dry_run(self._corrector, frame, self.lens, self.size)
 
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None

@@ -170,6 +170,18 @@ class OnlineShotLens:
             self._worker = threading.Thread(target=_serve, args=(theirs, *args), name="glradial-live-lens", daemon=True)
         self._worker.start()
 
+    @classmethod
+    def started(cls, estimator: Callable[[np.ndarray], object], **options: object) -> "OnlineShotLens":
+        """A new online lens (``options`` as the constructor's) whose worker has loaded its estimator
+        (:meth:`wait_ready`); closed again if that fails."""
+        online = cls(estimator, **options)  # type: ignore[arg-type]
+        try:
+            online.wait_ready()
+        except BaseException:
+            online.close()
+            raise
+        return online
+
     def wait_ready(self, timeout: float = READY_TIMEOUT_S) -> None:
         """Wait until the worker has loaded its estimator (``TimeoutError`` after ``timeout`` s; its
         error, as ``RuntimeError``, if it failed)."""
