@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 import torch  # noqa: E402
 
-from net.train import Run, TrainConfig, batch_source, build_run, panorama_source, rank_shards, train_step  # noqa: E402
+from net.train import AMP, Run, TrainConfig, batch_source, build_run, panorama_source, rank_shards, train_step  # noqa: E402
 
 
 class BusyMeter:
@@ -173,7 +173,7 @@ def main() -> int:
     parser.add_argument("--config", default=str(ROOT / "net/configs/stage12_multitask.json"))
     parser.add_argument("--seconds", type=float, default=6.0, help="wall seconds per phase (after a warm-up)")
     parser.add_argument("--sources", default="gpu,pool", help="comma-separated batch sources to measure")
-    parser.add_argument("--amp", choices=("off", "bf16"), default="off")
+    parser.add_argument("--amp", choices=AMP, default="off")
     parser.add_argument("--channels-last", action=argparse.BooleanOptionalAction, default=True)
     parser.add_argument("--compile", action="store_true")
     parser.add_argument("--panoramas", type=int, help="use only this many of the config's training stadiums (shorter start)")

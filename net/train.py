@@ -332,10 +332,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 def run_config(args: argparse.Namespace) -> TrainConfig:
     """The config file with the command line's overrides."""
     cfg = TrainConfig.from_json(args.config)
-    for option, name in (("steps", "steps"), ("time_budget_s", "time_budget_s"), ("threads", "threads"), ("source", "source"),
-                         ("amp", "amp"), ("channels_last", "channels_last"), ("compile", "compile")):
-        if getattr(args, option) is not None:
-            setattr(cfg, name, getattr(args, option))
+    for name in ("steps", "time_budget_s", "threads", "source", "amp", "channels_last", "compile"):
+        if getattr(args, name) is not None:
+            setattr(cfg, name, getattr(args, name))
     return cfg
 
 
