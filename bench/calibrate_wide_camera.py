@@ -59,20 +59,19 @@ TWIN_OFFSETS = ((0.0, 0.0), (0.016, -0.082), (0.0, -0.06), (0.03, 0.0))
 
 def twins(frame0: np.ndarray, truth: tuple) -> list[dict]:
     """The ``--twin`` rows (module docstring)."""
-    import math
-
     import cv2
 
     import glradial
     from glradial.camera.model import Camera
     from glradial.camera.views import render_view
+    from glradial.lens.lens import focal_from_hfov
     from glradial.lens.metrics import max_displacement_px
 
     height, width = frame0.shape[:2]
     size = (width, height)
     rotation = glradial.calibrate(frame0).camera.rotation
     scale = glradial.Lens(*truth).fit_scale(size, "crop", "distort")
-    focal = 1 / (2 * math.tan(math.radians(72.4 / 2)))
+    focal = focal_from_hfov(72.4)
     rows = []
     for seed in (1, 2, 3):
         canvas = Camera(rotation, np.array([-1.0, -48.8, 7.5]), focal / scale, size)

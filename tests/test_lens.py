@@ -240,3 +240,25 @@ def test_the_line_fit_uses_the_lens_models_inverse():
         # and it inverts the forward model where valid
         np.testing.assert_allclose(r_u[valid] * lensfuncs.radial_factor(r_u[valid] ** 2, k1[i, 0], k2[i, 0]),
                                    r_d[valid], atol=1e-9)
+
+
+@pytest.mark.parametrize("hfov", [8.0, 30.0, 72.4, 120.0])
+def test_focal_from_hfov_matches_opencv_field_of_view(hfov):
+    # oracle: cv2.calibrationMatrixValues reads the field of view back from a pixel camera matrix
+    from glradial.lens.lens import focal_from_hfov, hfov_deg
+
+    width, height = 1920, 1080
+    focal_px = focal_from_hfov(hfov) * width
+    matrix = np.array([[focal_px, 0, (width - 1) / 2], [0, focal_px, (height - 1) / 2], [0, 0, 1]])
+    fovx = cv2.calibrationMatrixValues(matrix, (width, height), 1.0, 1.0)[0]
+    assert fovx == pytest.approx(hfov, abs=0.05)  # OpenCV measures from the pixel edge: ±0.5 px of 1920
+    assert hfov_deg(focal_from_hfov(hfov)) == pytest.approx(hfov, abs=1e-9)
+    assert np.allclose(hfov_deg(np.array([focal_from_hfov(hfov)] * 2)), hfov)
+
+
+@pytest.mark.parametrize("hfov", [0, 180.0, -5.0, float("nan"), "60", True])
+def test_focal_from_hfov_names_a_bad_field_of_view(hfov):
+    from glradial.lens.lens import focal_from_hfov
+
+    with pytest.raises(ValueError, match="hfov"):
+        focal_from_hfov(hfov)

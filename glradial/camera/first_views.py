@@ -15,13 +15,12 @@ undistorted pixels, go to the refinement, which recovers the actual position, fo
 
 from __future__ import annotations
 
-import math
 from functools import lru_cache
 
 import cv2
 import numpy as np
 
-from ..lens.lens import frame_size
+from ..lens.lens import focal_from_hfov, frame_size
 from ..pitch.template import PitchTemplate
 from .model import intrinsics
 
@@ -65,7 +64,7 @@ def _dictionary(size: tuple[int, int], pitch: PitchTemplate):
         pans = np.arange(PAN[0], PAN[1] + 1e-9, fov / STEPS_PER_FOV)
         tilts = np.arange(TILT[0], TILT[1] + 1e-9, fov * height / width / STEPS_PER_FOV)
         r = _rotations(*(a.ravel() for a in np.meshgrid(pans, tilts)))
-        f = 0.5 / math.tan(math.radians(fov) / 2)
+        f = focal_from_hfov(fov)
         for d in DISTANCES:
             for z in HEIGHTS:
                 c = np.array([0.0, -pitch.half_width - d, z])

@@ -19,6 +19,7 @@ import itertools
 
 import numpy as np
 
+from ..lens.lens import focal_from_hfov
 from .model import plane_views
 from .white_lines import Line
 
@@ -125,7 +126,7 @@ def vanishing_pairs(vp: np.ndarray, size: tuple[int, int], hull: np.ndarray) -> 
     ww = v[:, None, 2] * v[None, :, 2]
     with np.errstate(all="ignore"):
         f2 = -dot / ww
-        f_lo, f_hi = (0.5 / np.tan(np.radians(h / 2)) for h in HFOV_RANGE[::-1])
+        f_lo, f_hi = (focal_from_hfov(h) for h in HFOV_RANGE[::-1])
         focal_ok = (f2 >= f_lo**2) & (f2 <= f_hi**2)
         # nearly parallel lines (a vanishing point far out) say little about the focal length
         norm = np.hypot(v[:, 0], v[:, 1])

@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..lens.lens import Lens, frame_size, lens_to_pixels
+from ..lens.lens import Lens, focal_from_hfov, frame_size, hfov_deg, lens_to_pixels
 from ..lens.lensfuncs import LENS_RADIUS_UNBOUNDED, fold_radii, radial_factor
 
 #: The half turn of the pitch about its centre spot.
@@ -178,18 +178,6 @@ def project_many(rotation: np.ndarray, position: np.ndarray, focal: np.ndarray, 
         pd = uv * radial_factor(r2, k1[:, None, None], k2[:, None, None])
         pd = np.where((z > 0) & (r2 < limit * limit), pd, np.nan)
     return lens_to_pixels(pd, size)
-
-
-def hfov_deg(focal: float) -> float:
-    """Horizontal field of view (degrees) of ``focal`` image widths."""
-    return math.degrees(2.0 * math.atan(0.5 / focal))
-
-
-def focal_from_hfov(hfov: float) -> float:
-    """Focal length in image widths of a horizontal field of view ``hfov`` (degrees, 0..180)."""
-    if not (isinstance(hfov, (int, float, np.number)) and 0.0 < float(hfov) < 180.0):
-        raise ValueError(f"hfov must be in (0, 180) degrees, got {hfov!r}")
-    return 0.5 / math.tan(math.radians(float(hfov)) / 2.0)
 
 
 def intrinsics(focal: float, size: tuple[int, int]) -> np.ndarray:

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from ..lens.lens import Lens
+from ..lens.lens import Lens, focal_from_hfov, hfov_deg
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
 from .model import Camera
@@ -168,9 +168,8 @@ def zoom_cameras(rng: np.random.Generator, frames: int, size: tuple[int, int] = 
     centre = np.array([(-1.0, 0.0, 1.0)[rng.integers(3)] * rng.uniform(30, 40), rng.uniform(-6, 6)])
     start, end = centre + rng.uniform(-8, 8, 2), centre + rng.uniform(-8, 8, 2)
     hfov_wide = rng.uniform(40, 56)
-    focal = np.geomspace(0.5 / math.tan(math.radians(hfov_wide / 2)),
-                         zoom * 0.5 / math.tan(math.radians(hfov_wide / 2)), frames)
-    hfov = np.degrees(2 * np.arctan(0.5 / focal))
+    focal = np.geomspace(focal_from_hfov(hfov_wide), zoom * focal_from_hfov(hfov_wide), frames)
+    hfov = hfov_deg(focal)
     k1_wide, k1_tele = rng.uniform(-0.30, -0.15), rng.uniform(-0.02, 0.06)
     out = []
     for i, h in enumerate(hfov):

@@ -57,6 +57,21 @@ def corner_radius(size: tuple[int, int]) -> float:
     return 0.5 * math.hypot(1.0, height / width)
 
 
+def hfov_deg(focal: float | np.ndarray) -> float | np.ndarray:
+    """Horizontal field of view (degrees) of a pinhole of ``focal`` image widths (lens units); element-wise
+    for an array."""
+    hfov = np.degrees(2.0 * np.arctan(0.5 / np.asarray(focal, dtype=np.float64)))
+    return float(hfov) if hfov.ndim == 0 else hfov
+
+
+def focal_from_hfov(hfov: float) -> float:
+    """Focal length in image widths (lens units) of a horizontal field of view ``hfov`` (degrees, 0..180):
+    ``0.5 / tan(hfov / 2)``."""
+    if isinstance(hfov, bool) or not (isinstance(hfov, (int, float, np.number)) and 0.0 < float(hfov) < 180.0):
+        raise ValueError(f"hfov must be in (0, 180) degrees, got {hfov!r}")
+    return 0.5 / math.tan(math.radians(float(hfov)) / 2.0)
+
+
 def pixels_to_lens(
     xy: np.ndarray, size: tuple[int, int], centre: tuple[float, float] = (0.0, 0.0), pixel_aspect: float = 1.0
 ) -> np.ndarray:

@@ -32,7 +32,7 @@ import numpy as np
 from ..gl.shaderlib import TEXTURE_FORMATS
 from ..lens import lensfuncs
 from ..lens.inverse_series import SERIES_DEGREE, fit_inverse_series
-from ..lens.lens import Lens, corner_radius, frame_size
+from ..lens.lens import Lens, corner_radius, focal_from_hfov, frame_size
 from ..lens.metrics import PAPER_SIZE, manifold_k2
 from ..lens.options import INVERSES, InverseMethod, real_number
 
@@ -80,7 +80,7 @@ class CropParams:
     @property
     def focal(self) -> float:
         """Focal length in lens units (image width = 1): ``1 / (2 tan(hfov / 2))``."""
-        return 1.0 / (2.0 * math.tan(math.radians(self.hfov) / 2.0))
+        return focal_from_hfov(self.hfov)
 
     def rotation(self) -> np.ndarray:
         """3×3 float64 ``R_pan · R_tilt · R_roll`` taking camera rays to world rays."""

@@ -28,7 +28,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..lens.lens import pixels_to_lens
+from ..lens.lens import focal_from_hfov, hfov_deg, pixels_to_lens
 from ..lens.lensfuncs import distort_point, fold_radius, undistort_point_exact
 from ..lens.metrics import manifold_k2
 from ..synthesis.crops import camera_rotation, ray_to_lonlat
@@ -86,13 +86,13 @@ class ClipTruth:
                 for i, (s, k, z) in enumerate(zip(self.shot, self.lens, self.zoom))]
 
 
-def _rays(size: tuple[int, int], lens: tuple[float, float], hfov_deg: float, rotation: np.ndarray) -> np.ndarray:
+def _rays(size: tuple[int, int], lens: tuple[float, float], hfov: float, rotation: np.ndarray) -> np.ndarray:
     """World rays (H x W x 3) of the distorted output pixels of a camera with ``rotation``."""
     width, height = size
     x, y = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
     p_d = pixels_to_lens(np.stack([x, y], axis=-1).reshape(-1, 2), size)
     p_u, _ = undistort_point_exact(p_d, *lens)
-    focal = 0.5 / math.tan(math.radians(hfov_deg) / 2)  # lens units (width = 1)
+    focal = focal_from_hfov(hfov)  # lens units (width = 1)
     rays = np.concatenate([p_u, np.full((len(p_u), 1), focal)], axis=1) @ rotation.T
     return rays.reshape(height, width, 3)
 
@@ -102,7 +102,7 @@ def _source_pixels(spec: ShotSpec, rays: np.ndarray) -> tuple[np.ndarray, np.nda
     if spec.panorama:
         lon, lat = ray_to_lonlat(rays)
         return ((lon / (2 * math.pi) + 0.5) * w - 0.5) % w, (0.5 - lat / math.pi) * h - 0.5
-    focal = 0.5 * w / math.tan(math.radians(spec.hfov_deg) / 2)
+    focal = focal_from_hfov(spec.hfov_deg) * w
     z = np.maximum(rays[..., 2], 1e-9)
     x, y = rays[..., 0] / z * focal, rays[..., 1] / z * focal  # px from the picture's centre, pinhole
     if any(spec.source_lens) or any(spec.source_centre):  # the picture's own lens about its principal point
@@ -127,7 +127,7 @@ def _margin(spec: ShotSpec, size: tuple[int, int]) -> float:
         worst = 1.0
         for i in (0, spec.frames // 2, spec.frames - 1):
             pan, tilt, zoom = spec.camera(i)
-            hfov = 2 * math.degrees(math.atan(math.tan(math.radians(spec.hfov_deg) / 2) / (zoom * margin)))
+            hfov = hfov_deg(focal_from_hfov(spec.hfov_deg) * zoom * margin)
             x, y = _source_pixels(spec, _rays(small, spec.lens(i), hfov, camera_rotation(pan, tilt, 0.0)))
             worst = max(worst, float(np.max(np.abs(x - (w - 1) / 2)) / ((w - 1) / 2 - 1)),
                         float(np.max(np.abs(y - (h - 1) / 2)) / ((h - 1) / 2 - 1)))
@@ -148,7 +148,7 @@ def render_shot(spec: ShotSpec, size: tuple[int, int]):
     margin = _margin(spec, size)
     for i in range(spec.frames):
         pan, tilt, zoom = spec.camera(i)
-        hfov = 2 * math.degrees(math.atan(math.tan(math.radians(spec.hfov_deg) / 2) / (zoom * margin)))
+        hfov = hfov_deg(focal_from_hfov(spec.hfov_deg) * zoom * margin)
         lens = spec.lens(i)
         x, y = _source_pixels(spec, _rays(size, lens, hfov, camera_rotation(pan, tilt, 0.0)))
         border = cv2.BORDER_WRAP if spec.panorama else cv2.BORDER_REPLICATE
