@@ -63,3 +63,23 @@ def test_the_per_frame_listing_tells_left_from_corrected_by_the_identity_lens():
     assert rows[0]["error"] == pytest.approx(0.0, abs=1e-9) and rows[1]["identity"] == pytest.approx(shift)
     assert rows[2]["error"] == pytest.approx(shift) and rows[2]["identity"] == 0.0
     assert all(r["shift"] == pytest.approx(shift) for r in rows)
+
+
+def test_an_answers_overshoot_toward_no_lens_says_when_correcting_helps():
+    """bench/cnn_alone_doubt.py's overshoot ``o = (s + d - d0) / 2`` (s the answer's shift, d its
+    error, d0 the identity lens's error): ``o = s`` when the truth is no lens, 0 when it is the answer,
+    ``0 <= o <= min(s, d)`` (triangle inequality of the metric), and correcting helps (``d < d0``)
+    exactly when ``o < s / 2``, on lens pairs drawn over the real range."""
+    spec = importlib.util.spec_from_file_location("cnn_alone_doubt", ROOT / "bench" / "cnn_alone_doubt.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    rng = np.random.default_rng(5)
+    for k1a, k1t in rng.uniform(-1.0, 0.4, (200, 2)):
+        answer = (float(k1a), float(manifold_k2(k1a)) + float(rng.normal(0.0, 0.03)))
+        truth = (float(k1t), float(manifold_k2(k1t)) + float(rng.normal(0.0, 0.03)))
+        s, d, d0 = bench._distances(answer, truth)
+        o = bench.overshoot(answer, truth)
+        assert -1e-9 <= o <= min(s, d) + 1e-9
+        assert (o < s / 2) == (d < d0)
+        assert bench.overshoot(answer, (0.0, 0.0)) == pytest.approx(s)
+        assert bench.overshoot(answer, answer) == pytest.approx(0.0, abs=1e-9)
