@@ -4,7 +4,7 @@ Usage::
 
     python bench/pitch_views.py [--data ../shared/data] [--frames /tmp/pitch_views_frames.pkl]
         [--evidence /tmp/pitch_views_evidence.pkl] [--trust glradial/data/trust.json] [--json OUT]
-        [--sources wide_camera,...]
+        [--sources wide_camera,...] [--list]
 
 Validation sets (validation only: nothing is trained or tuned on them for the figures reported):
 
@@ -42,7 +42,9 @@ frames).
 
 Frames are cached in ``--frames`` (pickle; delete to rebuild), the estimator's evidence in
 ``--evidence`` (delete it whenever the detection, the fit or ``FrameEvidence`` change); ``--trust``
-judges the cached evidence with another calibration.
+judges the cached evidence with another calibration. ``--list`` adds one row per doubtful or
+made-worse frame of the pitch sources: its reason, the answer's source, stated bound, error, the
+identity lens's error and the answer's own shift from no lens (:func:`frame_rows`).
 """
 
 from __future__ import annotations
@@ -263,24 +265,52 @@ def collect(frames: dict, sources: list[str]) -> dict:
     return out
 
 
+def frame_rows(items: list, trust) -> list[dict]:
+    """One row per ``(name, evidence, true lens)`` of ``items`` judged by ``auto`` under ``trust``:
+    name, reason, the answer's source (``lines``/``net``), stated bound, error, the identity lens's
+    error (leaving the lens in), the answer's own shift from no lens (px at 1920, the maximum
+    displacement), doubtful, and the verdict: ``left, would help`` (doubtful, error below the
+    identity's), ``corrected, worse`` (not doubtful, error above it), ``left`` or ``corrected``."""
+    from glradial.estimation.trust import shift_px
+
+    rows = []
+    for name, ev, truth in items:
+        e = judge(ev, "auto", trust)
+        k = np.array(truth, np.float64)
+        err = float(max_displacement_px(np.array([e.k1, e.k2]), k))
+        ident = float(max_displacement_px(np.zeros(2), k))
+        verdict = ("left, would help" if err < ident else "left") if e.doubtful else (
+            "corrected, worse" if err > ident else "corrected")
+        rows.append({"name": name, "reason": e.reason, "source": e.method, "bound": e.uncertainty_px, "error": err,
+                     "identity": ident, "shift": shift_px((e.k1, e.k2)), "doubtful": e.doubtful, "verdict": verdict})
+    return rows
+
+
 def score(evidence: dict, trust) -> dict:
     """Per source and over the pitch sources: the figures of the module docstring."""
     rows = {}
     for source, items in evidence.items():
-        errs, ids, bounds, doubt, reasons = [], [], [], [], []
-        for _, ev, truth in items:
-            e = judge(ev, "auto", trust)
-            k = np.array(truth, np.float64)
-            errs.append(float(max_displacement_px(np.array([e.k1, e.k2]), k)))
-            ids.append(float(max_displacement_px(np.zeros(2), k)))
-            bounds.append(e.uncertainty_px)
-            doubt.append(e.doubtful)
-            reasons.append(e.reason)
-        rows[source] = _figures(np.array(errs), np.array(ids), np.array(bounds), np.array(doubt), reasons)
+        per = frame_rows(items, trust)
+        rows[source] = _figures(*(np.array([r[key] for r in per]) for key in ("error", "identity", "bound", "doubtful")),
+                                [r["reason"] for r in per])
     pitch = [s for s in evidence if s not in NOT_PITCH_SOURCES]
     if pitch:
         rows["all pitch views"] = _merge([rows[s] for s in pitch])
     return rows
+
+
+def listing(evidence: dict, trust) -> str:
+    """Markdown of every doubtful or made-worse frame of the pitch sources (``--list``)."""
+    lines = ["| source | frame | reason | answer | stated bound px | error px | no lens px | answer's shift px | verdict |",
+             "| --- | --- | --- | --- | ---: | ---: | ---: | ---: | --- |"]
+    for source, items in evidence.items():
+        if source in NOT_PITCH_SOURCES:
+            continue
+        for r in frame_rows(items, trust):
+            if r["doubtful"] or r["verdict"] == "corrected, worse":
+                lines.append(f"| {source} | {r['name']} | {r['reason']} | {r['source']} | {r['bound']:.1f} | {r['error']:.1f} | "
+                             f"{r['identity']:.1f} | {r['shift']:.1f} | {r['verdict']} |")
+    return "\n".join(lines)
 
 
 def _figures(err, ident, bound, doubt, reasons) -> dict:
@@ -321,6 +351,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trust", type=Path, default=None)
     parser.add_argument("--sources", default="")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--list", action="store_true",
+                        help="also list every doubtful or made-worse frame of the pitch sources (reason, bound, error)")
     args = parser.parse_args(argv)
     cached = _cached(args.frames, lambda: build(args.data))
     frames = build(args.data, cached)
@@ -339,6 +371,8 @@ def main(argv: list[str] | None = None) -> int:
     trust = load_trust(args.trust) if args.trust else shipped_trust()
     rows = score(evidence, trust)
     print(markdown(rows))
+    if args.list:
+        print("\n" + listing(evidence, trust))
     if args.json:
         args.json.write_text(json.dumps({s: {k: v for k, v in r.items() if k != "_raw"} for s, r in rows.items()}, indent=1) + "\n")
     return 0
