@@ -14,6 +14,11 @@ Bound (split conformal):
     * a soft-edge fit (:mod:`glradial.estimation.soft_lines`, where the white-line fit found too
       little): the same scale, bound ``= q_soft · scale``, ``q_soft`` calibrated on soft fits alone
       (their residuals are in px of a 320-px copy); a model without it (``q_soft = 0``) ignores them;
+    * either fit, where its chains say how much its lens leans on the principal point sitting at
+      the centre (``centre_shift_px``, :mod:`glradial.estimation.decentring`): the bound above
+      combined in quadrature with ``misfit_weight · centre_shift_px`` (``misfit_weight`` calibrated
+      split-conformally on rendered views through off-centre lenses, ``bench/misfit_calibration.py``;
+      0 leaves the bound as it was);
     * the CNN alone: bound ``= q_net`` or, when its model has an error head and the calibration
       measured it, ``q_net_rel · net_error_px`` (the network's own expected error of the frame);
       ``q_no_lines`` / ``q_no_lines_rel`` instead when a line fit was sought and none was found (such
@@ -100,7 +105,8 @@ class FrameEvidence:
     fit's diagnostics (:class:`glradial.estimation.line_fit.LineFit`; ``fit_difficulty`` inf without
     a fit, ``None`` when not measured); ``soft``: the fit is the soft-edge fit
     (:mod:`glradial.estimation.soft_lines`, run where the white-line fit found too little), bounded
-    with its own quantile ``q_soft``.
+    with its own quantile ``q_soft``; ``centre_shift_px``: the fit's
+    :attr:`glradial.estimation.line_fit.LineFit.centre_shift_px` (px at 1920; ``None`` when not measured).
     """
 
     net: tuple[float, float]
@@ -120,6 +126,7 @@ class FrameEvidence:
     soft: bool = False
     grass: float | None = None
     grass_width: float = 0.0
+    centre_shift_px: float | None = None
 
     @property
     def disagreement_px(self) -> float:
@@ -279,6 +286,7 @@ class TrustModel:
     q_no_lines_rel: float = 0.0
     scale_feature: str = "sigma_px"
     q_soft: float = 0.0
+    misfit_weight: float = 0.0
     note: str = ""
 
     def lines_scale(self, evidence: FrameEvidence) -> float:
@@ -288,8 +296,11 @@ class TrustModel:
         return float(line_scale(self.floor_px, self.sigma_weight, spread, self.disagree_weight, evidence.disagreement_px))
 
     def lines_bound(self, evidence: FrameEvidence) -> float:
-        """``q_lines`` (``q_soft`` for a soft-edge fit) times :meth:`lines_scale` (px at 1920)."""
-        return (self.q_soft if evidence.soft else self.q_lines) * self.lines_scale(evidence)
+        """``q_lines`` (``q_soft`` for a soft-edge fit) times :meth:`lines_scale`, in quadrature with
+        ``misfit_weight`` times the fit's ``centre_shift_px`` where measured (px at 1920)."""
+        bound = (self.q_soft if evidence.soft else self.q_lines) * self.lines_scale(evidence)
+        misfit = evidence.centre_shift_px
+        return math.hypot(bound, self.misfit_weight * misfit) if misfit is not None and math.isfinite(misfit) else bound
 
     def net_bound(self, evidence: FrameEvidence, no_lines: bool) -> float:
         """The CNN's bound (px at 1920): relative to its own expected error when calibrated and
