@@ -9,8 +9,9 @@ The estimator's lens model is radial about the frame centre; a camera whose prin
 centre (the shared wide camera's, by ~6.5 % of the width) leaves the line fit reading a centred lens
 that differs from the one a checkerboard calibration reports by more than the fit's own uncertainty.
 The fit measures how far its lens moves when decentring terms are fitted with it
-(``centre_shift_px``, :mod:`glradial.estimation.decentring`); the bound is the base bound in
-quadrature with ``misfit_weight · centre_shift_px`` (:meth:`glradial.estimation.trust.TrustModel.lines_bound`).
+(``centre_shift_px``, :mod:`glradial.estimation.decentring`); the stated bound is the base bound of
+whichever answer is taken in quadrature with ``misfit_weight · centre_shift_px``
+(:meth:`glradial.estimation.trust.TrustModel.misfit_bound`).
 
 Views (:func:`pitch_views.offcentre_views`: lenses k1 -0.8..-0.1 with the principal point 4-8 % of
 the width off centre, scored against the centred lens of a simulated checkerboard calibration,
@@ -27,12 +28,12 @@ None of these stadiums is used by the trust records (``glradial.evaluation.calib
 are a third and fourth check, not seen here).
 
 Calibration (split conformal, :func:`glradial.evaluation.calibrate.conformal_quantile` at 90 %): over
-the calibration views whose answer is the line fit (with the term off), each view's score is the
-weight its bound needs to cover its error, ``sqrt(error² - bound²) / centre_shift_px`` (0 when
+the calibration views with a line fit (where the term can apply), each view's score is the weight
+its bound (with the term off) needs to cover its error, ``sqrt(error² - bound²) / centre_shift_px`` (0 when
 already covered; infinite where the shift is not measured); ``misfit_weight`` is the conformal
 quantile of the scores. ``--write`` stores it in ``glradial/data/trust.json``. Printed per split:
-views, line answers, coverage and median stated bound without and with the term (over all views
-and over the line answers), and the median error (px at 1920).
+views, views with a line fit, coverage and median stated bound without and with the term (over all
+views and over those with a fit), and the median error (px at 1920); the answers do not change.
 """
 
 from __future__ import annotations
@@ -73,20 +74,21 @@ def build(data: Path) -> dict[str, list[tuple[str, np.ndarray, tuple]]]:
 
 
 def readings(items, trust) -> dict[str, np.ndarray]:
-    """Per view under ``trust``: error and bound (px at 1920), whether the answer is the line fit,
-    and the fit's ``centre_shift_px`` (0 where not measured)."""
+    """Per view under ``trust``: error and bound (px at 1920), whether the frame has a line fit, and
+    the fit's ``centre_shift_px`` (0 where not measured)."""
     err, bound, lines, shift = [], [], [], []
     for _, ev, truth in items:
         e = judge(ev, "auto", trust)
         err.append(float(max_displacement_px(np.array([e.k1, e.k2]), np.array(truth, np.float64))))
         bound.append(e.uncertainty_px)
-        lines.append(e.method == "lines")
+        lines.append(ev.lines is not None)
         shift.append(ev.centre_shift_px if ev.centre_shift_px is not None else 0.0)
     return {"err": np.array(err), "bound": np.array(bound), "lines": np.array(lines), "shift": np.array(shift)}
 
 
 def needed_weight(r: dict[str, np.ndarray]) -> np.ndarray:
-    """Per line answer: the weight its bound needs to cover its error (0 when covered, inf unmeasured)."""
+    """Per view with a line fit: the weight its bound needs to cover its error (0 when covered, inf
+    where the shift is not measured)."""
     err, bound, shift = r["err"][r["lines"]], r["bound"][r["lines"]], r["shift"][r["lines"]]
     excess = np.sqrt(np.maximum(err**2 - bound**2, 0.0))
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -95,8 +97,8 @@ def needed_weight(r: dict[str, np.ndarray]) -> np.ndarray:
 
 def table(evidence: dict, trust, weight: float) -> str:
     """Markdown: per split, coverage and median bound without (``misfit_weight`` 0) and with ``weight``."""
-    rows = ["| split | views | line answers | median error px | coverage without / with | median bound px without / with "
-            "| line answers: coverage without / with | median bound without / with |", "| --- |" + " ---: |" * 7]
+    rows = ["| split | views | with a line fit | median error px | coverage without / with | median bound px without / with "
+            "| with a fit: coverage without / with | median bound without / with |", "| --- |" + " ---: |" * 7]
     for split, items in evidence.items():
         off, on = readings(items, replace(trust, misfit_weight=0.0)), readings(items, replace(trust, misfit_weight=weight))
         lines = off["lines"]
@@ -123,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
     trust = load_trust(args.trust) if args.trust else shipped_trust()
     scores = needed_weight(readings(evidence["calibration"], replace(trust, misfit_weight=0.0)))
     weight = conformal_quantile(scores)
-    print(f"misfit_weight = {weight:.3f} (conformal 90 % of {len(scores)} calibration line answers; "
+    print(f"misfit_weight = {weight:.3f} (conformal 90 % of {len(scores)} calibration views with a line fit; "
           f"{int(np.sum(scores > 0))} need it, {int(np.sum(~np.isfinite(scores)))} unmeasured)")
     print(table(evidence, trust, weight))
     if args.write:

@@ -18,6 +18,7 @@ from scipy.optimize import least_squares
 
 from glradial import Lens
 from glradial.estimation.decentring import MIN_CHAINS, centre_shift_px
+from glradial.estimation.lens_estimate import judge
 from glradial.estimation.trust import FrameEvidence, load_trust, shipped_trust
 from glradial.lens import lensfuncs
 from glradial.lens.metrics import manifold_k2, max_displacement_px
@@ -87,22 +88,31 @@ def test_too_few_chains_or_an_unreachable_radius_is_not_measured():
     k = (-0.4, float(manifold_k2(-0.4)))
     points, chain = chains(Lens(*k, 0.05, 0.0))
     two = chain < MIN_CHAINS - 1
-    assert math.isnan(centre_shift_px(points[two], chain[two], np.ones(2), SIZE[0], *k, NO_PRIOR))
+    assert math.isnan(centre_shift_px(points[two], chain[two], np.ones(MIN_CHAINS - 1), SIZE[0], *k, NO_PRIOR))
     # a pincushion lens so strong that it folds before the frame's corners: no undistortion, no figure
     assert math.isnan(centre_shift_px(points * 3.0, chain, np.ones(chain.max() + 1), SIZE[0], 1.5, 1.0, NO_PRIOR))
 
 
-def test_the_bound_grows_in_quadrature_with_the_shift_and_only_with_a_weight():
-    trust = shipped_trust()
+def test_the_bound_grows_in_quadrature_with_the_shift_whichever_answer_is_taken():
+    """The term is added after the choice between the line fit and the CNN: the answer is the same
+    with and without it, the bound is the old one in quadrature with weight x shift, and a frame
+    without a measured shift (or a model with weight 0) states what it stated before."""
+    trust = replace(shipped_trust(), misfit_weight=0.5)
+    off = replace(trust, misfit_weight=0.0)
     k = (-0.5, float(manifold_k2(-0.5)))
-    evidence = FrameEvidence(k, k, 4.0, 6, 6, grass=0.5, grass_width=1.0)
-    base = replace(trust, misfit_weight=0.0).lines_bound(evidence)
-    assert replace(trust, misfit_weight=0.0).lines_bound(replace(evidence, centre_shift_px=30.0)) == base
-    weighted = replace(trust, misfit_weight=0.5)
-    assert weighted.lines_bound(evidence) == pytest.approx(base)  # not measured: no term
-    assert weighted.lines_bound(replace(evidence, centre_shift_px=30.0)) == pytest.approx(math.hypot(base, 15.0))
-    assert weighted.lines_bound(replace(evidence, centre_shift_px=math.nan)) == pytest.approx(base)
-    restored = FrameEvidence.from_dict(replace(evidence, centre_shift_px=12.5).as_dict())
+    pitch = dict(grass=0.5, grass_width=1.0, net_error_px=3.0)
+    for lines, sigma in ((k, 4.0), ((-0.45, float(manifold_k2(-0.45))), 400.0)):  # the fit taken; the CNN taken
+        evidence = FrameEvidence(k, lines, sigma, 6, 6, families=1, **pitch)
+        before = judge(evidence, "auto", off)
+        for shift, expected in ((30.0, math.hypot(before.uncertainty_px, 15.0)), (None, before.uncertainty_px),
+                                (math.nan, before.uncertainty_px)):
+            after = judge(replace(evidence, centre_shift_px=shift), "auto", trust)
+            assert (after.k1, after.k2, after.method) == (before.k1, before.k2, before.method)
+            assert after.uncertainty_px == pytest.approx(expected)
+        assert judge(replace(evidence, centre_shift_px=30.0), "auto", off).uncertainty_px == before.uncertainty_px
+    assert {judge(FrameEvidence(k, k, 4.0, 6, 6, **pitch), "auto", off).method,
+            judge(FrameEvidence(k, (-0.45, float(manifold_k2(-0.45))), 400.0, 6, 6, **pitch), "auto", off).method} == {"lines", "net"}
+    restored = FrameEvidence.from_dict(replace(FrameEvidence(k, k, 4.0, 6, 6), centre_shift_px=12.5).as_dict())
     assert restored.centre_shift_px == 12.5
 
 

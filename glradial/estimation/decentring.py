@@ -12,7 +12,8 @@ uncertainty does not see.
 :func:`centre_shift_px` measures it on the chains the fit used: one Gauss-Newton step of the joint
 fit of ``(k1, k2, p1, p2)`` from the fitted lens (the chains' straightness, each chain's line
 refitted, with the fit's own per-chain weights and its k2 prior), and reports how far the lens moves
-when the decentring terms are free: the maximum radial displacement between the fitted ``(k1, k2)``
+when the decentring terms are free (held by a loose prior, :data:`OFFSET_SIGMA`): the maximum radial
+displacement between the fitted ``(k1, k2)``
 and the jointly fitted one over the 16:9 frame, px at 1920
 (:func:`glradial.lens.metrics.max_displacement_px`). It is 0 for lines that a centred lens
 straightens exactly and grows where the chains' curvature left after the centred fit has the
@@ -34,9 +35,15 @@ import numpy as np
 from ..lens import lensfuncs
 from ..lens.metrics import manifold_k2, max_displacement_px
 
-#: Fewest chains the joint fit of four parameters is made from (each chain's own line takes two
-#: of its points' constraints; with fewer chains the decentring terms are not measured).
-MIN_CHAINS = 3
+#: Fewest chains the joint fit is made from: with three, one chain's bend decides between a
+#: centred and a decentred lens (on real stadium views, three-chain fits moved by 50-120 px), so the
+#: decentring terms are not measured.
+MIN_CHAINS = 4
+#: Prior of the principal point's offset from the centre (width units, 1 sigma; the decentring terms
+#: get ``|k1| OFFSET_SIGMA``, at least ``K1_FLOOR OFFSET_SIGMA``): real cameras keep it within a few
+#: per cent of the width (the shared wide camera: 6.5 %), so this only holds back a few chains that
+#: cannot tell a centred lens from a decentred one from reading offsets of a third of the frame.
+OFFSET_SIGMA, K1_FLOOR = 0.15, 0.02
 
 
 def _fields(u: np.ndarray) -> np.ndarray:
@@ -110,7 +117,8 @@ def centre_shift_px(points: np.ndarray, chain: np.ndarray, weight: np.ndarray, w
     slope = (manifold_k2(k1 + 1e-4) - manifold_k2(k1 - 1e-4)) / 2e-4
     prior = np.array([-slope, 1.0, 0.0, 0.0]) / k2_sigma
     offset = (k2 - manifold_k2(k1)) / k2_sigma
-    hessian = g.T @ (g * w[:, None]) + np.outer(prior, prior)
+    decentring = 1.0 / (max(abs(k1), K1_FLOOR) * OFFSET_SIGMA) ** 2
+    hessian = g.T @ (g * w[:, None]) + np.outer(prior, prior) + np.diag([0.0, 0.0, decentring, decentring])
     try:
         step = -np.linalg.solve(hessian, g.T @ (w * d) + prior * offset)
     except np.linalg.LinAlgError:

@@ -14,11 +14,12 @@ Bound (split conformal):
     * a soft-edge fit (:mod:`glradial.estimation.soft_lines`, where the white-line fit found too
       little): the same scale, bound ``= q_soft · scale``, ``q_soft`` calibrated on soft fits alone
       (their residuals are in px of a 320-px copy); a model without it (``q_soft = 0``) ignores them;
-    * either fit, where its chains say how much its lens leans on the principal point sitting at
-      the centre (``centre_shift_px``, :mod:`glradial.estimation.decentring`): the bound above
-      combined in quadrature with ``misfit_weight · centre_shift_px`` (``misfit_weight`` calibrated
-      split-conformally on rendered views through off-centre lenses, ``bench/misfit_calibration.py``;
-      0 leaves the bound as it was);
+    * where a fit's chains say how much its lens leans on the principal point sitting at the
+      centre (``centre_shift_px``, :mod:`glradial.estimation.decentring`), the bound of whichever
+      answer is taken (chosen on the bounds above) in quadrature with ``misfit_weight ·
+      centre_shift_px`` (:meth:`TrustModel.misfit_bound`; ``misfit_weight`` calibrated split-conformally
+      on rendered views through off-centre lenses, ``bench/misfit_calibration.py``; 0 leaves the
+      bound as it was): the centred model's misfit holds for the CNN's centred answer too;
     * the CNN alone: bound ``= q_net`` or, when its model has an error head and the calibration
       measured it, ``q_net_rel · net_error_px`` (the network's own expected error of the frame);
       ``q_no_lines`` / ``q_no_lines_rel`` instead when a line fit was sought and none was found (such
@@ -296,11 +297,16 @@ class TrustModel:
         return float(line_scale(self.floor_px, self.sigma_weight, spread, self.disagree_weight, evidence.disagreement_px))
 
     def lines_bound(self, evidence: FrameEvidence) -> float:
-        """``q_lines`` (``q_soft`` for a soft-edge fit) times :meth:`lines_scale`, in quadrature with
-        ``misfit_weight`` times the fit's ``centre_shift_px`` where measured (px at 1920)."""
-        bound = (self.q_soft if evidence.soft else self.q_lines) * self.lines_scale(evidence)
-        misfit = evidence.centre_shift_px
-        return math.hypot(bound, self.misfit_weight * misfit) if misfit is not None and math.isfinite(misfit) else bound
+        """``q_lines`` (``q_soft`` for a soft-edge fit) times :meth:`lines_scale` (px at 1920)."""
+        return (self.q_soft if evidence.soft else self.q_lines) * self.lines_scale(evidence)
+
+    def misfit_bound(self, bound: float, evidence: FrameEvidence) -> float:
+        """``bound`` in quadrature with ``misfit_weight`` times the line fit's ``centre_shift_px``, where
+        measured (px at 1920): the centred model's misfit, whichever answer is taken."""
+        shift = evidence.centre_shift_px
+        if shift is None or not math.isfinite(shift) or self.misfit_weight <= 0.0:
+            return bound
+        return math.hypot(bound, self.misfit_weight * shift)
 
     def net_bound(self, evidence: FrameEvidence, no_lines: bool) -> float:
         """The CNN's bound (px at 1920): relative to its own expected error when calibrated and
@@ -338,7 +344,8 @@ class TrustModel:
         "lines"): which answer, its bound and the doubt verdict (doubt by benefit, module docstring).
         A soft-edge fit counts only under a model calibrated for it (``q_soft > 0``)."""
         if evidence.soft and self.q_soft <= 0.0:
-            evidence = replace(evidence, lines=None, sigma_px=math.inf, chains=0, fit_difficulty=math.inf, soft=False)
+            evidence = replace(evidence, lines=None, sigma_px=math.inf, chains=0, fit_difficulty=math.inf, soft=False,
+                               centre_shift_px=None)
         use_lines = evidence.lines is not None and method != "net"
         white = evidence.lines is not None and not evidence.soft  # a soft fit: the white-line fit found too little
         net_bound = self.net_bound(evidence, no_lines=method != "net" and not white)
@@ -346,6 +353,7 @@ class TrustModel:
         if use_lines and method == "auto" and bound >= net_bound:
             use_lines, bound = False, net_bound
         lens, source = (evidence.lines, "lines") if use_lines else (evidence.net, "net")
+        bound = self.misfit_bound(bound, evidence)  # after the choice: the misfit is the model's, not one answer's
         empty = self.no_evidence(evidence)
         if empty is not None:
             return lens, source, max(bound, anything_bound(lens)), True, empty
