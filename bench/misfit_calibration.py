@@ -3,7 +3,7 @@
 Usage::
 
     python bench/misfit_calibration.py [--data ../shared/data] [--frames /tmp/misfit_frames.pkl]
-        [--evidence /tmp/misfit_evidence.pkl] [--write]
+        [--evidence /tmp/misfit_evidence.pkl] [--out trust_misfit.json | --write]
 
 The estimator's lens model is radial about the frame centre; a camera whose principal point sits off
 centre (the shared wide camera's, by ~6.5 % of the width) leaves the line fit reading a centred lens
@@ -31,7 +31,10 @@ Calibration (split conformal, :func:`glradial.evaluation.calibrate.conformal_qua
 the calibration views with a line fit (where the term can apply), each view's score is the weight
 its bound (with the term off) needs to cover its error, ``sqrt(error² - bound²) / centre_shift_px`` (0 when
 already covered; infinite where the shift is not measured); ``misfit_weight`` is the conformal
-quantile of the scores. ``--write`` stores it in ``glradial/data/trust.json``. Printed per split:
+quantile of the scores. ``--out FILE`` writes the shipped calibration with that weight to ``FILE``
+(judge other sets with it: ``python bench/pitch_views.py --trust FILE``); ``--write`` stores it in
+``glradial/data/trust.json`` (which ships ``misfit_weight`` 0: the term is not applied, docs/LINES.md,
+"The wide camera's bound"). Printed per split:
 views, views with a line fit, coverage and median stated bound without and with the term (over all
 views and over those with a fit), and the median error (px at 1920); the answers do not change.
 """
@@ -118,6 +121,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--evidence", type=Path, default=Path("/tmp/misfit_evidence.pkl"),
                         help="the estimator's evidence (delete it whenever the fit or FrameEvidence change)")
     parser.add_argument("--trust", type=Path, default=None, help="base calibration (default: the shipped one)")
+    parser.add_argument("--out", type=Path, default=None, help="write the calibration with the fitted misfit_weight here")
     parser.add_argument("--write", action="store_true", help=f"store the fitted misfit_weight in {TRUST_FILE}")
     args = parser.parse_args(argv)
     frames = _cached(args.frames, lambda: build(args.data))
@@ -128,11 +132,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"misfit_weight = {weight:.3f} (conformal 90 % of {len(scores)} calibration views with a line fit; "
           f"{int(np.sum(scores > 0))} need it, {int(np.sum(~np.isfinite(scores)))} unmeasured)")
     print(table(evidence, trust, weight))
-    if args.write:
+    for path in ([args.out] if args.out else []) + ([TRUST_FILE] if args.write else []):
         if not math.isfinite(weight):
             raise SystemExit("misfit_weight is not finite: too many calibration misses the shift does not measure")
-        replace(trust, misfit_weight=weight).save(TRUST_FILE)
-        print(f"wrote {TRUST_FILE}")
+        replace(trust, misfit_weight=weight).save(path)
+        print(f"wrote {path}")
     return 0
 
 

@@ -71,7 +71,7 @@ def test_the_shift_measures_how_far_an_off_centre_lens_leaves_the_centred_fit(k1
     """The shift approximates the displacement between the centred fit and the true lens's radial
     part: one Gauss-Newton step with the decentring of a principal-point offset to first order, so
     within 25 % (+ 0.3 px) for offsets up to 3 % of the width and 35 % at 8 % (the neglected terms
-    are of second order in the offset; measured 5-29 %), and growing with the offset."""
+    are of second order in the offset; measured 0-29 %), and growing with the offset."""
     k = (k1, float(manifold_k2(k1)))
     shifts = []
     for offset in (0.01, 0.03, 0.08):
