@@ -52,7 +52,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 sys.path.insert(0, str(ROOT / "bench"))
-from pitch_views import _cached, collect, offcentre_views, stadiums  # noqa: E402
+from pitch_views import _cached, cache_options, collect, offcentre_views, stadiums  # noqa: E402
 
 from glradial.estimation.lens_estimate import judge  # noqa: E402
 from glradial.estimation.trust import TRUST_FILE, load_trust, shipped_trust  # noqa: E402
@@ -116,11 +116,7 @@ def table(evidence: dict, trust, weight: float) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
-    parser.add_argument("--frames", type=Path, default=Path("/tmp/misfit_frames.pkl"))
-    parser.add_argument("--evidence", type=Path, default=Path("/tmp/misfit_evidence.pkl"),
-                        help="the estimator's evidence (delete it whenever the fit or FrameEvidence change)")
-    parser.add_argument("--trust", type=Path, default=None, help="base calibration (default: the shipped one)")
+    cache_options(parser, "/tmp/misfit_frames.pkl", "/tmp/misfit_evidence.pkl")
     parser.add_argument("--out", type=Path, default=None, help="write the calibration with the fitted misfit_weight here")
     parser.add_argument("--write", action="store_true", help=f"store the fitted misfit_weight in {TRUST_FILE}")
     args = parser.parse_args(argv)

@@ -331,12 +331,19 @@ def markdown(rows: dict) -> str:
     return "\n".join(lines)
 
 
+def cache_options(parser: argparse.ArgumentParser, frames: str, evidence: str | None = None) -> None:
+    """The options of a bench over cached frames and evidence: ``--data`` (the shared data), ``--frames``
+    and ``--evidence`` (pickles, defaults ``frames`` and ``evidence``), ``--trust`` (another calibration)."""
+    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
+    parser.add_argument("--frames", type=Path, default=Path(frames))
+    parser.add_argument("--evidence", type=Path, default=Path(evidence) if evidence else None,
+                        help="the estimator's evidence (delete it whenever the fit or FrameEvidence change)")
+    parser.add_argument("--trust", type=Path, default=None, help="judge with this calibration (default: the shipped one)")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
-    parser.add_argument("--frames", type=Path, default=Path("/tmp/pitch_views_frames.pkl"))
-    parser.add_argument("--evidence", type=Path, default=None)
-    parser.add_argument("--trust", type=Path, default=None)
+    cache_options(parser, "/tmp/pitch_views_frames.pkl")
     parser.add_argument("--sources", default="")
     parser.add_argument("--json", type=Path, default=None)
     args = parser.parse_args(argv)
