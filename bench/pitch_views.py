@@ -55,6 +55,7 @@ import math
 import pickle
 import sys
 from pathlib import Path
+from typing import Iterator
 
 import cv2
 import numpy as np
@@ -180,27 +181,44 @@ def centred_fit(lens, size: tuple[int, int] = SIZE, views: int = 12) -> tuple[fl
     return float(dist.ravel()[0] * (width / k[0, 0]) ** 2), float(dist.ravel()[1] * (width / k[0, 0]) ** 4)
 
 
-def _offcentre(n_per: int = 8) -> list[tuple[str, np.ndarray, tuple]]:
+def offcentre_views(panoramas, n_per: int = 8, rng_base: int = 900, tilt=(-30.0, -8.0),
+                    pan=(-40.0, 40.0)) -> list[tuple[str, np.ndarray, tuple]]:
+    """``(name, frame, centred lens)``: ``n_per`` views (hfov 55-90 deg, ``tilt``, ``pan``) of each
+    ``(label, panorama)`` of ``panoramas`` through strong lenses (k1 -0.8..-0.1, k2 on or above the
+    manifold) whose principal point is :data:`OFFCENTRE_OFFSET` of the width off centre, each scored
+    against the centred lens a checkerboard calibration reports (:func:`centred_fit`); draws from
+    ``rng_base + j`` (poses, offsets) and ``rng_base + 50 + j`` (lenses) for the ``j``-th panorama."""
     from glradial import distort
     from glradial.lens.lens import Lens
     from glradial.synthesis.crops import CropParams, CropRenderer
-    from glradial.synthesis.stadium import stadium_panorama
-    from glradial.synthesis.stadium_style import split_seeds
 
     out = []
-    for j, seed in enumerate(split_seeds("val", OFFCENTRE_STADIUMS, start=OFFCENTRE_SEED)):
-        rng = np.random.default_rng(900 + j)
+    for j, (label, pano) in enumerate(panoramas):
+        rng = np.random.default_rng(rng_base + j)
         lenses = []
-        for k1, k2 in _lens_draws(n_per, 950 + j, (-0.8, -0.1)):
+        for k1, k2 in _lens_draws(n_per, rng_base + 50 + j, (-0.8, -0.1)):
             radius, angle = rng.uniform(*OFFCENTRE_OFFSET), rng.uniform(0.0, 2.0 * math.pi)
             lenses.append(Lens(k1, k2, float(radius * math.cos(angle)), float(radius * math.sin(angle))))
-        params = [CropParams(float(rng.uniform(-40.0, 40.0)), float(rng.uniform(-30.0, -8.0)), float(rng.uniform(-1.5, 1.5)),
+        params = [CropParams(float(rng.uniform(*pan)), float(rng.uniform(*tilt)), float(rng.uniform(-1.5, 1.5)),
                              float(rng.uniform(55.0, 90.0)), 0.0, 0.0) for _ in lenses]
-        with CropRenderer(stadium_panorama(seed, size=(4096, 2048)), size=SIZE, supersample=2) as renderer:
+        with CropRenderer(pano, size=SIZE, supersample=2) as renderer:
             frames = renderer.render(params)[..., :3]
         for i, (lens, frame) in enumerate(zip(lenses, frames)):
-            out.append((f"stadium{seed}/{i}", distort(np.ascontiguousarray(frame), lens, fit="crop"), centred_fit(lens)))
+            out.append((f"{label}/{i}", distort(np.ascontiguousarray(frame), lens, fit="crop"), centred_fit(lens)))
     return out
+
+
+def stadiums(seeds) -> Iterator[tuple[str, np.ndarray]]:
+    """``(label, panorama)`` of the procedural stadiums ``seeds`` (4096 x 2048), one at a time."""
+    from glradial.synthesis.stadium import stadium_panorama
+
+    return ((f"stadium{seed}", stadium_panorama(seed, size=(4096, 2048))) for seed in seeds)
+
+
+def _offcentre(n_per: int = 8) -> list[tuple[str, np.ndarray, tuple]]:
+    from glradial.synthesis.stadium_style import split_seeds
+
+    return offcentre_views(stadiums(split_seeds("val", OFFCENTRE_STADIUMS, start=OFFCENTRE_SEED)), n_per)
 
 
 def builders(data: Path) -> dict:
@@ -343,12 +361,19 @@ def markdown(rows: dict) -> str:
     return "\n".join(lines)
 
 
+def cache_options(parser: argparse.ArgumentParser, frames: str, evidence: str | None = None) -> None:
+    """The options of a bench over cached frames and evidence: ``--data`` (the shared data), ``--frames``
+    and ``--evidence`` (pickles, defaults ``frames`` and ``evidence``), ``--trust`` (another calibration)."""
+    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
+    parser.add_argument("--frames", type=Path, default=Path(frames))
+    parser.add_argument("--evidence", type=Path, default=Path(evidence) if evidence else None,
+                        help="the estimator's evidence (delete it whenever the fit or FrameEvidence change)")
+    parser.add_argument("--trust", type=Path, default=None, help="judge with this calibration (default: the shipped one)")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--data", type=Path, default=ROOT.parent / "shared" / "data")
-    parser.add_argument("--frames", type=Path, default=Path("/tmp/pitch_views_frames.pkl"))
-    parser.add_argument("--evidence", type=Path, default=None)
-    parser.add_argument("--trust", type=Path, default=None)
+    cache_options(parser, "/tmp/pitch_views_frames.pkl")
     parser.add_argument("--sources", default="")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--list", action="store_true",

@@ -112,7 +112,8 @@ def frame_evidence(frame: np.ndarray, net: tuple[float, float], view_features: V
                          float(fit.sigma_px) if usable else math.inf, int(fit.chains) if usable else 0,
                          int(fit.candidates), green, gray_std, float(evidence.edge_density), net_error,
                          float(fit.rms_px), int(fit.families), int(fit.conics), float(fit.reach),
-                         float(fit.difficulty) if usable else math.inf, soft, grass, grass_width)
+                         float(fit.difficulty) if usable else math.inf, soft, grass, grass_width,
+                         float(fit.centre_shift_px) if usable and math.isfinite(fit.centre_shift_px) else None)
 
 
 def judge(evidence: FrameEvidence, method: str, trust: TrustModel | None = None) -> LensEstimate:

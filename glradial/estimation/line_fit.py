@@ -53,7 +53,7 @@ import numpy as np
 
 from ..lens import lensfuncs
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2
-from . import pitch_geometry
+from . import decentring, pitch_geometry
 from .lines import LineEvidence
 
 #: Range of k1 searched (lens units): real broadcast and pitch cameras reach -0.72.
@@ -124,7 +124,10 @@ class LineFit:
       corner radius (a lens read from chains near the centre is extrapolated to the corners);
     * ``difficulty``: ``sigma_px * (1 + 2 / (chains + families + conics)) / max(reach, 0.25)``,
       larger is harder (``inf`` when not ``ok``): a per-frame scale for calibrating a bound;
-    * ``reason``: ``""`` when ``ok``; else one of :data:`REASONS` (machine-readable).
+    * ``reason``: ``""`` when ``ok``; else one of :data:`REASONS` (machine-readable);
+    * ``centre_shift_px``: how far the lens moves when decentring terms are fitted with it on the
+      chains used (:func:`glradial.estimation.decentring.centre_shift_px`, px at 1920): large where the
+      centred model does not hold the frame (a principal point off centre); NaN when not measured.
     """
 
     k1: float
@@ -141,6 +144,7 @@ class LineFit:
     reach: float = 0.0
     difficulty: float = math.inf
     reason: str = ""
+    centre_shift_px: float = math.nan
 
 
 #: Values of :attr:`LineFit.reason` when the fit fails: no chain at all; no chain that some lens
@@ -494,6 +498,17 @@ def _covariance(problem: _Problem, hessian: np.ndarray | None, chi: np.ndarray) 
     return 2.0 * np.linalg.inv(hessian) * max(1.0, reduced), float(eig.max() / eig.min())
 
 
+def _centre_shift(problem: _Problem, used: np.ndarray, k1: float, k2: float) -> float:
+    """:func:`glradial.estimation.decentring.centre_shift_px` of the chains where ``used`` (C,), with the
+    fit's per-chain weights (shared among each chain's points) and its k2 prior."""
+    mask = used[problem.chain]
+    per_chain = np.bincount(problem.chain[mask], minlength=problem.n)[used]
+    counts = problem.counts[used]
+    weight = counts / (np.maximum(per_chain, 1) * (SIGMA_POINT**2 + counts * SIGMA_FLOOR**2))
+    chain = (np.cumsum(used) - 1)[problem.chain[mask]]
+    return decentring.centre_shift_px(problem.points[mask], chain, weight, problem.width, k1, k2, K2_PRIOR_SIGMA)
+
+
 def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int, family_counts: bool = False) -> LineFit:
     """The :class:`LineFit` of a finished fit (diagnostics, ``ok`` and ``reason``; with
     ``family_counts`` a vanishing-point family counts as one agreeing chain towards MIN_CHAINS)."""
@@ -510,9 +525,10 @@ def _result(problem: _Problem, k1: float, k2: float, hessian, candidates: int, f
     ok = agreeing >= MIN_CHAINS and math.isfinite(sigma)
     reason = "" if ok else ("too_few_chains" if agreeing < MIN_CHAINS else "ill_conditioned")
     difficulty = sigma * (1.0 + 2.0 / max(used + families + conics, 1)) / max(reach, 0.25) if ok else math.inf
+    shift = _centre_shift(problem, used_mask, k1, k2) if ok else math.nan
     return LineFit(float(k1), float(k2), sigma, used, candidates, ok, problem.chain_rms_px(k1, k2, used_mask),
                    None if cov is None else (tuple(map(float, cov[0])), tuple(map(float, cov[1]))),
-                   condition, families, conics, reach, difficulty, reason)
+                   condition, families, conics, reach, difficulty, reason, shift)
 
 
 def fit_lines(evidence: LineEvidence, prior: tuple[float, float] | None = None, family_counts: bool = False) -> LineFit:

@@ -14,6 +14,12 @@ Bound (split conformal):
     * a soft-edge fit (:mod:`glradial.estimation.soft_lines`, where the white-line fit found too
       little): the same scale, bound ``= q_soft · scale``, ``q_soft`` calibrated on soft fits alone
       (their residuals are in px of a 320-px copy); a model without it (``q_soft = 0``) ignores them;
+    * where a fit's chains say how much its lens leans on the principal point sitting at the
+      centre (``centre_shift_px``, :mod:`glradial.estimation.decentring`), the bound of whichever
+      answer is taken (chosen on the bounds above) in quadrature with ``misfit_weight ·
+      centre_shift_px`` (:meth:`TrustModel.misfit_bound`; ``misfit_weight`` calibrated split-conformally
+      on rendered views through off-centre lenses, ``bench/misfit_calibration.py``; 0 leaves the
+      bound as it was): the centred model's misfit holds for the CNN's centred answer too;
     * the CNN alone: bound ``= q_net`` or, when its model has an error head and the calibration
       measured it, ``q_net_rel · net_error_px`` (the network's own expected error of the frame);
       ``q_no_lines`` / ``q_no_lines_rel`` instead when a line fit was sought and none was found (such
@@ -100,7 +106,8 @@ class FrameEvidence:
     fit's diagnostics (:class:`glradial.estimation.line_fit.LineFit`; ``fit_difficulty`` inf without
     a fit, ``None`` when not measured); ``soft``: the fit is the soft-edge fit
     (:mod:`glradial.estimation.soft_lines`, run where the white-line fit found too little), bounded
-    with its own quantile ``q_soft``.
+    with its own quantile ``q_soft``; ``centre_shift_px``: the fit's
+    :attr:`glradial.estimation.line_fit.LineFit.centre_shift_px` (px at 1920; ``None`` when not measured).
     """
 
     net: tuple[float, float]
@@ -120,6 +127,7 @@ class FrameEvidence:
     soft: bool = False
     grass: float | None = None
     grass_width: float = 0.0
+    centre_shift_px: float | None = None
 
     @property
     def disagreement_px(self) -> float:
@@ -279,6 +287,7 @@ class TrustModel:
     q_no_lines_rel: float = 0.0
     scale_feature: str = "sigma_px"
     q_soft: float = 0.0
+    misfit_weight: float = 0.0
     note: str = ""
 
     def lines_scale(self, evidence: FrameEvidence) -> float:
@@ -290,6 +299,14 @@ class TrustModel:
     def lines_bound(self, evidence: FrameEvidence) -> float:
         """``q_lines`` (``q_soft`` for a soft-edge fit) times :meth:`lines_scale` (px at 1920)."""
         return (self.q_soft if evidence.soft else self.q_lines) * self.lines_scale(evidence)
+
+    def misfit_bound(self, bound: float, evidence: FrameEvidence) -> float:
+        """``bound`` in quadrature with ``misfit_weight`` times the line fit's ``centre_shift_px``, where
+        measured (px at 1920): the centred model's misfit, whichever answer is taken."""
+        shift = evidence.centre_shift_px
+        if shift is None or not math.isfinite(shift) or self.misfit_weight <= 0.0:
+            return bound
+        return math.hypot(bound, self.misfit_weight * shift)
 
     def net_bound(self, evidence: FrameEvidence, no_lines: bool) -> float:
         """The CNN's bound (px at 1920): relative to its own expected error when calibrated and
@@ -327,7 +344,8 @@ class TrustModel:
         "lines"): which answer, its bound and the doubt verdict (doubt by benefit, module docstring).
         A soft-edge fit counts only under a model calibrated for it (``q_soft > 0``)."""
         if evidence.soft and self.q_soft <= 0.0:
-            evidence = replace(evidence, lines=None, sigma_px=math.inf, chains=0, fit_difficulty=math.inf, soft=False)
+            evidence = replace(evidence, lines=None, sigma_px=math.inf, chains=0, fit_difficulty=math.inf, soft=False,
+                               centre_shift_px=None)
         use_lines = evidence.lines is not None and method != "net"
         white = evidence.lines is not None and not evidence.soft  # a soft fit: the white-line fit found too little
         net_bound = self.net_bound(evidence, no_lines=method != "net" and not white)
@@ -335,6 +353,7 @@ class TrustModel:
         if use_lines and method == "auto" and bound >= net_bound:
             use_lines, bound = False, net_bound
         lens, source = (evidence.lines, "lines") if use_lines else (evidence.net, "net")
+        bound = self.misfit_bound(bound, evidence)  # after the choice: the misfit is the model's, not one answer's
         empty = self.no_evidence(evidence)
         if empty is not None:
             return lens, source, max(bound, anything_bound(lens)), True, empty
