@@ -273,8 +273,23 @@ def test_command_names_an_unknown_image_extension(tmp_path, capsys, name):
     assert main(["stadium", "--seed", "1", "--size", "64x32", "--out", str(tmp_path / name)]) == 1
     err = capsys.readouterr().err
     suffix = repr(Path(name).suffix or "(none)")
-    assert f"unknown image extension {suffix}; use .exr, .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
+    assert f"unknown image extension {suffix}; use .jpeg, .jpg, .png, .tif, .tiff or .npy" in err, err
     assert "video" not in err and list(tmp_path.iterdir()) == []
+
+
+def test_command_refuses_exr_before_rendering(tmp_path, capsys, monkeypatch):
+    """OpenEXR stores float samples only: an 8-bit panorama named .exr is refused before the
+    render (which takes a minute at the default size), naming the formats that keep it."""
+    from glradial.cli import main
+
+    def no_render(*args, **kwargs):
+        raise AssertionError("rendered although --out cannot store the panorama")
+
+    monkeypatch.setattr("glradial.synthesis.stadium.stadium_panorama", no_render)
+    assert main(["stadium", "--seed", "1", "--size", "64x32", "--out", str(tmp_path / "s.exr")]) == 1
+    err = capsys.readouterr().err
+    assert "'.exr' " not in err and ".exr cannot store the panorama's 8-bit RGB samples" in err, err
+    assert "use .jpeg, .jpg, .png, .tif, .tiff or .npy" in err and list(tmp_path.iterdir()) == []
 
 
 def test_the_panorama_cache_key_follows_the_shader_source(tmp_path, monkeypatch):

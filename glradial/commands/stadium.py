@@ -53,9 +53,12 @@ def run(args: argparse.Namespace) -> int:
 
     target = check_output_folder(args.out)  # everything about --out is checked before the render
     npy = target.suffix.lower() == ".npy"
+    known = ", ".join(sorted(ext for ext, dtypes in IMAGE_EXTENSIONS.items() if "uint8" in dtypes))  # 8-bit RGB formats
     if not npy and not is_image_path(target):
-        known = ", ".join(sorted(IMAGE_EXTENSIONS))
         raise ValueError(f"--out {str(target)!r}: unknown image extension {target.suffix or '(none)'!r}; use {known} or .npy")
+    if not npy and "uint8" not in IMAGE_EXTENSIONS[target.suffix.lower()]:
+        raise ValueError(f"--out {str(target)!r}: {target.suffix} cannot store the panorama's 8-bit RGB samples; "
+                         f"use {known} or .npy")
     check_overwrite(target, args.overwrite)
     with Progress(1, "stadium", unit="panoramas", enabled=show_progress(args)) as bar:
         image = stadium_panorama(args.seed, tuple(args.size), **overrides)
