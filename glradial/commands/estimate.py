@@ -11,14 +11,12 @@ from . import UsageError, positive_float, positive_int, show_progress
 from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted, write_image_opentrackio, write_track_opentrackio
 
 DESCRIPTION = """\
-Estimate the radial lens of each INPUT. How well (maximum displacement error, px of a 1920-wide
-frame): --method auto (default; the pitch-line fit where it is surer than the CNN; on images combined
-with the lens of the whole-camera fit to the pitch template where that fits, --no-pitch to skip it,
-docs/CAMERA.md) 1.1 px median on
-held-out stadium crops, 3.7-4.5 px median on real broadcast frames with known lenses (self-consistent);
-where no pitch line is found it falls back on the CNN, doubtful (33 px median on crops of a real
-panorama); --method net (the bundled CNN alone, ONNX on onnxruntime) 4.5 px on stadium crops;
---method lines the fit alone (docs/LINES.md, docs/eval/real.md, docs/eval/trust.md). Each image is
+Estimate the radial lens of each INPUT. --method auto (default): the pitch-line fit where it is
+surer than the CNN; on images combined with the lens of the whole-camera fit to the pitch template
+where that fits (--no-pitch to skip it, docs/CAMERA.md); where no pitch line is found it falls back
+on the CNN, doubtful. --method net: the bundled CNN alone (ONNX on onnxruntime); --method lines: the
+fit alone. How well each does (maximum displacement error, px of a 1920-wide frame, per source):
+README.md ("What it can and cannot do"), docs/LINES.md, docs/eval/real.md, docs/eval/trust.md. Each image is
 read as RGB; the network sees its centred 16:9 view (the whole frame when it is 16:9), resized with
 area interpolation, and its answer is converted to the image's own width-normalised lens; with auto
 or lines, the lens that straightens the frame's pitch lines and straight edges is fitted too. Prints one line per image: the path, k1 and
