@@ -317,6 +317,18 @@ def test_convert_json_and_opencv_matrix(capsys):
     assert document["dist_coeffs"][:2] == pytest.approx([-0.2, 0.04])
 
 
+
+def test_convert_opencv_extra_terms_point_to_the_option(capsys):
+    """p1, p2, k3 that glradial cannot represent are refused with the command line's advice
+    (--approximate), not the Python API's (approximate=True); with --approximate, k1, k2 are kept
+    (f = W: the same numbers, docs/DESIGN.md)."""
+    argv = ["convert", "--from", "opencv", "--to", "width", "--size", "1920x1080", "--focal", "1920", "--", "-0.1", "0.01", "0.001", "0", "0"]
+    assert main(argv) == 1
+    err = capsys.readouterr().err
+    assert "p1=0.001" in err and "--approximate" in err and "approximate=True" not in err, err
+    assert main(argv[:9] + ["--approximate"] + argv[9:]) == 0
+    assert [float(v) for v in capsys.readouterr().out.split()] == pytest.approx([-0.1, 0.01])
+
 # -- help --------------------------------------------------------------------------------------------
 def test_every_option_is_documented():
     parser = build_parser()

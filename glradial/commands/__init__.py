@@ -28,7 +28,7 @@ from ..errors import Error
 
 __all__ = [
     "CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress",
-    "add_lens_options", "lens_from_args", "read_lens_file",
+    "add_lens_options", "lens_from_args", "read_lens_file", "OPENCV_API_HINT",
 ]
 
 _SIZE = re.compile(r"^\s*(\d+)\s*[xX×,]\s*(\d+)\s*$")
@@ -185,16 +185,16 @@ def read_lens_file(path: str, size: tuple[int, int] | None = None):
     return Lens(**{name: document[name] for name in LENS_KEYS if name in document})
 
 
-#: the Python API's advice in :meth:`glradial.Lens.from_opencv`'s error, which the CLI has no option for
-_API_HINT = "Pass approximate=True to keep k1, k2 only."
+#: the Python API's advice in :meth:`glradial.Lens.from_opencv`'s error, which each command words its own way
+OPENCV_API_HINT = "Pass approximate=True to keep k1, k2 only."
 
 
 def _cli_advice(source: Path, message: str) -> str:
     """``message`` of :meth:`Lens.from_opencv` with the Python-only advice replaced by command-line advice."""
-    if _API_HINT not in message:
+    if OPENCV_API_HINT not in message:
         return f"lens file {str(source)!r}: {message}"
     return f"lens file {str(source)!r}: " + message.replace(
-        _API_HINT,
+        OPENCV_API_HINT,
         "Set p1, p2, k3 ... to 0 in the file to keep k1, k2 only (an approximation), or get centred numbers with "
         "'glradial convert --from opencv --to width --approximate --size WxH --focal FX K1 K2 P1 P2 K3'.",
     )

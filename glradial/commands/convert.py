@@ -7,7 +7,7 @@ import json
 import sys
 
 from ..lens.options import DISTORTION_MODELS
-from . import UsageError, finite_float, parse_size, positive_float
+from . import OPENCV_API_HINT, UsageError, finite_float, parse_size, positive_float
 from .engine_options import add_camera_options, camera_from_args, sensor_mm
 
 CONVENTIONS = ("glradial", "width", "opencv", "ffmpeg", "lensfun", "pixel", "height", "opentrackio")
@@ -90,7 +90,10 @@ def to_lens(source: str, values: list[float], size: tuple[int, int], focal: floa
         width, height = size
         camera = np.array([[focal, 0.0, (width - 1) / 2], [0.0, focal, (height - 1) / 2], [0.0, 0.0, 1.0]])
         dist = list(values) + [0.0] * (5 - len(values))
-        return Lens.from_opencv(camera, dist, size, approximate=approximate)
+        try:
+            return Lens.from_opencv(camera, dist, size, approximate=approximate)
+        except ValueError as err:  # the Python API's advice, in this command's terms
+            raise ValueError(str(err).replace(OPENCV_API_HINT, "Give --approximate to keep K1, K2 only.")) from None
     if source == "opentrackio":
         return _from_opentrackio(values, sensor_width_mm)
     if len(values) != 2:
