@@ -88,3 +88,18 @@ def test_every_public_name_is_in_the_readme():
     readme = (ROOT / "README.md").read_text(encoding="utf-8")
     missing = [name for name in glradial.__all__ if not re.search(rf"`[^`]*\b{re.escape(name)}\b[^`]*`", readme)]
     assert not missing, f"exported by glradial but not in README.md: {missing}"
+
+
+def test_every_file_the_docs_name_exists():
+    """Links and `path/like/this.py` mentions in README.md and docs/*.md point at files that exist
+    (a renamed or removed module, script or figure leaves a dead reference otherwise)."""
+    dead = []
+    for doc in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        text = doc.read_text(encoding="utf-8")
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text):
+            if "://" not in target and not (doc.parent / target).exists():
+                dead.append(f"{doc.name}: link {target}")
+        for path in re.findall(r"`((?:bench|scripts|tests|glradial|net|docs|examples|shaders)/[\w/.-]+\.[a-z]+)`", text):
+            if not (ROOT / path).exists():
+                dead.append(f"{doc.name}: {path}")
+    assert not dead, "the docs name files that do not exist:\n" + "\n".join(dead)
