@@ -15,7 +15,7 @@ Estimate the radial lens of each INPUT. --method auto (default): the pitch-line 
 surer than the CNN; on images combined with the lens of the whole-camera fit to the pitch template
 where that fits (--no-pitch to skip it, docs/CAMERA.md); where no pitch line is found it falls back
 on the CNN, doubtful. --method net: the bundled CNN alone (ONNX on onnxruntime); --method lines: the
-fit alone. How well each does (maximum displacement error, px of a 1920-wide frame, per source):
+line fit whenever a frame has usable lines. How well each does (maximum displacement error, px of a 1920-wide frame, per source):
 README.md ("What it can and cannot do"), docs/LINES.md, docs/eval/real.md, docs/eval/trust.md. Each image is
 read as RGB; the network sees its centred 16:9 view (the whole frame when it is 16:9), resized with
 area interpolation, and its answer is converted to the image's own width-normalised lens; with auto
