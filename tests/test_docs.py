@@ -103,3 +103,12 @@ def test_every_file_the_docs_name_exists():
             if not (ROOT / path).exists():
                 dead.append(f"{doc.name}: {path}")
     assert not dead, "the docs name files that do not exist:\n" + "\n".join(dead)
+
+
+def test_every_sub_package_is_in_the_readme_and_the_architecture_map():
+    packages = sorted(p.parent.name for p in (ROOT / "glradial").glob("*/__init__.py") if p.parent.name not in {"data", "models"})
+    assert "camera" in packages and "lens" in packages, packages
+    for doc in (ROOT / "README.md", ROOT / "docs" / "ARCHITECTURE.md"):
+        text = doc.read_text(encoding="utf-8")
+        missing = [name for name in packages if not re.search(rf"(?<![\w/]){name}/", text)]
+        assert not missing, f"{doc.name} does not name the sub-package(s) {missing}"
