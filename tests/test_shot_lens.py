@@ -146,3 +146,7 @@ def test_calibrate_shot_rejects_what_is_not_a_frame():
         glradial.calibrate_shot([np.zeros((4, 4), np.uint8).tolist()])
     with pytest.raises(TypeError, match="pitch"):
         glradial.calibrate_shot([], pitch=(105, 68))
+    with pytest.raises(TypeError, match="frames must be an iterable.*int"):
+        glradial.calibrate_shot(5)
+    with pytest.raises(TypeError, match=r"frames must be .*shape \(36, 64, 3\)"):  # one frame, not a shot
+        glradial.calibrate_shot(np.zeros((36, 64, 3), np.uint8))

@@ -218,6 +218,9 @@ def calibrate_shot(frames: Iterable[np.ndarray], *, pitch: PitchTemplate | None 
     e.g. with :func:`glradial.video.cuts.detect_cuts`; ``glradial calibrate VIDEO`` does) with one lens
     per shot as a function of the measured focal length (module docstring). ``frames``: uint8/uint16/
     float RGB or gray arrays of one size, consumed one at a time."""
+    if isinstance(frames, np.ndarray) and frames.ndim < 4 or not isinstance(frames, Iterable):
+        raise TypeError(f"frames must be an iterable of frames (a list, a generator, an N x H x W x C array), got {type(frames).__name__}"
+                        f"{' of shape ' + str(frames.shape) if isinstance(frames, np.ndarray) else ''}")
     calibrator = ShotCalibrator(pitch)
     for frame in frames:
         calibrator.add(frame)
