@@ -51,7 +51,15 @@ joint fit (whichever of the two states less) only when that median is doubtful (
 or its bound above the run's threshold). A fit that
 few chains leave loose (a pure zoom: its frame pairs tie the lens at one zoom to the next, not the
 lens itself) does not stand. A zooming shot needs estimates :data:`ZOOM_FALLBACK_RATIO` times
-surer: their one lens cannot follow the zoom.
+surer: the joint fit reads its lines as well as its pairs.
+
+**A zoom read by its frames follows the zoom** (:func:`_zoom_of_frames`): with
+:data:`ZOOM_FRAMES_MIN` estimates or more (a sample with few lines gets one of its own,
+:data:`glradial.video.shot_evidence.FEW_CHAINS`), ``k1`` is a line in the measured log zoom, its
+level the estimates' weighted mean and its slope the one under which the frame pairs fit (they tie
+the lens at one zoom to the lens at the next); its bound carries the level's uncertainty to every
+zoom the shot's frames reach. With fewer estimates, one lens (their median), which cannot follow
+the zoom: it stays doubtful (:func:`judged_by_benefit`).
 
 Doubt (reason strings are machine-readable): ``no_geometry`` (fewer than :data:`MIN_CHAINS` chains
 pass screening and the camera did not pan :data:`PAN_MIN`: nothing but the per-frame
@@ -130,9 +138,9 @@ ZOOM_FALLBACK_RATIO = 2.0
 #: a zoom read by its per-frame estimates alone follows the zoom (:func:`_zoom_of_frames`) when at
 #: least this many of them state a bound (the line through them then has a residual to check it)
 ZOOM_FRAMES_MIN = 3
-#: the slopes of k1 per unit log zoom a zoom read by its frames may take (:func:`_slope_of_pairs`),
-#: and the step in its level (k1) by which the slope's dependence on the level is measured
-SLOPE_RANGE = (-2.0, 2.0)
+#: the slopes of k1 per unit log zoom a zoom read by its frames may take (:func:`_slope_of_pairs`)
+#: and the grid they are first searched on (0.1 apart), and the step in its level (k1) by which the slope's dependence on the level is measured
+SLOPE_RANGE, SLOPE_GRID = (-2.0, 2.0), 41
 LEVEL_STEP = 0.01
 #: a stated ~90 % bound over this is its 1-sigma (the two-sided 90 % point of a normal)
 Z90 = float(norm.ppf(0.95))
@@ -554,18 +562,19 @@ def _slope_of_pairs(evidence: ShotEvidence, centre: float, zbar: float, level: f
         return None
     matches, z = _Pairs(pairs), evidence.log_zooms() - centre
 
-    def best(at_level: float) -> float:
+    def best(at_level: float, bounds: tuple[float, float]) -> float:
         def cost(a1: float) -> float:
             r = matches.residuals(_lens(np.array([at_level - a1 * zbar, a1, 0.0, b0]), z))
             return float(r @ r)
 
-        grid = np.linspace(*SLOPE_RANGE, 41)
-        i = int(np.argmin([cost(a) for a in grid]))
-        lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
-        return float(minimize_scalar(cost, bounds=(lo, hi), method="bounded", options={"xatol": 1e-4}).x)
+        return float(minimize_scalar(cost, bounds=bounds, method="bounded", options={"xatol": 1e-4}).x)
 
-    slope = best(level)
-    coupling = (best(level + LEVEL_STEP) - best(level - LEVEL_STEP)) / (2.0 * LEVEL_STEP)
+    grid = np.linspace(*SLOPE_RANGE, SLOPE_GRID)
+    costs = [float(np.sum(matches.residuals(_lens(np.array([level - a * zbar, a, 0.0, b0]), z)) ** 2)) for a in grid]
+    i = int(np.argmin(costs))
+    slope = best(level, (grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]))
+    near = (slope - 2.0 * (grid[1] - grid[0]), slope + 2.0 * (grid[1] - grid[0]))
+    coupling = (best(level + LEVEL_STEP, near) - best(level - LEVEL_STEP, near)) / (2.0 * LEVEL_STEP)
     return slope, coupling
 
 
@@ -621,10 +630,11 @@ def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
     bound. A 150 px barrel read stating 15 px is applied; a near-pinhole one stating 15 px is not.
     Other reasons (``fold_over``, the frames' own doubt) stand, and so does a frames-only bound when
     the per-frame estimates state none of their own (it is then :data:`NO_GEOMETRY_PX`, not a
-    calibrated bound), or when the shot zooms: its frames' one lens cannot follow the zoom, and
-    their bound covers only the zooms they were read at (a zoom over the real stadium panorama,
-    read at 20-60 px stating 52, was applied where it made the zoom's end worse than uncorrected,
-    docs/eval/shots.md)."""
+    calibrated bound), or when the shot zooms and its frames gave it one lens: that lens cannot
+    follow the zoom, and their bound covers only the zooms they were read at (a zoom over the real
+    stadium panorama, read at 20-60 px stating 52, was applied where it made the zoom's end worse
+    than uncorrected, docs/eval/shots.md). A zoom its frames read as a lens that follows it
+    (:func:`_zoom_of_frames`, ``zooming``) is judged by its bound like any other shot."""
     if not shot.doubtful or shot.reason not in ("uncertain", "no_geometry"):
         return shot
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
