@@ -157,7 +157,8 @@ def test_correct_auto_checks_the_encoder_before_estimating(tmp_path, capfd, monk
 def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, monkeypatch):
     """--auto on a small lossless clip with a cut, with a stand-in estimator keyed on the frame
     index stored in pixel (0, 0): the cut is found, the estimator runs on the shots' sampled frames
-    only (every 2nd frame, every 3rd sample), the sidecar has one row per frame with the shot, its
+    only (every 2nd frame), once each, on every 3rd sample at least (and on samples with few line
+    chains: these 160 px frames show few), the sidecar has one row per frame with the shot, its
     doubt, reason and whether it was applied; a doubtful shot passes through untouched (lossless:
     identical pixels), and with --apply-doubtful every frame is corrected with its track lens."""
     n, cut = 24, 14
@@ -180,7 +181,8 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
         out = tmp_path / f"out{len(extra)}.mkv"
         calls.clear()
         assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--backend", "cpu", *extra]) == 0
-        assert calls == [0, 6, 12, 14, 20]
+        sampled = set(range(0, cut, 2)) | set(range(cut, n, 2))
+        assert calls == sorted(set(calls)) and {0, 6, 12, 14, 20} <= set(calls) <= sampled, calls
         rows = np.genfromtxt(f"{out}.lens.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
         assert len(rows) == n
         assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)

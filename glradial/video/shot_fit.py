@@ -524,7 +524,7 @@ def _zoom_of_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> Sho
     centre = float(0.5 * (zoom.min() + zoom.max()))
     z = np.array([z for z, _ in picked]) - centre
     k = np.array([[e.k1, e.k2] for _, e in picked], np.float64)
-    bound = np.array([e.uncertainty_px for _, e in picked], np.float64)
+    bound = np.maximum([e.uncertainty_px for _, e in picked], BOUND_FLOOR_PX)  # no estimate is surer than the floor
     b0 = float(np.sum((k[:, 1] - manifold_k2(k[:, 0])) / bound**2) / np.sum(1.0 / bound**2))
     weight = (Z90 * _px_per_k1(k[:, 0], b0) / bound) ** 2  # 1 / sigma^2 of each estimate's k1
     zbar, level = float(np.sum(weight * z) / np.sum(weight)), float(np.sum(weight * k[:, 0]) / np.sum(weight))
