@@ -428,9 +428,14 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     assert shots[1].startswith(f"cut.mp4: shot 1 frames 12-19 k1={track.lens[12, 0]:.6f} k2={track.lens[12, 1]:.6f} ")
     document = json.loads(track_report(track, "cut.mp4", per_frame=True, as_json=True))
     assert len(document["frames"]) == 20 and document["fps"] == pytest.approx(25)
-    # samples every 3rd frame of each shot (0, 3, 6, 9 | 12, 15, 18); the estimator runs on every
-    # 3rd sample of a shot (glradial.video.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12
-    assert [r["frame"] for r in document["frames"] if r["k1_raw"] is not None] == [0, 9, 12]
+    # samples at least 3 frames apart in each shot (0, 3, 6, 9 | 12, ...: the sparse decode numbers
+    # what it decodes); the estimator runs on every 3rd sample of a shot
+    # (glradial.video.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12, and on the samples whose line
+    # detection finds few chains (shot_evidence.FEW_CHAINS), on no other frame
+    estimated = sorted(r["frame"] for r in document["frames"] if r["k1_raw"] is not None)
+    assert {0, 9, 12} <= set(estimated) and len(estimated) <= 7, estimated
+    assert all(b - a >= 3 for shot in ([f for f in estimated if f < 12], [f for f in estimated if f >= 12])
+               for a, b in zip(shot, shot[1:])), estimated
     track.save(tmp_path / "t.json")
     track.save(tmp_path / "t.csv")
     for name in ("t.csv", "t.json"):
