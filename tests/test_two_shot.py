@@ -258,7 +258,9 @@ def test_a_zoom_read_from_its_frames_follows_it():
     the zoom at every sample to within 3 px of the best line in log zoom through the truth (itself
     a few px off this curved truth); from the estimates alone, a weighted line, it follows
     their bias (more than 10 px off at the zoomed-in end). Either way the stated bound covers the
-    error at every sample, and one lens for the zoom (what a frames-read zoom was) is far worse."""
+    error at every sample, and one lens for the zoom (what a frames-read zoom was) is far worse. With
+    only two estimates (the estimator's rhythm, samples 0 and 3) the pairs still carry the zoom;
+    without pairs two estimates give one lens, doubtful."""
     from glradial.estimation.lens_estimate import LensEstimate
 
     zooms = np.linspace(0.0, math.log(1.6), 5)
@@ -279,6 +281,12 @@ def test_a_zoom_read_from_its_frames_follows_it():
             assert error[-1] > 10.0, error
     one_lens = max_displacement_px(np.median([[e.k1, e.k2] for e in estimates], axis=0), truth)
     assert one_lens.max() > 20.0, one_lens
+    rhythm = [e if i % 3 == 0 else None for i, e in enumerate(estimates)]  # every 3rd sample: two estimates
+    shot = fit_shot(_pure_zoom_evidence(zooms, truth, rhythm, True))
+    error = max_displacement_px(shot.lens_at(zooms), truth)
+    assert shot.zooming and error.max() < floor + 3.0 and error.max() <= shot.uncertainty_px, (error, shot)
+    alone = fit_shot(_pure_zoom_evidence(zooms, truth, rhythm, False))  # two points fix no line worth a bound
+    assert not alone.zooming and alone.doubtful and alone.reason == "no_geometry", alone
 
 
 def test_a_sample_without_lines_gets_its_own_estimate():

@@ -51,10 +51,12 @@ joint fit (whichever of the two states less) only when that median is doubtful (
 or its bound above the run's threshold). A fit that
 few chains leave loose (a pure zoom: its frame pairs tie the lens at one zoom to the next, not the
 lens itself) does not stand. A zooming shot needs estimates :data:`ZOOM_FALLBACK_RATIO` times
-surer: the joint fit reads its lines as well as its pairs.
+surer (their one lens, median and bound as above): their one lens cannot follow the zoom, and when
+they win the shot reads them as a lens that does where they allow (below). The choice itself is
+made on their one lens's bound, as before: the two readings' bounds are not calibrated alike.
 
 **A zoom read by its frames follows the zoom** (:func:`_zoom_of_frames`): with
-:data:`ZOOM_FRAMES_MIN` estimates or more (a sample with few lines gets one of its own,
+:data:`ZOOM_FRAMES_MIN` estimates or more (two with frame pairs, three without) (a sample with few lines gets one of its own,
 :data:`glradial.video.shot_evidence.FEW_CHAINS`), ``k1`` is a line in the measured log zoom, its
 level the estimates' weighted mean and its slope the one under which the frame pairs fit (they tie
 the lens at one zoom to the lens at the next); its bound carries the level's uncertainty to every
@@ -135,9 +137,10 @@ NO_GEOMETRY_PX = 16.0
 #: bound this many times smaller: one lens for the whole zoom cannot follow it (their spread, in
 #: their bound, only covers that), so the zoom model stands unless the lines leave it loose
 ZOOM_FALLBACK_RATIO = 2.0
-#: a zoom read by its per-frame estimates alone follows the zoom (:func:`_zoom_of_frames`) when at
-#: least this many of them state a bound (the line through them then has a residual to check it)
-ZOOM_FRAMES_MIN = 3
+#: a zoom read by its per-frame estimates follows the zoom (:func:`_zoom_of_frames`) when at least
+#: this many of them state a bound: with frame pairs (they give the slope, the estimates the level),
+#: without (the estimates give both); either way their residual about the model then checks it
+ZOOM_FRAMES_MIN = (2, 3)
 #: the slopes of k1 per unit log zoom a zoom read by its frames may take (:func:`_slope_of_pairs`)
 #: and the grid they are first searched on (0.1 apart), and the step in its level (k1) by which the slope's dependence on the level is measured
 SLOPE_RANGE, SLOPE_GRID = (-2.0, 2.0), 41
@@ -519,7 +522,8 @@ def _zoom_of_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> Sho
     zoom = evidence.log_zooms()
     picked = [(float(z), s.estimate) for z, s in zip(zoom, evidence.samples)
               if s.estimate is not None and math.isfinite(float(getattr(s.estimate, "uncertainty_px", math.nan)))]
-    if len(picked) < ZOOM_FRAMES_MIN or np.ptp([z for z, _ in picked]) <= ZOOM_MIN:
+    paired = any(len(m) >= 4 for _, _, m in evidence.pairs)
+    if len(picked) < ZOOM_FRAMES_MIN[0 if paired else 1] or np.ptp([z for z, _ in picked]) <= ZOOM_MIN:
         return None
     centre = float(0.5 * (zoom.min() + zoom.max()))
     z = np.array([z for z, _ in picked]) - centre
@@ -618,8 +622,10 @@ def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> ShotLe
         frames = _fallback(evidence, doubtful_px, "uncertain", static=True)
         if not frames.doubtful:
             return frames
-    fallback = _read_by_frames(evidence, doubtful_px, "uncertain")
-    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if shot.zooming else 1.0) < shot.uncertainty_px else shot
+    fallback = _fallback(evidence, doubtful_px, "uncertain")
+    if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if shot.zooming else 1.0) < shot.uncertainty_px:
+        return _read_by_frames(evidence, doubtful_px, "uncertain")  # a zoom: following it where they allow
+    return shot
 
 
 def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
