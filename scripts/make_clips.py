@@ -10,10 +10,11 @@ camera of ``../shared/data/real_wide_camera/`` (its own lens, measured by ``scri
 removed while rendering); procedural: glradial stadium panoramas. 640x360, 25 fps, H.264 crf 18.
 
 Run: ``python scripts/make_clips.py OUT_DIR [--data ../shared/data/real_football] [--wide
-../shared/data/real_wide_camera] [--frames 50] [--set main|check|static|twoshot]`` (``check``:
+../shared/data/real_wide_camera] [--frames 50] [--set main|check|static|twoshot|stands]`` (``check``:
 held-out clips, other lenses and paths, other stadiums; ``static``: static shots only, more
 calibration shots for the static shots' bound, see ``bench/eval_shots.py``; ``twoshot``: issue 35's
-clips, a static shot, a cut and a zoom whose lens follows it, over real frames, :func:`two_shot_clips`); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
+clips, a static shot, a cut and a zoom whose lens follows it, over real frames, :func:`two_shot_clips`;
+``stands``: zooms at procedural stands whose lens follows the zoom by other laws, :func:`stand_zoom_clips`); writes ``OUT_DIR/manifest.json`` (clip -> group, shots, the source picture
 of each shot) and the clips.
 """
 
@@ -215,6 +216,30 @@ def two_shot_clips(data: Path, wide: Path, n: int) -> dict[str, list[ShotSpec]]:
     return clips
 
 
+def stand_zoom_clips(n: int, seeds: tuple[int, ...] = (41, 43, 47, 53)) -> dict[str, list[ShotSpec]]:
+    """Zooms aimed at the stands of procedural stadiums (few pitch lines), each after a static shot,
+    with lenses that follow the zoom by laws other than the other sets' (k1 linear in log zoom):
+    a fixed lens cropped by the zoom (``cropped``: k1 / s^2, seeds 41 and 53), a lens held while
+    zooming (43), and a zoom-out (47, k1 -0.15 -> a stronger lens, linear in log zoom). For checking
+    how a zoom read by its frames follows its zoom and whether its bound covers, on procedural
+    pictures only."""
+    import glradial
+
+    rng = np.random.default_rng(5)
+    clips = {}
+    for seed in seeds:
+        pano = glradial.stadium_panorama(seed, (2048, 1024))
+        pan, tilt, k1 = float(rng.uniform(-60, 60)), float(rng.uniform(2, 8)), float(rng.uniform(-0.5, -0.25))
+        static = ShotSpec(pano, n, (pan + 40, -12, 1.0), (pan + 40, -12, 1.0), (-0.3, -0.3), hfov_deg=50, panorama=True)
+        zoom = {41: ShotSpec(pano, n, (pan, tilt, 1.0), (pan, tilt, 1.6), (k1, k1), hfov_deg=60, panorama=True, cropped=True),
+                43: ShotSpec(pano, n, (pan, tilt, 1.0), (pan, tilt, 1.5), (k1, k1), hfov_deg=60, panorama=True),
+                47: ShotSpec(pano, n, (pan, tilt, 1.6), (pan, tilt, 1.0), (-0.15, k1), hfov_deg=60, panorama=True),
+                53: ShotSpec(pano, n, (pan, tilt - 4, 1.0), (pan, tilt - 4, 1.5), (k1, k1), hfov_deg=55, panorama=True,
+                             cropped=True)}[seed]
+        clips[f"stands_{seed}"] = [static, zoom]
+    return clips
+
+
 def _digest(picture: np.ndarray) -> str:
     return hashlib.sha1(np.ascontiguousarray(picture).tobytes()).hexdigest()
 
@@ -226,10 +251,11 @@ def main() -> None:
     parser.add_argument("--wide", type=Path, default=Path(__file__).resolve().parents[2] / "shared/data/real_wide_camera",
                         help="the real wide camera's folder (--set twoshot)")
     parser.add_argument("--frames", type=int, default=50, help="frames per shot (default 50: 2 s)")
-    parser.add_argument("--set", choices=("main", "check", "static", "twoshot"), default="main",
+    parser.add_argument("--set", choices=("main", "check", "static", "twoshot", "stands"), default="main",
                         help="main: the calibration and report clips; check: held-out real clips and other stadiums; "
                              "static: static shots only, more calibration shots for the static shots' bound; "
-                             "twoshot: a static shot, a cut and a zoom over real frames (issue 35)")
+                             "twoshot: a static shot, a cut and a zoom over real frames (issue 35); "
+                             "stands: zooms at procedural stands, lenses following the zoom by other laws")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     manifest = {}
@@ -237,6 +263,8 @@ def main() -> None:
         sets = (("real", real_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames)))
     elif args.set == "twoshot":
         sets = (("real", two_shot_clips(args.data, args.wide, args.frames)),)
+    elif args.set == "stands":
+        sets = (("procedural", stand_zoom_clips(args.frames)),)
     elif args.set == "check":
         sets = (("real", check_clips(args.data, args.frames)), ("procedural", procedural_clips(args.frames, (5, 17))))
     else:

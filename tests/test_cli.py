@@ -157,7 +157,8 @@ def test_correct_auto_checks_the_encoder_before_estimating(tmp_path, capfd, monk
 def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, monkeypatch):
     """--auto on a small lossless clip with a cut, with a stand-in estimator keyed on the frame
     index stored in pixel (0, 0): the cut is found, the estimator runs on the shots' sampled frames
-    only (every 2nd frame, every 3rd sample), the sidecar has one row per frame with the shot, its
+    only (every 2nd frame), once each, on every 3rd sample at least (and on samples with few line
+    chains: these 160 px frames show few), the sidecar has one row per frame with the shot, its
     doubt, reason and whether it was applied; a doubtful shot passes through untouched (lossless:
     identical pixels), and with --apply-doubtful every frame is corrected with its track lens."""
     n, cut = 24, 14
@@ -180,7 +181,8 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
         out = tmp_path / f"out{len(extra)}.mkv"
         calls.clear()
         assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--backend", "cpu", *extra]) == 0
-        assert calls == [0, 6, 12, 14, 20]
+        sampled = set(range(0, cut, 2)) | set(range(cut, n, 2))
+        assert calls == sorted(set(calls)) and {0, 6, 12, 14, 20} <= set(calls) <= sampled, calls
         rows = np.genfromtxt(f"{out}.lens.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
         assert len(rows) == n
         assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)
@@ -438,9 +440,14 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     assert shots[1].startswith(f"cut.mp4: shot 1 frames 12-19 k1={track.lens[12, 0]:.6f} k2={track.lens[12, 1]:.6f} ")
     document = json.loads(track_report(track, "cut.mp4", per_frame=True, as_json=True))
     assert len(document["frames"]) == 20 and document["fps"] == pytest.approx(25)
-    # samples every 3rd frame of each shot (0, 3, 6, 9 | 12, 15, 18); the estimator runs on every
-    # 3rd sample of a shot (glradial.video.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12
-    assert [r["frame"] for r in document["frames"] if r["k1_raw"] is not None] == [0, 9, 12]
+    # samples at least 3 frames apart in each shot (0, 3, 6, 9 | 12, ...: the sparse decode numbers
+    # what it decodes); the estimator runs on every 3rd sample of a shot
+    # (glradial.video.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12, and on the samples whose line
+    # detection finds few chains (shot_evidence.FEW_CHAINS), on no other frame
+    estimated = sorted(r["frame"] for r in document["frames"] if r["k1_raw"] is not None)
+    assert {0, 9, 12} <= set(estimated) and len(estimated) <= 7, estimated
+    assert all(b - a >= 3 for shot in ([f for f in estimated if f < 12], [f for f in estimated if f >= 12])
+               for a, b in zip(shot, shot[1:])), estimated
     track.save(tmp_path / "t.json")
     track.save(tmp_path / "t.csv")
     for name in ("t.csv", "t.json"):

@@ -41,7 +41,9 @@ class ShotSpec:
     """One shot: ``frames`` long over ``source`` (uint8 RGB still or equirectangular panorama,
     ``panorama=True``), the camera moving linearly from ``start`` to ``end`` ``(pan_deg, tilt_deg,
     zoom)``, the lens ``k1`` going from ``k1[0]`` to ``k1[1]`` linearly in log zoom, ``k2`` the manifold
-    value plus ``k2_offset``. For a still, ``hfov_deg`` is the picture's assumed field of view (it
+    value plus ``k2_offset``; or, ``cropped``, one lens (``k1[0]``, its ``k2``) cropped by the zoom:
+    ``(k1 / s^2, k2 / s^4)`` at ``s`` = zoom / start zoom (a fixed lens and a digital zoom; ``k1[1]``
+    unused). For a still, ``hfov_deg`` is the picture's assumed field of view (it
     only matters for pans and tilts: a zoom about the centre is a scale), ``source_lens`` its own
     lens (width-normalised ``(k1, k2)``, removed exactly while rendering) and ``source_centre`` that
     lens's centre, the camera's principal point (widths from the picture's centre, y down); for a
@@ -57,6 +59,7 @@ class ShotSpec:
     panorama: bool = False
     source_lens: tuple[float, float] = (0.0, 0.0)
     source_centre: tuple[float, float] = (0.0, 0.0)
+    cropped: bool = False
 
     def camera(self, i: int) -> tuple[float, float, float]:
         """``(pan_deg, tilt_deg, zoom)`` of frame ``i`` (zoom interpolated geometrically)."""
@@ -66,7 +69,11 @@ class ShotSpec:
         return pan, tilt, zoom
 
     def lens(self, i: int) -> tuple[float, float]:
-        """The lens of frame ``i``: k1 linear in log zoom between the shot's ends."""
+        """The lens of frame ``i``: k1 linear in log zoom between the shot's ends (``cropped``: the
+        first lens scaled by the zoom, see the class docstring)."""
+        if self.cropped:
+            s2 = (self.camera(i)[2] / self.start[2]) ** 2
+            return self.k1[0] / s2, (float(manifold_k2(self.k1[0])) + self.k2_offset) / (s2 * s2)
         lo, hi = math.log(self.start[2]), math.log(self.end[2])
         t = (math.log(self.camera(i)[2]) - lo) / (hi - lo) if hi != lo else i / max(self.frames - 1, 1)
         k1 = self.k1[0] + (self.k1[1] - self.k1[0]) * t

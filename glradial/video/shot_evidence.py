@@ -19,7 +19,7 @@ from ..lens.lens import Lens, as_lens
 from .frame_motion import match_frames, motion_gray, zoom_of
 from .shot_fit import ShotEvidence, ShotSample
 
-__all__ = ["ShotCollector", "ANCHOR_TRAVEL", "ANCHOR_REACH", "MAX_ANCHORS"]
+__all__ = ["ShotCollector", "ANCHOR_TRAVEL", "ANCHOR_REACH", "MAX_ANCHORS", "FEW_CHAINS"]
 
 #: a sample becomes an anchor once the camera has moved this far (frame widths of new picture,
 #: :func:`_shift`) from the last anchor; every later sample is matched with every anchor it has
@@ -31,6 +31,11 @@ ANCHOR_TRAVEL = 0.15
 ANCHOR_REACH = 0.6
 #: anchors kept (the oldest is dropped): memory and matching time stay bounded on a long shot
 MAX_ANCHORS = 4
+#: a sample whose line detection finds fewer chains than this gets a per-frame estimate of its own,
+#: whatever ``estimate_every`` says: a shot of such samples has no joint fit and is read by its
+#: estimates, and a zoom read that way needs them at several zooms to follow it
+#: (:func:`glradial.video.shot_fit.fit_shot`). Samples with lines keep the cheaper rhythm.
+FEW_CHAINS = 4
 
 
 @dataclass
@@ -47,7 +52,8 @@ class _Anchor:
 class ShotCollector:
     """Evidence of one shot, sample by sample. ``estimator`` maps a uint8 RGB frame to a lens (a
     :class:`glradial.LensEstimate` states its uncertainty); it runs on every ``estimate_every``-th
-    sample (and the first), the chains and matches on every sample: with the previous sample, and
+    sample (and the first) and on every sample with fewer than :data:`FEW_CHAINS` line chains, the
+    chains and matches on every sample: with the previous sample, and
     with every kept anchor sample it has moved :data:`ANCHOR_TRAVEL` to :data:`ANCHOR_REACH` from.
     The surest per-frame estimate so far (smallest ``uncertainty_px``; the latest when none states
     one) is the hint of the line detector (chains are linked and cut at corners in the frame
@@ -70,14 +76,10 @@ class ShotCollector:
             raise ValueError(f"frame must be a uint8 H x W x 3 RGB array, got {getattr(frame, 'dtype', type(frame).__name__)} "
                              f"{getattr(frame, 'shape', '')}")
         n = len(self.evidence.samples)
-        estimate = None
-        if n % self.estimate_every == 0:
-            estimate = as_lens(self.estimator(frame))  # a plain (k1, k2) as the centred lens
-            self.estimates.append((index, estimate))
-            sure = float(getattr(estimate, "uncertainty_px", math.inf))
-            if sure <= self._hint_px:  # the surest estimate so far guides the detector and matcher
-                self._hint, self._hint_px = (estimate.k1, estimate.k2), sure
+        estimate = self._estimate(index, frame) if n % self.estimate_every == 0 else None
         chains = detect_chains(frame, lens_hint=self._hint)
+        if estimate is None and (chains is None or len(chains.chains) < FEW_CHAINS):
+            estimate = self._estimate(index, frame)  # little to read but the estimate itself
         self.evidence.samples.append(ShotSample(index, chains, estimate))
         gray = motion_gray(frame)
         zoom = self.evidence.zoom[-1] if self.evidence.zoom else 0.0
@@ -87,6 +89,15 @@ class ShotCollector:
         self._previous = gray
         if not self._anchors or self._anchors[-1].travel >= ANCHOR_TRAVEL:
             self._anchors = (self._anchors + [_Anchor(n, gray)])[-MAX_ANCHORS:]
+
+    def _estimate(self, index: int, frame: np.ndarray) -> Lens:
+        """The per-frame estimate of sample ``index``, kept; the surest so far becomes the hint."""
+        estimate = as_lens(self.estimator(frame))  # a plain (k1, k2) as the centred lens
+        self.estimates.append((index, estimate))
+        sure = float(getattr(estimate, "uncertainty_px", math.inf))
+        if sure <= self._hint_px:  # the surest estimate so far guides the detector and matcher
+            self._hint, self._hint_px = (estimate.k1, estimate.k2), sure
+        return estimate
 
     def _step(self, n: int, gray: np.ndarray) -> float:
         """Match sample ``n`` with the previous sample and with its anchors; the log zoom since the

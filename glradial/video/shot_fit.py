@@ -51,7 +51,17 @@ joint fit (whichever of the two states less) only when that median is doubtful (
 or its bound above the run's threshold). A fit that
 few chains leave loose (a pure zoom: its frame pairs tie the lens at one zoom to the next, not the
 lens itself) does not stand. A zooming shot needs estimates :data:`ZOOM_FALLBACK_RATIO` times
-surer: their one lens cannot follow the zoom.
+surer (their one lens, median and bound as above): their one lens cannot follow the zoom, and when
+they win the shot reads them as a lens that does where they allow (below). The choice itself is
+made on their one lens's bound, as before: the two readings' bounds are not calibrated alike.
+
+**A zoom read by its frames follows the zoom** (:func:`_zoom_of_frames`): with
+:data:`ZOOM_FRAMES_MIN` estimates or more (two with frame pairs, three without) (a sample with few lines gets one of its own,
+:data:`glradial.video.shot_evidence.FEW_CHAINS`), ``k1`` is a line in the measured log zoom, its
+level the estimates' weighted mean and its slope the one under which the frame pairs fit (they tie
+the lens at one zoom to the lens at the next); its bound carries the level's uncertainty to every
+zoom the shot's frames reach. With fewer estimates, one lens (their median), which cannot follow
+the zoom: it stays doubtful (:func:`judged_by_benefit`).
 
 Doubt (reason strings are machine-readable): ``no_geometry`` (fewer than :data:`MIN_CHAINS` chains
 pass screening and the camera did not pan :data:`PAN_MIN`: nothing but the per-frame
@@ -66,7 +76,8 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, minimize_scalar
+from scipy.stats import norm
 
 from ..estimation.line_fit import (
     K1_PRIOR_SIGMA,
@@ -126,6 +137,16 @@ NO_GEOMETRY_PX = 16.0
 #: bound this many times smaller: one lens for the whole zoom cannot follow it (their spread, in
 #: their bound, only covers that), so the zoom model stands unless the lines leave it loose
 ZOOM_FALLBACK_RATIO = 2.0
+#: a zoom read by its per-frame estimates follows the zoom (:func:`_zoom_of_frames`) when at least
+#: this many of them state a bound: with frame pairs (they give the slope, the estimates the level),
+#: without (the estimates give both); either way their residual about the model then checks it
+ZOOM_FRAMES_MIN = (2, 3)
+#: the slopes of k1 per unit log zoom a zoom read by its frames may take (:func:`_slope_of_pairs`)
+#: and the grid they are first searched on (0.1 apart), and the step in its level (k1) by which the slope's dependence on the level is measured
+SLOPE_RANGE, SLOPE_GRID = (-2.0, 2.0), 41
+LEVEL_STEP = 0.01
+#: a stated ~90 % bound over this is its 1-sigma (the two-sided 90 % point of a normal)
+Z90 = float(norm.ppf(0.95))
 #: a shot has geometric evidence of its lens when at least this many chains pass screening...
 MIN_CHAINS = 2
 #: ...or the camera panned at least this far (frame widths). A static camera's frame pairs say
@@ -476,6 +497,100 @@ def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometr
     return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False, "frames", static=static)
 
 
+def _zoom_of_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> ShotLens | None:
+    """A zoom read by its per-frame estimates and its frame pairs, following the zoom:
+    ``k1(z) = L + a1 (z - zbar)`` (``z`` the measured log zoom; a generic first-order model in the
+    log of the focal length, as :mod:`glradial.camera.shot_lens` fits for the pitch camera: nothing
+    of how any clip's lens was made to follow its zoom), ``k2 = m(k1) + b0``.
+
+    * The **level** ``L`` (``k1`` at ``zbar``, the estimates' weighted mean zoom) is the estimates'
+      weighted mean ``k1``, each weighted by the inverse square of the 1-sigma its stated bound gives
+      (bound / :data:`Z90`, over the lens's displacement per unit ``k1``, :func:`_px_per_k1`); ``b0``
+      their weighted mean offset from the manifold.
+    * The **slope** ``a1``: a pure zoom's frame pairs tie the lens at one zoom to the lens at
+      another, not to a level (module docstring), so given ``L`` they fix it (:func:`_slope_of_pairs`);
+      without pairs, the estimates' own weighted line.
+
+    Bound at a zoom: :data:`Z90` times the level's 1-sigma (its weighted mean's, scaled up by the
+    estimates' reduced chi^2 about the model when they scatter more than they state, and by ``S /
+    V``: ``S`` estimates of overlapping pictures count as ``V`` views, as in the joint fit) carried
+    to that zoom through the slope's dependence on the level (or, without pairs, the line's
+    covariance there), in px at 1920. It grows away from ``zbar``: wider where the model
+    extrapolates. The shot's bound is the largest over its sampled zooms and one sampling step past
+    each end (its frames beyond the samples). ``None`` with fewer than :data:`ZOOM_FRAMES_MIN`
+    estimates that state a bound, or when they span less than :data:`ZOOM_MIN` of log zoom."""
+    zoom = evidence.log_zooms()
+    picked = [(float(z), s.estimate) for z, s in zip(zoom, evidence.samples)
+              if s.estimate is not None and math.isfinite(float(getattr(s.estimate, "uncertainty_px", math.nan)))]
+    paired = any(len(m) >= 4 for _, _, m in evidence.pairs)
+    if len(picked) < ZOOM_FRAMES_MIN[0 if paired else 1] or np.ptp([z for z, _ in picked]) <= ZOOM_MIN:
+        return None
+    centre = float(0.5 * (zoom.min() + zoom.max()))
+    z = np.array([z for z, _ in picked]) - centre
+    k = np.array([[e.k1, e.k2] for _, e in picked], np.float64)
+    bound = np.maximum([e.uncertainty_px for _, e in picked], BOUND_FLOOR_PX)  # no estimate is surer than the floor
+    b0 = float(np.sum((k[:, 1] - manifold_k2(k[:, 0])) / bound**2) / np.sum(1.0 / bound**2))
+    weight = (Z90 * _px_per_k1(k[:, 0], b0) / bound) ** 2  # 1 / sigma^2 of each estimate's k1
+    zbar, level = float(np.sum(weight * z) / np.sum(weight)), float(np.sum(weight * k[:, 0]) / np.sum(weight))
+    views = min(float(len(z)), 1.0 + float(evidence.travel))
+    steps = np.diff(zoom)
+    at = np.r_[zoom, [zoom[0] - steps[0], zoom[-1] + steps[-1]] if len(steps) else []] - centre
+    pairs = _slope_of_pairs(evidence, centre, zbar, level, b0)
+    if pairs is not None:
+        slope, coupling = pairs
+        dof = len(z) - 1
+        gain = np.abs(1.0 + coupling * (at - zbar))  # how a level error carries to each zoom
+        variance = np.full(len(at), 1.0 / np.sum(weight))
+    else:
+        slope = float(np.sum(weight * (z - zbar) * k[:, 0]) / np.sum(weight * (z - zbar) ** 2))
+        dof, gain = len(z) - 2, np.ones(len(at))
+        variance = 1.0 / np.sum(weight) + (at - zbar) ** 2 / np.sum(weight * (z - zbar) ** 2)
+    chi2 = float(np.sum(weight * (k[:, 0] - level - slope * (z - zbar)) ** 2)) / dof
+    k1 = level + slope * (at - zbar)
+    sigma = np.sqrt(variance * max(1.0, chi2) * len(z) / views) * gain
+    stated = float(np.max(Z90 * sigma * _px_per_k1(k1, b0)))
+    frames = _fallback(evidence, doubtful_px, why)  # the estimates' own doubt, as for one lens
+    reason = frames.reason if frames.reason not in ("", why) else why if not stated <= doubtful_px else ""
+    theta = (level - slope * zbar, slope, 0.0, b0)
+    return ShotLens(theta, centre, stated, bool(reason), reason, 0, sum(len(m) for _, _, m in evidence.pairs), views,
+                    True, "frames")
+
+
+def _slope_of_pairs(evidence: ShotEvidence, centre: float, zbar: float, level: float, b0: float) -> tuple[float, float] | None:
+    """The slope ``a1`` of ``k1(z) = level + a1 (z - zbar)`` (``k2 = m(k1) + b0``) under which the
+    shot's frame pairs fit best (their transfer residuals, as in the joint fit), and how it moves
+    per unit of ``level`` (a level error carries to the other zooms through it); ``None`` without
+    pairs. A grid over :data:`SLOPE_RANGE`, then bounded Brent around its best."""
+    pairs = [p for p in evidence.pairs if len(p[2]) >= 4]
+    if not pairs:
+        return None
+    matches, z = _Pairs(pairs), evidence.log_zooms() - centre
+
+    def best(at_level: float, bounds: tuple[float, float]) -> float:
+        def cost(a1: float) -> float:
+            r = matches.residuals(_lens(np.array([at_level - a1 * zbar, a1, 0.0, b0]), z))
+            return float(r @ r)
+
+        return float(minimize_scalar(cost, bounds=bounds, method="bounded", options={"xatol": 1e-4}).x)
+
+    grid = np.linspace(*SLOPE_RANGE, SLOPE_GRID)
+    costs = [float(np.sum(matches.residuals(_lens(np.array([level - a * zbar, a, 0.0, b0]), z)) ** 2)) for a in grid]
+    i = int(np.argmin(costs))
+    slope = best(level, (grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]))
+    near = (slope - 2.0 * (grid[1] - grid[0]), slope + 2.0 * (grid[1] - grid[0]))
+    coupling = (best(level + LEVEL_STEP, near) - best(level - LEVEL_STEP, near)) / (2.0 * LEVEL_STEP)
+    return slope, coupling
+
+
+def _px_per_k1(k1: np.ndarray, b0: float, step: float = 1e-3) -> np.ndarray:
+    """How far the lens ``(k1, m(k1) + b0)`` moves per unit of ``k1`` along it (px at 1920, max
+    displacement over the 16:9 frame)."""
+    k1 = np.asarray(k1, np.float64)
+    here = np.stack([k1, manifold_k2(k1) + b0], axis=-1)
+    there = np.stack([k1 + step, manifold_k2(k1 + step) + b0], axis=-1)
+    return max_displacement_px(there, here) / step
+
+
 def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
     """The lens of one shot from all its evidence (see the module docstring). ``doubtful_px``: a
     bound above it makes the shot doubtful unless correcting helps even at the bound
@@ -485,11 +600,21 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
     return judged_by_benefit(_chosen(evidence, doubtful_px, radius), evidence)
 
 
+def _read_by_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> ShotLens:
+    """The shot read by its per-frame estimates alone: a zoom's lens following the zoom where they
+    allow (:func:`_zoom_of_frames`), else their one lens (:func:`_fallback`)."""
+    if evidence.camera() == "zoom":
+        zoom = _zoom_of_frames(evidence, doubtful_px, why)
+        if zoom is not None:
+            return zoom
+    return _fallback(evidence, doubtful_px, why)
+
+
 def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> ShotLens:
     """The joint fit or the frames' median (:func:`fit_shot`), before the benefit verdict."""
     shot = joint_fit(evidence, doubtful_px=doubtful_px, radius=radius)
     if shot is None:
-        return _fallback(evidence, doubtful_px)
+        return _read_by_frames(evidence, doubtful_px, "no_geometry")
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
         return shot  # estimates that state no bound cannot be weighed against the fit's
@@ -498,7 +623,9 @@ def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> ShotLe
         if not frames.doubtful:
             return frames
     fallback = _fallback(evidence, doubtful_px, "uncertain")
-    return fallback if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if shot.zooming else 1.0) < shot.uncertainty_px else shot
+    if fallback.uncertainty_px * (ZOOM_FALLBACK_RATIO if shot.zooming else 1.0) < shot.uncertainty_px:
+        return _read_by_frames(evidence, doubtful_px, "uncertain")  # a zoom: following it where they allow
+    return shot
 
 
 def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
@@ -509,16 +636,17 @@ def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
     bound. A 150 px barrel read stating 15 px is applied; a near-pinhole one stating 15 px is not.
     Other reasons (``fold_over``, the frames' own doubt) stand, and so does a frames-only bound when
     the per-frame estimates state none of their own (it is then :data:`NO_GEOMETRY_PX`, not a
-    calibrated bound), or when the shot zooms: its frames' one lens cannot follow the zoom, and
-    their bound covers only the zooms they were read at (a zoom over the real stadium panorama,
-    read at 20-60 px stating 52, was applied where it made the zoom's end worse than uncorrected,
-    docs/eval/shots.md)."""
+    calibrated bound), or when the shot zooms and its frames gave it one lens: that lens cannot
+    follow the zoom, and their bound covers only the zooms they were read at (a zoom over the real
+    stadium panorama, read at 20-60 px stating 52, was applied where it made the zoom's end worse
+    than uncorrected, docs/eval/shots.md). A zoom its frames read as a lens that follows it
+    (:func:`_zoom_of_frames`, ``zooming``) is judged by its bound like any other shot."""
     if not shot.doubtful or shot.reason not in ("uncertain", "no_geometry"):
         return shot
     estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
     if shot.source == "frames" and not (estimates and all(hasattr(e, "uncertainty_px") for e in estimates)):
         return shot
-    if shot.source == "frames" and evidence.camera() == "zoom":
+    if shot.source == "frames" and evidence.camera() == "zoom" and not shot.zooming:
         return shot
     lenses = np.atleast_2d(shot.lens_at(evidence.log_zooms() if shot.zooming else np.zeros(1)))
     smallest_shift = min(shift_px((float(k1), float(k2))) for k1, k2 in lenses)
