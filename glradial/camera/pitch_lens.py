@@ -120,19 +120,25 @@ def _may_be_a_pitch(reading: LensEstimate) -> bool:
     return reading.reason not in NO_EVIDENCE_REASONS
 
 
+def with_pitch(frame: np.ndarray, reading: LensEstimate) -> tuple[LensEstimate, CameraEstimate | None]:
+    """What ``method="auto"`` answers for ``frame`` given the estimation layer's ``reading`` of it, and
+    the camera fit behind it: ``(pitch_lens(camera, reading), camera)``, the camera fitted to the frame
+    restored to square pixels (``reading.pixel_aspect``) as the estimator did; ``(reading, None)``
+    where the estimation layer found no pitch evidence (the fit is not run). The one path of
+    :func:`estimate` and :class:`Estimator` (and of the benches that score them)."""
+    if not _may_be_a_pitch(reading):
+        return reading, None
+    rgb = to_rgb8(frame, clip=False)
+    if reading.pixel_aspect != 1.0:
+        rgb = square_pixels(rgb, reading.pixel_aspect)
+    camera = fit_camera(rgb, reading)
+    return pitch_lens(camera, reading), camera
+
+
 def _with_pitch(frames: list, found: list[LensEstimate]) -> list[LensEstimate]:
-    """Each estimate replaced by its frame's camera-fit lens where the template fits (the frame
-    restored to square pixels as the estimator did); frames with no pitch evidence skip the fit."""
-    out = []
-    for frame, est in zip(frames, found):
-        if not _may_be_a_pitch(est):
-            out.append(est)
-            continue
-        rgb = to_rgb8(frame, clip=False)
-        if est.pixel_aspect != 1.0:
-            rgb = square_pixels(rgb, est.pixel_aspect)
-        out.append(pitch_lens(fit_camera(rgb, est), est))
-    return out
+    """Each estimate replaced by its frame's camera-fit lens where the template fits
+    (:func:`with_pitch`); frames with no pitch evidence skip the fit."""
+    return [with_pitch(frame, est)[0] for frame, est in zip(frames, found)]
 
 
 def _as_list(frames: object) -> object:
