@@ -3,7 +3,7 @@ with an exact lens (the renderer's lens is the oracle), the camera fit's lens is
 displacement at 1920, issue 34's procedural goal for the lens; held-out procedural views give a median of
 0.2 px and a p90 of 0.63 px, docs/CAMERA.md), and ``glradial.estimate(method="auto")`` (the default:
 ``pitch=True``) says it came from the pitch and answers the fixed-weight combination of that lens (the
-nearest manifold lens) and the estimation layer's reading (recomputed here from the two), whose error
+fit's lens pulled toward the nearest manifold lens) and the estimation layer's reading (recomputed here from the two), whose error
 is at most the weighted mean of the two errors (the radial map is linear in (k1, k2) and the max
 displacement a norm) and within its stated bound; ``pitch=False``, and frames where no pitch fits,
 give the estimation layer's answer unchanged; ``net`` and ``lines`` never run the camera fit."""
@@ -127,8 +127,10 @@ def test_pitch_lens_policy():
     bound = pl.lens_bound_px(sure)  # 0.5 px RMS: a bound between the fallback's 9 px and none
     assert min(bound, 9.0) <= got.uncertainty_px <= max(bound, 9.0)
     assert min(-0.2, -0.1) <= got.k1 <= max(-0.2, -0.1) and min(0.03, 0.01) <= got.k2 <= max(0.03, 0.01)
-    w = camera_trust()["lens_weight"]
-    lens = pl.manifold_lens(cam.lens)
+    w, pull = camera_trust()["lens_weight"], camera_trust()["lens_manifold_pull"]
+    nearest = pl.manifold_lens(cam.lens)  # the camera's lens: the fit's pulled toward the nearest manifold lens
+    lens = Lens(pull * nearest.k1 + (1 - pull) * -0.2, pull * nearest.k2 + (1 - pull) * 0.03)
+    assert pl.camera_lens(sure) == lens and 0 <= pull <= 1
     assert (got.k1, got.k2) == pytest.approx((w * lens.k1 + (1 - w) * -0.1, w * lens.k2 + (1 - w) * 0.01), abs=1e-12)
     # a reading doubtful by benefit keeps its weight (its bound is calibrated); a combined bound that reaches
     # the identity lens makes the answer doubtful by benefit too
