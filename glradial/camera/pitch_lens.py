@@ -26,7 +26,7 @@ unchanged; ``pitch=False`` gives it always, bit for bit. ``"net"`` and ``"lines"
 lens=...)``): its search undistorts the white lines with that lens, so a barrel lens no longer hides the
 straight lines it looks for (docs/CAMERA.md has the figures).
 
-**The camera's lens** is the fit's ``(k1, k2)`` pulled halfway (``lens_manifold_pull``) toward the
+**The camera's lens** is the fit's ``(k1, k2)`` pulled part of the way (``lens_manifold_pull``) toward the
 Lopez-Antequera manifold lens nearest it over the radii to the 16:9 corner (:func:`manifold_lens`,
 :func:`camera_lens`): the markings a broadcast frame shows rarely reach its corners, so the fit's ``k2``
 trades against ``k1`` along a ridge, which the manifold steadies; the whole way to the manifold throws
@@ -38,8 +38,8 @@ away what the fit read off it. Its bound is split-conformal:
 between two readings that disagree by a frame-wide offset (the line fit reads a larger ``k2`` on the
 Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
 self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight`` and ``lens_manifold_pull``
-minimise the self-consistent median of Bundesliga clip 2e57b9 (a 0.1 grid by a 0.25 grid); clip 42ba34
-is held out.
+minimise the self-consistent median of Bundesliga clip 2e57b9 (a 0.1 grid by a 0.25 grid) among the
+weights that leave the procedural stadium crops as they were; clip 42ba34 is held out.
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.estimator.Estimator` stays
