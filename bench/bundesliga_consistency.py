@@ -24,7 +24,8 @@ was fed back), and ``auto+pitch``, the public ``glradial.estimate(method="auto")
 layer's ``auto`` elsewhere), with the share of samples it answered from the pitch and how often its
 stated bound covered its self-consistent error there; ``pitch alone``: the camera fit's lens alone where
 it fits (``auto`` elsewhere), with the bound of ``lens_bound_px``. ``--no-pitch`` (or a checkout without
-``glradial.camera.pitch_lens``) leaves it out. ``--dump FILE`` writes one JSON line per scored sample
+``glradial.camera.pitch_lens``) leaves it out; both rows come from ``pitch_lens.with_pitch``, the function
+``glradial.estimate`` itself calls (a checkout with ``pitch_lens`` but without it: use ``--no-pitch``). ``--dump FILE`` writes one JSON line per scored sample
 and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS, its
 reason, markings, support, field of view and lens; the
 unmodified frame's readings too, with ``truth`` null).
