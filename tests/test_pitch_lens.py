@@ -51,6 +51,8 @@ def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     assert _error_px(lens, view.camera.lens) <= LENS_TOLERANCE_PX  # the renderer's lens is on the manifold
     assert isinstance(est, LensEstimate) and est.method == "pitch" and not est.doubtful and est.reason == "ok"
     assert est.chains == len(camera.markings)
+    again, fitted = pl.with_pitch(view.frame, old)  # the one path estimate() takes, camera fit included
+    assert again == est and fitted.markings == camera.markings and fitted.rms_px == camera.rms_px
     bound, w = pl.lens_bound_px(camera), camera_trust()["lens_weight"]
     assert 0 < w < 1
     assert est.k1 == pytest.approx(w * lens.k1 + (1 - w) * old.k1, abs=1e-12)
@@ -140,6 +142,8 @@ def test_pitch_lens_policy():
     assert got.uncertainty_px > 1e5 and got.doubtful and got.reason == "weak_geometry" and got.method == "pitch"
     no_pitch = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="net", doubtful=True, reason="not_a_pitch")
     assert pl.pitch_lens(sure, no_pitch) is no_pitch  # the estimation layer saw no pitch: its answer stands
+    got, camera = pl.with_pitch(np.zeros((72, 128, 3), np.uint8), no_pitch)  # ... and the camera fit is not run
+    assert got is no_pitch and camera is None
     with pytest.raises(TypeError, match="camera"):
         pl.pitch_lens(fallback, fallback)
     with pytest.raises(TypeError, match="fallback"):

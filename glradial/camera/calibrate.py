@@ -26,6 +26,7 @@ from .estimate import CameraEstimate, camera_trust
 from .first_guess import first_guess as search
 from .first_guess import strong_lens
 from .first_views import first_views
+from .line_hypotheses import HEIGHT_RANGE
 from .model import Camera, decompose_homography
 from .refine import Fit, refine
 from .white_lines import LinePoints, line_points
@@ -114,8 +115,10 @@ def _reason(fit: Fit, t: dict) -> str:
         return "weak_geometry"  # one family of parallel image lines: nothing fixes the metric
     if not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
         return "weak_geometry"
-    if fit.camera.position[2] < t["min_height_m"] or fit.camera.hfov_deg > t["max_hfov_deg"]:
-        return "poor_fit"  # a camera on the grass or wider than a broadcast lens: lines fitted, not a pitch
+    if not t["min_height_m"] <= fit.camera.position[2] <= HEIGHT_RANGE[1] or fit.camera.hfov_deg > t["max_hfov_deg"]:
+        # a camera on the grass, above any main-camera position the search starts from, or wider than a
+        # broadcast lens: lines fitted, not a pitch
+        return "poor_fit"
     if fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
         return "poor_fit"
     return "ok"
