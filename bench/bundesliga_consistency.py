@@ -24,7 +24,8 @@ was fed back), and ``auto+pitch``, the public ``glradial.estimate(method="auto")
 layer's ``auto`` elsewhere), with the share of samples it answered from the pitch and how often its
 stated bound covered its self-consistent error there; ``pitch alone``: the camera fit's lens alone where
 it fits (``auto`` elsewhere), with the bound of ``lens_bound_px``. ``--no-pitch`` (or a checkout without
-``glradial.camera.pitch_lens``) leaves it out. ``--dump FILE`` writes one JSON line per scored sample
+``glradial.camera.pitch_lens``) leaves it out; both rows come from ``pitch_lens.with_pitch``, the function
+``glradial.estimate`` itself calls (a checkout with ``pitch_lens`` but without it: use ``--no-pitch``). ``--dump FILE`` writes one JSON line per scored sample
 and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS, its
 reason, markings, support, field of view and lens; the
 unmodified frame's readings too, with ``truth`` null).
@@ -90,15 +91,16 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
     out = {method: judge(evidence, method) for method in ("net", "lines", "auto")}
     if pitch:
         from glradial.camera import pitch_lens as pl
-        from glradial.camera.calibrate import calibrate
         from glradial.estimation.lens_estimate import LensEstimate
 
-        # what glradial.estimate(method="auto") runs beside the estimation layer's auto
-        camera = pl.fit_camera(frame, out["auto"]) if hasattr(pl, "fit_camera") else calibrate(frame)
-        out["auto+pitch"] = pl.pitch_lens(camera, out["auto"])
+        # what glradial.estimate(method="auto") answers: the estimation layer's auto with the camera fit fed back
+        out["auto+pitch"], camera = pl.with_pitch(frame, out["auto"])
+        if camera is None:  # no pitch evidence: the camera fit was not run
+            out["pitch alone"], out["rms"], out["camera"] = out["auto"], None, None
+            return out
         # the camera fit's lens alone where it fits (auto elsewhere): what the bound of pitch_lens_bound.py calibrates
-        lens = camera.lens if camera.doubtful or not hasattr(pl, "camera_lens") else pl.camera_lens(camera)
-        out["pitch alone"] = out["auto"] if camera.doubtful else LensEstimate(
+        lens = pl.camera_lens(camera) if not camera.doubtful else None
+        out["pitch alone"] = out["auto"] if lens is None else LensEstimate(
             lens.k1, lens.k2, uncertainty_px=pl.lens_bound_px(camera), method="pitch")
         out["rms"] = camera.rms_px
         out["camera"] = {"reason": camera.reason, "markings": len(camera.markings), "support": camera.support,

@@ -120,13 +120,12 @@ def main() -> None:
             e = judge(evidence, method.split("+")[0])
             if method == "auto+pitch":  # what glradial.estimate(method="auto") adds to the estimation layer's auto
                 from glradial.camera import pitch_lens as pl
-                from glradial.camera.calibrate import calibrate
 
-                camera = pl.fit_camera(frame, e) if hasattr(pl, "fit_camera") else calibrate(frame)
-                auto, e = e, pl.pitch_lens(camera, e)
+                auto = e
+                e, camera = pl.with_pitch(frame, auto)
                 pitched.append(e.method == "pitch")
                 readings = {"k_auto": [auto.k1, auto.k2], "bound_auto": auto.uncertainty_px, "k_auto_pitch": [e.k1, e.k2],
-                            "bound_auto_pitch": e.uncertainty_px, "camera_rms_px": camera.rms_px}
+                            "bound_auto_pitch": e.uncertainty_px, "camera_rms_px": None if camera is None else camera.rms_px}
             errors[method].append(float(max_displacement_px(np.array([e.k1, e.k2]), truth)))
         rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else list(lines),
                      "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1],

@@ -18,6 +18,7 @@ import pytest
 import glradial
 from glradial.camera import calibrate as cal
 from glradial.camera.estimate import camera_trust
+from glradial.camera.line_hypotheses import HEIGHT_RANGE
 from glradial.camera.model import Camera
 from glradial.camera.views import render_view
 from glradial.estimation import estimator as lines_layer
@@ -123,6 +124,10 @@ def test_doubt_rules_known_answers(rendered_fit):
     low = fit.camera
     on_grass = Camera(low.rotation, np.r_[low.position[:2], 0.5 * t["min_height_m"]], low.focal, low.size, low.lens)
     assert cal.judge(replace(fit, camera=on_grass), points).reason == "poor_fit"
+    # above every main-camera position the search starts from (line_hypotheses.HEIGHT_RANGE, 4-80 m): a grid of
+    # lines read as a pitch from 86 m up once the support counted the lens's squeeze (tests/test_trust.py)
+    too_high = Camera(low.rotation, np.r_[low.position[:2], HEIGHT_RANGE[1] + 5.0], low.focal, low.size, low.lens)
+    assert cal.judge(replace(fit, camera=too_high), points).reason == "poor_fit"
     wide_focal = 0.5 / np.tan(np.radians(t["max_hfov_deg"] + 5) / 2)  # focal (image widths) of a wider lens
     too_wide = Camera(low.rotation, low.position, wide_focal, low.size, low.lens)
     assert too_wide.hfov_deg > t["max_hfov_deg"]

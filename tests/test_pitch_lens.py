@@ -3,7 +3,7 @@ with an exact lens (the renderer's lens is the oracle), the camera fit's lens is
 displacement at 1920, issue 34's procedural goal for the lens; held-out procedural views give a median of
 0.2 px and a p90 of 0.63 px, docs/CAMERA.md), and ``glradial.estimate(method="auto")`` (the default:
 ``pitch=True``) says it came from the pitch and answers the fixed-weight combination of that lens (the
-nearest manifold lens) and the estimation layer's reading (recomputed here from the two), whose error
+fit's lens pulled toward the nearest manifold lens) and the estimation layer's reading (recomputed here from the two), whose error
 is at most the weighted mean of the two errors (the radial map is linear in (k1, k2) and the max
 displacement a norm) and within its stated bound; ``pitch=False``, and frames where no pitch fits,
 give the estimation layer's answer unchanged; ``net`` and ``lines`` never run the camera fit."""
@@ -51,6 +51,8 @@ def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     assert _error_px(lens, view.camera.lens) <= LENS_TOLERANCE_PX  # the renderer's lens is on the manifold
     assert isinstance(est, LensEstimate) and est.method == "pitch" and not est.doubtful and est.reason == "ok"
     assert est.chains == len(camera.markings)
+    again, fitted = pl.with_pitch(view.frame, old)  # the one path estimate() takes, camera fit included
+    assert again == est and fitted.markings == camera.markings and fitted.rms_px == camera.rms_px
     bound, w = pl.lens_bound_px(camera), camera_trust()["lens_weight"]
     assert 0 < w < 1
     assert est.k1 == pytest.approx(w * lens.k1 + (1 - w) * old.k1, abs=1e-12)
@@ -127,8 +129,10 @@ def test_pitch_lens_policy():
     bound = pl.lens_bound_px(sure)  # 0.5 px RMS: a bound between the fallback's 9 px and none
     assert min(bound, 9.0) <= got.uncertainty_px <= max(bound, 9.0)
     assert min(-0.2, -0.1) <= got.k1 <= max(-0.2, -0.1) and min(0.03, 0.01) <= got.k2 <= max(0.03, 0.01)
-    w = camera_trust()["lens_weight"]
-    lens = pl.manifold_lens(cam.lens)
+    w, pull = camera_trust()["lens_weight"], camera_trust()["lens_manifold_pull"]
+    nearest = pl.manifold_lens(cam.lens)  # the camera's lens: the fit's pulled toward the nearest manifold lens
+    lens = Lens(pull * nearest.k1 + (1 - pull) * -0.2, pull * nearest.k2 + (1 - pull) * 0.03)
+    assert pl.camera_lens(sure) == lens and 0 <= pull <= 1
     assert (got.k1, got.k2) == pytest.approx((w * lens.k1 + (1 - w) * -0.1, w * lens.k2 + (1 - w) * 0.01), abs=1e-12)
     # a reading doubtful by benefit keeps its weight (its bound is calibrated); a combined bound that reaches
     # the identity lens makes the answer doubtful by benefit too
@@ -138,6 +142,8 @@ def test_pitch_lens_policy():
     assert got.uncertainty_px > 1e5 and got.doubtful and got.reason == "weak_geometry" and got.method == "pitch"
     no_pitch = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="net", doubtful=True, reason="not_a_pitch")
     assert pl.pitch_lens(sure, no_pitch) is no_pitch  # the estimation layer saw no pitch: its answer stands
+    got, camera = pl.with_pitch(np.zeros((72, 128, 3), np.uint8), no_pitch)  # ... and the camera fit is not run
+    assert got is no_pitch and camera is None
     with pytest.raises(TypeError, match="camera"):
         pl.pitch_lens(fallback, fallback)
     with pytest.raises(TypeError, match="fallback"):

@@ -43,3 +43,31 @@ def test_strong_lens_reads_only_strong_lenses():
     assert max_displacement_px(np.array([strong.k1, strong.k2]), np.array([-0.6, manifold_k2(-0.6)])) < STRONG_LENS_PX
     weak = Camera.look_at((0.0, -50.0, 15.0), (20.0, 0.0), 55.0, SIZE, Lens(-0.02, float(manifold_k2(-0.02))))
     assert strong_lens(render_view(weak, seed=3).frame) is None
+
+
+@pytest.mark.parametrize("k1", [-0.7, -0.2, 0.3])
+def test_lens_width_scale_is_the_width_of_the_mapped_strip(k1):
+    """The support's visibility test widens or squeezes a painted line by the lens
+    (``glradial.camera.refine.lens_width_scale``). Oracle: two parallel lines 1e-5 apart pushed through
+    the lens's forward map (``Lens.distort_points``), their distance measured across the mapped line."""
+    from glradial.camera.refine import lens_width_scale
+
+    lens, size = Lens(k1, float(manifold_k2(k1))), (1280, 720)
+    rng = np.random.default_rng(5)
+    uv = rng.uniform(-0.45, 0.45, (40, 2)) * (1.0, 0.5)
+    uv[0] = (0.0, 0.0)
+    angle = rng.uniform(0, np.pi, 40)
+    tangent = np.column_stack([np.cos(angle), np.sin(angle)])
+    normal = tangent[:, ::-1] * (-1, 1)
+    eps = 1e-5
+
+    def mapped(p):  # lens units (image widths from the centre) through the forward map, in lens units
+        centre = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2])
+        return (lens.distort_points(p * size[0] + centre, size) - centre) / size[0]
+
+    a, b, c = mapped(uv), mapped(uv + eps * tangent), mapped(uv + eps * normal)
+    direction = (b - a) / np.linalg.norm(b - a, axis=1, keepdims=True)
+    d = c - a
+    across = np.abs(direction[:, 0] * d[:, 1] - direction[:, 1] * d[:, 0]) / eps
+    np.testing.assert_allclose(lens_width_scale(lens, uv, tangent), across, rtol=1e-3)
+    assert lens_width_scale(lens, uv[:1], tangent[:1])[0] == 1.0

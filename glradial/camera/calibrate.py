@@ -26,6 +26,7 @@ from .estimate import CameraEstimate, camera_trust
 from .first_guess import first_guess as search
 from .first_guess import strong_lens
 from .first_views import first_views
+from .line_hypotheses import HEIGHT_RANGE
 from .model import Camera, decompose_homography
 from .refine import Fit, refine
 from .white_lines import LinePoints, line_points
@@ -64,13 +65,22 @@ def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb:
         if not isinstance(cam, Camera):
             raise TypeError(f"previous must be a Camera or a CameraEstimate with a camera, got {previous!r}")
         return [cam.with_size(lines.size)]
-    if first_guess is None:
-        points, labels = pitch.sampled_points(SEARCH_STEP)
-        guess = None if lens is None else (lens.k1, lens.k2)
-        homographies = [c.homography for c in search(rgb, points, labels, lens=guess)] or first_views(lines.xy, lines.size, pitch)
-    else:
-        homographies = list(first_guess)
+    homographies = _searched(rgb, lines, pitch, lens) if first_guess is None else list(first_guess)
     return _cameras(homographies, lines.size, lens)
+
+
+def _searched(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, lens: Lens | None) -> list[np.ndarray]:
+    """glradial's own first guesses (plane homographies to the frame undistorted by ``lens``; the
+    frame's own pixels for ``None``): the line and circle search
+    (:func:`glradial.camera.first_guess.first_guess`) on the frame undistorted by ``lens``, or, where it
+    finds nothing, the dictionary of synthetic views (:func:`first_views`) on the white-line points
+    undistorted by the same lens (one path for a given lens reading and the strong-lens retry)."""
+    points, labels = pitch.sampled_points(SEARCH_STEP)
+    found = [c.homography for c in search(rgb, points, labels, lens=None if lens is None else (lens.k1, lens.k2))]
+    if found:
+        return found
+    flat = lines.xy if lens is None else lens.undistort_points(lines.xy, lines.size)
+    return first_views(flat[np.isfinite(flat).all(1)], lines.size, pitch)
 
 
 def _cameras(homographies: list[np.ndarray], size: tuple[int, int], lens: Lens | None) -> list[Camera]:
@@ -105,8 +115,10 @@ def _reason(fit: Fit, t: dict) -> str:
         return "weak_geometry"  # one family of parallel image lines: nothing fixes the metric
     if not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
         return "weak_geometry"
-    if fit.camera.position[2] < t["min_height_m"] or fit.camera.hfov_deg > t["max_hfov_deg"]:
-        return "poor_fit"  # a camera on the grass or wider than a broadcast lens: lines fitted, not a pitch
+    if not t["min_height_m"] <= fit.camera.position[2] <= HEIGHT_RANGE[1] or fit.camera.hfov_deg > t["max_hfov_deg"]:
+        # a camera on the grass, above any main-camera position the search starts from, or wider than a
+        # broadcast lens: lines fitted, not a pitch
+        return "poor_fit"
     if fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
         return "poor_fit"
     return "ok"
@@ -204,12 +216,7 @@ def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate,
     lens = strong_lens(rgb)
     if lens is None:
         return judged
-    points, labels = pitch.sampled_points(SEARCH_STEP)
-    homographies = [c.homography for c in search(rgb, points, labels, lens=(lens.k1, lens.k2))]
-    if not homographies:
-        flat = lens.undistort_points(lines.xy, lines.size)
-        homographies = first_views(flat[np.isfinite(flat).all(1)], lines.size, pitch)
-    retried = judge(_search_fit(_cameras(homographies, lines.size, lens), lines, pitch), len(lines.xy))
+    retried = judge(_search_fit(_starts(lines, pitch, None, None, rgb, lens), lines, pitch), len(lines.xy))
     if not retried.doubtful or (retried.camera is not None and retried.inliers > judged.inliers):
         return retried
     return judged

@@ -26,17 +26,20 @@ unchanged; ``pitch=False`` gives it always, bit for bit. ``"net"`` and ``"lines"
 lens=...)``): its search undistorts the white lines with that lens, so a barrel lens no longer hides the
 straight lines it looks for (docs/CAMERA.md has the figures).
 
-**The camera's lens** is the Lopez-Antequera manifold lens nearest the fit's ``(k1, k2)`` over the
-radii to the 16:9 corner (:func:`manifold_lens`): the markings a broadcast frame shows rarely reach its
-corners, so the fit's ``k2`` trades against ``k1`` along a ridge; the manifold fixes it. Its bound is split-conformal:
+**The camera's lens** is the fit's ``(k1, k2)`` pulled part of the way (``lens_manifold_pull``) toward the
+Lopez-Antequera manifold lens nearest it over the radii to the 16:9 corner (:func:`manifold_lens`,
+:func:`camera_lens`): the markings a broadcast frame shows rarely reach its corners, so the fit's ``k2``
+trades against ``k1`` along a ridge, which the manifold steadies; the whole way to the manifold throws
+away what the fit read off it. Its bound is split-conformal:
 ``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), both in
 ``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_bound.py``).
 
 **Why a fixed weight and not the bounds' inverse variance**: per-frame weights make the answer jump
 between two readings that disagree by a frame-wide offset (the line fit reads a larger ``k2`` on the
 Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
-self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight`` minimises the self-consistent
-median of Bundesliga clip 2e57b9 (a 0.1 grid); clip 42ba34 is held out.
+self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight`` and ``lens_manifold_pull``
+minimise the self-consistent median of Bundesliga clip 2e57b9 (a 0.1 grid by a 0.25 grid) among the
+weights that leave the procedural stadium crops as they were; clip 42ba34 is held out.
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.estimator.Estimator` stays
@@ -73,9 +76,12 @@ def manifold_lens(lens: Lens) -> Lens:
 
 
 def camera_lens(camera: CameraEstimate) -> Lens:
-    """The lens ``camera``'s fit contributes (see the module docstring, "The camera's lens"): the manifold
-    lens nearest the fit's ``(k1, k2)`` (:func:`manifold_lens`)."""
-    return manifold_lens(camera.lens)
+    """The lens ``camera``'s fit contributes (see the module docstring, "The camera's lens"): the fit's
+    ``(k1, k2)`` pulled toward the manifold lens nearest it (:func:`manifold_lens`) by the share
+    ``lens_manifold_pull`` (``camera_trust.json``): ``p m + (1 - p) k``."""
+    p = float(camera_trust()["lens_manifold_pull"])
+    fit, nearest = camera.lens, manifold_lens(camera.lens)
+    return Lens(p * nearest.k1 + (1 - p) * fit.k1, p * nearest.k2 + (1 - p) * fit.k2)
 
 
 def lens_bound_px(camera: CameraEstimate) -> float:
@@ -120,19 +126,25 @@ def _may_be_a_pitch(reading: LensEstimate) -> bool:
     return reading.reason not in NO_EVIDENCE_REASONS
 
 
+def with_pitch(frame: np.ndarray, reading: LensEstimate) -> tuple[LensEstimate, CameraEstimate | None]:
+    """What ``method="auto"`` answers for ``frame`` given the estimation layer's ``reading`` of it, and
+    the camera fit behind it: ``(pitch_lens(camera, reading), camera)``, the camera fitted to the frame
+    restored to square pixels (``reading.pixel_aspect``) as the estimator did; ``(reading, None)``
+    where the estimation layer found no pitch evidence (the fit is not run). The one path of
+    :func:`estimate` and :class:`Estimator` (and of the benches that score them)."""
+    if not _may_be_a_pitch(reading):
+        return reading, None
+    rgb = to_rgb8(frame, clip=False)
+    if reading.pixel_aspect != 1.0:
+        rgb = square_pixels(rgb, reading.pixel_aspect)
+    camera = fit_camera(rgb, reading)
+    return pitch_lens(camera, reading), camera
+
+
 def _with_pitch(frames: list, found: list[LensEstimate]) -> list[LensEstimate]:
-    """Each estimate replaced by its frame's camera-fit lens where the template fits (the frame
-    restored to square pixels as the estimator did); frames with no pitch evidence skip the fit."""
-    out = []
-    for frame, est in zip(frames, found):
-        if not _may_be_a_pitch(est):
-            out.append(est)
-            continue
-        rgb = to_rgb8(frame, clip=False)
-        if est.pixel_aspect != 1.0:
-            rgb = square_pixels(rgb, est.pixel_aspect)
-        out.append(pitch_lens(fit_camera(rgb, est), est))
-    return out
+    """Each estimate replaced by its frame's camera-fit lens where the template fits
+    (:func:`with_pitch`); frames with no pitch evidence skip the fit."""
+    return [with_pitch(frame, est)[0] for frame, est in zip(frames, found)]
 
 
 def _as_list(frames: object) -> object:

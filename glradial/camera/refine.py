@@ -267,15 +267,39 @@ def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result, s
 def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
     """Share of the template samples projected inside the frame, where a painted line would be wide
     enough to detect (:data:`LINE_WIDTH_M` seen at least :data:`MIN_VISIBLE_PX` wide on the detection
-    copy), with an evidence point within :data:`SUPPORT_PX` (0 when none is inside)."""
+    copy, the lens's squeeze included: :func:`lens_width_scale`), with an evidence point within
+    :data:`SUPPORT_PX` (0 when none is inside)."""
     proj, ok = _segments(camera, samples)
     width, height = camera.size
-    _, depth = camera.undistorted_lens_points(samples.points)
+    uv, depth = camera.undistorted_lens_points(samples.points)
+    ahead = np.where(samples.next >= 0, samples.next, np.arange(len(samples.next)))
+    tangent = uv[ahead] - uv  # along the marking (zero at an element's last sample: taken as radial)
     with np.errstate(divide="ignore", invalid="ignore"):
-        seen_px = camera.focal * DETECT_WIDTH * LINE_WIDTH_M / depth
+        seen_px = camera.focal * DETECT_WIDTH * LINE_WIDTH_M / depth * lens_width_scale(camera.lens, uv, tangent)
     ok &= (proj[:, 0] >= 0) & (proj[:, 0] <= width - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= height - 1)
     ok &= seen_px >= MIN_VISIBLE_PX
     if not ok.any() or len(xy) == 0:
         return 0.0
     d, _ = cKDTree(xy).query(proj[ok])
     return float(np.mean(d * REFERENCE_WIDTH / width < SUPPORT_PX))
+
+
+def lens_width_scale(lens: Lens, uv: np.ndarray, tangent: np.ndarray) -> np.ndarray:
+    """How much ``lens`` widens (> 1) or squeezes (< 1) a thin line at the undistorted lens points
+    ``uv`` (N x 2, image widths from the principal point) running along ``tangent`` (N x 2, any
+    length): the width across the line after the lens's forward map over the width before. The map
+    scales radially by its slope ``s = d r_d / d r_u`` and tangentially by ``t = r_d / r_u``; a strip
+    along the unit direction ``(c, s')`` (radial, tangential components) keeps its area ``s t`` per
+    length and its length scales by ``|(s c, t s')|``, so its width scales by
+    ``s t / sqrt((s c)^2 + (t s')^2)`` (``t`` along a radial line, ``s`` across; 1 at the centre)."""
+    r = np.hypot(uv[:, 0], uv[:, 1])
+    slope = np.asarray(lens.slope(r), dtype=np.float64)
+    stretch = np.asarray(lens.forward_radius(r), dtype=np.float64) / np.maximum(r, 1e-12)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        radial = uv / np.maximum(r, 1e-12)[:, None]
+        length = np.hypot(tangent[:, 0], tangent[:, 1])
+        cos = np.where(length > 0, np.abs(np.sum(tangent * radial, axis=1)) / np.maximum(length, 1e-12), 1.0)
+    sin = np.sqrt(np.maximum(0.0, 1.0 - cos**2))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        scale = slope * stretch / np.hypot(slope * cos, stretch * sin)
+    return np.where(r > 1e-9, scale, 1.0)
