@@ -8,7 +8,7 @@ Use::
         live.push(frame, timestamp)                            # never blocks
         for out in live.pull_ready():                          # corrected, in order
             show(out.image); send(out.sample)
-    live.finish(); ...; live.close()
+    live.finish(); ...; live.close()                         # left open: closed at exit
 
 Conventions:
 
