@@ -8,7 +8,7 @@ Use::
         live.push(frame, timestamp)                            # never blocks
         for out in live.pull_ready():                          # corrected, in order
             show(out.image); send(out.sample)
-    live.finish(); ...; live.close()
+    live.finish(); ...; live.close()                         # left open: closed at exit
 
 Conventions:
 
@@ -44,6 +44,7 @@ Conventions:
 
 from __future__ import annotations
 
+import atexit
 import threading
 import time
 import uuid
@@ -174,6 +175,11 @@ class _MapsAhead:
         _dry_run(self._corrector(), frame, lens, self.size)
         self._built.append(lens)
 
+    def join(self) -> None:
+        """Wait for the build in progress, if any (it runs in native code: not left running at exit)."""
+        if self._thread is not None:
+            self._thread.join()
+
 
 def _dry_run(corrector: FrameCorrector, frame, lens: Lens, size: tuple[int, int]) -> None:
     """Correct ``frame`` (an ``av.VideoFrame``, corrected in its planes, or an RGB array) with
@@ -236,6 +242,9 @@ class LiveCorrector:
             self._sample(0, 0.0, self._state(0, None))  # the schema validator and the lens object, made now
         self._thread = threading.Thread(target=self._work, name="glradial-live-correct", daemon=True)
         self._thread.start()
+        # a script that exits without close(): stopped and joined before the interpreter finalizes
+        # (a daemon thread still inside OpenCV then aborts the process: docs/CLI.md, "live")
+        atexit.register(self.close)
 
     # -- the caller's side ---------------------------------------------------------------------------
     def push(self, frame: np.ndarray | av.VideoFrame, timestamp: float | None = None) -> None:
@@ -311,13 +320,17 @@ class LiveCorrector:
             self._cond.notify_all()
 
     def close(self) -> None:
-        """Stop the worker now (frames not yet corrected are dropped, not counted) and release what it holds."""
+        """Stop the worker now (frames not yet corrected are dropped, not counted), wait for it and
+        for the maps built ahead, and release what they hold (its GL context, on its thread; the
+        ``"auto"`` worker). Called at interpreter exit for a corrector not closed by then; again, a no-op."""
         with self._cond:
             self._ended = self._stopped = True
             self._cond.notify_all()
         self._thread.join()
+        self._ahead.join()
         if self._online is not None:
             self._online.close()
+        atexit.unregister(self.close)
 
     def __enter__(self) -> "LiveCorrector":
         return self

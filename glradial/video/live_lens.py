@@ -29,6 +29,7 @@ is fitted: its first frames, and a doubtful shot's, pass through uncorrected and
 
 from __future__ import annotations
 
+import atexit
 import math
 import multiprocessing
 import threading
@@ -169,6 +170,7 @@ class OnlineShotLens:
             self._connection, theirs = multiprocessing.Pipe()
             self._worker = threading.Thread(target=_serve, args=(theirs, *args), name="glradial-live-lens", daemon=True)
         self._worker.start()
+        atexit.register(self.close)  # not closed by the script: stopped before the interpreter finalizes
 
     @classmethod
     def started(cls, estimator: Callable[[np.ndarray], object], **options: object) -> "OnlineShotLens":
@@ -242,15 +244,22 @@ class OnlineShotLens:
         return LensState(shot, applied, fit.lens, fit.uncertainty_px, True, fit.reason)
 
     def close(self) -> None:
-        """Stop the worker (a sample in progress is abandoned)."""
+        """Stop the worker: a process abandons the sample in progress (terminated after 5 s); a thread,
+        which cannot be stopped, finishes it and is waited for (left running inside OpenCV or
+        onnxruntime, it would abort the process at interpreter exit). Called at exit for an online
+        lens not closed by then; again, a no-op."""
+        atexit.unregister(self.close)
+        if self._connection.closed:
+            return
         try:
             self._connection.send(None)
         except OSError:
             pass
-        self._worker.join(timeout=5.0)
         if isinstance(self._worker, threading.Thread):
+            self._worker.join()
             self._connection.close()
             return
+        self._worker.join(timeout=5.0)
         if self._worker.is_alive():
             self._worker.terminate()
             self._worker.join()
