@@ -194,6 +194,11 @@ class ShotEvidence:
         return "pan" if self.pan >= PAN_MIN else "static"
 
 
+def _estimates(samples: list[ShotSample]) -> list[Lens]:
+    """The samples' per-frame estimates, in frame order, leaving out samples without one."""
+    return [s.estimate for s in samples if s.estimate is not None]
+
+
 @dataclass(frozen=True)
 class ShotLens:
     """The lens of one shot (see the module docstring). ``theta`` the model's parameters
@@ -479,7 +484,7 @@ def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometr
     the median removes, not a range of lenses; one estimate far out does not move the median), plus
     their typical scatter (the median distance from their median) where that exceeds what they state. Doubtful (reason ``why``) when that bound exceeds
     ``doubtful_px``, or (reason theirs) when most per-frame estimates say they are doubtful."""
-    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    estimates = _estimates(evidence.samples)
     k = np.median([[e.k1, e.k2] for e in estimates], axis=0) if estimates else np.zeros(2)
     stated = [float(getattr(e, "uncertainty_px", NO_GEOMETRY_PX)) for e in estimates]
     distances = max_displacement_px(np.array([[e.k1, e.k2] for e in estimates]), k) if estimates else np.zeros(1)
@@ -615,7 +620,7 @@ def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> ShotLe
     shot = joint_fit(evidence, doubtful_px=doubtful_px, radius=radius)
     if shot is None:
         return _read_by_frames(evidence, doubtful_px, "no_geometry")
-    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    estimates = _estimates(evidence.samples)
     if not estimates or not all(hasattr(e, "uncertainty_px") for e in estimates):
         return shot  # estimates that state no bound cannot be weighed against the fit's
     if shot.static:  # a static shot is never worse than its frames: their median, when it is sure enough
@@ -643,7 +648,7 @@ def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
     (:func:`_zoom_of_frames`, ``zooming``) is judged by its bound like any other shot."""
     if not shot.doubtful or shot.reason not in ("uncertain", "no_geometry"):
         return shot
-    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    estimates = _estimates(evidence.samples)
     if shot.source == "frames" and not (estimates and all(hasattr(e, "uncertainty_px") for e in estimates)):
         return shot
     if shot.source == "frames" and evidence.camera() == "zoom" and not shot.zooming:
@@ -659,7 +664,7 @@ def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
               radius: float = CORNER_RADIUS_16_9) -> ShotLens | None:
     """The joint fit of the shot's chains and matches alone (``None``: no geometric evidence, see
     the module docstring); :func:`fit_shot` weighs it against the per-frame estimates."""
-    estimates = [s.estimate for s in evidence.samples if s.estimate is not None]
+    estimates = _estimates(evidence.samples)
     prior_k1 = float(np.median([e.k1 for e in estimates])) if estimates else 0.0
     chains = _Chains(evidence.samples)
     chains = chains.subset(_screen(chains)) if chains.n else chains
