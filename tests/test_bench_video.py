@@ -2,21 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
+
+from repo_scripts import load_script
 
 import glradial
 from glradial.commands.demo import FRAME_NAME
 from glradial.media.image_io import read_image
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def _bench_video():
-    spec = importlib.util.spec_from_file_location("bench_video", ROOT / "bench" / "bench_video.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("bench/bench_video.py")
 
 
 def test_default_frame_is_the_packaged_one() -> None:

@@ -7,23 +7,16 @@ displacement at 1920 of :func:`glradial.lens.metrics.max_displacement_px`); its 
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 import pytest
+from repo_scripts import load_script
 
 from glradial.lens.lens import Lens
 from glradial.lens.metrics import manifold_k2, max_displacement_px
 
-ROOT = Path(__file__).resolve().parents[1]
-
 
 def _bench():
-    spec = importlib.util.spec_from_file_location("pitch_views_bench", ROOT / "bench" / "pitch_views.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("bench/pitch_views.py")
 
 
 def _centred_fit():
@@ -70,9 +63,7 @@ def test_an_answers_overshoot_toward_no_lens_says_when_correcting_helps():
     error, d0 the identity lens's error): ``o = s`` when the truth is no lens, 0 when it is the answer,
     ``0 <= o <= min(s, d)`` (triangle inequality of the metric), and correcting helps (``d < d0``)
     exactly when ``o < s / 2``, on lens pairs drawn over the real range."""
-    spec = importlib.util.spec_from_file_location("cnn_alone_doubt", ROOT / "bench" / "cnn_alone_doubt.py")
-    bench = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(bench)
+    bench = load_script("bench/cnn_alone_doubt.py")
     rng = np.random.default_rng(5)
     for k1a, k1t in rng.uniform(-1.0, 0.4, (200, 2)):
         answer = (float(k1a), float(manifold_k2(k1a)) + float(rng.normal(0.0, 0.03)))

@@ -17,6 +17,7 @@ import subprocess
 import cv2
 import numpy as np
 import pytest
+from repo_scripts import load_script
 
 from glradial.lens.lens import Lens
 from glradial.lens.metrics import manifold_k2, max_displacement_px
@@ -113,14 +114,9 @@ def test_the_plumb_line_tool_recovers_a_known_lens_and_centre():
     eye) are refined to the lines, and the fitted lens with its centre moves no point of the frame
     by more than 1 px at 1920 from the true one (after the best homography between the two pinhole
     views: a centre and a lens trade a little against a projective change, which bends no line)."""
-    import importlib.util
-    from pathlib import Path
-
     from glradial.lens.lensfuncs import distort_point, undistort_point_exact
 
-    spec = importlib.util.spec_from_file_location("plumb_lines", Path(__file__).parents[1] / "scripts/plumb_lines.py")
-    plumb = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(plumb)
+    plumb = load_script("scripts/plumb_lines.py")
     size = (960, 540)
     picture = _distorted_grid(size, OWN, CENTRE)
     camera = np.array([[size[0], 0, size[0] / 2 - 0.5 + CENTRE[0] * size[0]],
