@@ -15,7 +15,8 @@ kept. Each frame:
    :func:`glradial.camera.calibrate.judge` (the doubt rule is calibrate's, untouched). Without any
    camera yet, glradial's full search runs instead, at most every :data:`SEARCH_EVERY` frames. A still
    camera pools the white-line points of its last :data:`POOL` frames (players cover other parts of
-   the lines in each), so its measurement sees more of the markings than any one frame;
+   the lines in each), so its measurement sees more of the markings than any one frame. Once the
+   track holds a sure camera, this step runs on every :data:`MEASURE_EVERY` th frame only;
 3. **correct**: a sure measurement pulls the prediction toward it by :data:`GAIN` (rotation on the
    sphere, focal length in log, position and lens linearly): the motion carries what changes fast,
    the markings correct drift (a complementary filter, no lag on a pan). A sure measurement farther
@@ -25,8 +26,8 @@ kept. Each frame:
 The bound: a measured frame states the bound of its measurement (px at 1280, as
 :class:`glradial.CameraEstimate`); a carried frame the bound of the last sure frame grown by the
 motion's residual and :data:`DRIFT_PX` per frame, ``carried`` counting the frames since it. A carried
-camera is sure while its bound stays under :data:`MAX_BOUND_PX` and the frames since the last sure one
-under :data:`MAX_CARRIED`; past either, or without a sure frame yet, doubtful (``track_lost``, or the
+camera is sure while the motion is found, its bound stays under :data:`MAX_BOUND_PX` and the frames
+since the last sure one under :data:`MAX_CARRIED`; past either, or without a sure frame yet, doubtful (``track_lost``, or the
 measurement's own reason).
 
 :class:`CameraTracker` is causal (``push(frame, time)``, one frame in, its camera out: ``glradial
@@ -66,6 +67,9 @@ GAIN = 0.3
 DRIFT_PX = 0.1
 #: A carried camera is doubtful past this bound (px at 1280) or this many frames since a sure one.
 MAX_BOUND_PX, MAX_CARRIED = 20.0, 250
+#: Once the track holds a sure camera, the markings are measured on every this many frames (the
+#: white-line points and their refit cost some 5 times the motion; the motion carries the others).
+MEASURE_EVERY = 5
 #: Without any camera, glradial's full search (seconds a frame) runs at most every this many frames.
 SEARCH_EVERY = 10
 #: A still camera (motion under :data:`STILL_PX` px at 1280 at the frame's corners) pools the
@@ -179,13 +183,16 @@ class _Filter:
         return self._carried(predicted, measured, math.nan if step.motion is None else step.motion.residual_px)
 
     def _carried(self, predicted: Camera | None, measured: CameraEstimate | None, residual_px: float) -> CameraEstimate:
-        if predicted is None:  # nothing to carry: the frame's own answer (a camera, doubtful) or nothing
-            if measured is not None and measured.camera is not None and self.state is None:
-                self.state = measured
+        if not self.anchored and measured is not None and measured.camera is not None and (
+                self.state is None or measured.support * measured.inliers > self.state.support * self.state.inliers):
+            self.state = measured  # no sure camera yet: the best-supported doubtful one is carried
+            return measured
+        if predicted is None:  # nothing to carry
             return measured if measured is not None else CameraEstimate(None, 1280.0, True, "no_markings")
         self.carried += 1
-        bound = self.state.uncertainty_px + (residual_px if math.isfinite(residual_px) else 0.0) + DRIFT_PX
-        lost = not self.anchored or bound > MAX_BOUND_PX or self.carried > MAX_CARRIED
+        moved = math.isfinite(residual_px)  # the motion was found (else the camera was only kept)
+        bound = self.state.uncertainty_px + (residual_px if moved else 0.0) + DRIFT_PX
+        lost = not (self.anchored and moved) or bound > MAX_BOUND_PX or self.carried > MAX_CARRIED
         reason = "ok" if not lost else (self.state.reason if not self.anchored else "track_lost")
         self.state = replace(self.state, camera=predicted, uncertainty_px=bound, doubtful=lost, reason=reason,
                              carried=self.carried)
@@ -202,10 +209,16 @@ class CameraTracker:
     (px at 1280), and ``doubtful`` says whether to use it (module docstring). :meth:`cut` starts a new
     shot (forgets the camera, the pooled points and the shot's lens). :attr:`steps` keeps each frame's
     :class:`TrackStep` (a few hundred bytes) for :func:`track_cameras`' backward pass when
-    ``keep_steps``. Not thread-safe: one tracker per stream, used from one thread."""
+    ``keep_steps``. ``measure_every``: once a sure camera is held, the markings are measured on every
+    this many frames (1: every frame; the motion carries the others), and on any frame whose motion
+    was not found. Not thread-safe: one tracker per stream, used from one thread."""
 
-    def __init__(self, pitch: PitchTemplate | None = None, *, keep_steps: bool = False) -> None:
+    def __init__(self, pitch: PitchTemplate | None = None, *, measure_every: int = MEASURE_EVERY,
+                 keep_steps: bool = False) -> None:
+        if isinstance(measure_every, bool) or not isinstance(measure_every, int) or measure_every < 1:
+            raise ValueError(f"measure_every must be a whole number of frames >= 1, got {measure_every!r}")
         self.pitch = check_pitch(pitch)
+        self.measure_every = measure_every
         self.keep_steps = keep_steps
         self.steps: list[TrackStep] = []
         self.time: float | None = None
@@ -219,6 +232,7 @@ class CameraTracker:
         self._sure: list[CameraEstimate] = []
         self._shot_lens: ShotLens | None = None
         self._since_search = SEARCH_EVERY
+        self._since_measure = 0
 
     @property
     def shot_lens(self) -> ShotLens | None:
@@ -239,11 +253,15 @@ class CameraTracker:
         motion = self._motion(gray)
         self._gray, self.time = gray, time
         predicted = self._filter.predict(motion)
-        lines = line_points(rgb)
         if motion is None or predicted is None or motion.shift_px(predicted.focal) > STILL_PX:
             self._pool.clear()
-        self._pool.append(lines)
-        step = TrackStep(motion, self._measure(rgb, lines, predicted))
+        self._since_measure += 1
+        measured = None
+        if not self._filter.anchored or motion is None or self._since_measure >= self.measure_every:
+            lines = line_points(rgb)
+            self._pool.append(lines)
+            measured, self._since_measure = self._measure(rgb, lines, predicted), 0
+        step = TrackStep(motion, measured)
         if self.keep_steps:
             self.steps.append(step)
         est = self._filter.update(predicted, step)
@@ -265,12 +283,13 @@ class CameraTracker:
 
     def _measure(self, rgb: np.ndarray, lines: LinePoints, predicted: Camera | None) -> CameraEstimate | None:
         """The frame's own measurement (module docstring, step 2); ``None`` when none ran."""
-        if predicted is None:
+        if not self._filter.anchored:
             self._since_search += 1
-            if self._since_search < SEARCH_EVERY:
+            if self._since_search >= SEARCH_EVERY:  # no sure camera yet: glradial's own search now and then
+                self._since_search = 0
+                return calibrate_points(rgb, lines, self.pitch, None, None)
+            if predicted is None:
                 return None
-            self._since_search = 0
-            return calibrate_points(rgb, lines, self.pitch, None, None)
         pooled = _pooled(self._pool)
         if len(pooled.xy) < 12:
             return judge(None, len(pooled.xy))
