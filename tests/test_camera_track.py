@@ -135,3 +135,12 @@ def test_a_doubtful_estimate_says_why_in_numbers():
     assert est.why == "support 0.73 < 0.83; rms 3.10 px > 2.5 px"
     assert CameraEstimate(cam, 5.0, False, "ok", ("a", "b"), 1.0, 400, 0.9, 0.01).why == ""
     assert est.as_dict()["why"] == est.why
+
+
+@pytest.mark.parametrize("focal, position", [(1e-8, (0.0, -60.0, 16.0)), (0.001, (0.0, -60.0, 16.0)),
+                                             (1.0, (0.0, -2e9, 16.0)), (1.0, (0.0, -60.0, -3.0))])
+def test_a_degenerate_fit_carries_no_camera(focal, position):
+    cam = Camera(np.eye(3), np.array(position), focal, (1280, 720))
+    est = CameraEstimate(cam, 3.0, False, "ok", ("a", "b"), 1.0, 300, 0.9, 0.01)
+    assert est.camera is None and est.doubtful and est.reason == "poor_fit"
+    assert "degenerate" in est.why and "position_m" not in est.as_dict()

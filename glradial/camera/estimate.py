@@ -13,7 +13,9 @@ doubtful). ``markings``: labels of the template elements the fit used
 (:meth:`glradial.pitch.PitchTemplate.elements`); ``rms_px`` the fit's RMS distance of the white-line
 points on them (px at 1280), ``inliers`` their number, ``support`` the share of the markings drawn in
 the frame that the frame shows (:func:`glradial.camera.refine.support`), ``focal_sd`` the relative
-standard deviation of the focal length from the fit's Jacobian. A doubtful estimate may carry no camera at all.
+standard deviation of the focal length from the fit's Jacobian. A doubtful estimate may carry no camera at all;
+a degenerate one (:func:`degenerate`: e.g. a focal length of 1e-8 image widths or a camera 2e9 m away)
+never carries it.
 ``carried``: frames since the last sure measurement when the camera was carried there by the frame-to-frame
 motion (:mod:`glradial.video.camera_track`; 0: measured on this frame); ``"track_lost"``: carried too far.
 :attr:`CameraEstimate.why` says what the doubt rests on in numbers (e.g. ``"support 0.73 < 0.83"``).
@@ -43,6 +45,19 @@ def camera_trust() -> dict:
     return json.loads(CAMERA_TRUST_FILE.read_text(encoding="utf-8"))
 
 
+#: A fitted camera outside these is degenerate and never reported (the estimate keeps no camera):
+#: focal length (image widths; 0.05-50 is a field of view of 170 down to 1.1 degrees) and the
+#: distance of the camera from the centre spot (m).
+FOCAL_RANGE, MAX_DISTANCE_M = (0.05, 50.0), 1000.0
+
+
+def degenerate(camera: Camera) -> bool:
+    """Whether ``camera`` is no camera that could film a pitch: a focal length outside
+    :data:`FOCAL_RANGE`, farther than :data:`MAX_DISTANCE_M` from the centre spot, or not above it."""
+    return not (FOCAL_RANGE[0] <= camera.focal <= FOCAL_RANGE[1]
+                and float(np.linalg.norm(camera.position)) <= MAX_DISTANCE_M and camera.position[2] > 0)
+
+
 def _of_camera(name: str, doc: str) -> property:
     """A read-only attribute of the estimate's camera (``None`` when it has none)."""
     return property(lambda self: None if self.camera is None else getattr(self.camera, name), doc=doc)
@@ -64,6 +79,10 @@ class CameraEstimate:
     carried: int = 0
 
     def __post_init__(self) -> None:
+        if self.camera is not None and degenerate(self.camera):  # no impossible numbers leave glradial
+            object.__setattr__(self, "camera", None)
+            object.__setattr__(self, "doubtful", True)
+            object.__setattr__(self, "reason", "poor_fit" if self.reason == "ok" else self.reason)
         if self.reason not in REASONS or (self.reason == "ok") == bool(self.doubtful):
             raise ValueError(f"reason must be one of {REASONS} ('ok' exactly when not doubtful), got "
                              f"{self.reason!r} with doubtful={self.doubtful}")
@@ -104,7 +123,9 @@ class CameraEstimate:
             return ""
         t = camera_trust()
         if self.camera is None:
-            return f"{self.inliers} line points < {t['min_points']}" if self.reason == "no_markings" else self.reason
+            if self.inliers:
+                return f"{self.reason}: the fit is degenerate (no camera kept)"
+            return f"{self.reason}: no camera found"
         checks = ((self.inliers < t["min_points"], f"inliers {self.inliers} < {t['min_points']}"),
                   (len(self.markings) < t["min_elements"], f"markings {len(self.markings)} < {t['min_elements']}"),
                   (self.focal_sd > t["max_log_focal_sd"], f"focal sd {self.focal_sd:.3f} > {t['max_log_focal_sd']}"),

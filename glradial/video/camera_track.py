@@ -25,7 +25,7 @@ kept. Each frame:
 
 The bound: a measured frame states the bound of its measurement (px at 1280, as
 :class:`glradial.CameraEstimate`); a carried frame the bound of the last sure frame grown by the
-motion's residual and :data:`DRIFT_PX` per frame, ``carried`` counting the frames since it. A carried
+motion's standard error and :data:`DRIFT_PX` per frame, ``carried`` counting the frames since it. A carried
 camera is sure while the motion is found, its bound stays under :data:`MAX_BOUND_PX` and the frames
 since the last sure one under :data:`MAX_CARRIED`; past either, or without a sure frame yet, doubtful (``track_lost``, or the
 measurement's own reason).
@@ -83,7 +83,8 @@ _WIDTH = 1280.0
 class Motion:
     """How the camera moved between two frames of a shot about its fixed centre: ``turn`` (3 x 3, the
     first frame's camera axes to the second's: ``R_b = turn @ R_a``), ``zoom`` (``f_b / f_a``) and
-    ``residual_px`` (RMS misfit of the matched points, px at 1280)."""
+    ``residual_px`` (the matched points' RMS misfit times ``sqrt(4 / N)``: the standard error of the
+    fitted motion, px at 1280)."""
 
     turn: np.ndarray
     zoom: float
@@ -118,8 +119,10 @@ def motion_of(camera: Camera, a: np.ndarray, b: np.ndarray) -> Motion | None:
     fit = least_squares(residuals, np.zeros(4), loss="soft_l1", f_scale=2.0 / _WIDTH, x_scale=1e-3)
     if not fit.success or not np.all(np.isfinite(fit.fun)):
         return None
-    return Motion(Rotation.from_rotvec(fit.x[:3]).as_matrix(), math.exp(fit.x[3]),
-                  float(np.sqrt(np.mean(fit.fun ** 2) * 2)) * _WIDTH)
+    # the residual of one point over the square root of the points per parameter: how far the fitted
+    # motion itself may be off (px at 1280), what a carried camera's bound grows by
+    rms = float(np.sqrt(np.mean(fit.fun ** 2) * 2)) * _WIDTH
+    return Motion(Rotation.from_rotvec(fit.x[:3]).as_matrix(), math.exp(fit.x[3]), rms * math.sqrt(4.0 / len(a)))
 
 
 def carry(camera: Camera, motion: Motion) -> Camera:
