@@ -10,18 +10,19 @@ kept. Each frame:
 1. **predict**: the previous frame's camera carried by the motion (the same camera when there was
    no previous frame or the motion was not found);
 2. **measure**: the white-line points refit from the prediction (the short tracking gates of
-   :func:`glradial.calibrate`, lens free, or held at the shot's lens model once it has
-   :data:`glradial.camera.shot_lens.MIN_FRAMES` [0] sure frames: :func:`fit_shot_lens`), judged by
+   :func:`glradial.calibrate`, lens free), judged by
    :func:`glradial.camera.calibrate.judge` (the doubt rule is calibrate's, untouched). Without any
    camera yet, glradial's full search runs instead, at most every :data:`SEARCH_EVERY` frames. A still
    camera pools the white-line points of its last :data:`POOL` frames (players cover other parts of
    the lines in each), so its measurement sees more of the markings than any one frame. Once the
-   track holds a sure camera, this step runs on every :data:`MEASURE_EVERY` th frame only;
+   track holds a sure camera, this step runs on every :data:`MEASURE_EVERY` th frame only, and on
+   each frame that zooms (:data:`ZOOMING`: the lens changes with the focal length);
 3. **correct**: a sure measurement pulls the prediction toward it by :data:`GAIN` (rotation on the
    sphere, focal length in log, position and lens linearly): the motion carries what changes fast,
    the markings correct drift (a complementary filter, no lag on a pan). A sure measurement farther
    from the prediction than its own bound plus the prediction's takes over outright (the track had
-   drifted). A doubtful measurement leaves the prediction alone.
+   drifted); on a zooming frame the lens is the measured one (it changes with the focal length). A
+   doubtful measurement leaves the prediction alone.
 
 The bound: a measured frame states the bound of its measurement (px at 1280, as
 :class:`glradial.CameraEstimate`); a carried frame the bound of the last sure frame grown by the
@@ -51,7 +52,6 @@ from ..camera.calibrate import FINE_POINTS, TRACK_GATES, calibrate_points, check
 from ..camera.estimate import CameraEstimate
 from ..camera.model import Camera
 from ..camera.refine import refine
-from ..camera.shot_lens import MIN_FRAMES, ShotLens, fit_shot_lens
 from ..camera.white_lines import LinePoints, line_points
 from ..lens.lens import Lens
 from ..lens.lensfuncs import undistort_point_exact
@@ -70,6 +70,9 @@ MAX_BOUND_PX, MAX_CARRIED = 20.0, 250
 #: Once the track holds a sure camera, the markings are measured on every this many frames (the
 #: white-line points and their refit cost some 5 times the motion; the motion carries the others).
 MEASURE_EVERY = 5
+#: A frame that zooms by more than this (|ln f_b / f_a|) is measured too: a zoom lens's distortion
+#: changes with its focal length, which the motion does not carry.
+ZOOMING = 0.002
 #: Without any camera, glradial's full search (seconds a frame) runs at most every this many frames.
 SEARCH_EVERY = 10
 #: A still camera (motion under :data:`STILL_PX` px at 1280 at the frame's corners) pools the
@@ -130,12 +133,13 @@ def carry(camera: Camera, motion: Motion) -> Camera:
     return Camera(motion.turn @ camera.rotation, camera.position, camera.focal * motion.zoom, camera.size, camera.lens)
 
 
-def blend(a: Camera, b: Camera, weight: float) -> Camera:
+def blend(a: Camera, b: Camera, weight: float, lens_weight: float | None = None) -> Camera:
     """The camera ``weight`` of the way from ``a`` to ``b`` (rotation on the sphere, focal length in
-    log, position and lens linearly)."""
+    log, position linearly) and its lens ``lens_weight`` of the way (default ``weight``; linearly)."""
+    lw = weight if lens_weight is None else lens_weight
     turn = Rotation.from_matrix(b.rotation @ a.rotation.T).as_rotvec() * weight
     focal = math.exp((1 - weight) * math.log(a.focal) + weight * math.log(b.focal))
-    lens = Lens((1 - weight) * a.lens.k1 + weight * b.lens.k1, (1 - weight) * a.lens.k2 + weight * b.lens.k2)
+    lens = Lens((1 - lw) * a.lens.k1 + lw * b.lens.k1, (1 - lw) * a.lens.k2 + lw * b.lens.k2)
     return Camera(Rotation.from_rotvec(turn).as_matrix() @ a.rotation, (1 - weight) * a.position + weight * b.position,
                   focal, a.size, lens)
 
@@ -177,7 +181,9 @@ class _Filter:
         if sure and predicted is not None and self.anchored:
             gap = camera_gap_px(predicted, measured.camera, self.pitch)
             weight = 1.0 if gap > measured.uncertainty_px + self.state.uncertainty_px else GAIN
-            self.state = replace(measured, camera=blend(predicted, measured.camera, weight))
+            zooming = step.motion is not None and abs(math.log(step.motion.zoom)) > ZOOMING
+            # a zoom lens's distortion follows its focal length: the measured lens, not a lagging blend
+            self.state = replace(measured, camera=blend(predicted, measured.camera, weight, 1.0 if zooming else weight))
         elif sure:
             self.state = measured
         if sure:
@@ -210,11 +216,11 @@ class CameraTracker:
     time in seconds (optional; kept as :attr:`time`). The estimate's ``carried`` counts the frames since
     the last sure measurement (0: measured on this frame), its ``uncertainty_px`` grows with it
     (px at 1280), and ``doubtful`` says whether to use it (module docstring). :meth:`cut` starts a new
-    shot (forgets the camera, the pooled points and the shot's lens). :attr:`steps` keeps each frame's
+    shot (forgets the camera and the pooled points). :attr:`steps` keeps each frame's
     :class:`TrackStep` (a few hundred bytes) for :func:`track_cameras`' backward pass when
     ``keep_steps``. ``measure_every``: once a sure camera is held, the markings are measured on every
-    this many frames (1: every frame; the motion carries the others), and on any frame whose motion
-    was not found. Not thread-safe: one tracker per stream, used from one thread."""
+    this many frames (1: every frame; the motion carries the others), on any frame that zooms and on
+    any frame whose motion was not found. Not thread-safe: one tracker per stream, used from one thread."""
 
     def __init__(self, pitch: PitchTemplate | None = None, *, measure_every: int = MEASURE_EVERY,
                  keep_steps: bool = False) -> None:
@@ -232,15 +238,8 @@ class CameraTracker:
         self._filter = _Filter(self.pitch)
         self._gray: np.ndarray | None = None
         self._pool: deque[LinePoints] = deque(maxlen=POOL)
-        self._sure: list[CameraEstimate] = []
-        self._shot_lens: ShotLens | None = None
         self._since_search = SEARCH_EVERY
         self._since_measure = 0
-
-    @property
-    def shot_lens(self) -> ShotLens | None:
-        """The shot's lens model so far (:func:`glradial.camera.shot_lens.fit_shot_lens`), or ``None``."""
-        return self._shot_lens
 
     def push(self, frame: np.ndarray, time: float | None = None) -> CameraEstimate:
         """The camera of the next frame of the shot (class docstring)."""
@@ -260,17 +259,15 @@ class CameraTracker:
             self._pool.clear()
         self._since_measure += 1
         measured = None
-        if not self._filter.anchored or motion is None or self._since_measure >= self.measure_every:
+        zooming = motion is not None and abs(math.log(motion.zoom)) > ZOOMING
+        if not self._filter.anchored or motion is None or zooming or self._since_measure >= self.measure_every:
             lines = line_points(rgb)
             self._pool.append(lines)
             measured, self._since_measure = self._measure(rgb, lines, predicted), 0
         step = TrackStep(motion, measured)
         if self.keep_steps:
             self.steps.append(step)
-        est = self._filter.update(predicted, step)
-        if step.measured is not None and not step.measured.doubtful:
-            self._learn_lens(step.measured)
-        return est
+        return self._filter.update(predicted, step)
 
     def _motion(self, gray: np.ndarray) -> Motion | None:
         state = self._filter.state
@@ -297,18 +294,8 @@ class CameraTracker:
         if len(pooled.xy) < 12:
             return judge(None, len(pooled.xy))
         fine = pooled.thinned(FINE_POINTS)
-        start, fit_lens = predicted, True
-        if self._shot_lens is not None:
-            start, fit_lens = replace(predicted, lens=self._shot_lens.lens_at(predicted.focal)), False
-        fit = refine(start, fine.xy, fine.angle, self.pitch, fit_lens=fit_lens, gates=TRACK_GATES, lens_from=1,
-                     support_xy=pooled.xy)
+        fit = refine(predicted, fine.xy, fine.angle, self.pitch, gates=TRACK_GATES, lens_from=1, support_xy=pooled.xy)
         return judge(fit, len(pooled.xy))
-
-    def _learn_lens(self, measured: CameraEstimate) -> None:
-        self._sure.append(measured)
-        count = len(self._sure)
-        if count >= MIN_FRAMES[0] and (count <= 2 * MIN_FRAMES[2] or count % MIN_FRAMES[2] == 0):
-            self._shot_lens = fit_shot_lens(self._sure[-100:]) or self._shot_lens
 
 
 def _pooled(pool: Iterable[LinePoints]) -> LinePoints:
