@@ -124,8 +124,8 @@ class CameraEstimate:
         t = camera_trust()
         if self.camera is None:
             if self.inliers:
-                return f"{self.reason}: the fit is degenerate (no camera kept)"
-            return f"{self.reason}: no camera found"
+                return "the fit is degenerate (no camera kept)"
+            return "no camera found"
         checks = ((self.inliers < t["min_points"], f"inliers {self.inliers} < {t['min_points']}"),
                   (len(self.markings) < t["min_elements"], f"markings {len(self.markings)} < {t['min_elements']}"),
                   (self.focal_sd > t["max_log_focal_sd"], f"focal sd {self.focal_sd:.3f} > {t['max_log_focal_sd']}"),
