@@ -121,6 +121,7 @@ def test_cli_video_follows_each_shot(tmp_path, capsys):
     assert main(["calibrate", str(source), "--json", "--opentrackio", str(samples), "--sensor-width-mm", "9.59"]) == 0
     rows = [json.loads(line) for line in capsys.readouterr().out.strip().splitlines()]
     assert [r["frame"] for r in rows] == list(range(8)) and [r["shot"] for r in rows] == [0] * 4 + [1] * 4
+    assert all(r["time_s"] == pytest.approx(r["frame"] / 25) and "undistorted px" in r["units"]["homography"] for r in rows)
     sure = [r for r in rows if not r["doubtful"]]
     assert len(sure) >= 6
     for r in sure:
@@ -135,6 +136,7 @@ def test_cli_video_follows_each_shot(tmp_path, capsys):
         mine = sample["custom"]["glradial"]
         row = rows[mine["frame"]]
         assert mine["shot"] == row["shot"] and mine["calibration_carried"] == row["carried"]
+        assert sample["timing"]["sequenceNumber"] == mine["frame"] and sample["timing"]["sampleRate"]["num"] == 25
         assert sample["lens"]["pinholeFocalLength"] == pytest.approx(row["focal"] * 9.59)
 
 

@@ -219,10 +219,6 @@ def _video(args: argparse.Namespace, out: _Outputs) -> None:
         for index, est in track_cameras(frames(), lag=ROW_LAG, is_cut=is_cut):
             shot = sum(1 for s in starts if s <= index) - 1
             out.emit(args.input, index, est, index / fps, shot)
-    if out.detections is not None and int(out.detections.frame.max()) > out.count:
-        late = int(out.detections.frame.max())
-        raise UsageError(f"{args.points!r} has boxes in frame {late} but {args.input!r} holds {out.count} frames "
-                         "(MOTChallenge counts frames from 1)")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -234,6 +230,10 @@ def run(args: argparse.Namespace) -> int:
         _images(args, kind, out)
     if out.count == 0:
         raise UsageError(f"{args.input!r} holds no frame")
+    frames = 1 if kind == "folder" else out.count  # a folder's images are each frame 1
+    if detections is not None and int(detections.frame.max()) > frames:
+        raise UsageError(f"{args.points!r} has boxes in frame {int(detections.frame.max())} but {args.input!r} holds "
+                         f"{frames} frame(s) (MOTChallenge counts frames from 1): no positions written")
     _write(args, out)
     return 0
 
