@@ -1,4 +1,4 @@
-"""The camera followed through a shot (issue 44): ``glradial.video.camera_track`` against calibrating
+"""The camera followed through a shot (issue 44): ``glradial.tracking.camera_track`` against calibrating
 each frame alone (``glradial.calibrate``, what ``glradial calibrate VIDEO`` did per frame), in one
 process, on one thread.
 
@@ -142,7 +142,7 @@ def _jitter(estimates, size: tuple[int, int], still: np.ndarray) -> float:
 def track(frames: list) -> tuple[list, dict]:
     """The tracked estimates (forward-backward, :func:`track_cameras`) and the timings (ms): per frame
     of the whole track, per frame of the causal tracker alone, and its median on carried frames."""
-    from glradial.video.camera_track import CameraTracker, track_cameras
+    from glradial.tracking.camera_track import CameraTracker, track_cameras
 
     t0 = time.perf_counter()
     out = dict(track_cameras(iter(frames), lag=25))

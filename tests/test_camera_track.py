@@ -1,4 +1,4 @@
-"""The camera through a shot (glradial.video.camera_track) and pixels to the pitch (to_pitch), against
+"""The camera through a shot (glradial.tracking.camera_track) and pixels to the pitch (to_pitch), against
 exact synthetic cameras: the renderer knows every frame's camera."""
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from glradial.camera.estimate import CameraEstimate
 from glradial.camera.model import Camera
 from glradial.camera.views import render_view
 from glradial.pitch import PitchTemplate
-from glradial.video.camera_track import CameraTracker, carry, motion_of
+from glradial.tracking.camera_track import CameraTracker, carry, motion_of
 
 KEYPOINTS = PitchTemplate().keypoints()
 

@@ -17,7 +17,7 @@ standard deviation of the focal length from the fit's Jacobian. A doubtful estim
 a degenerate one (:func:`degenerate`: e.g. a focal length of 1e-8 image widths or a camera 2e9 m away)
 never carries it.
 ``carried``: frames since the last sure measurement when the camera was carried there by the frame-to-frame
-motion (:mod:`glradial.video.camera_track`; 0: measured on this frame); ``"track_lost"``: carried too far.
+motion (:mod:`glradial.tracking.camera_track`; 0: measured on this frame); ``"track_lost"``: carried too far.
 :attr:`CameraEstimate.why` says what the doubt rests on in numbers (e.g. ``"support 0.73 < 0.83"``).
 """
 

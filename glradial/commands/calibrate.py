@@ -188,12 +188,12 @@ def _images(args: argparse.Namespace, kind: str, out: _Outputs) -> None:
 
 
 def _video(args: argparse.Namespace, out: _Outputs) -> None:
-    """A video's frames followed shot by shot (:func:`glradial.video.camera_track.track_cameras`),
+    """A video's frames followed shot by shot (:func:`glradial.tracking.camera_track.track_cameras`),
     each frame's row emitted :data:`ROW_LAG` frames after it is read."""
     from ..media.frames import to_rgb8
     from ..media.progress import Progress
     from ..media.video_io import VideoReader
-    from ..video.camera_track import track_cameras
+    from ..tracking.camera_track import track_cameras
     from ..video.cuts import ShotDetector
 
     detector, starts, reading = ShotDetector(), [0], [0]

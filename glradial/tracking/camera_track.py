@@ -57,7 +57,7 @@ from ..lens.lens import Lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
-from .frame_motion import match_frames, motion_gray
+from ..video.frame_motion import match_frames, motion_gray
 
 __all__ = ["CameraTracker", "Motion", "TrackStep", "carry", "motion_of", "track_cameras"]
 
