@@ -16,7 +16,7 @@ from glradial.camera.estimate import CameraEstimate
 from glradial.camera.model import Camera
 from glradial.camera.views import render_view
 from glradial.pitch import PitchTemplate
-from glradial.tracking.camera_track import CameraTracker, carry, motion_of
+from glradial.tracking.camera_track import CameraTracker, carry, motion_of, track_cameras
 
 KEYPOINTS = PitchTemplate().keypoints()
 
@@ -97,16 +97,20 @@ def _turning_shot(frames: int, seed: int) -> tuple[list[Camera], list[np.ndarray
     return cams, out
 
 
-def test_a_frame_that_alone_is_declined_takes_the_carried_camera():
-    cams, frames = _turning_shot(5, 5)
-    # frame 3's markings painted over with the grass around them: alone it is declined
-    f = frames[3]
-    grass = tuple(int(v) for v in np.median(f[f.shape[0] // 2:].reshape(-1, 3), axis=0))
+def _paint_out(frame: np.ndarray, cam: Camera) -> None:
+    """The frame's markings painted over with its grass: alone it is declined."""
+    grass = tuple(int(v) for v in np.median(frame[frame.shape[0] // 2:].reshape(-1, 3), axis=0))
     for _, line in PitchTemplate().polylines(0.25):
-        xy = cams[3].project(line)
+        xy = cam.project(line)
         xy = xy[np.all(np.isfinite(xy), axis=1)]
         if len(xy) > 1:
-            cv2.polylines(f, [np.round(xy).astype(np.int32)], False, grass, 7)
+            cv2.polylines(frame, [np.round(xy).astype(np.int32)], False, grass, 7)
+
+
+def test_a_frame_that_alone_is_declined_takes_the_carried_camera():
+    cams, frames = _turning_shot(5, 5)
+    f = frames[3]
+    _paint_out(f, cams[3])
     assert calibrate(f).doubtful
     tracker = CameraTracker(measure_every=1)
     answers = [tracker.push(frame) for frame in frames]
@@ -144,3 +148,16 @@ def test_a_degenerate_fit_carries_no_camera(focal, position):
     est = CameraEstimate(cam, 3.0, False, "ok", ("a", "b"), 1.0, 300, 0.9, 0.01)
     assert est.camera is None and est.doubtful and est.reason == "poor_fit"
     assert "degenerate" in est.why and "position_m" not in est.as_dict()
+
+
+def test_track_cameras_answers_the_frames_before_the_first_sure_one():
+    cams, frames = _turning_shot(12, 6)
+    _paint_out(frames[0], cams[0])  # no camera found on frame 0: the next search is on frame 10
+    forward = [CameraTracker().push(f) for f in frames[:1]]
+    assert forward[0].doubtful
+    both = list(track_cameras(iter(frames)))  # lag 25: frame 10 is read before frame 0 is decided
+    assert [i for i, _ in both] == list(range(12))
+    assert all(not e.doubtful for _, e in both)
+    assert max(_gap(e.camera, c) for (_, e), c in zip(both, cams)) < 1.5
+    with pytest.raises(ValueError, match="lag"):
+        next(track_cameras(iter(frames), lag=-1))

@@ -28,12 +28,12 @@ INPUT: an image, a folder of images (each calibrated on its own) or a video.
 Videos: the camera is followed through each shot (cuts detected): the motion between frames carries
 it, the markings are measured on every 5th frame and correct it, a frame that alone would be
 declined takes the camera carried from its sure neighbours (carried=N frames, a growing bound), and
-the track is smoothed forward and backward; each frame's row is written 25 frames after it is read.
+the track is smoothed forward and backward; rows are written in blocks, each 25-50 frames after its frame is read.
 --points DETECTIONS (MOTChallenge CSV: frame,id,left,top,width,height,conf,..., frames from 1) maps
 each box's bottom centre to pitch metres, written to --positions OUT.csv (empty where the frame's
 camera is doubtful). docs/CAMERA.md says what it can and cannot do."""
 
-#: Frames a video's row waits for the frames after it (the backward pass of the track).
+#: A video's rows wait for 25-50 later frames (the backward pass of the track, once per block).
 ROW_LAG = 25
 #: What the numbers of a --json row are in.
 UNITS = {"time_s": "seconds from the first frame", "homography": "pitch (x, y, 1) metres -> undistorted px of the frame",

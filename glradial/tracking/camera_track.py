@@ -34,7 +34,9 @@ measurement's own reason).
 :class:`CameraTracker` is causal (``push(frame, time)``, one frame in, its camera out: ``glradial
 live``); :func:`track_cameras` runs it forward and a second filter backward over the same motions
 for a file, each frame taking the surer of the two (the two averaged where both are sure: a
-smoother with no lag either way), ``lag`` frames behind the newest frame read.
+smoother with no lag either way; where the forward pass had no camera yet, the backward one reads
+the motion from the same matched points with its own camera), in blocks, ``lag`` to ``2 lag``
+frames behind the newest frame read.
 """
 
 from __future__ import annotations
@@ -59,7 +61,7 @@ from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
 from ..video.frame_motion import match_frames, motion_gray
 
-__all__ = ["CameraTracker", "Motion", "TrackStep", "carry", "motion_of", "track_cameras"]
+__all__ = ["CameraTracker", "Motion", "TrackStep", "carry", "motion_between", "motion_of", "track_cameras"]
 
 #: Share of the way a sure measurement pulls the carried camera (per measured frame).
 GAIN = 0.3
@@ -154,11 +156,25 @@ def camera_gap_px(a: Camera, b: Camera, pitch: PitchTemplate) -> float:
 
 @dataclass(frozen=True)
 class TrackStep:
-    """One frame's record: ``motion`` (from the previous frame, ``None``: not found or first frame)
-    and ``measured`` (the frame's own measurement, sure or not; ``None``: none ran)."""
+    """One frame's record: ``motion`` (from the previous frame, ``None``: not found, first frame, or
+    no camera to read it with), ``measured`` (the frame's own measurement, sure or not; ``None``: none
+    ran), ``matches`` (the matched points of the previous frame and this one, distorted lens units,
+    for a backward pass to read the motion with its own camera where the forward pass had no sure
+    one) and ``read_sure`` (whether ``motion`` was read with a sure camera's focal length and lens)."""
 
     motion: Motion | None
     measured: CameraEstimate | None
+    matches: tuple[np.ndarray, np.ndarray] | None = None
+    read_sure: bool = False
+
+
+def motion_between(camera: Camera, a: np.ndarray, b: np.ndarray) -> Motion | None:
+    """:func:`motion_of` for matched points ``a``, ``b`` in distorted lens units, undistorted with
+    ``camera``'s lens first; ``None`` with fewer than 4 points both ends of which undistort."""
+    lens = camera.lens
+    (ua, va), (ub, vb) = undistort_point_exact(a, lens.k1, lens.k2), undistort_point_exact(b, lens.k1, lens.k2)
+    ok = va & vb
+    return motion_of(camera, ua[ok], ub[ok]) if ok.sum() >= 4 else None
 
 
 class _Filter:
@@ -252,7 +268,7 @@ class CameraTracker:
         if self._gray is not None and self._gray.shape != gray.shape:
             raise ValueError(f"frame size changed within a shot: {self._gray.shape[::-1]} -> {gray.shape[::-1]} "
                              "(call cut() between shots)")
-        motion = self._motion(gray)
+        motion, matches = self._motion(gray)
         self._gray, self.time = gray, time
         predicted = self._filter.predict(motion)
         if motion is None or predicted is None or motion.shift_px(predicted.focal) > STILL_PX:
@@ -264,22 +280,22 @@ class CameraTracker:
             lines = line_points(rgb)
             self._pool.append(lines)
             measured, self._since_measure = self._measure(rgb, lines, predicted), 0
-        step = TrackStep(motion, measured)
+        step = TrackStep(motion, measured, matches if self.keep_steps else None, self._filter.anchored)
         if self.keep_steps:
             self.steps.append(step)
         return self._filter.update(predicted, step)
 
-    def _motion(self, gray: np.ndarray) -> Motion | None:
+    def _motion(self, gray: np.ndarray) -> tuple[Motion | None, tuple[np.ndarray, np.ndarray] | None]:
+        """The motion from the previous frame (with the camera held, if any) and the matches it comes from."""
+        if self._gray is None:
+            return None, None
         state = self._filter.state
-        if self._gray is None or state is None or state.camera is None:
-            return None
-        lens = state.camera.lens
-        m = match_frames(self._gray, gray, (lens.k1, lens.k2))
+        camera = None if state is None else state.camera
+        lens = (0.0, 0.0) if camera is None else (camera.lens.k1, camera.lens.k2)
+        m = match_frames(self._gray, gray, lens)
         if m is None:
-            return None
-        (ua, va), (ub, vb) = undistort_point_exact(m.a, lens.k1, lens.k2), undistort_point_exact(m.b, lens.k1, lens.k2)
-        ok = va & vb
-        return motion_of(state.camera, ua[ok], ub[ok]) if ok.sum() >= 4 else None
+            return None, None
+        return (None if camera is None else motion_between(camera, m.a, m.b)), (m.a, m.b)
 
     def _measure(self, rgb: np.ndarray, lines: LinePoints, predicted: Camera | None) -> CameraEstimate | None:
         """The frame's own measurement (module docstring, step 2); ``None`` when none ran."""
@@ -305,15 +321,19 @@ def _pooled(pool: Iterable[LinePoints]) -> LinePoints:
     return LinePoints(np.concatenate([p.xy for p in pool]), np.concatenate([p.angle for p in pool]), pool[-1].size)
 
 
-def _backward(steps: list[TrackStep], pitch: PitchTemplate, start: int, stop: int) -> CameraEstimate | None:
-    """The backward filter's estimate of frame ``start`` from frames ``start .. stop - 1`` (newest first)."""
-    back = _Filter(pitch)
-    est = None
-    for i in range(stop - 1, start - 1, -1):
-        following = steps[i + 1].motion if i + 1 < stop else None
-        inverse = None if following is None else following.inverse()
-        est = back.update(back.predict(inverse), TrackStep(inverse, steps[i].measured))
-    return est
+def _backward(steps: list[TrackStep], pitch: PitchTemplate, start: int) -> list[CameraEstimate | None]:
+    """The backward filter's estimates of frames ``start ..`` of ``steps``, run from the newest."""
+    back, out = _Filter(pitch), [None] * (len(steps) - start)
+    for i in range(len(steps) - 1, start - 1, -1):
+        following = steps[i + 1] if i + 1 < len(steps) else None
+        inverse = None
+        if following is not None and following.motion is not None and following.read_sure:
+            inverse = following.motion.inverse()
+        elif following is not None and following.matches is not None and back.state is not None \
+                and back.state.camera is not None:  # the forward pass had no sure camera here: read it with ours
+            inverse = motion_between(back.state.camera, following.matches[1], following.matches[0])
+        out[i - start] = back.update(back.predict(inverse), TrackStep(inverse, steps[i].measured))
+    return out
 
 
 def combine(forward: CameraEstimate, backward: CameraEstimate | None, pitch: PitchTemplate) -> CameraEstimate:
@@ -333,29 +353,34 @@ def combine(forward: CameraEstimate, backward: CameraEstimate | None, pitch: Pit
 def track_cameras(frames: Iterable[np.ndarray], *, pitch: PitchTemplate | None = None, lag: int = 25,
                   is_cut: Callable[[np.ndarray], bool] | None = None) -> Iterator[tuple[int, CameraEstimate]]:
     """Each frame's camera of a video, forward and backward (module docstring): yields ``(index,
-    estimate)`` in order, ``lag`` frames (>= 0) behind the frames read, each shot's last frames at its
-    end. ``is_cut(frame)``: whether a frame starts a new shot (e.g.
-    :meth:`glradial.video.cuts.ShotDetector.update`; default: one shot)."""
+    estimate)`` in order, in blocks of ``lag`` frames (>= 0; 0: forward only, each frame at once), each
+    frame once ``lag`` to ``2 lag`` later frames are read (the backward pass runs once per block over
+    them), each shot's last frames at its end. ``is_cut(frame)``: whether a frame starts a new shot
+    (e.g. :meth:`glradial.video.cuts.ShotDetector.update`; default: one shot). Keeps the undecided
+    frames' records only, not the frames."""
     if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
         raise ValueError(f"lag must be a whole number of frames >= 0, got {lag!r}")
     pitch = check_pitch(pitch)
     tracker = CameraTracker(pitch, keep_steps=True)
     forward: list[CameraEstimate] = []
-    done = first = 0
+    base = 0  # the index of forward[0] and tracker.steps[0]
     for index, frame in enumerate(frames):
         if is_cut is not None and is_cut(frame) and index > 0:
-            yield from _flush(tracker.steps, forward, pitch, first, done, index, index)
+            yield from _flush(tracker.steps, forward, pitch, base, index)
             tracker.cut()
-            tracker.steps, forward, first, done = [], [], index, index
+            tracker.steps, forward, base = [], [], index
         forward.append(tracker.push(frame))
-        if index - lag >= done:
-            yield from _flush(tracker.steps, forward, pitch, first, done, done + 1, index + 1)
-            done += 1
-    yield from _flush(tracker.steps, forward, pitch, first, done, first + len(forward), first + len(forward))
+        if len(forward) > 2 * lag:
+            end = index + 1 - lag
+            yield from _flush(tracker.steps, forward, pitch, base, end)
+            del tracker.steps[: end - base], forward[: end - base]
+            base = end
+    yield from _flush(tracker.steps, forward, pitch, base, base + len(forward))
 
 
-def _flush(steps, forward, pitch, first: int, begin: int, end: int, read: int) -> Iterator[tuple[int, CameraEstimate]]:
-    """Frames ``begin .. end - 1`` of the shot starting at ``first``, the backward pass over the frames read."""
-    for index in range(begin, end):
-        back = _backward(steps, pitch, index - first, read - first)
-        yield index, combine(forward[index - first], back, pitch)
+def _flush(steps: list[TrackStep], forward: list[CameraEstimate], pitch: PitchTemplate, base: int,
+           end: int) -> Iterator[tuple[int, CameraEstimate]]:
+    """Frames ``base .. end - 1`` (``forward[0]`` is frame ``base``), the backward pass over every step held."""
+    back = _backward(steps, pitch, 0)
+    for index in range(base, end):
+        yield index, combine(forward[index - base], back[index - base], pitch)
