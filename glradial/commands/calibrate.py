@@ -189,7 +189,7 @@ def _images(args: argparse.Namespace, kind: str, out: _Outputs) -> None:
 
 def _video(args: argparse.Namespace, out: _Outputs) -> None:
     """A video's frames followed shot by shot (:func:`glradial.tracking.camera_track.track_cameras`),
-    each frame's row emitted :data:`ROW_LAG` frames after it is read."""
+    rows emitted in blocks, each :data:`ROW_LAG` to twice that many frames after its frame is read."""
     from ..media.frames import to_rgb8
     from ..media.progress import Progress
     from ..media.video_io import VideoReader
