@@ -53,6 +53,29 @@ def test_points_map_box_feet_to_pitch_metres(tmp_path, view, capsys):
     assert np.max(np.linalg.norm(got - FEET, axis=1)) < 0.3
 
 
+def test_points_of_a_video_frame_by_frame(tmp_path, capsys):
+    from glradial.media.video_io import VideoInfo, VideoWriter
+
+    cam = TRUTH.with_size((640, 360))
+    source = tmp_path / "still.mkv"
+    frame = render_view(cam, seed=5).frame
+    with VideoWriter(source, VideoInfo.of((640, 360), 25, codec="ffv1", pix_fmt="gbrp")) as writer:
+        for i in range(4):
+            writer.write(np.clip(frame + np.random.default_rng(i).normal(0, 2, frame.shape), 0, 255).astype(np.uint8))
+    px = cam.project(FEET)
+    det, out = tmp_path / "det.txt", tmp_path / "pos.csv"
+    _mot(det, [(f, i + 1, x - 5, y - 30, 10, 30, 0.8) for f in (2, 4) for i, (x, y) in enumerate(px)])
+    assert main(["calibrate", str(source), "--points", str(det), "--positions", str(out)]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert [int(r["frame"]) for r in rows] == [2] * 4 + [4] * 4
+    got = np.array([[float(r["x_m"]), float(r["y_m"])] for r in rows])
+    assert np.max(np.linalg.norm(got - np.vstack([FEET, FEET]), axis=1)) < 0.5  # 640 wide: twice 1280's 0.3 m, about
+    _mot(det, [(5, 1, 10, 10, 10, 30, 0.8)])
+    out.unlink()
+    assert main(["calibrate", str(source), "--points", str(det), "--positions", str(out)]) != 0
+    assert "boxes in frame 5 but" in capsys.readouterr().err and not out.exists()
+
+
 @pytest.mark.parametrize("rows, message", [
     ([(1, 1, 10, 10, 20)], "line 1: expected frame,id,left,top,width,height,conf"),
     ([(1, 1, "a", 10, 20, 60, 0.9)], "line 1: not numbers"),
@@ -120,6 +143,7 @@ def test_opentrackio_samples_are_timed_as_live_and_doubtful_ones_carry_no_transf
             validate_sample(sample)
             timing = sample["timing"]
             assert timing["sequenceNumber"] == index and timing["sampleRate"] == {"num": 25, "denom": 1}
+            assert sample["static"]["camera"]["captureFrameRate"] == {"num": 25, "denom": 1}
             assert timing["sampleTimestamp"]["seconds"] + timing["sampleTimestamp"]["nanoseconds"] * 1e-9 == pytest.approx(time_s)
         assert "transforms" in samples[0]
         assert ("transforms" in samples[1]) == asked and samples[1]["custom"]["glradial"]["doubtful"]

@@ -115,7 +115,7 @@ class _Outputs:
         self.samples: list[dict] = []
         self.positions: list[tuple] = []
         self.count, self.last, self.last_frame = 0, None, None
-        self.source_id, self.rate, self.otio = uuid.uuid4().urn, None, None
+        self.source_id, self.rate, self.timecode = uuid.uuid4().urn, None, None
 
     def emit(self, path: str, index: int, est, time_s: float | None = None, shot: int | None = None) -> None:
         more = {"time_s": None if time_s is None else round(time_s, 6), "shot": shot}
@@ -145,7 +145,7 @@ class _Outputs:
 
     def _sample(self, index: int, est, time_s: float | None, shot: int | None) -> dict:
         """The frame's OpenTrackIO sample, timed as ``glradial live``'s (sequence number = frame, sample
-        rate, timestamp); the camera transform (pitch metres; OpenTrackIO pan/tilt/roll) only where
+        rate, capture frame rate, timestamp, the source's timecode); the camera transform (pitch metres; OpenTrackIO pan/tilt/roll) only where
         the camera is sure, or with --doubtful-transforms."""
         from ..export.engines import MODEL_NAMES
         from ..export.opentrackio import Camera as OtioCamera
@@ -153,7 +153,8 @@ class _Outputs:
         from ..lens.lens import Lens
 
         width_mm, height_mm = sensor_mm(self.args)
-        otio = OtioCamera(est.camera.size, width_mm, est.focal * width_mm, height_mm, rate=self.rate)
+        otio = OtioCamera(est.camera.size, width_mm, est.focal * width_mm, height_mm, rate=self.rate,
+                          timecode=self.timecode if self.rate is not None else None)
         sample = frame_sample(Lens(est.lens.k1, est.lens.k2), otio, index, self.source_id,
                               model=MODEL_NAMES[self.args.distortion_model], uncertainty_px=math.nan,
                               doubtful=est.doubtful, shot=shot, timestamp_s=time_s)
@@ -199,7 +200,7 @@ def _video(args: argparse.Namespace, out: _Outputs) -> None:
     detector, starts, reading = ShotDetector(), [0], [0]
 
     with VideoReader(args.input) as reader, Progress(reader.info.frame_count, "calibrate", enabled=show_progress(args)) as bar:
-        out.rate, fps = Fraction(reader.info.rate), reader.info.fps
+        out.rate, out.timecode, fps = Fraction(reader.info.rate), reader.info.timecode, reader.info.fps
 
         def frames():
             for index, frame in enumerate(reader):
