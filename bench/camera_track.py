@@ -23,7 +23,8 @@ the still part (px at 1280 wide: the 32 keypoints projected, those inside the fr
 against the moved labels (median px at 1280) with the labels' own homography floor (RMS of the labels
 about the homography fitted to them, the frame's labelling noise); ms per frame of the tracker
 (:func:`track_cameras`, and the causal :class:`CameraTracker` alone) and of the peer; the causal
-tracker's median ms on frames the motion alone carries (no markings measured) and their share. Writes ``docs/figures/camera_track.json``.
+tracker's median ms on frames the motion alone carries (no markings measured) and their share; each
+also in CPU ms of this process (one thread: what an idle core would take, on a shared machine). Writes ``docs/figures/camera_track.json``.
 """
 
 from __future__ import annotations
@@ -152,16 +153,19 @@ def track(frames: list) -> tuple[list, dict]:
     t0 = time.perf_counter()
     out = dict(track_cameras(iter(frames), lag=25))
     total = time.perf_counter() - t0
-    tracker, times, carried = CameraTracker(keep_steps=True), [], []
+    tracker, times, cpu, carried = CameraTracker(keep_steps=True), [], [], []
     for frame in frames:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         tracker.push(frame)
         times.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
         if tracker.steps[-1].measured is None:  # the motion alone carried the camera
-            carried.append(times[-1])
+            carried.append(len(times) - 1)
     return [out[i] for i in range(len(frames))], {
         "ms_per_frame_track_cameras": 1000 * total / len(frames), "ms_per_frame_causal": 1000 * float(np.mean(times)),
-        "ms_per_carried_frame_median": 1000 * float(np.median(carried)) if carried else math.nan,
+        "cpu_ms_per_frame_causal": 1000 * float(np.mean(cpu)),
+        "ms_per_carried_frame_median": 1000 * float(np.median(np.take(times, carried))) if carried else math.nan,
+        "cpu_ms_per_carried_frame_median": 1000 * float(np.median(np.take(cpu, carried))) if carried else math.nan,
         "carried_share": len(carried) / len(frames)}
 
 
