@@ -13,8 +13,9 @@ kept. Each frame:
    :func:`glradial.calibrate`, lens free), judged by
    :func:`glradial.camera.calibrate.judge` (the doubt rule is calibrate's, untouched). Without any
    camera yet, glradial's full search runs instead, at most every :data:`SEARCH_EVERY` frames. A still
-   camera pools the white-line points of its last :data:`POOL` frames (players cover other parts of
-   the lines in each), so its measurement sees more of the markings than any one frame. Once the
+   camera pools the white-line points of up to :data:`POOL` earlier frames :data:`POOL_SPACING` apart
+   (players cover other parts of the lines in each), so its measurement sees more of the markings
+   than any one frame. Once the
    track holds a sure camera, this step runs on every :data:`MEASURE_EVERY` th frame only, and on
    each frame that zooms (:data:`ZOOMING`: the lens changes with the focal length);
 3. **correct**: a sure measurement pulls the prediction toward it by :data:`GAIN` (rotation on the
@@ -78,8 +79,10 @@ ZOOMING = 0.002
 #: Without any camera, glradial's full search (seconds a frame) runs at most every this many frames.
 SEARCH_EVERY = 10
 #: A still camera (its motion since the oldest pooled frame under :data:`STILL_PX` px at 1280 at
-#: the frame's corners) pools the white-line points of up to this many measured frames.
-POOL, STILL_PX = 8, 1.0
+#: the frame's corners) measures on its own white-line points and those of up to :data:`POOL` earlier
+#: frames at least :data:`POOL_SPACING` frames apart (players move some metres in 0.2 s: each frame
+#: hides other parts of the lines).
+POOL, POOL_SPACING, STILL_PX = 8, 5, 1.0
 #: Report width of bounds and residuals (px).
 _WIDTH = 1280.0
 
@@ -257,6 +260,7 @@ class CameraTracker:
         self._since_search = SEARCH_EVERY
         self._since_measure = 0
         self._drift = 0.0  # px at 1280 the camera moved since the oldest pooled frame
+        self._since_pooled = 0
 
     def push(self, frame: np.ndarray, time: float | None = None) -> CameraEstimate:
         """The camera of the next frame of the shot (class docstring)."""
@@ -277,12 +281,15 @@ class CameraTracker:
             self._pool.clear()
             self._drift = 0.0
         self._since_measure += 1
+        self._since_pooled += 1
         measured = None
         zooming = motion is not None and abs(math.log(motion.zoom)) > ZOOMING
         if not self._filter.anchored or motion is None or zooming or self._since_measure >= self.measure_every:
             lines = line_points(rgb)
-            self._pool.append(lines)
             measured, self._since_measure = self._measure(rgb, lines, predicted), 0
+            if not self._pool or self._since_pooled >= POOL_SPACING:
+                self._pool.append(lines)
+                self._since_pooled = 0
         step = TrackStep(motion, measured, matches if self.keep_steps else None, self._filter.anchored)
         if self.keep_steps:
             self.steps.append(step)
@@ -309,7 +316,7 @@ class CameraTracker:
                 return calibrate_points(rgb, lines, self.pitch, None, None)
             if predicted is None:
                 return None
-        pooled = _pooled(self._pool)
+        pooled = _pooled([*self._pool, lines])
         if len(pooled.xy) < 12:
             return judge(None, len(pooled.xy))
         fine = pooled.thinned(FINE_POINTS)
