@@ -147,7 +147,7 @@ def _write_opentrackio(args: argparse.Namespace, estimates, extra, size: tuple[i
     out, a doubtful one is flagged."""
     from ..export.engines import MODEL_NAMES
     from ..export.opentrackio import Camera as OtioCamera
-    from ..export.opentrackio import track_samples, validate_sample, write_samples
+    from ..export.opentrackio import camera_transform, track_samples, validate_sample, write_samples
     from ..lens.lens import Lens
 
     width_mm, height_mm = sensor_mm(args)
@@ -160,12 +160,7 @@ def _write_opentrackio(args: argparse.Namespace, estimates, extra, size: tuple[i
         otio = OtioCamera(size, width_mm, e.focal * width_mm, height_mm)
         sample = track_samples([Lens(e.lens.k1, e.lens.k2)], otio, model=MODEL_NAMES[args.distortion_model],
                                uncertainty_px=[math.nan], doubtful=[e.doubtful], source_id=source)[0]
-        pan, tilt, roll = e.pan_tilt_roll
-        x, y, z = (float(v) for v in e.position)
-        # OpenTrackIO: Z up, Y forward at pan = tilt = roll = 0, pan counter-clockwise seen from above,
-        # tilt up: glradial's pan (toward +x) and tilt (down) change sign
-        sample["transforms"] = [{"translation": {"x": x, "y": y, "z": z},
-                                 "rotation": {"pan": -pan, "tilt": -tilt, "roll": roll}, "id": "camera"}]
+        sample["transforms"] = [camera_transform(e.position, e.pan_tilt_roll)]
         sample["custom"]["glradial"].update({"frame": i, "calibration_uncertainty_px_1280": e.uncertainty_px,
                                              "calibration_reason": e.reason,
                                              **{k: extra[i][k] for k in ("shot", "lens_from") if k in extra[i]}})

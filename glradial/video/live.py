@@ -60,6 +60,7 @@ import numpy as np
 from ..lens.lens import Lens, as_lens
 from ..media.frames import to_rgb8
 from ..media.video_io import VideoInfo, frame_planes, yuv_layout
+from .live_camera import PENDING, LiveCamera
 from .live_lens import SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
 from .video_pipeline import FrameCorrector
 
@@ -79,6 +80,8 @@ READY_SLOTS = 1
 COSTS_KEPT = 9
 #: OpenTrackIO lens objects kept per lens (a stream changes lens only between shots or on a zoom)
 LENS_OBJECTS = 64
+#: the lens reported while none is given (tracking only, ``lens=None``)
+IDENTITY = Lens(0.0, 0.0)
 
 
 @dataclass
@@ -96,6 +99,7 @@ class LiveFrame:
     state: LensState
     sample: dict | None
     arrived: float
+    tracked: LiveCamera | None = None
 
 
 @dataclass
@@ -204,18 +208,24 @@ class LiveCorrector:
     that cannot be pickled) for ``"auto"``, whose worker is started and waited for here; or an
     OnlineShotLens made beforehand as ``lens`` (closed with this corrector)."""
 
-    def __init__(self, lens: Lens | tuple[float, float] | str | OnlineShotLens, size: tuple[int, int], rate: float | Fraction, *,
-                 max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None, fit: str = "same",
-                 interpolation: str = "linear", backend: str = "cpu", codec: str = "", frames=None,
-                 estimator: Callable | None = None, auto: dict | None = None) -> None:
+    def __init__(self, lens: Lens | tuple[float, float] | str | OnlineShotLens | None, size: tuple[int, int],
+                 rate: float | Fraction, *, max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None,
+                 fit: str = "same", interpolation: str = "linear", backend: str = "cpu", codec: str = "", frames=None,
+                 estimator: Callable | None = None, auto: dict | None = None, tracker=None) -> None:
         if isinstance(max_delay, bool) or not isinstance(max_delay, (int, np.integer)) or max_delay < 1:
             raise ValueError(f"max_delay must be an integer >= 1 (frames), got {max_delay!r}")
         info = VideoInfo.of(size, rate, codec=codec)
         self.size, self.rate, self.max_delay = info.size, info.rate, int(max_delay)
         self.camera, self.model, self.codec, self.frames = camera, model, codec, frames
+        if tracker is not None and camera is None:
+            raise ValueError("tracker needs camera (the sensor, rate and timecode of the samples)")
+        self.tracker = tracker
         self._corrector = FrameCorrector(backend, fit, interpolation)
         self._online: OnlineShotLens | None = None
-        if isinstance(lens, OnlineShotLens):
+        self.passthrough = lens is None
+        if lens is None:
+            self.lens = None
+        elif isinstance(lens, OnlineShotLens):
             self._online, self.lens = lens, None
         elif isinstance(lens, str):
             if lens != "auto":
@@ -238,7 +248,7 @@ class LiveCorrector:
         self._costs: deque = deque(maxlen=COSTS_KEPT)  # the last corrections' times (s)
         self._applied: Lens | None = None  # --auto: the lens applied now
         self._ahead = _MapsAhead(self._twin, self.size)
-        if camera is not None and self.lens is not None:
+        if camera is not None and (self.lens is not None or self.passthrough):
             self._sample(0, 0.0, self._state(0, None))  # the schema validator and the lens object, made now
         self._thread = threading.Thread(target=self._work, name="glradial-live-correct", daemon=True)
         self._thread.start()
@@ -330,6 +340,8 @@ class LiveCorrector:
         self._ahead.join()
         if self._online is not None:
             self._online.close()
+        if self.tracker is not None:
+            self.tracker.close()
         atexit.unregister(self.close)
 
     def __enter__(self) -> "LiveCorrector":
@@ -390,6 +402,10 @@ class LiveCorrector:
 
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None
+        tracked = self.tracker.push(frame, index / float(self.rate)) if self.tracker is not None else None
+        if self.passthrough:  # tracking only: the frame as it came
+            sample = self._sample(index, timestamp, self._state(index, None), tracked) if self.camera is not None else None
+            return LiveFrame(index, timestamp, pts, frame, self._state(index, None), sample, arrived, tracked)
         if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
             frame = frame.to_ndarray(format="rgb24")
         state = self._state(index, frame)
@@ -402,8 +418,8 @@ class LiveCorrector:
             image = self._corrector.planar(frame, state.applied, self.frames, pts)
         else:
             image = frame if state.applied is None else self._corrector(frame, state.applied)
-        sample = self._sample(index, timestamp, state) if self.camera is not None else None
-        return LiveFrame(index, timestamp, pts, image, state, sample, arrived)
+        sample = self._sample(index, timestamp, state, tracked) if self.camera is not None else None
+        return LiveFrame(index, timestamp, pts, image, state, sample, arrived, tracked)
 
     def _twin(self) -> FrameCorrector:
         """A corrector like the worker's (same options and planes), for :class:`_MapsAhead`."""
@@ -425,14 +441,18 @@ class LiveCorrector:
 
     def _state(self, index: int, frame) -> LensState:
         if self._online is None:
-            return LensState(0, self.lens, self.lens, None, False, "")
+            return LensState(0, self.lens, self.lens or IDENTITY, None, False, "")
         return self._online.observe(index, _thumbnail(frame), lambda: _sample_copy(frame))
 
-    def _sample(self, index: int, timestamp: float, state: LensState) -> dict:
+    def _sample(self, index: int, timestamp: float, state: LensState, tracked: LiveCamera | None = None) -> dict:
         from ..export.engines import MODEL_UD
-        from ..export.opentrackio import frame_sample, lens_object
+        from ..export.opentrackio import camera_frame_sample, frame_sample, lens_object
 
         lens, model = state.reported, self.model or MODEL_UD
+        if self.tracker is not None:
+            fields = tracked.fields() if tracked is not None else {"doubtful": True, "reason": PENDING}
+            return camera_frame_sample(fields, self.camera, index, self.source_id, model=model,
+                                       timestamp_s=timestamp if timestamp >= 0 else None)
         objects = self._objects.get(lens)
         if objects is None:
             objects = self._objects[lens] = lens_object(lens, self.camera, model=model)
