@@ -34,6 +34,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from pathlib import Path
 
 import cv2
@@ -216,6 +217,7 @@ def summary(report: dict, samples: list[dict], name: str, size: tuple[int, int],
             "sure_share": len(sure) / frames, "first_sure_frame": first,
             "sure_share_after_lock": sum(1 for i in sure if i >= first) / max(frames - first, 1),
             "dropped_share": report["dropped"] / frames,
+            "reasons": dict(Counter(s["custom"]["glradial"]["reason"] for s in samples)),
             "schema_valid_share": float(np.mean([validator.is_valid(s) for s in samples])) if samples else math.nan,
             **score(samples, name, size, frames)}
 

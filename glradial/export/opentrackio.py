@@ -271,7 +271,7 @@ def camera_transform(position_m: Sequence[float], pan_tilt_roll_deg: Sequence[fl
 
 
 def camera_frame_sample(fields: dict, camera: Camera, index: int, source_id: str, *, model: str = MODEL_UD,
-                        timestamp_s: float | None = None) -> dict:
+                        timestamp_s: float | None = None, lens_objects: dict | None = None) -> dict:
     """The validated sample of one frame of a stream whose whole camera is tracked: ``fields`` the
     frame's fields as ``glradial calibrate --json`` writes them (``k1``, ``k2``, ``focal`` in image
     widths, ``position_m``, ``pan_deg``/``tilt_deg``/``roll_deg``, ``homography``, ``doubtful``,
@@ -279,9 +279,8 @@ def camera_frame_sample(fields: dict, camera: Camera, index: int, source_id: str
     rate and timecode (its ``focal_mm`` is replaced by the measured one). The sample carries the
     transform, ``lens.pinholeFocalLength`` (mm) and the distortion where the frame has a camera,
     the timing as :func:`frame_sample`'s, ``tracker.status`` ``"camera tracked"`` or ``"camera
-    tracked: DOUBTFUL (reason)"``, and ``fields`` whole in ``custom.glradial``."""
-    from dataclasses import replace
-
+    tracked: DOUBTFUL (reason)"``, and ``fields`` whole in ``custom.glradial``. ``lens_objects``: a
+    dict the caller keeps to cache the lens objects (a stream keeps one lens for many frames)."""
     timing = _timing(camera, int(index))
     if timestamp_s is not None:
         timing["sampleTimestamp"] = _timestamp(timestamp_s)
@@ -294,9 +293,12 @@ def camera_frame_sample(fields: dict, camera: Camera, index: int, source_id: str
         "custom": {"glradial": {k: v for k, v in fields.items() if v is not None}},
     }
     if "k1" in fields:
-        measured = replace(camera, focal_mm=float(fields["focal"]) * camera.sensor_width_mm)
-        sample["lens"], _ = lens_object(Lens(fields["k1"], fields["k2"]), measured, model=model)
-        sample["static"] = _static(measured, None, sample["lens"]["distortion"][0]["overscan"])
+        lens = Lens(fields["k1"], fields["k2"])
+        cache = lens_objects if lens_objects is not None else {}
+        if (lens, model) not in cache:
+            cache[(lens, model)] = lens_object(lens, camera, model=model)[0]
+        sample["lens"] = {**cache[(lens, model)], "pinholeFocalLength": float(fields["focal"]) * camera.sensor_width_mm}
+        sample["static"] = _static(camera, None, sample["lens"]["distortion"][0]["overscan"])
         sample["transforms"] = [camera_transform(fields["position_m"], (fields["pan_deg"], fields["tilt_deg"], fields["roll_deg"]))]
     validate_sample(sample)
     return sample

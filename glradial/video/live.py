@@ -451,8 +451,10 @@ class LiveCorrector:
         lens, model = state.reported, self.model or MODEL_UD
         if self.tracker is not None:
             fields = tracked.fields() if tracked is not None else {"doubtful": True, "reason": PENDING}
+            while len(self._objects) > LENS_OBJECTS:
+                self._objects.popitem(last=False)
             return camera_frame_sample(fields, self.camera, index, self.source_id, model=model,
-                                       timestamp_s=timestamp if timestamp >= 0 else None)
+                                       timestamp_s=timestamp if timestamp >= 0 else None, lens_objects=self._objects)
         objects = self._objects.get(lens)
         if objects is None:
             objects = self._objects[lens] = lens_object(lens, self.camera, model=model)

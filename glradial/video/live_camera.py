@@ -33,8 +33,10 @@ The one place that makes the tracker is :func:`camera_tracker`: a causal tracker
 from __future__ import annotations
 
 import atexit
+import contextlib
 import math
 import multiprocessing
+import os
 import threading
 import time
 from collections import OrderedDict
@@ -50,7 +52,7 @@ from ..camera.model import Camera
 from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..lens.options import LIVE_WORKERS, check_choice
-from .frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of, motion_gray
+from .frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of
 
 __all__ = ["LiveCamera", "CameraTracker", "camera_tracker", "carry", "PENDING", "LOST", "STALE", "LIVE_REASONS"]
 
@@ -66,13 +68,15 @@ LIVE_REASONS = (PENDING, LOST, STALE)
 MAX_CARRY_S = 4.0
 #: frames whose chained motion is kept (a fit of an older frame can no longer be carried)
 MOTION_KEPT = 256
-#: the motion's gray copies are at most this wide (px): 480 px tracks a 720p frame's corners to
-#: ~0.15 px of the copy at a quarter of the cost of :data:`~glradial.video.frame_motion.MOTION_WIDTH`
-FLOW_WIDTH = 480
+#: the motion's gray copies are at most this wide (px), the frame shrunk by a whole factor (area
+#: averaging: a 1280-wide frame by 2, 1920 by 3)
+FLOW_WIDTH = 640
 #: corners followed at most, and fewer than which new ones are found
 FLOW_POINTS, REFILL = 200, 120
 #: Lucas-Kanade's window (px of the copy) and pyramid levels
-FLOW_WINDOW, FLOW_LEVELS = (15, 15), 3
+FLOW_WINDOW, FLOW_LEVELS = (15, 15), 2
+#: the fit worker process's niceness (added): the frames' motion and samples come first
+WORKER_NICENESS = 5
 #: seconds :meth:`CameraTracker.wait_ready` waits for the worker by default
 READY_TIMEOUT_S = 120.0
 
@@ -181,29 +185,44 @@ def _luma(frame) -> np.ndarray:
         if frame.format.name.startswith(("yuv", "yuvj", "nv12")):
             plane = frame.planes[0]
             rows = np.frombuffer(plane, np.uint8).reshape(plane.height, plane.line_size)
-            return motion_gray(np.ascontiguousarray(rows[:, :plane.width]), FLOW_WIDTH)
+            return _shrunk(rows[:, :plane.width])
         frame = frame.to_ndarray(format="rgb24")
-    return motion_gray(frame, FLOW_WIDTH)
+    return _shrunk(cv2.cvtColor(np.asarray(frame), cv2.COLOR_RGB2GRAY))
+
+
+def _shrunk(gray: np.ndarray) -> np.ndarray:
+    """A uint8 gray frame shrunk by the whole factor that brings it to at most :data:`FLOW_WIDTH` px."""
+    factor = -(-gray.shape[1] // FLOW_WIDTH)
+    if factor == 1:
+        return np.ascontiguousarray(gray)
+    size = (gray.shape[1] // factor, gray.shape[0] // factor)
+    return cv2.resize(gray[: size[1] * factor, : size[0] * factor], size, interpolation=cv2.INTER_AREA)
 
 
 def _rgb(frame) -> np.ndarray:
     return frame.to_ndarray(format="rgb24") if isinstance(frame, av.VideoFrame) else np.asarray(frame)
 
 
-def _serve(connection, size: tuple[int, int] = (1280, 720)) -> None:
+def _serve(connection, duty: float, niceness: int = 0, size: tuple[int, int] = (1280, 720)) -> None:
     """The fit worker: warms up on a procedural view (imports, first-call set-up), says ``("ready",)``,
-    then answers each job ``(index, rgb, previous)`` with ``("fit", index, CameraEstimate)`` until
-    None; an error is sent as ``("error", text)``."""
+    then answers each job ``(index, rgb, previous)`` with ``("fit", index, CameraEstimate, rest_s)``
+    (``rest_s``: how long it asks to rest, so that it takes at most ``duty`` of a core) until None;
+    an error is sent as ``("error", text)``."""
     from ..camera.calibrate import calibrate
     from ..camera.views import random_camera, render_view
 
+    if niceness:
+        with contextlib.suppress(OSError):
+            os.nice(niceness)  # the frames come first: the fit takes what the correction leaves
     try:
         view = render_view(random_camera(np.random.default_rng(0), size), seed=0, players=0)
         calibrate(view.frame, previous=calibrate(view.frame))
         connection.send(("ready",))
         while (job := connection.recv()) is not None:
             index, rgb, previous = job
-            connection.send(("fit", index, calibrate(rgb, previous=previous)))
+            started = time.monotonic()
+            estimate = calibrate(rgb, previous=previous)
+            connection.send(("fit", index, estimate, (time.monotonic() - started) * (1.0 / duty - 1.0)))
     except (EOFError, OSError, KeyboardInterrupt):
         return
     except Exception as err:  # handed to the frame thread
@@ -218,17 +237,21 @@ class CameraTracker:
     (frames per second) of the stream, or given later to :meth:`for_stream` (a tracker warmed up
     before the stream is opened); ``worker``: ``"process"`` (default), ``"thread"``, or
     ``"inline"`` (the fit runs inside :meth:`push` every ``every`` frames: deterministic, for tests
-    and files, not live); ``max_carry``: frames a fit is carried (default :data:`MAX_CARRY_S` s).
+    and files, not live); ``max_carry``: frames a fit is carried (default :data:`MAX_CARRY_S` s);
+    ``duty``: the worker's share of one core at most (it rests between fits; default 1: it fits
+    again at once, a process at :data:`WORKER_NICENESS`, so that the frames come first).
     Call :meth:`push` for every frame in order from one thread; :meth:`close` stops the worker."""
 
     def __init__(self, size: tuple[int, int] | None = None, rate: float | Fraction | None = None, *,
-                 worker: str = "process", every: int = 1, max_carry: int | None = None) -> None:
+                 worker: str = "process", every: int = 1, max_carry: int | None = None, duty: float = 1.0) -> None:
         self.worker = check_choice("worker", worker, LIVE_WORKERS + ("inline",))
         if isinstance(every, bool) or not isinstance(every, int) or every < 1:
             raise ValueError(f"every must be an integer >= 1 (frames), got {every!r}")
         if max_carry is not None and (isinstance(max_carry, bool) or not isinstance(max_carry, int) or max_carry < 1):
             raise ValueError(f"max_carry must be an integer >= 1 (frames), got {max_carry!r}")
-        self.every, self._max_carry = every, max_carry
+        if not 0 < duty <= 1:
+            raise ValueError(f"duty must lie in (0, 1] (a share of one core), got {duty!r}")
+        self.every, self._max_carry, self.duty = every, max_carry, float(duty)
         self.size: tuple[int, int] | None = None
         self.rate, self.max_carry, self._index = 0.0, 0, -1
         if size is not None or rate is not None:
@@ -241,7 +264,7 @@ class CameraTracker:
         self._last: tuple[int, CameraEstimate] | None = None  # the newest fit, sure or not
         self._latest: Camera | None = None  # the newest frame's camera (the next fit starts there)
         self._first: float | None = None
-        self._ready, self._busy = worker == "inline", False
+        self._ready, self._busy, self._rest_until = worker == "inline", False, 0.0
         self._connection = self._process = None
         if worker != "inline":
             self._start(worker)
@@ -250,10 +273,11 @@ class CameraTracker:
         if worker == "process":
             context = multiprocessing.get_context("spawn")
             self._connection, theirs = context.Pipe()
-            self._process = context.Process(target=_serve, args=(theirs,), name="glradial-live-camera", daemon=True)
+            self._process = context.Process(target=_serve, args=(theirs, self.duty, WORKER_NICENESS), name="glradial-live-camera",
+                                            daemon=True)
         else:
             self._connection, theirs = multiprocessing.Pipe()
-            self._process = threading.Thread(target=_serve, args=(theirs,), name="glradial-live-camera", daemon=True)
+            self._process = threading.Thread(target=_serve, args=(theirs, self.duty), name="glradial-live-camera", daemon=True)
         self._process.start()
         atexit.register(self.close)
 
@@ -311,7 +335,7 @@ class CameraTracker:
 
                 self._answer(index, calibrate(_rgb(frame), previous=self._latest))
                 self._latest = self._carried(index)
-        elif self._ready and not self._busy:
+        elif self._ready and not self._busy and time.monotonic() >= self._rest_until:
             self._connection.send((index, np.ascontiguousarray(_rgb(frame)), self._latest))
             self._busy = True
         return self._state(index)
@@ -358,8 +382,9 @@ class CameraTracker:
         if message[0] == "ready":
             self._ready = True
             return
-        _, index, estimate = message
-        self._busy = False
+        _, index, estimate, rest = message
+        sure = not estimate.doubtful  # resting after a doubtful fit would only delay the lock-on
+        self._busy, self._rest_until = False, time.monotonic() + (rest if sure else 0.0)
         self._answer(index, estimate)
 
     def _answer(self, index: int, estimate: CameraEstimate) -> None:
