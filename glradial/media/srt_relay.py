@@ -25,7 +25,7 @@ __all__ = ["FFMPEG", "srt_route", "SrtRelay", "is_srt"]
 #: the system FFmpeg command the relay runs (Debian's ffmpeg is built with libsrt)
 FFMPEG = "ffmpeg"
 #: the relay's probe of an SRT input: as short as stream_io's (microseconds, bytes)
-RELAY_PROBE = ("-probesize", "500000", "-analyzeduration", "100000", "-fflags", "nobuffer")
+RELAY_PROBE = ("-probesize", "500000", "-analyzeduration", "100000")
 
 
 def is_srt(url: str) -> bool:
