@@ -112,10 +112,10 @@ def test_srt_in_listener_and_caller(clip, tmp_path, glradial_mode):
 @needs_srt
 def test_srt_out_to_a_listening_peer(clip, tmp_path):
     port, received = _port(), tmp_path / "received.ts"
-    receiver = subprocess.Popen(["ffmpeg", "-v", "error", "-y", "-i", f"srt://127.0.0.1:{port}?mode=listener", "-c", "copy",
+    receiver = subprocess.Popen(["ffmpeg", "-v", "error", "-y", "-analyzeduration", "100000", "-i", f"srt://127.0.0.1:{port}?mode=listener", "-c", "copy",
                                  str(received)])
     time.sleep(0.5)
-    process = _live(str(clip), f"srt://127.0.0.1:{port}?mode=caller", "--k1", str(K1), "--k2", str(K2), "--crf", "8",
+    process = _live(str(clip), f"srt://127.0.0.1:{port}?mode=caller", "--k1", str(K1), "--k2", str(K2), "--crf", "8", "--preset", "ultrafast",
                     "--realtime", "-q")
     stderr = process.communicate(timeout=60)[1]
     assert process.returncode == 0, stderr

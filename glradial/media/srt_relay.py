@@ -26,6 +26,11 @@ __all__ = ["FFMPEG", "srt_route", "SrtRelay", "is_srt"]
 FFMPEG = "ffmpeg"
 #: the relay's probe of an SRT input: as short as stream_io's (microseconds, bytes)
 RELAY_PROBE = ("-probesize", "500000", "-analyzeduration", "100000")
+#: seconds an SRT output waits at its end for the peer to take what it has not yet acknowledged
+LINGER_S = 2
+#: the output relay's probe of glradial's own MPEG-TS: the first packets only (its parameters lead the
+#: first key frame), so that frames go on as they come rather than in a burst after the probe
+OUT_PROBE = ("-probesize", "32768", "-analyzeduration", "0")
 
 
 def is_srt(url: str) -> bool:
@@ -86,7 +91,8 @@ class SrtRelay:
             self.process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
             self.url = f"pipe:{self.process.stdout.fileno()}"
         else:
-            command += ["-f", "mpegts", *RELAY_PROBE, "-i", "pipe:0", "-map", "0", "-c", "copy", "-f", "mpegts", url]
+            srt = _with_option(url, "linger", LINGER_S)  # the last frames still reach the peer when the stream ends
+            command += ["-f", "mpegts", *OUT_PROBE, "-i", "pipe:0", "-map", "0", "-c", "copy", "-f", "mpegts", srt]
             self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stderr=subprocess.PIPE)
             self.url = f"pipe:{self.process.stdin.fileno()}"
 

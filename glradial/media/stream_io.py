@@ -231,6 +231,8 @@ class StreamWriter(VideoWriter):
         self._tmpdir, self._atomic = None, contextlib.nullcontext()
         try:
             self._open(url, [])
+            if url.startswith("pipe:"):  # stdout or the SRT relay: each frame's packets go at once, not in 32 KB bursts
+                self._container.flags |= av.container.Flags.flush_packets.value
         except BaseException:
             self.abort()
             raise
