@@ -190,6 +190,23 @@ def _corrector(args: argparse.Namespace, info, writer, camera, online=None, trac
                          backend=args.backend, codec=info.codec, frames=writer, tracker=tracker)
 
 
+def _warm_imports(args: argparse.Namespace) -> None:
+    """What the set-up after the first frame would otherwise import or build while the stream's
+    frames pile up behind it (measured: 0.5 s, 13 frames of a 25p stream lost at the start): the
+    corrector, the stream loop, the encoders' module and, with samples, the OpenTrackIO schema's
+    validator."""
+    from ..media import video_io  # noqa: F401
+    from ..video import live, live_stream  # noqa: F401
+
+    if opentrackio_wanted(args):
+        from ..export.opentrackio import validate_sample
+
+        try:
+            validate_sample({})
+        except ValueError:
+            pass
+
+
 def _warm_tracker(args: argparse.Namespace):
     """``--camera``'s tracker, its worker started and warmed up before the input is opened (the
     stream is given to it once open: :meth:`~glradial.video.live_camera.CameraTracker.for_stream`)."""
@@ -230,6 +247,7 @@ def run(args: argparse.Namespace) -> int:
         opened.append((online, "close"))
         warm = _warm_tracker(args)  # the camera search warmed up before the input is opened
         opened.append((warm, "close"))
+        _warm_imports(args)
         source = _open_source(args)
         opened.append((source, "close"))
         info = source.info

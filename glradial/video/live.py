@@ -60,8 +60,8 @@ import numpy as np
 from ..lens.lens import Lens, as_lens
 from ..media.frames import to_rgb8
 from ..media.video_io import VideoInfo, frame_planes, yuv_layout
-from .live_camera import PENDING, LiveCamera
-from .live_lens import SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
+from .live_camera import LiveCamera
+from .live_lens import PENDING, SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
 from .video_pipeline import FrameCorrector
 
 __all__ = ["LiveCorrector", "LiveFrame", "LiveStats", "DEFAULT_MAX_DELAY"]
@@ -165,6 +165,11 @@ class _MapsAhead:
         self._corrector, self.size = corrector, size
         self._built: deque = deque(maxlen=4)
         self._thread: threading.Thread | None = None
+
+    @property
+    def started(self) -> bool:
+        """Whether a build was ever started."""
+        return self._thread is not None
 
     def ready(self, lens: Lens, frame) -> bool:
         """Whether ``lens``'s maps are built; if not, and no build is running, start one on ``frame``."""
@@ -389,16 +394,22 @@ class LiveCorrector:
                 self._done = True
                 self._cond.notify_all()
 
-    def warm_up(self, frame: np.ndarray | av.VideoFrame) -> None:
-        """Build the given lens's maps (and the planar set-up) on ``frame``, one like those to come,
-        before the stream starts, so that the first frame costs no more than the others (the frames
-        behind it would otherwise wait for its maps, and be dropped). Call it before the first
-        :meth:`push`; a no-op for ``"auto"`` (its lenses are built ahead as they come) and the GL backend."""
+    def warm_up(self, frame: np.ndarray | av.VideoFrame, wait: bool = False) -> None:
+        """Start building the given lens's maps (and the planar set-up) on ``frame``, one like those
+        to come, on a helper thread, so that the stream starts at once: frames that come before the
+        maps are ready pass through uncorrected, flagged doubtful (reason ``"pending"``), rather than
+        wait and be dropped. ``wait``: build them now instead (every frame corrected, the first ones
+        perhaps dropped). Call it before the first :meth:`push`; a no-op for ``"auto"`` (its lenses
+        are built ahead as they come), without a lens and for the GL backend."""
         if self.lens is None or self._corrector.backend != "cpu" or self.stats.pushed:
             return
         if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
             frame = frame.to_ndarray(format="rgb24")
-        _dry_run(self._corrector, frame, self.lens, self.size)
+        if wait:
+            _dry_run(self._corrector, frame, self.lens, self.size)
+            self._applied = self.lens
+        else:
+            self._ahead.ready(self.lens, frame)
 
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None
@@ -409,6 +420,11 @@ class LiveCorrector:
         if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
             frame = frame.to_ndarray(format="rgb24")
         state = self._state(index, frame)
+        if self.lens is not None and self._applied is None and self._ahead.started:  # warm_up's maps not built yet
+            if not self._ahead.ready(self.lens, frame):
+                state = LensState(0, None, self.lens, None, True, PENDING)
+            else:
+                self._applied = self.lens
         if self._online is not None and self._corrector.backend == "cpu":  # a new lens: once its maps are built
             wanted = state.applied
             if wanted is None or wanted == self._applied or self._ahead.ready(wanted, frame):
@@ -463,7 +479,7 @@ class LiveCorrector:
         estimated = self._online is not None
         uncertainty = (state.uncertainty_px if state.uncertainty_px is not None else float("nan")) if estimated else None
         return frame_sample(lens, self.camera, index, self.source_id, model=model, uncertainty_px=uncertainty,
-                            doubtful=state.doubtful if estimated else None, shot=state.shot if estimated else None,
+                            doubtful=state.doubtful if estimated or state.doubtful else None, shot=state.shot if estimated else None,
                             timestamp_s=timestamp if timestamp >= 0 else None, lens_and_error=objects)
 
 

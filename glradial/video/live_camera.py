@@ -53,11 +53,10 @@ from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..lens.options import LIVE_WORKERS, check_choice
 from .frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of
+from .live_lens import PENDING
 
 __all__ = ["LiveCamera", "CameraTracker", "camera_tracker", "carry", "PENDING", "LOST", "STALE", "LIVE_REASONS"]
 
-#: no fit has answered yet
-PENDING = "pending"
 #: the frame-to-frame motion broke (a cut, no texture) since the last sure fit
 LOST = "lost"
 #: the last sure fit is older than ``max_carry`` frames
