@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from .synthesis.crop_producer import crop_batches
     from .synthesis.crops import CropParams, CropRenderer, render_crops, sample_crop_params
     from .synthesis.stadium import StadiumRenderer, stadium_panorama
+    from .tracking.camera_track import CameraTracker, track_cameras
     from .video.live import LiveCorrector, LiveFrame
 
 __getattr__, _dir, _names = attach(__name__, __file__)

@@ -134,9 +134,14 @@ def test_cli_errors(tmp_path, capsys):
     assert "sensor" in capsys.readouterr().err
     assert main(["calibrate", str(src), "--overlay", str(tmp_path / "o.png")]) != 0  # no camera: nothing drawn
     assert not (tmp_path / "o.png").exists()
+    capsys.readouterr()
+    # calibrate measures the focal length: --focal-mm is neither listed nor taken
+    assert main(["calibrate", "--help"]) == 0
+    helped = capsys.readouterr().out
+    assert "--sensor-width-mm" in helped and "--focal-mm" not in helped
     assert main(["calibrate", str(src), "--opentrackio", str(tmp_path / "s.jsonl"), "--sensor", "2/3-inch",
                  "--focal-mm", "20"]) != 0
-    assert "measures the focal length" in capsys.readouterr().err
+    assert "unrecognized arguments: --focal-mm" in capsys.readouterr().err
     assert not (tmp_path / "s.jsonl").exists()
 
 

@@ -13,7 +13,12 @@ doubtful). ``markings``: labels of the template elements the fit used
 (:meth:`glradial.pitch.PitchTemplate.elements`); ``rms_px`` the fit's RMS distance of the white-line
 points on them (px at 1280), ``inliers`` their number, ``support`` the share of the markings drawn in
 the frame that the frame shows (:func:`glradial.camera.refine.support`), ``focal_sd`` the relative
-standard deviation of the focal length from the fit's Jacobian. A doubtful estimate may carry no camera at all.
+standard deviation of the focal length from the fit's Jacobian. A doubtful estimate may carry no camera at all;
+a degenerate one (:func:`degenerate`: e.g. a focal length of 1e-8 image widths or a camera 2e9 m away)
+never carries it.
+``carried``: frames since the last sure measurement when the camera was carried there by the frame-to-frame
+motion (:mod:`glradial.tracking.camera_track`; 0: measured on this frame); ``"track_lost"``: carried too far.
+:attr:`CameraEstimate.why` says what the doubt rests on in numbers (e.g. ``"support 0.73 < 0.83"``).
 """
 
 from __future__ import annotations
@@ -29,7 +34,7 @@ import numpy as np
 from .model import Camera
 
 #: Why a camera is doubtful ("ok" when it is not).
-REASONS = ("ok", "no_markings", "too_few_markings", "weak_geometry", "poor_fit")
+REASONS = ("ok", "no_markings", "too_few_markings", "weak_geometry", "poor_fit", "track_lost")
 #: The shipped calibration of the bound.
 CAMERA_TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "camera_trust.json"
 
@@ -38,6 +43,19 @@ CAMERA_TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "camera_trust
 def camera_trust() -> dict:
     """The bound's calibration and the doubt thresholds (``glradial/data/camera_trust.json``)."""
     return json.loads(CAMERA_TRUST_FILE.read_text(encoding="utf-8"))
+
+
+#: A fitted camera outside these is degenerate and never reported (the estimate keeps no camera):
+#: focal length (image widths; 0.05-50 is a field of view of 170 down to 1.1 degrees) and the
+#: distance of the camera from the centre spot (m).
+FOCAL_RANGE, MAX_DISTANCE_M = (0.05, 50.0), 1000.0
+
+
+def degenerate(camera: Camera) -> bool:
+    """Whether ``camera`` is no camera that could film a pitch: a focal length outside
+    :data:`FOCAL_RANGE`, farther than :data:`MAX_DISTANCE_M` from the centre spot, or not above it."""
+    return not (FOCAL_RANGE[0] <= camera.focal <= FOCAL_RANGE[1]
+                and float(np.linalg.norm(camera.position)) <= MAX_DISTANCE_M and camera.position[2] > 0)
 
 
 def _of_camera(name: str, doc: str) -> property:
@@ -58,8 +76,13 @@ class CameraEstimate:
     inliers: int = 0
     support: float = 0.0
     focal_sd: float = math.inf
+    carried: int = 0
 
     def __post_init__(self) -> None:
+        if self.camera is not None and degenerate(self.camera):  # no impossible numbers leave glradial
+            object.__setattr__(self, "camera", None)
+            object.__setattr__(self, "doubtful", True)
+            object.__setattr__(self, "reason", "poor_fit" if self.reason == "ok" else self.reason)
         if self.reason not in REASONS or (self.reason == "ok") == bool(self.doubtful):
             raise ValueError(f"reason must be one of {REASONS} ('ok' exactly when not doubtful), got "
                              f"{self.reason!r} with doubtful={self.doubtful}")
@@ -91,12 +114,44 @@ class CameraEstimate:
         lens included (:meth:`glradial.camera.model.Camera.project`). ``ValueError`` without a camera."""
         return self._need().project(points)
 
+    @property
+    def why(self) -> str:
+        """The doubt in numbers: each of the shipped thresholds (``camera_trust.json``) the estimate's
+        own figures fail, e.g. ``"support 0.73 < 0.83; rms 3.10 px > 2.50 px"`` (px at 1280); ``""``
+        when it is sure, the reason alone where no figure says more."""
+        if not self.doubtful:
+            return ""
+        t = camera_trust()
+        if self.camera is None:
+            if self.inliers:
+                return "the fit is degenerate (no camera kept)"
+            return "no camera found"
+        checks = ((self.inliers < t["min_points"], f"inliers {self.inliers} < {t['min_points']}"),
+                  (len(self.markings) < t["min_elements"], f"markings {len(self.markings)} < {t['min_elements']}"),
+                  (self.focal_sd > t["max_log_focal_sd"], f"focal sd {self.focal_sd:.3f} > {t['max_log_focal_sd']}"),
+                  (self.position[2] < t["min_height_m"], f"height {self.position[2]:.1f} m < {t['min_height_m']} m"),
+                  (self.hfov_deg > t["max_hfov_deg"], f"hfov {self.hfov_deg:.1f} deg > {t['max_hfov_deg']} deg"),
+                  (self.support < t["min_support"], f"support {self.support:.2f} < {t['min_support']}"),
+                  (self.rms_px > t["max_rms_px"], f"rms {self.rms_px:.2f} px > {t['max_rms_px']} px"))
+        failed = [text for bad, text in checks if bad]
+        if self.reason == "track_lost":
+            failed.insert(0, f"carried {self.carried} frames, bound {self.uncertainty_px:.1f} px")
+        return "; ".join(failed) or self.reason
+
+    def to_pitch(self, pixels: object) -> np.ndarray:
+        """Pixels of the distorted frame (N x 2) -> N x 2 pitch metres (z = 0), the exact inverse of
+        :meth:`project` on the pitch plane, lens included (:meth:`glradial.camera.model.Camera.to_pitch`;
+        NaN above the horizon). ``ValueError`` without a camera; a doubtful estimate's positions are
+        as doubtful as its camera."""
+        return self._need().to_pitch(pixels)
+
     def as_dict(self) -> dict:
         """JSON-ready summary (units in the keys' names)."""
         out: dict = {"doubtful": self.doubtful, "reason": self.reason, "uncertainty_px": self.uncertainty_px,
                      "rms_px": self.rms_px if math.isfinite(self.rms_px) else None, "inliers": self.inliers,
                      "support": self.support,
-                     "focal_sd": self.focal_sd if math.isfinite(self.focal_sd) else None, "markings": list(self.markings)}
+                     "focal_sd": self.focal_sd if math.isfinite(self.focal_sd) else None, "markings": list(self.markings),
+                     "why": self.why, "carried": self.carried}
         cam = self.camera
         if cam is not None:
             pan, tilt, roll = cam.pan_tilt_roll

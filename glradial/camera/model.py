@@ -148,6 +148,21 @@ class Camera:
         return project_many(self.rotation[None], self.position[None], np.array([self.focal]), np.array([lens.k1]),
                             np.array([lens.k2]), self.size, points3(points))[0]
 
+    def to_pitch(self, pixels: object) -> np.ndarray:
+        """Pixels of the distorted frame (N x 2, or one pair) -> N x 2 pitch metres on the plane z = 0:
+        the exact inverse of :meth:`project` for pitch-plane points (the lens's exact inverse, then
+        the inverse homography). NaN where a pixel sees no point of the plane (above the horizon, or
+        beyond the radius where the lens folds over)."""
+        try:
+            xy = np.asarray(pixels, dtype=np.float64)
+        except (TypeError, ValueError):
+            raise TypeError(f"pixels must be an N×2 array of pixels, got {pixels!r}") from None
+        if xy.ndim == 1 and xy.shape[0] == 2:
+            xy = xy[None]
+        if xy.ndim != 2 or xy.shape[1] != 2:
+            raise ValueError(f"pixels must be an N×2 array of pixels, got shape {xy.shape}")
+        return lens_points_to_pitch(self, xy)
+
     def with_size(self, size: tuple[int, int]) -> "Camera":
         """The same camera seeing a frame of another size (same field of view, same width-normalised
         lens): a resized frame."""

@@ -215,7 +215,7 @@ class ShotCalibration:
 
 def calibrate_shot(frames: Iterable[np.ndarray], *, pitch: PitchTemplate | None = None) -> ShotCalibration:
     """The cameras of the frames of **one shot** (no cut inside: split a video at its cuts first,
-    e.g. with :func:`glradial.video.cuts.detect_cuts`; ``glradial calibrate VIDEO`` does) with one lens
+    e.g. with :func:`glradial.video.cuts.detect_cuts`) with one lens
     per shot as a function of the measured focal length (module docstring). ``frames``: uint8/uint16/
     float RGB or gray arrays of one size, consumed one at a time."""
     if isinstance(frames, np.ndarray) and frames.ndim < 4 or not isinstance(frames, Iterable):

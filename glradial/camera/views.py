@@ -31,25 +31,37 @@ from .model import Camera
 #: Overlay colour (RGB) and width (px of a 1280-wide frame).
 OVERLAY_RGB = (255, 40, 200)
 OVERLAY_WIDTH = 2.0
+#: The colour of a doubtful camera's overlay (RGB): the markings dashed, under a DOUBTFUL banner.
+DOUBT_RGB = (255, 160, 0)
 
 
-def overlay(frame: np.ndarray, camera: Camera, pitch: PitchTemplate | None = None) -> np.ndarray:
+def overlay(frame: np.ndarray, camera: Camera, pitch: PitchTemplate | None = None, doubt: str = "") -> np.ndarray:
     """A copy of the uint8 RGB ``frame`` with ``pitch``'s markings (every 0.25 m, lens included)
-    drawn where ``camera`` projects them; the keypoints as small circles."""
+    drawn where ``camera`` projects them; the keypoints as small circles. ``doubt``: why the camera is
+    doubtful (:attr:`glradial.CameraEstimate.why`); given, the markings are drawn dashed in
+    :data:`DOUBT_RGB` under a banner ``DOUBTFUL: <doubt>``, so a picture never passes for a sure one."""
     out = np.ascontiguousarray(frame[..., :3]).copy()
     height, width = out.shape[:2]
     cam = camera.with_size((width, height))
     thick = max(1, int(round(OVERLAY_WIDTH * width / 1280)))
+    colour = DOUBT_RGB if doubt else OVERLAY_RGB
     pitch = pitch or PitchTemplate()
     for _, line in pitch.polylines(0.25):
         xy = cam.project(line)
         ok = np.isfinite(xy).all(1) & (np.abs(xy[:, 0] - width / 2) < 2 * width) & (np.abs(xy[:, 1] - height / 2) < 2 * height)
+        if doubt:  # dashed: every other metre
+            ok &= (np.arange(len(xy)) // 4) % 2 == 0
         for run in np.split(np.arange(len(xy)), np.flatnonzero(np.diff(ok.astype(int)) != 0) + 1):
             if ok[run[0]] and len(run) >= 2:
-                cv2.polylines(out, [np.round(xy[run] * 16).astype(np.int32)], False, OVERLAY_RGB, thick, cv2.LINE_AA, 4)
+                cv2.polylines(out, [np.round(xy[run] * 16).astype(np.int32)], False, colour, thick, cv2.LINE_AA, 4)
     for q in cam.project(pitch.keypoints()):
         if np.isfinite(q).all() and 0 <= q[0] < width and 0 <= q[1] < height:
-            cv2.circle(out, (int(round(q[0])), int(round(q[1]))), 3 * thick, OVERLAY_RGB, thick, cv2.LINE_AA)
+            cv2.circle(out, (int(round(q[0])), int(round(q[1]))), 3 * thick, colour, thick, cv2.LINE_AA)
+    if doubt:
+        scale = 0.6 * width / 1280
+        cv2.rectangle(out, (0, 0), (width, int(36 * scale) + 8), (0, 0, 0), -1)
+        cv2.putText(out, f"DOUBTFUL: {doubt}", (8, int(26 * scale) + 4), cv2.FONT_HERSHEY_SIMPLEX, scale, DOUBT_RGB,
+                    max(1, thick // 2), cv2.LINE_AA)
     return out
 
 

@@ -34,18 +34,22 @@ def overscan_value(text: str | None) -> float | None:
     return value
 
 
-def add_camera_options(group: argparse._ArgumentGroup) -> None:
-    """``--sensor-width-mm --sensor-height-mm --sensor --focal-mm`` (read by :func:`camera_from_args`)."""
+def add_camera_options(group: argparse._ArgumentGroup, *, focal: bool = True) -> None:
+    """``--sensor-width-mm --sensor-height-mm --sensor --focal-mm`` (read by :func:`camera_from_args`);
+    without ``--focal-mm`` for a command that measures the focal length (``focal=False``)."""
     group.add_argument("--sensor-width-mm", type=positive_float, metavar="MM", help="width of the camera sensor's active area in mm (the frame's width)")
     group.add_argument("--sensor-height-mm", type=positive_float, metavar="MM", help="its height in mm (default: width x H / W, square photosites)")
     group.add_argument("--sensor", choices=SENSORS, help="a named sensor instead of --sensor-width-mm: 2/3-inch = 9.59 x 5.39 mm (16:9 broadcast)")
-    group.add_argument("--focal-mm", type=positive_float, metavar="MM", help="pinhole focal length of the lens in mm (glradial measures distortion, not the field of view)")
+    if focal:
+        group.add_argument("--focal-mm", type=positive_float, metavar="MM", help="pinhole focal length of the lens in mm (glradial measures distortion, not the field of view)")
 
 
-def add_opentrackio_options(parser: argparse.ArgumentParser) -> None:
-    """The OpenTrackIO output group: ``--opentrackio FILE --distortion-model --cbor --send`` and the camera."""
+def add_opentrackio_options(parser: argparse.ArgumentParser, *, focal: bool = True) -> argparse._ArgumentGroup:
+    """The OpenTrackIO output group: ``--opentrackio FILE --distortion-model --cbor --send`` and the
+    camera (``focal=False``: no ``--focal-mm``, the command measures it); returns the group."""
     group = parser.add_argument_group(
-        "OpenTrackIO output (one sample per frame for a graphics engine; needs the sensor width and focal length)")
+        "OpenTrackIO output (one sample per frame for a graphics engine; needs the sensor width"
+        + (" and focal length)" if focal else ")"))
     group.add_argument("--opentrackio", metavar="FILE",
                        help="write one OpenTrackIO sample per frame (JSON lines; a CBOR sequence with --cbor)")
     group.add_argument("--distortion-model", choices=DISTORTION_MODELS, default="U-D",
@@ -55,7 +59,8 @@ def add_opentrackio_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--send", metavar="HOST:PORT",
                        help="also stream the samples as OpenTrackIO UDP packets, paced at the frame rate "
                             "(the standard's multicast group for source 1 is 235.135.1.1:55555)")
-    add_camera_options(group)
+    add_camera_options(group, focal=focal)
+    return group
 
 
 def opentrackio_wanted(args: argparse.Namespace) -> bool:
@@ -92,7 +97,7 @@ def _camera_numbers(args: argparse.Namespace, what: str, focal_measured: bool = 
     missing = []
     if width_mm is None:
         missing.append("--sensor-width-mm MM (or --sensor 2/3-inch)")
-    if args.focal_mm is None and not focal_measured:
+    if getattr(args, "focal_mm", None) is None and not focal_measured:
         missing.append("--focal-mm MM")
     if missing:
         raise UsageError(f"{what}: give {' and '.join(missing)} (glradial cannot know them from the picture)")
@@ -106,7 +111,7 @@ def check_opentrackio_output(args: argparse.Namespace, *, focal_measured: bool =
 
     given = [name for name in ("distortion_model", "cbor") if getattr(args, name) not in (None, False, "U-D")]
     if not opentrackio_wanted(args):
-        camera = [n for n in ("sensor_width_mm", "sensor_height_mm", "sensor", "focal_mm") if getattr(args, n) is not None]
+        camera = [n for n in ("sensor_width_mm", "sensor_height_mm", "sensor", "focal_mm") if getattr(args, n, None) is not None]
         if given or camera:
             names = ", ".join(f"--{n.replace('_', '-')}" for n in given + camera)
             raise UsageError(f"{names} need(s) --opentrackio FILE or --send HOST:PORT")
