@@ -65,16 +65,17 @@ def _shot(frames: int, pan_deg: float = 0.4, zoom: float = 1.01):
     return cameras, views
 
 
-def test_carry_recovers_a_turn_and_a_zoom_about_the_centre():
+def test_a_homography_reads_as_the_turn_and_a_zoom_about_the_centre():
     from glradial.camera.model import Camera
     from glradial.lens.lens import Lens
-    from glradial.video.live_camera import carry
+    from glradial.tracking.camera_track import carry
+    from glradial.tracking.live_camera import motion_of_homography
 
     start = Camera.look_at((5.0, -55.0, 18.0), (10.0, 3.0), 35.0, (1280, 720), Lens(-0.1, 0.02))
     turn = _turn("y", 3.0) @ _turn("x", -1.5) @ _turn("z", 0.4)
     focal = start.focal * 1.3
     motion = np.diag([focal, focal, 1.0]) @ turn @ np.diag([1 / start.focal, 1 / start.focal, 1.0])  # lens units
-    moved = carry(start, 2.5 * motion)  # any scale of a homography
+    moved = carry(start, motion_of_homography(start, 2.5 * motion))  # any scale of a homography
     assert moved.focal == pytest.approx(focal, rel=1e-12)
     np.testing.assert_allclose(moved.rotation, turn @ start.rotation, atol=1e-12)
     np.testing.assert_array_equal(moved.position, start.position)
@@ -83,10 +84,10 @@ def test_carry_recovers_a_turn_and_a_zoom_about_the_centre():
 
 def test_tracker_carries_the_first_fit_through_a_pan_and_zoom():
     from glradial.pitch.template import PitchTemplate
-    from glradial.video.live_camera import CameraTracker
+    from glradial.tracking.live_camera import LiveCameraTracker
 
     cameras, frames = _shot(8)
-    tracker = CameraTracker(SIZE, RATE, worker="inline", every=100)  # one fit, on frame 0; the rest carried
+    tracker = LiveCameraTracker(SIZE, RATE, worker="inline", every=100)  # one fit, on frame 0; the rest carried
     points = PitchTemplate().keypoints()
     for index, (camera, frame) in enumerate(zip(cameras, frames)):
         state = tracker.push(frame, index / RATE)
@@ -99,15 +100,15 @@ def test_tracker_carries_the_first_fit_through_a_pan_and_zoom():
 
 
 def test_tracker_says_lost_after_a_cut_and_pending_before_any_fit():
-    from glradial.video.live_camera import LOST, PENDING, CameraTracker
+    from glradial.tracking.live_camera import LOST, PENDING, LiveCameraTracker
 
     cameras, frames = _shot(2)
-    tracker = CameraTracker(SIZE, RATE, worker="inline", every=100)
+    tracker = LiveCameraTracker(SIZE, RATE, worker="inline", every=100)
     assert tracker.push(frames[0], 0.0).reason == "ok"
     flat = np.full_like(frames[0], 90)  # a cut to a frame with nothing to follow
     state = tracker.push(flat, 1 / RATE)
     assert (state.doubtful, state.reason, state.camera) == (True, LOST, None)
-    pending = CameraTracker(SIZE, RATE, worker="thread")  # its worker warming up: nothing fitted yet
+    pending = LiveCameraTracker(SIZE, RATE, worker="thread")  # its worker warming up: nothing fitted yet
     try:
         first = pending.push(frames[0], 0.0)
         assert (first.doubtful, first.reason, first.camera) == (True, PENDING, None)
@@ -118,7 +119,7 @@ def test_tracker_says_lost_after_a_cut_and_pending_before_any_fit():
 def test_camera_samples_validate_and_carry_the_calibrate_json_fields():
     from glradial.camera.calibrate import calibrate
     from glradial.export.opentrackio import Camera, camera_frame_sample
-    from glradial.video.live_camera import LiveCamera
+    from glradial.tracking.live_camera import LiveCamera
 
     cameras, frames = _shot(1)
     estimate = calibrate(frames[0])

@@ -209,10 +209,10 @@ def _warm_imports(args: argparse.Namespace) -> None:
 
 def _warm_tracker(args: argparse.Namespace):
     """``--camera``'s tracker, its worker started and warmed up before the input is opened (the
-    stream is given to it once open: :meth:`~glradial.video.live_camera.CameraTracker.for_stream`)."""
+    stream is given to it once open: :meth:`~glradial.tracking.live_camera.LiveCameraTracker.for_stream`)."""
     if not args.camera:
         return None
-    from ..video.live_camera import camera_tracker
+    from ..tracking.live_camera import camera_tracker
 
     return camera_tracker()
 

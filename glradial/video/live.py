@@ -60,7 +60,6 @@ import numpy as np
 from ..lens.lens import Lens, as_lens
 from ..media.frames import to_rgb8
 from ..media.video_io import VideoInfo, frame_planes, yuv_layout
-from .live_camera import LiveCamera
 from .live_lens import PENDING, SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
 from .video_pipeline import FrameCorrector
 
@@ -99,7 +98,7 @@ class LiveFrame:
     state: LensState
     sample: dict | None
     arrived: float
-    tracked: LiveCamera | None = None
+    tracked: object | None = None  # the frame's camera (glradial.tracking.live_camera.LiveCamera) with a tracker
 
 
 @dataclass
@@ -460,7 +459,7 @@ class LiveCorrector:
             return LensState(0, self.lens, self.lens or IDENTITY, None, False, "")
         return self._online.observe(index, _thumbnail(frame), lambda: _sample_copy(frame))
 
-    def _sample(self, index: int, timestamp: float, state: LensState, tracked: LiveCamera | None = None) -> dict:
+    def _sample(self, index: int, timestamp: float, state: LensState, tracked=None) -> dict:
         from ..export.engines import MODEL_UD
         from ..export.opentrackio import camera_frame_sample, frame_sample, lens_object
 

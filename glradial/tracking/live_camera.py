@@ -15,7 +15,7 @@ Two halves, one per speed:
   pair: four times slower). The newest sure fit, of frame ``k``, is
   carried to frame ``t`` by the chained motion ``k -> t`` as a broadcast camera moves: about its
   fixed centre (pan, tilt, roll) and by its zoom (focal length); position and lens stay the fit's
-  (:func:`carry`).
+  (:func:`motion_of_homography`, :func:`glradial.tracking.camera_track.carry`).
 
 A frame's camera is sure when the fit it comes from is sure, the motion has not broken since (a
 cut or a frame with too little texture breaks it) and that fit is at most ``max_carry`` frames old.
@@ -26,8 +26,11 @@ unless its fit found one (never a guess presented as sure). Its ``uncertainty_px
 (``calibrate``'s 90 % bound, px at 1280 wide): the drift of the carried motion is measured by
 ``bench/bench_live_camera.py``, not added to it.
 
-The one place that makes the tracker is :func:`camera_tracker`: a causal tracker with the same
-``push(frame, timestamp) -> LiveCamera`` replaces this one there.
+The one place that makes the tracker is :func:`camera_tracker`: a tracker with the same
+``for_stream(size, rate)`` and ``push(frame, timestamp) -> LiveCamera`` replaces this one there.
+:class:`glradial.tracking.camera_track.CameraTracker` is causal too but measures inside its
+``push`` (a full search while it holds no camera: seconds a frame on 2 cores), which a live frame
+cannot wait for; this tracker runs the measurement beside the frames instead.
 """
 
 from __future__ import annotations
@@ -40,7 +43,7 @@ import os
 import threading
 import time
 from collections import OrderedDict
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from fractions import Fraction
 
 import av
@@ -52,17 +55,20 @@ from ..camera.model import Camera
 from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..lens.options import LIVE_WORKERS, check_choice
-from .frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of
-from .live_lens import PENDING
+from ..video.frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of
+from ..video.live_lens import PENDING
+from .camera_track import Motion, carry
 
-__all__ = ["LiveCamera", "CameraTracker", "camera_tracker", "carry", "PENDING", "LOST", "STALE", "LIVE_REASONS"]
+__all__ = ["LiveCamera", "LiveCameraTracker", "camera_tracker", "motion_of_homography", "PENDING", "LOST", "STALE",
+           "LIVE_REASONS"]
 
-#: the frame-to-frame motion broke (a cut, no texture) since the last sure fit
-LOST = "lost"
+#: the frame-to-frame motion broke (a cut, no texture) since the last sure fit (calibrate's own
+#: reason for a camera the track lost, :data:`glradial.camera.estimate.REASONS`)
+LOST = "track_lost"
 #: the last sure fit is older than ``max_carry`` frames
 STALE = "stale"
-#: a live frame's doubt reasons beyond calibrate's
-LIVE_REASONS = (PENDING, LOST, STALE)
+#: a live frame's doubt reasons beyond calibrate's (:data:`glradial.camera.estimate.REASONS`)
+LIVE_REASONS = (PENDING, STALE)
 #: seconds a fit may be carried by the motion before its frames are doubtful (``max_carry`` = this x rate)
 MAX_CARRY_S = 4.0
 #: frames whose chained motion is kept (a fit of an older frame can no longer be carried)
@@ -76,7 +82,7 @@ FLOW_POINTS, REFILL = 200, 120
 FLOW_WINDOW, FLOW_LEVELS = (15, 15), 2
 #: the fit worker process's niceness (added): the frames' motion and samples come first
 WORKER_NICENESS = 5
-#: seconds :meth:`CameraTracker.wait_ready` waits for the worker by default
+#: seconds :meth:`LiveCameraTracker.wait_ready` waits for the worker by default
 READY_TIMEOUT_S = 120.0
 
 
@@ -109,11 +115,12 @@ class LiveCamera:
         return out
 
 
-def carry(camera: Camera, motion: np.ndarray) -> Camera | None:
-    """``camera`` moved by ``motion`` (3 x 3, undistorted lens units of its frame -> those of a later
-    frame): rotated about its fixed centre and zoomed, ``motion ~ K_t R K_k^-1`` with ``K = diag(f, f,
-    1)`` (lens units: focal in image widths). The new focal length balances the rows' norms, the
-    rotation is the nearest one (SVD). None where the motion is no camera rotation (degenerate)."""
+def motion_of_homography(camera: Camera, motion: np.ndarray) -> Motion | None:
+    """The :class:`~glradial.tracking.camera_track.Motion` (turn and zoom about the fixed centre) of
+    ``camera`` that a homography ``motion`` of its undistorted lens units to a later frame's is,
+    ``motion ~ K_t R K_k^-1`` with ``K = diag(f, f, 1)`` (focal in image widths): the new focal
+    length balances the rows' norms, the turn is the nearest rotation (SVD); residual 0 (unknown
+    here). None where the homography is no camera turn (degenerate)."""
     a = np.asarray(motion, np.float64) @ np.diag([camera.focal, camera.focal, 1.0])
     norms = np.linalg.norm(a, axis=1)
     if not np.all(np.isfinite(a)) or norms[2] <= 0:
@@ -125,7 +132,7 @@ def carry(camera: Camera, motion: np.ndarray) -> Camera | None:
     turn = u @ vt
     if np.linalg.det(turn) < 0:
         turn = -turn
-    return Camera(turn @ camera.rotation, camera.position, focal, camera.size, camera.lens)
+    return Motion(turn, focal / camera.focal, 0.0)
 
 
 class _Flow:
@@ -231,7 +238,7 @@ def _serve(connection, duty: float, niceness: int = 0, size: tuple[int, int] = (
             pass
 
 
-class CameraTracker:
+class LiveCameraTracker:
     """The camera of every frame of a live stream (module docstring). ``size`` (W, H) and ``rate``
     (frames per second) of the stream, or given later to :meth:`for_stream` (a tracker warmed up
     before the stream is opened); ``worker``: ``"process"`` (default), ``"thread"``, or
@@ -280,7 +287,7 @@ class CameraTracker:
         self._process.start()
         atexit.register(self.close)
 
-    def for_stream(self, size: tuple[int, int], rate: float | Fraction) -> "CameraTracker":
+    def for_stream(self, size: tuple[int, int], rate: float | Fraction) -> "LiveCameraTracker":
         """Set the stream's ``size`` (W, H px) and ``rate`` (frames per second) before the first
         :meth:`push`; returns the tracker."""
         from ..lens.lens import frame_size
@@ -295,7 +302,7 @@ class CameraTracker:
 
     @classmethod
     def started(cls, size: tuple[int, int] | None = None, rate: float | Fraction | None = None,
-                **options: object) -> "CameraTracker":
+                **options: object) -> "LiveCameraTracker":
         """A tracker whose worker has warmed up (:meth:`wait_ready`); closed again if that fails."""
         tracker = cls(size, rate, **options)  # type: ignore[arg-type]
         try:
@@ -369,7 +376,8 @@ class CameraTracker:
         then, now = self._history.get(fit_index), self._history.get(index)
         if then is None or now is None or then[0] != now[0]:
             return None
-        return carry(estimate.camera, now[1] @ np.linalg.inv(then[1]))
+        motion = motion_of_homography(estimate.camera, now[1] @ np.linalg.inv(then[1]))
+        return None if motion is None else carry(estimate.camera, motion)
 
     def _receive(self) -> None:
         try:
@@ -402,8 +410,7 @@ class CameraTracker:
         camera = self._latest
         if camera is None:
             return LiveCamera(index, None, True, LOST, estimate.uncertainty_px, fit_index)
-        carried = CameraEstimate(camera, estimate.uncertainty_px, False, "ok", estimate.markings, estimate.rms_px,
-                                 estimate.inliers, estimate.support, estimate.focal_sd)
+        carried = replace(estimate, camera=camera, carried=index - fit_index)
         stale = index - fit_index > self.max_carry
         return LiveCamera(index, carried, stale, STALE if stale else "ok", estimate.uncertainty_px, fit_index)
 
@@ -424,8 +431,8 @@ class CameraTracker:
         self._connection.close()
 
 
-def camera_tracker(**options: object) -> CameraTracker:
+def camera_tracker(**options: object) -> LiveCameraTracker:
     """The live camera tracker of ``glradial live --camera``, its worker warmed up (the stream is
-    given later, :meth:`CameraTracker.for_stream`): the one place that chooses it (a causal tracker
+    given later, :meth:`LiveCameraTracker.for_stream`): the one place that chooses it (a causal tracker
     with ``for_stream(size, rate)`` and ``push(frame, timestamp) -> LiveCamera`` swaps in here)."""
-    return CameraTracker.started(**options)
+    return LiveCameraTracker.started(**options)
