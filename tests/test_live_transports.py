@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -133,3 +134,68 @@ def test_no_srt_anywhere_is_a_clear_error(monkeypatch, tmp_path, capsys):
         srt_relay.srt_route()
     assert main(["live", "-", "srt://127.0.0.1:9", "--k1", "-0.1"]) == 1  # refused before the input is opened
     assert "srt:// needs FFmpeg with libsrt" in capsys.readouterr().err
+
+
+@pytest.fixture()
+def ndi_loopback(tmp_path, monkeypatch):
+    """NDI's discovery on loopback (no mDNS daemon here): an NDI configuration naming 127.0.0.1."""
+    pytest.importorskip("cyndilib")
+    folder = tmp_path / "ndi"
+    folder.mkdir()
+    (folder / "ndi-config.v1.json").write_text('{"ndi": {"networks": {"ips": "127.0.0.1", "discovery": ""}}}')
+    monkeypatch.setenv("NDI_CONFIG_DIR", str(folder))
+    return {**os.environ, "NDI_CONFIG_DIR": str(folder), "PYTHONPATH": str(ROOT)}
+
+
+def _picture() -> np.ndarray:
+    x, y = np.meshgrid(np.arange(SIZE[0]), np.arange(SIZE[1]))
+    return np.stack([(x * 255 // SIZE[0]), (y * 255 // SIZE[1]), ((x // 20 + y // 20) % 2) * 200 + 30], -1).astype(np.uint8)
+
+
+def test_ndi_in_on_loopback(ndi_loopback, tmp_path):
+    """A picture sent as an NDI source by glradial's own NDI writer, read by ``glradial live ndi://...``
+    and corrected into a file: OpenCV's undistortion of the picture (NDI is lossy: >= 30 dB in luma).
+    (NDI's discovery by address reaches only the first NDI process of a machine without mDNS, so the
+    writer runs here, first, and glradial's output goes to a file.)"""
+    import threading
+
+    from glradial.media.ndi_io import NdiWriter
+    from glradial.media.video_io import VideoInfo
+
+    picture, stop, out = _picture(), threading.Event(), tmp_path / "out.mkv"
+    sender = NdiWriter("ndi://glradial-test-in", VideoInfo.of(SIZE, RATE))
+
+    def send() -> None:
+        while not stop.is_set():
+            sender.write(picture)
+            time.sleep(1 / RATE)
+
+    thread = threading.Thread(target=send, daemon=True)
+    thread.start()
+    try:
+        process = subprocess.Popen([sys.executable, "-m", "glradial", "live", "ndi://glradial-test-in", str(out), "--k1", str(K1),
+                                    "--k2", str(K2), "--crf", "8", "--preset", "ultrafast", "--idle-timeout", "20", "-q"],
+                                   cwd=ROOT, env=ndi_loopback, stderr=subprocess.PIPE, text=True)
+        time.sleep(12)  # python, NDI's connection, then some frames
+        process.send_signal(signal.SIGINT)
+        stderr = process.communicate(timeout=60)[1]
+    finally:
+        stop.set()
+        thread.join()
+        sender.close()
+    assert process.returncode in (0, 130), stderr
+    with av.open(str(out)) as container:
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
+    luma = lambda image: cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)  # noqa: E731
+    assert len(frames) >= 3, stderr
+    scores = [_psnr(luma(f), luma(_undistorted(picture))) for f in frames]
+    assert min(scores) >= 30.0, (scores, stderr)
+    assert scores[-1] >= _psnr(luma(frames[-1]), luma(picture)) + 3.0  # corrected, not passed through
+
+
+def test_ndi_without_its_extra_says_what_to_install(monkeypatch, capsys):
+    from glradial.cli import main
+
+    monkeypatch.setitem(sys.modules, "cyndilib", None)  # as if not installed
+    assert main(["live", "-", "ndi://studio", "--k1", "-0.1"]) == 1
+    assert "pip install 'glradial[ndi]'" in capsys.readouterr().err

@@ -22,11 +22,13 @@ from .remapping import (
 
 DESCRIPTION = """\
 Correct a live stream as it arrives and hand the lens to a graphics engine with every frame.
-INPUT: a network stream FFmpeg reads (udp://, rtp://, srt:// where the build has it, tcp://, rtsp://),
+INPUT: a network stream FFmpeg reads (udp://, rtp://, srt:// (the system's ffmpeg relays it where
+PyAV's lacks it; ?mode=listener waits for a caller), tcp://, rtsp://), ndi://NAME (the NDI source
+whose name holds NAME; pip install 'glradial[ndi]'),
 '-' for standard input (MPEG-TS or NUT), a V4L2 device (/dev/video0) or a file (--realtime plays it
 at its own frame rate). OUTPUT: a file (it appears, complete and playable, when the stream ends: also
-on Ctrl-C/SIGTERM or an input error midway), '-' for MPEG-TS on standard output, or udp://HOST:PORT
-(MPEG-TS). The run ends at the input's EOF, after --idle-timeout seconds without data from a network
+on Ctrl-C/SIGTERM or an input error midway), '-' for MPEG-TS on standard output, udp://HOST:PORT or
+srt://HOST:PORT (MPEG-TS), ndi://NAME (an NDI source), or none (--camera only). The run ends at the input's EOF, after --idle-timeout seconds without data from a network
 input, or on SIGINT/SIGTERM.
 
 Causal: every frame is corrected with what is known when it arrives and leaves within --max-delay
@@ -268,13 +270,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _open_source(args: argparse.Namespace):
-    from ..media.stream_io import LiveSource
+    from ..media.stream_io import open_live_source
 
     if not getattr(args, "quiet", False):  # the set-up is done: a sender may start now
         wait = f" (up to {args.idle_timeout:g} s)" if "://" in args.input else ""
         sys.stderr.write(f"glradial live: waiting for {'stdin' if args.input == '-' else args.input}{wait}\n")
         sys.stderr.flush()
-    return LiveSource(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
+    return open_live_source(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
 
 
 def _sample_outputs(args: argparse.Namespace):

@@ -35,7 +35,7 @@ import av
 from .srt_relay import SrtRelay, is_srt, srt_route
 from .video_io import EncodeOptions, VideoInfo, VideoWriter, ffmpeg_error, frame_tags, stream_info
 
-__all__ = ["LiveSource", "StreamWriter", "open_live_output", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
+__all__ = ["LiveSource", "StreamWriter", "open_live_output", "open_live_source", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
 
 #: URL schemes read as network streams (ended by ``idle_timeout``)
 NETWORK_SCHEMES = ("udp", "rtp", "srt", "tcp", "rtsp", "rtmp", "http", "https")
@@ -54,15 +54,17 @@ UDP_FIFO_PACKETS = 50_000
 
 
 def source_kind(source: str) -> str:
-    """``"stdin"``, ``"network"``, ``"device"`` or ``"file"`` for an INPUT text (module docstring)."""
+    """``"stdin"``, ``"network"``, ``"ndi"``, ``"device"`` or ``"file"`` for an INPUT text (module docstring)."""
     if source == "-":
         return "stdin"
     scheme, sep, _ = source.partition("://")
     if sep:
         if scheme.lower() in NETWORK_SCHEMES:
             return "network"
+        if scheme.lower() == "ndi":
+            return "ndi"
         raise ValueError(f"input {source!r}: unknown URL scheme {scheme!r}; live inputs take {', '.join(NETWORK_SCHEMES)}, "
-                         "'-' (stdin), a V4L2 device or a file")
+                         "ndi, '-' (stdin), a V4L2 device or a file")
     return "device" if source.startswith("/dev/video") else "file"
 
 
@@ -252,16 +254,22 @@ class StreamWriter(VideoWriter):
 
 
 def check_live_output(target: str) -> str:
-    """``"stdout"``, ``"udp"``, ``"srt"`` or ``"file"`` for an OUTPUT text; ``ValueError`` for another
-    URL, or for srt:// where no FFmpeg has SRT (:func:`glradial.media.srt_relay.srt_route`)."""
+    """``"stdout"``, ``"udp"``, ``"srt"``, ``"ndi"`` or ``"file"`` for an OUTPUT text; ``ValueError``
+    for another URL, or for srt:// where no FFmpeg has SRT (:func:`glradial.media.srt_relay.srt_route`);
+    ``RuntimeError`` for ndi:// without the NDI extra."""
     if target == "-":
         return "stdout"
     scheme, sep, _ = target.partition("://")
     if not sep:
         return "file"
+    if scheme.lower() == "ndi":
+        from .ndi_io import require_ndi
+
+        require_ndi()
+        return "ndi"
     if scheme.lower() not in ("udp", "srt"):
         raise ValueError(f"output {target!r}: a live output URL must be udp://HOST:PORT or srt://HOST:PORT (MPEG-TS), "
-                         "or give a file or '-'")
+                         "ndi://NAME, or give a file or '-'")
     if scheme.lower() == "srt":
         srt_route()
     return scheme.lower()
@@ -270,6 +278,21 @@ def check_live_output(target: str) -> str:
 def open_live_output(target: str, info: VideoInfo, *, options: EncodeOptions = EncodeOptions(),
                      overwrite: bool = False) -> VideoWriter:
     """The writer of OUTPUT ``target`` (module docstring) for frames like ``info``."""
-    if check_live_output(target) == "file":
+    kind = check_live_output(target)
+    if kind == "file":
         return VideoWriter(target, info, options=options, overwrite=overwrite)
+    if kind == "ndi":
+        from .ndi_io import NdiWriter
+
+        return NdiWriter(target, info)
     return StreamWriter(target, info, options=options)
+
+
+def open_live_source(source: str, *, idle_timeout: float = 5.0, realtime: bool = False):
+    """The live input ``source``: an :class:`~glradial.media.ndi_io.NdiSource` for ``ndi://NAME``,
+    else a :class:`LiveSource` (module docstring)."""
+    if source_kind(source) == "ndi":
+        from .ndi_io import NdiSource
+
+        return NdiSource(source, idle_timeout=idle_timeout)
+    return LiveSource(source, idle_timeout=idle_timeout, realtime=realtime)
