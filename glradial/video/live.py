@@ -40,6 +40,12 @@ Conventions:
 * ``camera`` (:class:`glradial.export.opentrackio.Camera`): each frame gets its OpenTrackIO sample
   (:func:`glradial.export.opentrackio.frame_sample`), with ``custom.glradial`` k1, k2 (the lens
   reported: the estimate even where it is not applied), uncertainty and doubt as for files.
+* ``tracker`` (with ``camera``; :func:`glradial.tracking.live_camera.camera_tracker`): each frame's
+  whole camera, ``LiveFrame.tracked``, and a sample with its transform, focal length and lens
+  (:func:`glradial.export.opentrackio.camera_frame_sample`). ``lens=None``: frames pass through
+  uncorrected (the tracking only).
+* :meth:`LiveCorrector.warm_up` starts a given lens's maps on a helper thread: frames before they
+  are ready pass through uncorrected, flagged doubtful (``reason`` ``"pending"``).
 """
 
 from __future__ import annotations
