@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import signal
 import subprocess
 import sys
 import time
@@ -156,7 +155,8 @@ def test_ndi_in_on_loopback(ndi_loopback, tmp_path):
     """A picture sent as an NDI source by glradial's own NDI writer, read by ``glradial live ndi://...``
     and corrected into a file: OpenCV's undistortion of the picture (NDI is lossy: >= 30 dB in luma).
     (NDI's discovery by address reaches only the first NDI process of a machine without mDNS, so the
-    writer runs here, first, and glradial's output goes to a file.)"""
+    writer runs here, first, and glradial's output goes to a file.) The run ends when the source goes
+    quiet (--idle-timeout)."""
     import threading
 
     from glradial.media.ndi_io import NdiWriter
@@ -174,16 +174,22 @@ def test_ndi_in_on_loopback(ndi_loopback, tmp_path):
     thread.start()
     try:
         process = subprocess.Popen([sys.executable, "-m", "glradial", "live", "ndi://glradial-test-in", str(out), "--k1", str(K1),
-                                    "--k2", str(K2), "--crf", "8", "--preset", "ultrafast", "--idle-timeout", "20", "-q"],
+                                    "--k2", str(K2), "--crf", "8", "--preset", "ultrafast", "--idle-timeout", "5"],
                                    cwd=ROOT, env=ndi_loopback, stderr=subprocess.PIPE, text=True)
-        time.sleep(12)  # python, NDI's connection, then some frames
-        process.send_signal(signal.SIGINT)
-        stderr = process.communicate(timeout=60)[1]
+        lines: list[str] = []
+        out_now = 0
+        while out_now < 3:  # the status line, once a second: wait for 3 frames out
+            line = process.stderr.readline()
+            assert line, "".join(lines)
+            lines.append(line)
+            if " frames out" in line:
+                out_now = int(line.split(" frames out")[0].split()[-1])
     finally:
-        stop.set()
+        stop.set()  # the source goes quiet: glradial ends after --idle-timeout
         thread.join()
         sender.close()
-    assert process.returncode in (0, 130), stderr
+    stderr = "".join(lines) + process.communicate(timeout=120)[1]
+    assert process.returncode == 0 and "no data for 5 s" in stderr, stderr
     with av.open(str(out)) as container:
         frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     luma = lambda image: cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)  # noqa: E731
