@@ -19,11 +19,13 @@ Clips (validation only: nothing here is fitted or tuned on them):
 
 Per clip: the share of frames answered (not doubtful) after tracking and by each frame alone (the
 peer, on the first ``--peer-frames`` frames); the median keypoint jitter between consecutive frames of
-the still part (px at 1280 wide: the 32 keypoints projected, those inside the frame); keypoints
+the still part (px at 1280 wide: the 32 keypoints projected, those inside the frame) and their median
+second difference over the moving part (a smooth pan or zoom leaves it near 0); keypoints
 against the moved labels (median px at 1280) with the labels' own homography floor (RMS of the labels
 about the homography fitted to them, the frame's labelling noise); ms per frame of the tracker
 (:func:`track_cameras`, and the causal :class:`CameraTracker` alone) and of the peer; the causal
-tracker's median ms on frames the motion alone carries (no markings measured) and their share. Writes ``docs/figures/camera_track.json``.
+tracker's median ms on frames the motion alone carries (no markings measured) and their share; each
+also in CPU ms of this process (one thread: what an idle core would take, on a shared machine). Writes ``docs/figures/camera_track.json``.
 """
 
 from __future__ import annotations
@@ -144,6 +146,22 @@ def _jitter(estimates, size: tuple[int, int], still: np.ndarray) -> float:
     return float(np.median(moves)) * 1280 / w if moves else math.nan
 
 
+def _wobble(estimates, size: tuple[int, int], moving: np.ndarray) -> float:
+    """Median second difference (px at 1280) of the keypoints inside the frame over consecutive
+    moving frames: what a smooth pan or zoom leaves near 0 and a jittering track does not."""
+    from glradial.pitch import PitchTemplate
+
+    proj = np.array([_projected(e, PitchTemplate().keypoints()) for e in estimates])
+    w, h = size
+    inside = (proj[..., 0] >= 0) & (proj[..., 0] < w) & (proj[..., 1] >= 0) & (proj[..., 1] < h)
+    out = []
+    for i in range(1, len(proj) - 1):
+        if moving[i - 1] and moving[i] and moving[i + 1]:
+            ok = inside[i - 1] & inside[i] & inside[i + 1]
+            out.extend(np.linalg.norm(proj[i + 1, ok] - 2 * proj[i, ok] + proj[i - 1, ok], axis=1))
+    return float(np.median(out)) * 1280 / w if out else math.nan
+
+
 def track(frames: list) -> tuple[list, dict]:
     """The tracked estimates (forward-backward, :func:`track_cameras`) and the timings (ms): per frame
     of the whole track, per frame of the causal tracker alone, and its median on carried frames."""
@@ -152,16 +170,19 @@ def track(frames: list) -> tuple[list, dict]:
     t0 = time.perf_counter()
     out = dict(track_cameras(iter(frames), lag=25))
     total = time.perf_counter() - t0
-    tracker, times, carried = CameraTracker(keep_steps=True), [], []
+    tracker, times, cpu, carried = CameraTracker(keep_steps=True), [], [], []
     for frame in frames:
-        t = time.perf_counter()
+        t, c = time.perf_counter(), time.process_time()
         tracker.push(frame)
         times.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
         if tracker.steps[-1].measured is None:  # the motion alone carried the camera
-            carried.append(times[-1])
+            carried.append(len(times) - 1)
     return [out[i] for i in range(len(frames))], {
         "ms_per_frame_track_cameras": 1000 * total / len(frames), "ms_per_frame_causal": 1000 * float(np.mean(times)),
-        "ms_per_carried_frame_median": 1000 * float(np.median(carried)) if carried else math.nan,
+        "cpu_ms_per_frame_causal": 1000 * float(np.mean(cpu)), "cpu_ms_per_frame_causal_median": 1000 * float(np.median(cpu)),
+        "ms_per_carried_frame_median": 1000 * float(np.median(np.take(times, carried))) if carried else math.nan,
+        "cpu_ms_per_carried_frame_median": 1000 * float(np.median(np.take(cpu, carried))) if carried else math.nan,
         "carried_share": len(carried) / len(frames)}
 
 
@@ -196,6 +217,7 @@ def run_clip(name: str, frames, still, moved=None, pitch=None, floor=None, peer_
            **times, "ms_per_frame_alone": ms_peer, "speedup_causal_vs_alone": ms_peer / times["ms_per_frame_causal"],
            "load_average_1min": os.getloadavg()[0]}
     if moved is not None:
+        row["moving_second_difference_median_px_1280"] = _wobble(estimates, size, ~still)
         row.update({"keypoints_vs_labels_median_px_1280": _label_error(estimates, moved, pitch),
                     "keypoints_vs_labels_alone_median_px_1280": _label_error(alone, moved[: len(alone)], pitch),
                     "labels_homography_floor_rms_px_1280": floor})

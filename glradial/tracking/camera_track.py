@@ -77,9 +77,9 @@ MEASURE_EVERY = 5
 ZOOMING = 0.002
 #: Without any camera, glradial's full search (seconds a frame) runs at most every this many frames.
 SEARCH_EVERY = 10
-#: A still camera (motion under :data:`STILL_PX` px at 1280 at the frame's corners) pools the
-#: white-line points of up to this many frames.
-POOL, STILL_PX = 8, 0.5
+#: A still camera (its motion since the oldest pooled frame under :data:`STILL_PX` px at 1280 at
+#: the frame's corners) pools the white-line points of up to this many measured frames.
+POOL, STILL_PX = 8, 1.0
 #: Report width of bounds and residuals (px).
 _WIDTH = 1280.0
 
@@ -256,6 +256,7 @@ class CameraTracker:
         self._pool: deque[LinePoints] = deque(maxlen=POOL)
         self._since_search = SEARCH_EVERY
         self._since_measure = 0
+        self._drift = 0.0  # px at 1280 the camera moved since the oldest pooled frame
 
     def push(self, frame: np.ndarray, time: float | None = None) -> CameraEstimate:
         """The camera of the next frame of the shot (class docstring)."""
@@ -271,8 +272,10 @@ class CameraTracker:
         motion, matches = self._motion(gray)
         self._gray, self.time = gray, time
         predicted = self._filter.predict(motion)
-        if motion is None or predicted is None or motion.shift_px(predicted.focal) > STILL_PX:
+        self._drift += math.inf if motion is None or predicted is None else motion.shift_px(predicted.focal)
+        if self._drift > STILL_PX:  # moved since the oldest pooled frame: its points no longer lie here
             self._pool.clear()
+            self._drift = 0.0
         self._since_measure += 1
         measured = None
         zooming = motion is not None and abs(math.log(motion.zoom)) > ZOOMING
