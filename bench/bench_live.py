@@ -52,6 +52,9 @@ sys.path.insert(0, str(ROOT))
 
 from glradial.commands import parse_size  # noqa: E402
 
+sys.path.insert(0, str(ROOT / "bench"))
+from figures import write_figure  # noqa: E402
+
 
 def make_clip(path: Path, size: tuple[int, int], rate: int, seconds: float, k1: float, k2: float) -> Path:
     """The content (module docstring), cached at ``path``."""
@@ -277,6 +280,7 @@ def main() -> None:
     args = parser.parse_args()
     args.work.mkdir(parents=True, exist_ok=True)
     skip = set(filter(None, args.skip.split(",")))
+    figures: dict = {"load_1min_at_start": os.getloadavg()[0]}
     size, (k1, k2) = args.size, (args.k1, args.k2)
     tag = f"{size[0]}x{size[1]}"
     print(f"bench_live: {tag}, {args.seconds:g} s, lens k1={k1} k2={k2}, {os.cpu_count()} CPU cores", flush=True)
@@ -285,6 +289,7 @@ def main() -> None:
         frames = int(round(args.seconds * args.rate))
         if "fixed" not in skip:
             r = run_fixed_udp(clip, args.work, k1, k2, frames)
+            figures[f"fixed_udp_{args.rate}p"] = {**r, "written_share_of_sent": r["written"] / r["sent"]}
             print(f"fixed lens, UDP, {args.rate}p: written {r['written']}/{r['sent']} = {r['written'] / r['sent']:.1%} "
                   f"(read {r['read']}, dropped {r['dropped']}, late {r['late']}); samples received {r['samples']}/{r['written']} = "
                   f"{r['samples'] / max(r['written'], 1):.1%}; delay p50 {r['p50']:.2f} p95 {r['p95']:.2f} max {r['max']:.2f} frames; "
@@ -297,10 +302,14 @@ def main() -> None:
         clip = make_clip(args.work / f"clip_{tag}_{args.auto_rate}p.ts", size, args.auto_rate, args.seconds, k1, k2)
         frames = int(round(args.seconds * args.auto_rate))
         r = run_auto_stdin(clip, args.work, k1, k2, size)
+        figures[f"auto_stdin_{args.auto_rate}p"] = {**r, "sent": frames, "written_share_of_sent": r["written"] / frames}
         print(f"--auto, stdin, {args.auto_rate}p: written {r['written']}/{frames} = {r['written'] / frames:.1%} (dropped "
               f"{r['dropped']}, late {r['late']}); delay p50 {r['p50']:.2f} p95 {r['p95']:.2f} max {r['max']:.2f} frames; "
               f"samples' lens after 1 s vs applied: median {r['err_median']:.1f} px, p95 {r['err_p95']:.1f} px at 1920, "
               f"{r['within_8px']:.0%} within 8 px; {r['sure']:.0%} of frames sure (lens applied)", flush=True)
+
+    if {"fixed", "auto"} - skip:
+        write_figure("live_start" if tag == "1280x720" else f"live_start_{tag}", figures)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,10 @@ ldconfig -p 2>/dev/null | grep -q 'libEGL.so.1' || need+=(libegl1)
 ldconfig -p 2>/dev/null | grep -q 'libEGL_mesa.so.0' || need+=(libegl-mesa0 libgl1-mesa-dri)
 ldconfig -p 2>/dev/null | grep -q 'libGL.so.1' || need+=(libgl1)
 command -v ffmpeg >/dev/null 2>&1 || need+=(ffmpeg)
+# glradial live relays srt:// through the system's ffmpeg (PyAV's wheels have no libsrt): Debian's has it
+if command -v ffmpeg >/dev/null 2>&1 && ! ffmpeg -hide_banner -protocols 2>/dev/null | grep -qx '  srt'; then
+  need+=(ffmpeg libsrt1.5-openssl)
+fi
 if ! "$PYTHON" -c 'import venv, ensurepip' >/dev/null 2>&1; then
   ver=$("$PYTHON" -c 'import sys; print(f"{sys.version_info[0]}.{sys.version_info[1]}")')
   need+=(python3-venv "python${ver}-venv")

@@ -141,13 +141,17 @@ def test_udp_in_real_time_fixed_lens(clip, tmp_path):
     source, written = _frames(clip), _frames(out)
     assert counts["written"] == len(written) and counts["read"] == counts["written"] + counts["dropped"]
     assert len(written) >= 0.9 * len(source), lines.text()  # the bench measures the 98 % of the target at 720p50
-    for pts, image in written.items():
-        assert pts in source, f"output pts {pts} is no input frame's"
-        assert _psnr(image, _opencv_undistort(source[pts])) >= 30.0
     samples = [json.loads(parse_packet(p).payload) for p in packets]
     assert len(samples) >= 0.95 * len(written)
     numbers = [s["timing"]["sequenceNumber"] for s in samples]
     assert numbers == sorted(set(numbers))
+    # frames that came before the lens's maps were built pass through uncorrected, flagged doubtful
+    pending = {s["timing"]["sequenceNumber"] for s in samples if s["custom"]["glradial"].get("doubtful")}
+    assert pending == set(range(len(pending))) and len(pending) <= 5, pending
+    order = {pts: i for i, pts in enumerate(sorted(source))}
+    for pts, image in written.items():
+        assert pts in source, f"output pts {pts} is no input frame's"
+        assert _psnr(image, source[pts] if order[pts] in pending else _opencv_undistort(source[pts])) >= 30.0
     assert all(s["custom"]["glradial"]["k1"] == K1 and s["custom"]["glradial"]["k2"] == K2 for s in samples)
     assert all(s["tracker"]["status"] == "lens given" and "sampleTimestamp" in s["timing"] for s in samples)
 

@@ -149,7 +149,7 @@ class _Outputs:
         the camera is sure, or with --doubtful-transforms."""
         from ..export.engines import MODEL_NAMES
         from ..export.opentrackio import Camera as OtioCamera
-        from ..export.opentrackio import frame_sample, validate_sample
+        from ..export.opentrackio import camera_transform, frame_sample, validate_sample
         from ..lens.lens import Lens
 
         width_mm, height_mm = sensor_mm(self.args)
@@ -159,12 +159,7 @@ class _Outputs:
                               model=MODEL_NAMES[self.args.distortion_model], uncertainty_px=math.nan,
                               doubtful=est.doubtful, shot=shot, timestamp_s=time_s)
         if not est.doubtful or self.args.doubtful_transforms:
-            pan, tilt, roll = est.pan_tilt_roll
-            x, y, z = (float(v) for v in est.position)
-            # OpenTrackIO: Z up, Y forward at pan = tilt = roll = 0, pan counter-clockwise seen from above,
-            # tilt up: glradial's pan (toward +x) and tilt (down) change sign
-            sample["transforms"] = [{"translation": {"x": x, "y": y, "z": z},
-                                     "rotation": {"pan": -pan, "tilt": -tilt, "roll": roll}, "id": "camera"}]
+            sample["transforms"] = [camera_transform(est.position, est.pan_tilt_roll)]
         sample["custom"]["glradial"].update({"frame": index, "calibration_uncertainty_px_1280": est.uncertainty_px,
                                              "calibration_reason": est.reason, "calibration_carried": est.carried})
         validate_sample(sample)

@@ -22,11 +22,13 @@ from .remapping import (
 
 DESCRIPTION = """\
 Correct a live stream as it arrives and hand the lens to a graphics engine with every frame.
-INPUT: a network stream FFmpeg reads (udp://, rtp://, srt:// where the build has it, tcp://, rtsp://),
+INPUT: a network stream FFmpeg reads (udp://, rtp://, srt:// (the system's ffmpeg relays it where
+PyAV's lacks it; ?mode=listener waits for a caller), tcp://, rtsp://), ndi://NAME (the NDI source
+whose name holds NAME; pip install 'glradial[ndi]'),
 '-' for standard input (MPEG-TS or NUT), a V4L2 device (/dev/video0) or a file (--realtime plays it
 at its own frame rate). OUTPUT: a file (it appears, complete and playable, when the stream ends: also
-on Ctrl-C/SIGTERM or an input error midway), '-' for MPEG-TS on standard output, or udp://HOST:PORT
-(MPEG-TS). The run ends at the input's EOF, after --idle-timeout seconds without data from a network
+on Ctrl-C/SIGTERM or an input error midway), '-' for MPEG-TS on standard output, udp://HOST:PORT or
+srt://HOST:PORT (MPEG-TS), ndi://NAME (an NDI source), or none (--camera only). The run ends at the input's EOF, after --idle-timeout seconds without data from a network
 input, or on SIGINT/SIGTERM.
 
 Causal: every frame is corrected with what is known when it arrives and leaves within --max-delay
@@ -40,8 +42,17 @@ passes through uncorrected, flagged doubtful (--until-sure last keeps the last s
 --apply-doubtful applies a doubtful shot's own lens). With --send HOST:PORT each frame's
 OpenTrackIO sample (lens distortion, the input's timecode and timestamp, custom.glradial k1, k2,
 uncertainty, doubt) goes out as UDP packets as soon as the frame is out; --opentrackio FILE keeps
-them. H.264/HEVC output defaults to the ultrafast preset (a live encoder must keep up)."""
+them. H.264/HEVC output defaults to the ultrafast preset (a live encoder must keep up).
 
+--camera: the whole camera of every frame, tracked from the pitch markings (a fit of the newest
+frame whenever the last is done, carried frame to frame by the image motion: docs/CLI.md, "live
+--camera"), sent as OpenTrackIO samples with the transform (pitch metres, pan/tilt/roll), the
+measured focal length (give --sensor or --sensor-width-mm), the lens and the timecode; a frame
+without a sure camera is flagged doubtful with a reason; custom.glradial holds the frame's fields
+as 'calibrate --json' writes them. OUTPUT 'none': no video out, only the samples (no lens options)."""
+
+#: OUTPUT that writes no video (``--camera``: the samples only)
+NO_OUTPUT = "none"
 #: options only --auto takes
 AUTO_OPTIONS = ("model", "method", "every", "max_uncertainty", "apply_doubtful", "until_sure")
 #: encoders whose presets take ``ultrafast`` (the default preset of a live run)
@@ -67,6 +78,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     live.add_argument("--idle-timeout", type=positive_float, default=5.0, metavar="S",
                       help="a network input ends after this many seconds without data (default 5)")
     live.add_argument("--realtime", action="store_true", help="hand out the frames of a file (or stdin) INPUT at their own rate (timestamps), as a live source would")
+    live.add_argument("--camera", action="store_true",
+                      help="track the whole camera from the pitch and send it per frame (OpenTrackIO: transform, focal length, lens)")
     auto = parser.add_argument_group("with --auto")
     add_shot_lens_options(auto)
     auto.add_argument("--until-sure", choices=UNTIL_SURE, default=None,
@@ -81,6 +94,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def _check_options(args: argparse.Namespace) -> None:
     """The options fit together (before the input is opened)."""
     given = lens_given(args)
+    _check_camera(args, given)
+    if args.output == NO_OUTPUT:
+        return
     if given and args.auto:
         raise UsageError("--k1/--k2/--cx/--cy/--pixel-aspect/--lens and --auto cannot be combined: give the lens one way")
     if not given and not args.auto:
@@ -92,7 +108,28 @@ def _check_options(args: argparse.Namespace) -> None:
     if args.alpha != "auto":
         raise UsageError("--alpha is for files ('glradial correct')")
     check_encode_options(args)
-    check_opentrackio_output(args)
+    check_opentrackio_output(args, focal_measured=args.camera)
+    _check_ends(args)
+
+
+def _check_camera(args: argparse.Namespace, lens_given_: bool) -> None:
+    """``--camera`` and OUTPUT ``none``: what they need and refuse."""
+    if args.camera:
+        from .engine_options import sensor_mm
+
+        if not opentrackio_wanted(args):
+            raise UsageError("--camera sends the camera as OpenTrackIO samples: give --send HOST:PORT or --opentrackio FILE")
+        if args.focal_mm is not None:
+            raise UsageError("--camera measures the focal length: --focal-mm is not used")
+        if sensor_mm(args)[0] is None:
+            raise UsageError("--camera: give --sensor-width-mm MM (or --sensor 2/3-inch) for the focal length in mm")
+    if args.output != NO_OUTPUT:
+        return
+    if not args.camera:
+        raise UsageError("OUTPUT 'none' writes no video: it is for --camera (the samples only)")
+    if lens_given_ or args.auto or any(getattr(args, n) is not None for n in AUTO_OPTIONS):
+        raise UsageError("OUTPUT 'none': nothing is corrected, give no lens (--k1/--k2/--lens/--auto and their options)")
+    check_opentrackio_output(args, focal_measured=True)
     _check_ends(args)
 
 
@@ -103,7 +140,7 @@ def _check_ends(args: argparse.Namespace) -> None:
 
     if source_kind(args.input) == "file" and not Path(args.input).is_file():
         raise FileNotFoundError(f"input {args.input!r} does not exist (live inputs: '-', a URL, a V4L2 device or a file)")
-    if check_live_output(args.output) == "file":
+    if args.output != NO_OUTPUT and check_live_output(args.output) == "file":
         from ..media.atomic import check_output_folder
         from ..media.video_io import check_video_overwrite
 
@@ -145,14 +182,53 @@ def _online_lens(args: argparse.Namespace):
     return OnlineShotLens.started(BundledEstimator(args.model, args.method), **auto)
 
 
-def _corrector(args: argparse.Namespace, info, writer, camera, online=None):
+def _corrector(args: argparse.Namespace, info, writer, camera, online=None, tracker=None):
     from ..export.engines import MODEL_NAMES
     from ..video.live import LiveCorrector
 
-    lens = online if online is not None else lens_from_args(args, info.size)
+    lens = online if online is not None else None if writer is None else lens_from_args(args, info.size)
     return LiveCorrector(lens, info.size, info.rate, max_delay=args.max_delay, camera=camera,
                          model=MODEL_NAMES[args.distortion_model], fit=args.fit, interpolation=args.interpolation,
-                         backend=args.backend, codec=info.codec, frames=writer)
+                         backend=args.backend, codec=info.codec, frames=writer, tracker=tracker)
+
+
+def _warm_imports(args: argparse.Namespace) -> None:
+    """What the set-up after the first frame would otherwise import or build while the stream's
+    frames pile up behind it (measured: 0.5 s, 13 frames of a 25p stream lost at the start): the
+    corrector, the stream loop, the encoders' module and, with samples, the OpenTrackIO schema's
+    validator."""
+    from ..media import video_io  # noqa: F401
+    from ..video import live, live_stream  # noqa: F401
+
+    if opentrackio_wanted(args):
+        from ..export.opentrackio import validate_sample
+
+        try:
+            validate_sample({})
+        except ValueError:
+            pass
+
+
+def _warm_tracker(args: argparse.Namespace):
+    """``--camera``'s tracker, its worker started and warmed up before the input is opened (the
+    stream is given to it once open: :meth:`~glradial.tracking.live_camera.LiveCameraTracker.for_stream`)."""
+    if not args.camera:
+        return None
+    from ..tracking.live_camera import camera_tracker
+
+    return camera_tracker()
+
+
+def _sample_camera(args: argparse.Namespace, info):
+    """The sensor, rate and timecode of the samples; with ``--camera`` the focal length is measured
+    per frame (the 1 mm here is replaced in every sample that has a camera)."""
+    if not args.camera:
+        return camera_from_args(args, info.size, info.rate, info.timecode)
+    from ..export.opentrackio import Camera
+    from .engine_options import sensor_mm
+
+    width_mm, height_mm = sensor_mm(args)
+    return Camera(info.size, width_mm, 1.0, height_mm, rate=info.rate, timecode=info.timecode)
 
 
 def _status_printer(quiet: bool):
@@ -171,13 +247,17 @@ def run(args: argparse.Namespace) -> int:
     try:
         online = _online_lens(args) if args.auto else None
         opened.append((online, "close"))
+        warm = _warm_tracker(args)  # the camera search warmed up before the input is opened
+        opened.append((warm, "close"))
+        _warm_imports(args)
         source = _open_source(args)
         opened.append((source, "close"))
         info = source.info
-        camera = camera_from_args(args, info.size, info.rate, info.timecode) if opentrackio_wanted(args) else None
-        writer = _open_output(args, info)
+        camera = _sample_camera(args, info) if opentrackio_wanted(args) else None
+        writer = None if args.output == NO_OUTPUT else _open_output(args, info)
         opened.append((writer, "abort"))
-        corrector = _corrector(args, info, writer, camera, online)
+        tracker = warm.for_stream(info.size, info.rate) if warm is not None else None
+        corrector = _corrector(args, info, writer, camera, online, tracker)
         opened.append((corrector, "close"))
         corrector.warm_up(source.first_frame)
         sender, samples = _sample_outputs(args)
@@ -190,13 +270,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _open_source(args: argparse.Namespace):
-    from ..media.stream_io import LiveSource
+    from ..media.stream_io import open_live_source
 
     if not getattr(args, "quiet", False):  # the set-up is done: a sender may start now
         wait = f" (up to {args.idle_timeout:g} s)" if "://" in args.input else ""
         sys.stderr.write(f"glradial live: waiting for {'stdin' if args.input == '-' else args.input}{wait}\n")
         sys.stderr.flush()
-    return LiveSource(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
+    return open_live_source(args.input, idle_timeout=args.idle_timeout, realtime=args.realtime)
 
 
 def _sample_outputs(args: argparse.Namespace):
@@ -231,33 +311,43 @@ def _stream(args, source, writer, corrector, sender, samples, run_live) -> int:
         if sender is not None:
             sender.close()
     stats = corrector.stats
-    if writer.frames_written == 0:
-        writer.abort()
-        if samples is not None:
-            samples.abort()
-    else:
-        try:
-            writer.close()
-        except BaseException:
-            if samples is not None:
-                samples.abort()
-            raise
-        if samples is not None:
-            samples.close()
+    written = _close_outputs(writer, samples, stats)
     if status is not None and sys.stderr.isatty():
         sys.stderr.write("\n")
-    _report(args, ended, stats, writer.frames_written, source.frames_read, sender, samples)
+    _report(args, ended, stats, written, source.frames_read, sender, samples)
     if failure is not None:
         raise failure
-    if writer.frames_written == 0:
+    if written == 0:
         raise ValueError(f"live input {args.input!r}: no frame was written ({ended})")
     return 0
+
+
+def _close_outputs(writer, samples, stats) -> int:
+    """Close the video (None: OUTPUT none) and the samples file complete, or abort both when no frame
+    went out; returns the frames out."""
+    written = stats.left if writer is None else writer.frames_written
+    if written == 0:
+        if writer is not None:
+            writer.abort()
+        if samples is not None:
+            samples.abort()
+        return 0
+    try:
+        if writer is not None:
+            writer.close()
+    except BaseException:
+        if samples is not None:
+            samples.abort()
+        raise
+    if samples is not None:
+        samples.close()
+    return written
 
 
 def _report(args, ended: str, stats, written: int, read: int, sender, samples) -> None:
     """The closing lines (stderr, also with -q: a short output is never silent)."""
     why = {"eof": "end of input", "idle": f"no data for {args.idle_timeout:g} s", "error": "input error"}.get(ended, ended)
-    target = "stdout" if args.output == "-" else args.output
+    target = {"-": "stdout", NO_OUTPUT: "no video (OUTPUT none)"}.get(args.output, args.output)
     lines = [f"glradial live: {why}: {read} frames read, {written} written to {target}, dropped {stats.dropped}, "
              f"late {stats.late} (over {stats.max_delay} frames); delay p50 {stats.delay_percentile(50):.2f} "
              f"p95 {stats.delay_percentile(95):.2f} max {max(stats.delays, default=float('nan')):.2f} frames"]

@@ -41,7 +41,8 @@ from .overscan import overscan_factor
 
 __all__ = [
     "PROTOCOL", "SENSOR_PRESETS", "Camera", "lens_object", "track_samples", "validate_sample", "encode_sample",
-    "write_samples", "parse_timecode", "timecode_at", "require_cbor2", "frame_sample",
+    "write_samples", "parse_timecode", "timecode_at", "require_cbor2", "frame_sample", "camera_transform",
+    "camera_frame_sample",
 ]
 
 PROTOCOL = {"name": "OpenTrackIO", "version": [1, 0, 1]}
@@ -251,14 +252,64 @@ def frame_sample(lens: Lens, camera: Camera, index: int, source_id: str, *, mode
     static = _static(camera, None, lens_and_error[0]["distortion"][0]["overscan"])
     timing = _timing(camera, int(index))
     if timestamp_s is not None:
-        if not timestamp_s >= 0:
-            raise ValueError(f"timestamp_s must be >= 0 seconds, got {timestamp_s!r}")
-        seconds = int(timestamp_s)
-        timing["sampleTimestamp"] = {"seconds": seconds, "nanoseconds": min(int(round((timestamp_s - seconds) * 1e9)), 999_999_999)}
+        timing["sampleTimestamp"] = _timestamp(timestamp_s)
     known = uncertainty_px is not None and math.isfinite(uncertainty_px)
     return _sample(lens, lens_and_error, static, timing, source_id, estimated=uncertainty_px is not None,
                    uncertainty_px=float(uncertainty_px) if known else None,
                    doubtful=None if doubtful is None else bool(doubtful), shot=None if shot is None else int(shot))
+
+
+def camera_transform(position_m: Sequence[float], pan_tilt_roll_deg: Sequence[float]) -> dict:
+    """The OpenTrackIO ``transforms`` entry (id ``"camera"``) of a glradial camera at ``position_m``
+    (pitch metres: :mod:`glradial.pitch.template`'s axes, z up) with glradial's pan, tilt, roll
+    (degrees, :class:`glradial.camera.model.Camera`). OpenTrackIO: Z up, Y forward at pan = tilt =
+    roll = 0, pan counter-clockwise seen from above, tilt up: glradial's pan (toward +x) and tilt
+    (down) change sign."""
+    x, y, z = (float(v) for v in position_m)
+    pan, tilt, roll = (float(v) for v in pan_tilt_roll_deg)
+    return {"translation": {"x": x, "y": y, "z": z}, "rotation": {"pan": -pan, "tilt": -tilt, "roll": roll}, "id": "camera"}
+
+
+def camera_frame_sample(fields: dict, camera: Camera, index: int, source_id: str, *, model: str = MODEL_UD,
+                        timestamp_s: float | None = None, lens_objects: dict | None = None) -> dict:
+    """The validated sample of one frame of a stream whose whole camera is tracked: ``fields`` the
+    frame's fields as ``glradial calibrate --json`` writes them (``k1``, ``k2``, ``focal`` in image
+    widths, ``position_m``, ``pan_deg``/``tilt_deg``/``roll_deg``, ``homography``, ``doubtful``,
+    ``reason``, ``uncertainty_px``; without ``k1`` the frame has no camera), ``camera`` the sensor,
+    rate and timecode (its ``focal_mm`` is replaced by the measured one). The sample carries the
+    transform, ``lens.pinholeFocalLength`` (mm) and the distortion where the frame has a camera,
+    the timing as :func:`frame_sample`'s, ``tracker.status`` ``"camera tracked"`` or ``"camera
+    tracked: DOUBTFUL (reason)"``, and ``fields`` whole in ``custom.glradial``. ``lens_objects``: a
+    dict the caller keeps to cache the lens objects (a stream keeps one lens for many frames)."""
+    timing = _timing(camera, int(index))
+    if timestamp_s is not None:
+        timing["sampleTimestamp"] = _timestamp(timestamp_s)
+    doubtful = bool(fields.get("doubtful", True))
+    sample: dict = {
+        "protocol": PROTOCOL, "sampleId": uuid.uuid4().urn, "sourceId": source_id, "sourceNumber": 1, "timing": timing,
+        "tracker": {"notes": "glradial camera tracked from the pitch markings (custom.glradial: calibrate --json fields; "
+                             "uncertainty_px at 1280 wide, ~p90 of the keypoint RMS)", "recording": False,
+                    "status": f"camera tracked: DOUBTFUL ({fields.get('reason')})" if doubtful else "camera tracked"},
+        "custom": {"glradial": {k: v for k, v in fields.items() if v is not None}},
+    }
+    if "k1" in fields:
+        lens = Lens(fields["k1"], fields["k2"])
+        cache = lens_objects if lens_objects is not None else {}
+        if (lens, model) not in cache:
+            cache[(lens, model)] = lens_object(lens, camera, model=model)[0]
+        sample["lens"] = {**cache[(lens, model)], "pinholeFocalLength": float(fields["focal"]) * camera.sensor_width_mm}
+        sample["static"] = _static(camera, None, sample["lens"]["distortion"][0]["overscan"])
+        sample["transforms"] = [camera_transform(fields["position_m"], (fields["pan_deg"], fields["tilt_deg"], fields["roll_deg"]))]
+    validate_sample(sample)
+    return sample
+
+
+def _timestamp(seconds_in: float) -> dict:
+    """OpenTrackIO ``sampleTimestamp`` of a presentation time (s >= 0, the stream's clock)."""
+    if not seconds_in >= 0:
+        raise ValueError(f"timestamp_s must be >= 0 seconds, got {seconds_in!r}")
+    seconds = int(seconds_in)
+    return {"seconds": seconds, "nanoseconds": min(int(round((seconds_in - seconds) * 1e9)), 999_999_999)}
 
 
 @lru_cache(maxsize=1)

@@ -97,6 +97,27 @@ def parse_packet(data: bytes) -> Packet:
     return Packet(encoding, sequence, offset, bool(length & LAST_SEGMENT), payload)
 
 
+def reassemble(datagrams: Iterable[bytes]) -> list[bytes]:
+    """The payloads of received datagrams, in the order their last segments arrived: each payload's
+    segments (same sequence number) joined by offset; a payload with a segment missing is left out."""
+    parts: dict[int, dict[int, bytes]] = {}
+    out = []
+    for data in datagrams:
+        packet = parse_packet(data)
+        segments = parts.setdefault(packet.sequence, {})
+        segments[packet.offset] = packet.payload
+        if packet.last:
+            joined, at = b"", 0
+            for offset in sorted(segments):
+                if offset != at:
+                    break
+                joined, at = joined + segments[offset], at + len(segments[offset])
+            else:
+                out.append(joined)
+            del parts[packet.sequence]
+    return out
+
+
 def parse_address(text: str) -> tuple[str, int]:
     """``HOST:PORT`` -> ``(host, port)``; ``ValueError`` naming the text otherwise."""
     host, _, port = text.rpartition(":")

@@ -32,9 +32,10 @@ from typing import Iterator
 
 import av
 
+from .srt_relay import SrtRelay, is_srt, srt_route
 from .video_io import EncodeOptions, VideoInfo, VideoWriter, ffmpeg_error, frame_tags, stream_info
 
-__all__ = ["LiveSource", "StreamWriter", "open_live_output", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
+__all__ = ["LiveSource", "StreamWriter", "open_live_output", "open_live_source", "check_live_output", "source_kind", "NETWORK_SCHEMES", "STREAM_OUTPUT_FORMAT"]
 
 #: URL schemes read as network streams (ended by ``idle_timeout``)
 NETWORK_SCHEMES = ("udp", "rtp", "srt", "tcp", "rtsp", "rtmp", "http", "https")
@@ -53,15 +54,17 @@ UDP_FIFO_PACKETS = 50_000
 
 
 def source_kind(source: str) -> str:
-    """``"stdin"``, ``"network"``, ``"device"`` or ``"file"`` for an INPUT text (module docstring)."""
+    """``"stdin"``, ``"network"``, ``"ndi"``, ``"device"`` or ``"file"`` for an INPUT text (module docstring)."""
     if source == "-":
         return "stdin"
     scheme, sep, _ = source.partition("://")
     if sep:
         if scheme.lower() in NETWORK_SCHEMES:
             return "network"
+        if scheme.lower() == "ndi":
+            return "ndi"
         raise ValueError(f"input {source!r}: unknown URL scheme {scheme!r}; live inputs take {', '.join(NETWORK_SCHEMES)}, "
-                         "'-' (stdin), a V4L2 device or a file")
+                         "ndi, '-' (stdin), a V4L2 device or a file")
     return "device" if source.startswith("/dev/video") else "file"
 
 
@@ -97,17 +100,30 @@ class LiveSource:
             raise ValueError(f"idle_timeout must be > 0 seconds, got {idle_timeout!r}")
         self.source, self.kind, self.realtime = source, source_kind(source), bool(realtime)
         self.idle_timeout = float(idle_timeout)
+        self.relay = None
         url, keywords = _open_arguments(source, self.kind, self.idle_timeout)
+        if is_srt(source) and srt_route() == "ffmpeg":  # PyAV's wheels have no SRT: the system's FFmpeg relays it
+            self.relay = SrtRelay(source, "in", idle_timeout=self.idle_timeout)
+            url, keywords = self.relay.url, {"format": STREAM_OUTPUT_FORMAT, **_open_arguments(source, "stdin", 0)[1]}
         try:
             self._container = av.open(url, "r", **keywords)
         except av.ExitError:
+            self._close_relay()
             raise ValueError(f"live input {source!r}: no data within {self.idle_timeout:g} s") from None
         except (av.FFmpegError, UnicodeDecodeError) as err:
-            raise ValueError(f"cannot read live input {ffmpeg_error(source, err)} (not a stream FFmpeg knows, "
-                             "or no video in it)") from None
+            why = (self.relay.error() if self.relay is not None else "") or "not a stream FFmpeg knows, or no video in it"
+            self._close_relay()
+            raise ValueError(f"cannot read live input {ffmpeg_error(source, err)} ({why})") from None
+        try:
+            self._start()
+        except BaseException:
+            self.close()
+            raise
+
+    def _start(self) -> None:
+        """The stream, its first frames and its :attr:`info` (``ValueError`` for none)."""
         if not self._container.streams.video:
-            self._container.close()
-            raise ValueError(f"live input {source!r} holds no video stream")
+            raise ValueError(f"live input {self.source!r} holds no video stream")
         self.stream = self._container.streams.video[0]
         self.stream.thread_type = "AUTO"
         self.frames_read = 0
@@ -153,6 +169,7 @@ class LiveSource:
             except StopIteration:
                 self._container.close()
                 why = f"no data within {self.idle_timeout:g} s" if self.ended == "idle" else "no frame could be decoded"
+                why = (self.relay.error() if self.relay is not None else "") or why
                 raise ValueError(f"live input {self.source!r}: {why}") from None
             if frames:
                 return frames
@@ -185,12 +202,18 @@ class LiveSource:
     def close(self) -> None:
         with contextlib.suppress(Exception):
             self._container.close()
+        self._close_relay()
+
+    def _close_relay(self) -> None:
+        if self.relay is not None:
+            self.relay.close()
 
 
 class StreamWriter(VideoWriter):
     """:class:`~glradial.media.video_io.VideoWriter` into MPEG-TS on standard output (``target``
-    ``-``) or a ``udp://`` URL: written as it goes, not atomically (there is no file to rename);
-    :meth:`close` flushes the encoder and ends the stream, :meth:`abort` stops it where it is."""
+    ``-``), a ``udp://`` or an ``srt://`` URL (:mod:`glradial.media.srt_relay`): written as it goes,
+    not atomically (there is no file to rename); :meth:`close` flushes the encoder and ends the
+    stream, :meth:`abort` stops it where it is."""
 
     container_format = STREAM_OUTPUT_FORMAT
 
@@ -200,32 +223,76 @@ class StreamWriter(VideoWriter):
         url = "pipe:1" if target == "-" else target
         if url.lower().startswith("udp://") and "pkt_size=" not in url:
             url += ("&" if "?" in url else "?") + f"pkt_size={UDP_PACKET_SIZE}"
+        self.relay = None
+        if is_srt(target) and srt_route() == "ffmpeg":  # PyAV's wheels have no SRT: the system's FFmpeg relays it
+            self.relay = SrtRelay(target, "out")
+            url = self.relay.url
         self.path = target
         self.info, self.order, self.options = info, order, options
         self.sequence, self.frames_written, self._closed = False, 0, False
         self._tmpdir, self._atomic = None, contextlib.nullcontext()
         try:
             self._open(url, [])
+            if url.startswith("pipe:"):  # stdout or the SRT relay: each frame's packets go at once, not in 32 KB bursts
+                self._container.flags |= av.container.Flags.flush_packets.value
         except BaseException:
             self.abort()
             raise
 
+    def close(self) -> Path:
+        """Flush the encoder and end the stream (an SRT relay flushed and ended too)."""
+        try:
+            return super().close()
+        finally:
+            if self.relay is not None:
+                self.relay.close()
+
+    def abort(self) -> None:
+        super().abort()
+        if getattr(self, "relay", None) is not None:
+            self.relay.close(wait=1.0)
+
 
 def check_live_output(target: str) -> str:
-    """``"stdout"``, ``"udp"`` or ``"file"`` for an OUTPUT text; ``ValueError`` for another URL."""
+    """``"stdout"``, ``"udp"``, ``"srt"``, ``"ndi"`` or ``"file"`` for an OUTPUT text; ``ValueError``
+    for another URL, or for srt:// where no FFmpeg has SRT (:func:`glradial.media.srt_relay.srt_route`);
+    ``RuntimeError`` for ndi:// without the NDI extra."""
     if target == "-":
         return "stdout"
     scheme, sep, _ = target.partition("://")
     if not sep:
         return "file"
-    if scheme.lower() != "udp":
-        raise ValueError(f"output {target!r}: a live output URL must be udp://HOST:PORT (MPEG-TS), or give a file or '-'")
-    return "udp"
+    if scheme.lower() == "ndi":
+        from .ndi_io import require_ndi
+
+        require_ndi()
+        return "ndi"
+    if scheme.lower() not in ("udp", "srt"):
+        raise ValueError(f"output {target!r}: a live output URL must be udp://HOST:PORT or srt://HOST:PORT (MPEG-TS), "
+                         "ndi://NAME, or give a file or '-'")
+    if scheme.lower() == "srt":
+        srt_route()
+    return scheme.lower()
 
 
 def open_live_output(target: str, info: VideoInfo, *, options: EncodeOptions = EncodeOptions(),
                      overwrite: bool = False) -> VideoWriter:
     """The writer of OUTPUT ``target`` (module docstring) for frames like ``info``."""
-    if check_live_output(target) == "file":
+    kind = check_live_output(target)
+    if kind == "file":
         return VideoWriter(target, info, options=options, overwrite=overwrite)
+    if kind == "ndi":
+        from .ndi_io import NdiWriter
+
+        return NdiWriter(target, info)
     return StreamWriter(target, info, options=options)
+
+
+def open_live_source(source: str, *, idle_timeout: float = 5.0, realtime: bool = False):
+    """The live input ``source``: an :class:`~glradial.media.ndi_io.NdiSource` for ``ndi://NAME``,
+    else a :class:`LiveSource` (module docstring)."""
+    if source_kind(source) == "ndi":
+        from .ndi_io import NdiSource
+
+        return NdiSource(source, idle_timeout=idle_timeout)
+    return LiveSource(source, idle_timeout=idle_timeout, realtime=realtime)

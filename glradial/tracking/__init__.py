@@ -10,5 +10,6 @@ from ..lazy import attach
 
 if TYPE_CHECKING:
     from .camera_track import CameraTracker, Motion, carry, motion_of, track_cameras
+    from .live_camera import LiveCamera, LiveCameraTracker, camera_tracker
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

@@ -40,6 +40,12 @@ Conventions:
 * ``camera`` (:class:`glradial.export.opentrackio.Camera`): each frame gets its OpenTrackIO sample
   (:func:`glradial.export.opentrackio.frame_sample`), with ``custom.glradial`` k1, k2 (the lens
   reported: the estimate even where it is not applied), uncertainty and doubt as for files.
+* ``tracker`` (with ``camera``; :func:`glradial.tracking.live_camera.camera_tracker`): each frame's
+  whole camera, ``LiveFrame.tracked``, and a sample with its transform, focal length and lens
+  (:func:`glradial.export.opentrackio.camera_frame_sample`). ``lens=None``: frames pass through
+  uncorrected (the tracking only).
+* :meth:`LiveCorrector.warm_up` starts a given lens's maps on a helper thread: frames before they
+  are ready pass through uncorrected, flagged doubtful (``reason`` ``"pending"``).
 """
 
 from __future__ import annotations
@@ -60,7 +66,7 @@ import numpy as np
 from ..lens.lens import Lens, as_lens
 from ..media.frames import to_rgb8
 from ..media.video_io import VideoInfo, frame_planes, yuv_layout
-from .live_lens import SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
+from .live_lens import PENDING, SAMPLE_WIDTH, BundledEstimator, LensState, OnlineShotLens
 from .video_pipeline import FrameCorrector
 
 __all__ = ["LiveCorrector", "LiveFrame", "LiveStats", "DEFAULT_MAX_DELAY"]
@@ -79,6 +85,8 @@ READY_SLOTS = 1
 COSTS_KEPT = 9
 #: OpenTrackIO lens objects kept per lens (a stream changes lens only between shots or on a zoom)
 LENS_OBJECTS = 64
+#: the lens reported while none is given (tracking only, ``lens=None``)
+IDENTITY = Lens(0.0, 0.0)
 
 
 @dataclass
@@ -96,6 +104,7 @@ class LiveFrame:
     state: LensState
     sample: dict | None
     arrived: float
+    tracked: object | None = None  # the frame's camera (glradial.tracking.live_camera.LiveCamera) with a tracker
 
 
 @dataclass
@@ -162,6 +171,11 @@ class _MapsAhead:
         self._built: deque = deque(maxlen=4)
         self._thread: threading.Thread | None = None
 
+    @property
+    def started(self) -> bool:
+        """Whether a build was ever started."""
+        return self._thread is not None
+
     def ready(self, lens: Lens, frame) -> bool:
         """Whether ``lens``'s maps are built; if not, and no build is running, start one on ``frame``."""
         if lens in self._built:
@@ -204,18 +218,24 @@ class LiveCorrector:
     that cannot be pickled) for ``"auto"``, whose worker is started and waited for here; or an
     OnlineShotLens made beforehand as ``lens`` (closed with this corrector)."""
 
-    def __init__(self, lens: Lens | tuple[float, float] | str | OnlineShotLens, size: tuple[int, int], rate: float | Fraction, *,
-                 max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None, fit: str = "same",
-                 interpolation: str = "linear", backend: str = "cpu", codec: str = "", frames=None,
-                 estimator: Callable | None = None, auto: dict | None = None) -> None:
+    def __init__(self, lens: Lens | tuple[float, float] | str | OnlineShotLens | None, size: tuple[int, int],
+                 rate: float | Fraction, *, max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None,
+                 fit: str = "same", interpolation: str = "linear", backend: str = "cpu", codec: str = "", frames=None,
+                 estimator: Callable | None = None, auto: dict | None = None, tracker=None) -> None:
         if isinstance(max_delay, bool) or not isinstance(max_delay, (int, np.integer)) or max_delay < 1:
             raise ValueError(f"max_delay must be an integer >= 1 (frames), got {max_delay!r}")
         info = VideoInfo.of(size, rate, codec=codec)
         self.size, self.rate, self.max_delay = info.size, info.rate, int(max_delay)
         self.camera, self.model, self.codec, self.frames = camera, model, codec, frames
+        if tracker is not None and camera is None:
+            raise ValueError("tracker needs camera (the sensor, rate and timecode of the samples)")
+        self.tracker = tracker
         self._corrector = FrameCorrector(backend, fit, interpolation)
         self._online: OnlineShotLens | None = None
-        if isinstance(lens, OnlineShotLens):
+        self.passthrough = lens is None
+        if lens is None:
+            self.lens = None
+        elif isinstance(lens, OnlineShotLens):
             self._online, self.lens = lens, None
         elif isinstance(lens, str):
             if lens != "auto":
@@ -238,7 +258,7 @@ class LiveCorrector:
         self._costs: deque = deque(maxlen=COSTS_KEPT)  # the last corrections' times (s)
         self._applied: Lens | None = None  # --auto: the lens applied now
         self._ahead = _MapsAhead(self._twin, self.size)
-        if camera is not None and self.lens is not None:
+        if camera is not None and (self.lens is not None or self.passthrough):
             self._sample(0, 0.0, self._state(0, None))  # the schema validator and the lens object, made now
         self._thread = threading.Thread(target=self._work, name="glradial-live-correct", daemon=True)
         self._thread.start()
@@ -330,6 +350,8 @@ class LiveCorrector:
         self._ahead.join()
         if self._online is not None:
             self._online.close()
+        if self.tracker is not None:
+            self.tracker.close()
         atexit.unregister(self.close)
 
     def __enter__(self) -> "LiveCorrector":
@@ -377,22 +399,37 @@ class LiveCorrector:
                 self._done = True
                 self._cond.notify_all()
 
-    def warm_up(self, frame: np.ndarray | av.VideoFrame) -> None:
-        """Build the given lens's maps (and the planar set-up) on ``frame``, one like those to come,
-        before the stream starts, so that the first frame costs no more than the others (the frames
-        behind it would otherwise wait for its maps, and be dropped). Call it before the first
-        :meth:`push`; a no-op for ``"auto"`` (its lenses are built ahead as they come) and the GL backend."""
+    def warm_up(self, frame: np.ndarray | av.VideoFrame, wait: bool = False) -> None:
+        """Start building the given lens's maps (and the planar set-up) on ``frame``, one like those
+        to come, on a helper thread, so that the stream starts at once: frames that come before the
+        maps are ready pass through uncorrected, flagged doubtful (reason ``"pending"``), rather than
+        wait and be dropped. ``wait``: build them now instead (every frame corrected, the first ones
+        perhaps dropped). Call it before the first :meth:`push`; a no-op for ``"auto"`` (its lenses
+        are built ahead as they come), without a lens and for the GL backend."""
         if self.lens is None or self._corrector.backend != "cpu" or self.stats.pushed:
             return
         if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
             frame = frame.to_ndarray(format="rgb24")
-        _dry_run(self._corrector, frame, self.lens, self.size)
+        if wait:
+            _dry_run(self._corrector, frame, self.lens, self.size)
+            self._applied = self.lens
+        else:
+            self._ahead.ready(self.lens, frame)
 
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None
+        tracked = self.tracker.push(frame, index / float(self.rate)) if self.tracker is not None else None
+        if self.passthrough:  # tracking only: the frame as it came
+            sample = self._sample(index, timestamp, self._state(index, None), tracked) if self.camera is not None else None
+            return LiveFrame(index, timestamp, pts, frame, self._state(index, None), sample, arrived, tracked)
         if isinstance(frame, av.VideoFrame) and not self._takes_planes(frame):
             frame = frame.to_ndarray(format="rgb24")
         state = self._state(index, frame)
+        if self.lens is not None and self._applied is None and self._ahead.started:  # warm_up's maps not built yet
+            if not self._ahead.ready(self.lens, frame):
+                state = LensState(0, None, self.lens, None, True, PENDING)
+            else:
+                self._applied = self.lens
         if self._online is not None and self._corrector.backend == "cpu":  # a new lens: once its maps are built
             wanted = state.applied
             if wanted is None or wanted == self._applied or self._ahead.ready(wanted, frame):
@@ -402,8 +439,8 @@ class LiveCorrector:
             image = self._corrector.planar(frame, state.applied, self.frames, pts)
         else:
             image = frame if state.applied is None else self._corrector(frame, state.applied)
-        sample = self._sample(index, timestamp, state) if self.camera is not None else None
-        return LiveFrame(index, timestamp, pts, image, state, sample, arrived)
+        sample = self._sample(index, timestamp, state, tracked) if self.camera is not None else None
+        return LiveFrame(index, timestamp, pts, image, state, sample, arrived, tracked)
 
     def _twin(self) -> FrameCorrector:
         """A corrector like the worker's (same options and planes), for :class:`_MapsAhead`."""
@@ -425,14 +462,20 @@ class LiveCorrector:
 
     def _state(self, index: int, frame) -> LensState:
         if self._online is None:
-            return LensState(0, self.lens, self.lens, None, False, "")
+            return LensState(0, self.lens, self.lens or IDENTITY, None, False, "")
         return self._online.observe(index, _thumbnail(frame), lambda: _sample_copy(frame))
 
-    def _sample(self, index: int, timestamp: float, state: LensState) -> dict:
+    def _sample(self, index: int, timestamp: float, state: LensState, tracked=None) -> dict:
         from ..export.engines import MODEL_UD
-        from ..export.opentrackio import frame_sample, lens_object
+        from ..export.opentrackio import camera_frame_sample, frame_sample, lens_object
 
         lens, model = state.reported, self.model or MODEL_UD
+        if self.tracker is not None:
+            fields = tracked.fields() if tracked is not None else {"doubtful": True, "reason": PENDING}
+            while len(self._objects) > LENS_OBJECTS:
+                self._objects.popitem(last=False)
+            return camera_frame_sample(fields, self.camera, index, self.source_id, model=model,
+                                       timestamp_s=timestamp if timestamp >= 0 else None, lens_objects=self._objects)
         objects = self._objects.get(lens)
         if objects is None:
             objects = self._objects[lens] = lens_object(lens, self.camera, model=model)
@@ -441,7 +484,7 @@ class LiveCorrector:
         estimated = self._online is not None
         uncertainty = (state.uncertainty_px if state.uncertainty_px is not None else float("nan")) if estimated else None
         return frame_sample(lens, self.camera, index, self.source_id, model=model, uncertainty_px=uncertainty,
-                            doubtful=state.doubtful if estimated else None, shot=state.shot if estimated else None,
+                            doubtful=state.doubtful if estimated or state.doubtful else None, shot=state.shot if estimated else None,
                             timestamp_s=timestamp if timestamp >= 0 else None, lens_and_error=objects)
 
 

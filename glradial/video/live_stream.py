@@ -6,7 +6,7 @@
 * the corrector's **worker** thread corrects them (planar YUV in its own samples where the output
   takes it, :mod:`glradial.remapping.planes`);
 * the caller's thread (:func:`run_live`) encodes each corrected frame (the writer: a file, stdout or
-  UDP, :func:`glradial.media.stream_io.open_live_output`), then sends its OpenTrackIO sample (UDP,
+  UDP, :func:`glradial.media.stream_io.open_live_output`; None: no video out), then sends its OpenTrackIO sample (UDP,
   :class:`glradial.export.opentrackio_udp.SampleSender`) and appends it to the samples file, and
   only then counts the frame as left (its delay, :class:`~glradial.video.live.LiveStats`): the
   sample goes as soon as its frame is out, never before.
@@ -84,7 +84,9 @@ def run_live(source, writer, corrector: LiveCorrector, *, sender=None, samples: 
             if corrector.done:
                 break
         else:
-            if isinstance(item.image, av.VideoFrame):
+            if writer is None:  # OUTPUT none: the samples only
+                pass
+            elif isinstance(item.image, av.VideoFrame):
                 writer.write(item.image)
             else:
                 writer.write(item.image, item.pts)
