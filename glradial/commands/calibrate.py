@@ -30,7 +30,11 @@ docs/CAMERA.md says what it can and cannot do."""
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser("calibrate", help="the whole camera (lens, focal length, pose) from the pitch markings",
                                    description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("input", metavar="IMG|VIDEO", help="an image (PNG, JPEG, TIFF) or a video")
+    from . import InputPaths
+
+    parser.add_argument("paths", metavar="IMG|VIDEO", nargs="+", action=InputPaths,
+                        help="an image (PNG, JPEG, TIFF) or a video; with --out-dir DIR: many (files, folders, globs, @LIST), "
+                             "each calibration in DIR/NAME.json")
     parser.add_argument("--json", action="store_true", help="one JSON object per frame instead of text")
     parser.add_argument("--overlay", metavar="OUT", help="write the frame with the projected markings (an image; a video's last frame)")
     parser.add_argument("--topview", metavar="OUT", help="write the frame warped onto the pitch plane (8 px per metre)")
