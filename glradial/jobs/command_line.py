@@ -19,7 +19,7 @@ from pathlib import Path
 from ..commands import UsageError, non_negative_int, positive_float, positive_int, show_progress
 from .tasks import JOB_COMMANDS, CommandWork, planned_outputs
 
-__all__ = ["add_job_options", "wants_job", "check_one_file_form", "run_job_command", "JOB_OPTIONS", "runner_factory"]
+__all__ = ["add_job_options", "wants_job", "check_one_file_form", "run_job_command", "JOB_OPTIONS", "runner_factory", "closing"]
 
 #: the options a job adds to a command (never handed to the command's own run)
 JOB_OPTIONS = ("out_dir", "workers", "ray", "retries", "gpus_per_worker")
@@ -120,10 +120,10 @@ def run_job_command(args: argparse.Namespace) -> int:
                       lambda source: planned_outputs(args.command, options, source),
                       retries=1 if args.retries is None else args.retries, overwrite=bool(getattr(args, "overwrite", False)),
                       progress=show_progress(args))
-    return _closing(args.command, summary, Path(args.out_dir))
+    return closing(args.command, summary, Path(args.out_dir))
 
 
-def _closing(command: str, summary, out_dir: Path) -> int:
+def closing(command: str, summary, out_dir: Path) -> int:
     """The closing summary (stdout) and the exit status."""
     if summary.report is None:
         return 0

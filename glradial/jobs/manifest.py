@@ -72,7 +72,7 @@ class Manifest:
         entry = self.entries.get(name)
         if not entry or entry.get("status") != "done" or entry.get("digest") != digest or entry.get("options_digest") != self.digest:
             return False
-        return all((self.path.parent / output).is_file() for output in entry.get("outputs", []))
+        return all((self.path.parent / output).exists() for output in entry.get("outputs", []))
 
     def owns(self, output: str) -> bool:
         """Whether the file ``output`` in DIR was planned or written by a run of this job."""

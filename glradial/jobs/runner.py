@@ -63,7 +63,10 @@ def _clear_stale(manifest: Manifest, name: str) -> None:
     """Remove the outputs an earlier run left for ``name`` (redone now) and its staging leftovers."""
     out_dir = manifest.path.parent
     for output in manifest.entries.get(name, {}).get("outputs", []) + manifest.entries.get(name, {}).get("planned", []):
-        (out_dir / output).unlink(missing_ok=True)
+        if (out_dir / output).is_dir():
+            shutil.rmtree(out_dir / output)
+        else:
+            (out_dir / output).unlink(missing_ok=True)
     for left in (out_dir / STAGING).glob(f"{name}.*"):
         shutil.rmtree(left, ignore_errors=True)
 

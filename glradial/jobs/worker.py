@@ -61,10 +61,10 @@ def run_task(work: Callable[[str, Path], dict], task: Task) -> Result:
     staging = Path(tempfile.mkdtemp(prefix=f"{task.name}.", dir=root))
     try:
         facts = work(task.source, staging) or {}
-        written = sorted(p.name for p in staging.iterdir() if p.is_file() and not p.name.startswith("."))
+        written = sorted(p.name for p in staging.iterdir() if not p.name.startswith("."))
         if not written:
             raise RuntimeError("the command wrote no output")
-        for name in written:
+        for name in written:  # a file, or a folder (a crops shard) moved whole
             os.replace(staging / name, Path(task.out_dir) / name)
         return Result(task.name, written, facts, time.perf_counter() - start, worker_name())
     except Exception as err:  # the job records it and goes on with the other inputs

@@ -1,0 +1,71 @@
+"""``glradial crops PANORAMA ... --out DIR --workers N | --ray``: the crops dataset in shards, one per
+panorama, each a complete crops dataset of its own (:mod:`glradial.synthesis.dataset`) in
+``DIR/<panorama file name>.crops/``, run as a job (manifest, retries, report; :mod:`glradial.jobs.runner`).
+
+A shard is fixed by the settings alone, whatever the number of workers: panorama ``j`` (in the order
+given) gets ``count // P`` crops, one more for ``j < count % P``; its split is the one
+:func:`~glradial.synthesis.dataset.assign_splits` gives it among all ``P`` panoramas with ``--seed``
+(so no panorama is in two splits, as in one dataset); its crops are drawn with the seed
+``SeedSequence([seed, j])`` gives. A shard is written in the worker's staging folder and moved into
+place complete.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..commands import show_progress
+from ..synthesis.dataset import SPLITS, assign_splits, write_crops_dataset
+
+__all__ = ["CropShardWork", "shard_plan", "run_crop_shards"]
+
+
+def shard_plan(names: list[str], count: int, seed: int, splits) -> dict[str, tuple[int, int, str]]:
+    """``{panorama file name: (crops, shard seed, split)}`` of the module docstring."""
+    split_of = assign_splits(len(names), splits, seed)
+    plan = {}
+    for j, name in enumerate(names):
+        crops = count // len(names) + (1 if j < count % len(names) else 0)
+        shard_seed = int(np.random.SeedSequence([seed, j]).generate_state(1)[0])
+        plan[name] = (crops, shard_seed, split_of[j])
+    return plan
+
+
+@dataclass(frozen=True)
+class CropShardWork:
+    """``work(source, staging) -> facts`` writing one panorama's shard (picklable)."""
+
+    plan: dict
+    options: dict
+
+    def __call__(self, source: str, staging: Path) -> dict:
+        name = Path(source).name
+        crops, seed, split = self.plan[name]
+        if crops == 0:
+            raise ValueError(f"--count {self.options['count']} leaves no crop for panorama {source!r} (give at least one per panorama)")
+        fractions = tuple(1.0 if s == split else 0.0 for s in SPLITS)
+        o = self.options
+        summary = write_crops_dataset([source], staging / f"{name}.crops", count=crops, seed=seed, size=o["size"],
+                                      out_size=o["out_size"], inverse=o["inverse"], supersample=o["supersample"],
+                                      splits=fractions, image_format=o["format"])
+        return {"frames": summary.written + summary.skipped, "split": split}
+
+
+def run_crop_shards(args: argparse.Namespace) -> int:
+    """The sharded ``crops`` job; exit status 1 when a shard failed."""
+    from .command_line import closing, runner_factory
+    from .inputs import expand_inputs
+    from .runner import run_job
+
+    inputs = expand_inputs(args.panoramas)
+    options = {key: getattr(args, key) for key in ("count", "seed", "size", "out_size", "inverse", "supersample", "splits", "format")}
+    plan = shard_plan([p.name for p in inputs], args.count, args.seed, args.splits)
+    work = CropShardWork(plan, options)
+    summary = run_job("crops", inputs, args.out, runner_factory(work, args, len(inputs)), options,
+                      lambda source: [f"{source.name}.crops"], retries=1 if args.retries is None else args.retries,
+                      progress=show_progress(args))
+    return closing("crops", summary, Path(args.out))
