@@ -19,7 +19,7 @@ from pathlib import Path
 from ..commands import UsageError, non_negative_int, positive_float, positive_int, show_progress
 from .tasks import JOB_COMMANDS, CommandWork, planned_outputs
 
-__all__ = ["add_job_options", "wants_job", "check_one_file_form", "run_job_command", "JOB_OPTIONS", "runner_factory", "closing"]
+__all__ = ["add_job_options", "wants_job", "check_one_file_form", "run_job_command", "JOB_OPTIONS", "runner_factory", "closing", "command_options"]
 
 #: the options a job adds to a command (never handed to the command's own run)
 JOB_OPTIONS = ("out_dir", "workers", "ray", "retries", "gpus_per_worker")
@@ -73,7 +73,7 @@ def check_one_file_form(args: argparse.Namespace) -> None:
         raise UsageError(f"give {form} (got {len(paths)} paths), or many inputs with --out-dir DIR")
 
 
-def _options(args: argparse.Namespace) -> dict:
+def command_options(args: argparse.Namespace) -> dict:
     """The command's own options (what makes two runs the same job), without paths and job options."""
     return {k: v for k, v in sorted(vars(args).items()) if k not in _NOT_OPTIONS + JOB_OPTIONS and not k.startswith("job_")
             and k != "json"}
@@ -114,7 +114,7 @@ def run_job_command(args: argparse.Namespace) -> int:
     from .runner import run_job
 
     inputs = expand_inputs(args.paths if args.command != "estimate" else args.inputs)
-    options = _options(args)
+    options = command_options(args)
     work = CommandWork(args.command, options)
     summary = run_job(args.command, inputs, args.out_dir, runner_factory(work, args, len(inputs)), options,
                       lambda source: planned_outputs(args.command, options, source),

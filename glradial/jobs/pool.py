@@ -61,9 +61,16 @@ class ProcessRunner:
         return sum(slot.task is None for slot in self.slots)
 
     def submit(self, task: Task) -> None:
-        slot = next(s for s in self.slots if s.task is None)
+        index = next(i for i, s in enumerate(self.slots) if s.task is None)
+        if not self.slots[index].process.is_alive():  # died while idle: replaced before it is given work
+            self._close_slot(self.slots[index], kill=True)
+            self.slots[index] = _Slot(self._context, self._work, self._threads)
+        slot = self.slots[index]
         slot.task = task
-        slot.connection.send(task)
+        try:
+            slot.connection.send(task)
+        except OSError:  # it died just now: wait() sees its sentinel and reports the task as lost
+            pass
 
     def wait(self, timeout: float) -> list[tuple[Task, Result | None]]:
         """The tasks that ended within ``timeout`` s: ``(task, result)``, ``None`` for a worker that died."""
