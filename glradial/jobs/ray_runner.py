@@ -45,7 +45,7 @@ class RayRunner:
         self._ray = ray
         self._connected = not ray.is_initialized()  # this runner connects (and disconnects at the end)
         if self._connected:
-            local = {"include_dashboard": False, **(init or {})} if address is None else {"address": address}
+            local = {"address": "local", "include_dashboard": False, **(init or {})} if address is None else {"address": address}
             ray.init(log_to_driver=False, configure_logging=False, **local)
         if workers is None:
             workers = max(1, int(ray.cluster_resources().get("CPU", 1) // cpus_per_worker))
@@ -96,5 +96,8 @@ class RayRunner:
                 self._ray.kill(slot[0], no_restart=True)
             except Exception:  # an actor already gone
                 pass
+        running = [slot[2] for slot in self.slots if slot[2] is not None]
+        if running:  # ray.kill returns at once: wait until the killed actors' tasks have ended (they error out)
+            self._ray.wait(running, num_returns=len(running), timeout=30)
         if self._connected:
             self._ray.shutdown()

@@ -139,8 +139,11 @@ def run_job(command: str, inputs: list[Path], out_dir: str | Path, make_runner: 
             runner = make_runner()
             try:
                 _drive(runner, manifest, [p[0] for p in plan], retries, bar, summary)
-            except BaseException:  # Ctrl-C, SIGTERM: the workers are ended at once
+            except BaseException:  # Ctrl-C, SIGTERM: the workers are ended at once, then what they left is removed
                 runner.close(kill=True)
+                for task, *_ in plan:
+                    if manifest.entries[task.name]["status"] == "pending":
+                        _clear_stale(manifest, task.name)
                 raise
             runner.close()
     finally:
