@@ -26,8 +26,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
-
 from figures import write_figure
+
 from glradial.cli import build_parser
 from glradial.jobs.command_line import command_options
 from glradial.jobs.pool import ProcessRunner

@@ -101,26 +101,34 @@ def runner_factory(work, args: argparse.Namespace, tasks: int):
 
 def run_job_command(args: argparse.Namespace) -> int:
     """Run the job the command line asks for; the exit status (1 when an input failed)."""
-    if args.command == "crops":
-        from .crop_shards import run_crop_shards
+    from .runner import run_job
 
-        return run_crop_shards(args)
+    if args.command == "crops":
+        from .crop_shards import crop_job
+
+        inputs, work, options, planned = crop_job(args)
+        out_dir = args.out
+    else:
+        inputs, work, options, planned = _command_job(args)
+        out_dir = args.out_dir
+    summary = run_job(args.command, inputs, out_dir, runner_factory(work, args, len(inputs)), options, planned,
+                      retries=1 if args.retries is None else args.retries, overwrite=bool(getattr(args, "overwrite", False)),
+                      progress=show_progress(args))
+    return closing(args.command, summary, Path(out_dir))
+
+
+def _command_job(args: argparse.Namespace):
+    """``(inputs, work, options, planned)`` of ``correct``/``distort``/``estimate``/``calibrate`` over many inputs."""
     if args.command not in JOB_COMMANDS:
         raise UsageError(f"'{args.command}' does not run over many inputs (--out-dir is for {', '.join(JOB_COMMANDS)})")
     given = [f"--{name.replace('_', '-')}" for name in SINGLE_OUTPUTS if getattr(args, name, None)]
     if given:
         raise UsageError(f"{', '.join(given)} names one output; in a job each input's outputs go to --out-dir")
     from .inputs import expand_inputs
-    from .runner import run_job
 
     inputs = expand_inputs(args.paths if args.command != "estimate" else args.inputs)
     options = command_options(args)
-    work = CommandWork(args.command, options)
-    summary = run_job(args.command, inputs, args.out_dir, runner_factory(work, args, len(inputs)), options,
-                      lambda source: planned_outputs(args.command, options, source),
-                      retries=1 if args.retries is None else args.retries, overwrite=bool(getattr(args, "overwrite", False)),
-                      progress=show_progress(args))
-    return closing(args.command, summary, Path(args.out_dir))
+    return inputs, CommandWork(args.command, options), options, lambda source: planned_outputs(args.command, options, source)
 
 
 def closing(command: str, summary, out_dir: Path) -> int:

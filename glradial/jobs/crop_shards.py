@@ -18,10 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..commands import show_progress
 from ..synthesis.dataset import SPLITS, assign_splits, write_crops_dataset
 
-__all__ = ["CropShardWork", "shard_plan", "run_crop_shards"]
+__all__ = ["CropShardWork", "shard_plan", "crop_job"]
 
 
 def shard_plan(names: list[str], count: int, seed: int, splits) -> dict[str, tuple[int, int, str]]:
@@ -55,17 +54,11 @@ class CropShardWork:
         return {"frames": summary.written + summary.skipped, "split": split}
 
 
-def run_crop_shards(args: argparse.Namespace) -> int:
-    """The sharded ``crops`` job; exit status 1 when a shard failed."""
-    from .command_line import closing, runner_factory
+def crop_job(args: argparse.Namespace):
+    """``(inputs, work, options, planned)`` of the sharded ``crops`` job (run by :mod:`glradial.jobs.command_line`)."""
     from .inputs import expand_inputs
-    from .runner import run_job
 
     inputs = expand_inputs(args.panoramas)
     options = {key: getattr(args, key) for key in ("count", "seed", "size", "out_size", "inverse", "supersample", "splits", "format")}
     plan = shard_plan([p.name for p in inputs], args.count, args.seed, args.splits)
-    work = CropShardWork(plan, options)
-    summary = run_job("crops", inputs, args.out, runner_factory(work, args, len(inputs)), options,
-                      lambda source: [f"{source.name}.crops"], retries=1 if args.retries is None else args.retries,
-                      progress=show_progress(args))
-    return closing("crops", summary, Path(args.out))
+    return inputs, CropShardWork(plan, options), options, lambda source: [f"{source.name}.crops"]
