@@ -1,8 +1,12 @@
 """Tiny inputs shared by the job tests: pan videos over the real field panorama (lossless FFV1),
-crops of it as images, rendered pitch views with a known camera, and a corrupt file."""
+crops of it as images, rendered pitch views with a known camera, and a corrupt file; what the tests
+read back (the report, the manifest while a job runs)."""
 
 from __future__ import annotations
 
+import csv
+import json
+import time
 from pathlib import Path
 
 import cv2
@@ -51,3 +55,21 @@ def read_frames(path: Path) -> list[np.ndarray]:
 
     with VideoReader(path) as reader:
         return [np.array(frame) for frame in reader]
+
+
+def rows_of(out: Path) -> dict[str, dict]:
+    """DIR/report.csv by input file name."""
+    with open(out / "report.csv", newline="") as handle:
+        return {Path(row["input"]).name: row for row in csv.DictReader(handle)}
+
+
+def wait_for_a_done_input(out: Path, job, seconds: float) -> None:
+    """Until the running ``job`` (a ``Popen``) has recorded an input as done in DIR/manifest.json."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline and job.poll() is None:
+        try:
+            if any(e["status"] == "done" for e in json.loads((out / "manifest.json").read_text())["entries"].values()):
+                return
+        except (OSError, ValueError, KeyError):
+            pass
+        time.sleep(0.05)

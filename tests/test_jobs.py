@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from job_inputs import ROOT, corrupt, image, pan_video, panorama, pitch_view, read_frames
+from job_inputs import ROOT, corrupt, image, pan_video, panorama, pitch_view, read_frames, rows_of, wait_for_a_done_input
 
 from glradial.cli import build_parser, main
 from glradial.jobs.command_line import command_options
@@ -35,11 +35,6 @@ def media(tmp_path_factory) -> dict[str, Path]:
     folder, pano = tmp_path_factory.mktemp("media"), panorama()
     return {"v0": pan_video(folder / "v0.mkv", pano), "v1": pan_video(folder / "v1.mkv", pano, x0=600),
             "i0": image(folder / "i0.png", pano), "i1": image(folder / "i1.png", pano, 40), "bad": corrupt(folder / "bad.png")}
-
-
-def rows_of(out: Path) -> dict[str, dict]:
-    with open(out / "report.csv", newline="") as handle:
-        return {Path(row["input"]).name: row for row in csv.DictReader(handle)}
 
 
 def same_output(a: Path, b: Path) -> None:
@@ -151,14 +146,7 @@ def test_ctrl_c_leaves_the_manifest_consistent(tmp_path, media):
     command = [sys.executable, "-m", "glradial", "correct", str(media["v0"]), str(media["v1"]), str(media["i0"]), str(media["i1"]),
                "--out-dir", str(out), "--workers", "1", *LENS]
     job = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 120
-    while time.monotonic() < deadline and job.poll() is None:
-        try:
-            if any(e["status"] == "done" for e in json.loads((out / "manifest.json").read_text())["entries"].values()):
-                break
-        except (OSError, ValueError, KeyError):
-            pass
-        time.sleep(0.05)
+    wait_for_a_done_input(out, job, 120)
     job.send_signal(signal.SIGINT)
     _, err = job.communicate(timeout=60)
     assert job.returncode == 130 and "interrupted" in err

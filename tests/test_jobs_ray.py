@@ -8,7 +8,6 @@ address, not 127.0.0.1 (``ray._private.services.resolve_ip_for_localhost``)."""
 
 from __future__ import annotations
 
-import csv
 import json
 import os
 import signal
@@ -18,7 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
-from job_inputs import ROOT, corrupt, image, pan_video, panorama, pitch_view
+from job_inputs import ROOT, corrupt, image, pan_video, panorama, pitch_view, rows_of, wait_for_a_done_input
 from test_jobs import same_output
 
 from glradial.cli import main
@@ -60,11 +59,6 @@ def busy_actor_pid(deadline: float) -> int | None:
                 return int(pid)
         time.sleep(0.05)
     return None
-
-
-def rows_of(out: Path) -> dict[str, dict]:
-    with open(out / "report.csv", newline="") as handle:
-        return {Path(row["input"]).name: row for row in csv.DictReader(handle)}
 
 
 def test_correct_auto_on_ray_with_a_killed_worker_and_a_corrupt_input(tmp_path, address, media):
@@ -118,14 +112,7 @@ def test_ctrl_c_on_ray_leaves_the_manifest_consistent(tmp_path, address, media):
     out = tmp_path / "out"
     inputs = [str(media[k]) for k in ("v0", "v1", "i0", "i1")]
     job = glradial("correct", *inputs, "--k1", "-0.2", "--backend", "cpu", "--out-dir", str(out), "--ray", address, "--workers", "1")
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and job.poll() is None:
-        try:
-            if any(e["status"] == "done" for e in json.loads((out / "manifest.json").read_text())["entries"].values()):
-                break
-        except (OSError, ValueError, KeyError):
-            pass
-        time.sleep(0.05)
+    wait_for_a_done_input(out, job, 300)
     job.send_signal(signal.SIGINT)
     _, err = job.communicate(timeout=120)
     assert job.returncode == 130, err
