@@ -80,7 +80,8 @@ def _record_facts(command: str, document) -> dict:
     """The report's facts of an estimate (an image's object or a video's document) or of a calibration (frames)."""
     if command == "estimate":
         if "shots" in document:
-            return {"shot_list": document["shots"]}
+            shots = document["shots"]
+            return {"shot_list": shots, "frames": sum(s["last_frame"] - s["first_frame"] + 1 for s in shots)}
         return {"frames": 1, **{k: document.get(k) for k in ("k1", "k2", "method", "uncertainty_px", "doubtful", "reason")}}
     frames = document
     facts: dict = {"frames": len(frames), "doubtful_frames": sum(bool(f.get("doubtful")) for f in frames)}
