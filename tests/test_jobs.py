@@ -210,6 +210,8 @@ def test_job_usage_errors(tmp_path, media, monkeypatch, capsys):
     assert "got 3 paths" in capsys.readouterr().err
     assert main(["correct", image, "--out-dir", str(tmp_path / "o"), "--auto", "--sidecar", "x.csv"]) == 2
     assert main(["correct", image, "--out-dir", str(tmp_path / "o"), "--gpus-per-worker", "1", *LENS]) == 2
+    assert main(["correct", "--ray", image, str(media["i1"]), "--out-dir", str(tmp_path / "o"), *LENS]) == 2
+    assert "put --ray after the inputs" in capsys.readouterr().err
     monkeypatch.setattr("glradial.jobs.ray_runner.ray_available", lambda: False)
     assert main(["correct", image, "--out-dir", str(tmp_path / "o"), "--ray", *LENS]) == 2
     assert "pip install 'glradial[cluster]'" in capsys.readouterr().err

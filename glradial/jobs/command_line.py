@@ -42,7 +42,7 @@ def add_job_options(parser: argparse.ArgumentParser, command: str) -> None:
                        help="local worker processes (default: one per core); with --ray: the number of Ray actors "
                             "(default: one per CPU of the cluster)")
     group.add_argument("--ray", nargs="?", const=LOCAL, metavar="ADDRESS",
-                       help="run on Ray: alone, Ray started on this machine; ADDRESS (auto, ray://head:10001) joins a cluster "
+                       help="run on Ray: alone (or 'local'), Ray started on this machine; ADDRESS (auto, ray://head:10001) joins a cluster "
                             "(needs pip install 'glradial[cluster]')")
     group.add_argument("--retries", type=non_negative_int, default=None, metavar="N",
                        help="attempts after a failure (an error or the worker's death) before an input is recorded as failed (default 1)")
@@ -94,6 +94,8 @@ def runner_factory(work, args: argparse.Namespace, tasks: int):
         raise UsageError(INSTALL_HINT)
     from .ray_runner import RayRunner
 
+    if os.path.exists(args.ray):
+        raise UsageError(f"--ray took the input {args.ray!r} as its ADDRESS: put --ray after the inputs, or write --ray local")
     address = None if args.ray == LOCAL else args.ray
     workers = min(args.workers, tasks) if args.workers else None
     return lambda: RayRunner(work, address, workers, gpus_per_worker=args.gpus_per_worker or 0.0)
