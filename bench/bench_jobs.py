@@ -9,7 +9,8 @@ What is timed: the job (:func:`glradial.jobs.runner.run_job`) with its runner al
 ONNX session; Ray itself started once, as a cluster would be), so the speed-up is the work's; the
 start-up and warm-up is reported beside it (``start_s``). The overhead per file is the
 time per no-op task (a task that writes one byte) with 2 workers, and Ray's minus the pool's. The
-memory of one worker is its peak resident set (VmHWM) after the video job. The machine is shared:
+memory of one worker is its peak resident set (VmHWM) after the video job, and after one clip of
+``--memory-size`` (1080p by default). The machine is shared:
 the load average before and after each measurement is recorded beside it, since other processes'
 load depresses a speed-up.
 """
@@ -51,6 +52,7 @@ def make_videos(folder: Path, count: int, frames: int, size: tuple[int, int]) ->
     """``count`` short pans over the shipped field panorama (FFV1), each from another place."""
     pano = cv2.imread(str(ROOT / "tests" / "data" / "panorama_field_2048x1024.jpg"))[:, :, ::-1]
     paths = []
+    folder.mkdir(exist_ok=True)
     for k in range(count):
         path = folder / f"clip{k}.mkv"
         with VideoWriter(path, VideoInfo.of(size, 25, codec="ffv1", pix_fmt="gbrp")) as writer:
@@ -116,6 +118,7 @@ def main() -> None:
     parser.add_argument("--frames", type=int, default=30)
     parser.add_argument("--size", default="320x180")
     parser.add_argument("--noop", type=int, default=40, help="no-op tasks for the per-file overhead")
+    parser.add_argument("--memory-size", default="1920x1080", help="frame size of the clip one worker's memory is measured on")
     args = parser.parse_args()
     size = tuple(int(v) for v in args.size.split("x"))
     import ray
@@ -146,6 +149,10 @@ def main() -> None:
             timing = timed_job(make, noop, noop_inputs, folder / "out", {"noop": True}, command="noop")
             results[f"noop_{name}_ms_per_file"] = round(1000 * timing["run_s"] / args.noop, 1)
         results["ray_overhead_ms_per_file"] = round(results["noop_ray_ms_per_file"] - results["noop_pool_ms_per_file"], 1)
+        big = make_videos(folder / "big", 1, args.frames, tuple(int(v) for v in args.memory_size.split("x")))
+        for name, make in (("pool", lambda: ProcessRunner(work, 1)), ("ray", lambda: RayRunner(work, None, 1))):
+            timing = timed_job(make, work, big, folder / "out", options)
+            results[f"{name}_worker_peak_rss_mb_{args.memory_size}"] = timing["worker_peak_rss_mb"][0]
         print(results, flush=True)
         write_figure("bench_jobs", results)
     finally:

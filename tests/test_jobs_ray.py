@@ -23,6 +23,7 @@ from test_jobs import same_output
 from glradial.cli import main
 
 ray = pytest.importorskip("ray", reason="the job tests on Ray need the cluster extra: pip install -e '.[cluster]'")
+pytestmark = pytest.mark.slow  # a Ray head takes 9-13 s to start on this loaded 2-core machine
 
 
 @pytest.fixture(scope="module")
