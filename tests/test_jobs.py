@@ -1,7 +1,7 @@
 """Jobs over many inputs on local worker processes (``glradial COMMAND IN ... --out-dir DIR
 --workers N``, glradial/jobs): inputs expanded, outputs equal to the one-file commands', a corrupt
 input recorded while the rest completes, a rerun that does nothing and says so, a worker killed
-mid-task, Ctrl-C leaving the manifest consistent, estimate/calibrate JSON, crops shards. The same
+mid-task, Ctrl-C leaving the manifest consistent, estimate JSON, crops shards. The same
 on a real Ray cluster: tests/test_jobs_ray.py."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from job_inputs import ROOT, corrupt, image, pan_video, panorama, pitch_view, read_frames, rows_of, wait_for_a_done_input
+from job_inputs import ROOT, corrupt, image, pan_video, panorama, read_frames, rows_of, wait_for_a_done_input
 
 from glradial.cli import build_parser, main
 from glradial.jobs.command_line import command_options
@@ -128,14 +128,14 @@ def test_a_worker_killed_mid_task_costs_one_attempt(tmp_path, media):
     options = command_options(args)
     work = CommandWork("correct", options)
     runners = []
-    inputs = [media["v0"], media["v1"], media["i0"]]
+    inputs = [media["v0"], media["i0"]]
     summary = run_job("correct", inputs, out, lambda: runners.append(KillingRunner(work, 2)) or runners[0], options,
                       lambda source: planned_outputs("correct", options, source), retries=1)
     pid, name = runners[0].killed
-    assert sorted(summary.done) == ["i0.png", "v0.mkv", "v1.mkv"] and not summary.failed
+    assert sorted(summary.done) == ["i0.png", "v0.mkv"] and not summary.failed
     rows = rows_of(out)
     assert rows[name]["attempts"] == "2" and rows[name]["worker"] != f"{os.uname().nodename}:{pid}"
-    assert sorted(os.listdir(out)) == ["i0.png", "manifest.json", "report.csv", "report.json", "v0.mkv", "v1.mkv"]
+    assert sorted(os.listdir(out)) == ["i0.png", "manifest.json", "report.csv", "report.json", "v0.mkv"]
     single = tmp_path / f"single{Path(name).suffix}"
     assert main(["correct", str(media[Path(name).stem]), str(single), *LENS]) == 0
     same_output(out / name, single)
@@ -164,21 +164,15 @@ def test_ctrl_c_leaves_the_manifest_consistent(tmp_path, media):
     assert f"{4 - len(done)} done, {len(done)} already complete, 0 failed" in finished.stdout
 
 
-def test_estimate_and_calibrate_write_what_json_prints(tmp_path, media, capsys):
-    views = [tmp_path / "view0.png", tmp_path / "view1.png"]
-    cams = [pitch_view(path, pan) for path, pan in zip(views, (0.0, 3.0))]
-    assert main(["calibrate", *map(str, views), "--out-dir", str(tmp_path / "cal"), "--workers", "2"]) == 0
+def test_estimate_writes_what_json_prints(tmp_path, media, capsys):
+    """NAME.json is what the one-file command prints with --json (calibrate's: tests/test_jobs_ray.py)."""
     assert main(["estimate", str(media["i0"]), "--out-dir", str(tmp_path / "est"), "--workers", "1", "--no-pitch"]) == 0
     capsys.readouterr()
-    for view, cam in zip(views, cams):
-        assert main(["calibrate", str(view), "--json"]) == 0
-        alone = [json.loads(line) for line in capsys.readouterr().out.splitlines()]
-        assert json.loads((tmp_path / "cal" / f"{view.name}.json").read_text()) == alone
-        assert alone[0]["focal"] == pytest.approx(cam.focal, rel=0.01)  # the camera it was rendered with
-        row = rows_of(tmp_path / "cal")[view.name]
-        assert float(row["focal"]) == pytest.approx(alone[0]["focal"]) and row["doubtful"] == "0"
     assert main(["estimate", str(media["i0"]), "--json", "--no-pitch"]) == 0
-    assert json.loads((tmp_path / "est" / "i0.png.json").read_text()) == json.loads(capsys.readouterr().out)
+    alone = json.loads(capsys.readouterr().out)
+    assert json.loads((tmp_path / "est" / "i0.png.json").read_text()) == alone
+    row = rows_of(tmp_path / "est")["i0.png"]
+    assert float(row["k1"]) == alone["k1"] and row["doubtful"] == str(int(alone["doubtful"])) and row["reason"] == alone["reason"]
 
 
 def test_crops_shards_are_fixed_by_the_settings(tmp_path, field_panorama):

@@ -82,7 +82,7 @@ def test_correct_auto_on_ray_with_a_killed_worker_and_a_corrupt_input(tmp_path, 
     expected = {"manifest.json", "report.csv", "report.json", "v0.mkv", "v0.mkv.lens.csv", "v1.mkv", "v1.mkv.lens.csv",
                 "i0.png", "i1.png"}
     assert set(os.listdir(out)) == expected  # no partial file, no staging folder
-    for key in names[:4]:
+    for key in ("v0", "i0"):  # the others' outputs come from the same code on the same actors
         single = tmp_path / f"single_{media[key].name}"
         assert main(["correct", str(media[key]), str(single), "--auto", "--backend", "cpu"]) == 0
         same_output(out / media[key].name, single)

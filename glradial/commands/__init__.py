@@ -29,7 +29,7 @@ from ..errors import Error
 
 __all__ = [
     "CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress",
-    "add_lens_options", "lens_from_args", "read_lens_file", "OPENCV_API_HINT", "InputPaths", "note", "cached_estimator",
+    "add_lens_options", "lens_from_args", "read_lens_file", "OPENCV_API_HINT", "InputPaths", "note", "cached_estimator", "keep_estimators", "estimators_kept",
 ]
 
 _SIZE = re.compile(r"^\s*(\d+)\s*[xX×,]\s*(\d+)\s*$")
@@ -63,13 +63,33 @@ def note(args: argparse.Namespace, *, replace: bool = True, **facts: object) -> 
         store.update(facts if replace else {k: v for k, v in facts.items() if k not in store})
 
 
-@functools.lru_cache(maxsize=4)
+#: whether :func:`cached_estimator` keeps its estimators (set in a job's worker, :func:`keep_estimators`)
+_KEEP = {"estimators": False}
+
+
+def keep_estimators(keep: bool = True) -> None:
+    """Keep the estimators the commands make for the rest of the process (a job's worker: its ONNX
+    sessions serve every file it gets); a one-file command makes its own and frees it."""
+    _KEEP["estimators"] = bool(keep)
+
+
+def estimators_kept() -> bool:
+    return _KEEP["estimators"]
+
+
 def cached_estimator(model: str | None = None, threads: int | None = None):
-    """The :class:`glradial.Estimator` of ``model`` (None: the bundled one) with ``threads`` made
-    once per process: a job's worker keeps its ONNX session across the files it gets."""
+    """The :class:`glradial.Estimator` of ``model`` (None: the bundled one) with ``threads``: made
+    once per process where :func:`keep_estimators` was called, else a new one."""
+    return _kept_estimator(model, threads) if _KEEP["estimators"] else _new_estimator(model, threads)
+
+
+def _new_estimator(model: str | None, threads: int | None):
     from ..camera.pitch_lens import Estimator
 
     return Estimator(model, threads=threads)
+
+
+_kept_estimator = functools.lru_cache(maxsize=4)(_new_estimator)
 
 
 def parse_size(text: str) -> tuple[int, int]:

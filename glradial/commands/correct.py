@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..lens.options import METHODS
-from . import UsageError, cached_estimator, lens_given, note, show_progress
+from . import UsageError, cached_estimator, estimators_kept, lens_given, note, show_progress
 from .engine_options import add_opentrackio_options, opentrackio_hook, opentrackio_wanted, write_track_opentrackio
 from .remapping import (
     add_encode_options,
@@ -181,7 +181,7 @@ def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
         # the encoder, its options and the container are checked before the estimation pass: open and drop
         VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
     given_options = {"every": args.every} if args.every is not None else {}
-    track = track_video(args.input, default_estimator(args.model, args.method), progress=video["progress"],
+    track = track_video(args.input, _video_estimator(args, default_estimator), progress=video["progress"],
                         doubtful_px=args.max_uncertainty or DOUBTFUL_PX, apply_doubtful=bool(args.apply_doubtful),
                         rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
@@ -198,6 +198,15 @@ def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
     if opentrackio_wanted(args):
         write_track_opentrackio(args, track, info)
     return 0
+
+
+def _video_estimator(args: argparse.Namespace, default_estimator):
+    """Pass 1's frame -> lens: the estimation layer's reading without the camera fit (as 'estimate
+    VIDEO'); in a job's worker its kept estimator (:func:`glradial.commands.keep_estimators`)."""
+    if not estimators_kept():
+        return default_estimator(args.model, args.method)
+    estimator, method = cached_estimator(args.model), args.method or "auto"
+    return lambda frame: estimator.estimate(frame, method=method, pitch=False)
 
 
 def _print_shots(source: str, track, sidecar: Path) -> None:

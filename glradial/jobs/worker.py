@@ -92,8 +92,11 @@ class JobWorker:
     thread pools sized to ``threads`` (:func:`limit_threads`; None leaves them)."""
 
     def __init__(self, work: Callable[[str, Path], dict], threads: int | None = None) -> None:
+        from ..commands import keep_estimators
+
         if threads is not None:
             limit_threads(threads)
+        keep_estimators()
         self.work = work
 
     def run(self, task: Task) -> Result:

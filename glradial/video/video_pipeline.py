@@ -28,7 +28,6 @@ RGB corrector, planes of the source's own samples on the YUV path; the estimator
 
 from __future__ import annotations
 
-import functools
 import json
 import logging
 import os
@@ -74,19 +73,12 @@ EstimatorFn = Callable[[np.ndarray], "tuple[float, float] | Lens"]
 MAP_REUSE_PX = 1.0 / 64.0
 
 
-@functools.lru_cache(maxsize=4)
-def _estimator(model: str | None):
-    """The :class:`glradial.Estimator` of ``model`` (None: bundled), made once per process (a job's
-    worker keeps its ONNX session across videos)."""
-    from ..estimation.estimator import Estimator
-
-    return Estimator(model) if model is not None else Estimator()
-
-
 def default_estimator(model: str | os.PathLike | None = None, method: str | None = None) -> EstimatorFn:
     """The bundled estimator (:class:`glradial.Estimator`), as a frame -> lens function; ``method``
     (e.g. "auto", "net", "lines") is handed to ``Estimator.estimate`` when given."""
-    estimator = _estimator(None if model is None else str(model))
+    from ..estimation.estimator import Estimator
+
+    estimator = Estimator(model) if model is not None else Estimator()
     if method is None:
         return lambda frame: estimator.estimate(frame)
     return lambda frame: estimator.estimate(frame, method=method)
