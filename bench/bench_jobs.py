@@ -12,7 +12,9 @@ time per no-op task (a task that writes one byte) with 2 workers, and Ray's minu
 memory of one worker is its peak resident set (VmHWM) after the video job, and after one clip of
 ``--memory-size`` (1080p by default). The machine is shared:
 the load average before and after each measurement is recorded beside it, since other processes'
-load depresses a speed-up.
+load depresses a speed-up, and so are the cores the workers used (their CPU seconds over the run's):
+one worker that already keeps more than one core busy (decode, correct and encode threads) leaves a
+second less to gain.
 """
 
 from __future__ import annotations
@@ -90,6 +92,15 @@ def warm_up(runner, inputs: list[Path], out: Path, options: dict, command: str) 
     return time.perf_counter() - start
 
 
+def cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU time of the processes and their waited-for children, s."""
+    total = 0
+    for pid in pids:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        total += sum(int(v) for v in fields[11:15])  # utime, stime, cutime, cstime
+    return total / os.sysconf("SC_CLK_TCK")
+
+
 def timed_job(make, work, inputs: list[Path], out: Path, options: dict, command: str = "correct") -> dict:
     """Start the runner and warm each worker (timed), run the job on it (timed), note the workers' peak memory."""
     load_before = os.getloadavg()[0]
@@ -103,12 +114,15 @@ def timed_job(make, work, inputs: list[Path], out: Path, options: dict, command:
         close(kill)
 
     runner.close = close_noting_memory
-    start = time.perf_counter()
+    pids = runner.pids()
+    cpu, start = cpu_seconds(pids), time.perf_counter()
     summary = run_job(command, inputs, out, lambda: runner, options, lambda s: planned_outputs(command, options, s), progress=False)
     seconds = time.perf_counter() - start
+    cpu = cpu_seconds(pids) - cpu
     assert not summary.failed and len(summary.done) == len(inputs), summary
     shutil.rmtree(out)
-    return {"start_s": round(started, 2), "run_s": round(seconds, 2), "worker_peak_rss_mb": [round(m) for m in memory],
+    return {"start_s": round(started, 2), "run_s": round(seconds, 2), "workers_cpu_s": round(cpu, 2),
+            "cores_used": round(cpu / seconds, 2), "worker_peak_rss_mb": [round(m) for m in memory],
             "load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2)}
 
 
