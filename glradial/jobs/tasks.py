@@ -18,7 +18,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..media.atomic import atomic_write_text
-from ..media.image_io import media_kind
 
 __all__ = ["JOB_COMMANDS", "CommandWork", "planned_outputs"]
 
@@ -28,6 +27,8 @@ JOB_COMMANDS = ("correct", "distort", "estimate", "calibrate")
 
 def planned_outputs(command: str, options: dict, source: Path) -> list[str]:
     """The file names ``command`` writes in DIR for ``source``."""
+    from ..media.image_io import media_kind
+
     name = source.name
     if command in ("estimate", "calibrate"):
         return [f"{name}.json"]
