@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import json
+import signal
 import time
 from pathlib import Path
 
@@ -73,3 +74,9 @@ def wait_for_a_done_input(out: Path, job, seconds: float) -> None:
         except (OSError, ValueError, KeyError):
             pass
         time.sleep(0.05)
+
+
+def default_sigint() -> None:
+    """``preexec_fn`` of a job started to be interrupted: SIGINT back to its default, since a test run
+    started in the background (``cmd &``) passes it on ignored, and Python then installs no Ctrl-C handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)

@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from job_inputs import ROOT, corrupt, image, pan_video, panorama, read_frames, rows_of, wait_for_a_done_input
+from job_inputs import ROOT, corrupt, default_sigint, image, pan_video, panorama, read_frames, rows_of, wait_for_a_done_input
 
 from glradial.cli import build_parser, main
 from glradial.jobs.command_line import command_options
@@ -143,9 +143,10 @@ def test_a_worker_killed_mid_task_costs_one_attempt(tmp_path, media):
 
 def test_ctrl_c_leaves_the_manifest_consistent(tmp_path, media):
     out = tmp_path / "out"
-    command = [sys.executable, "-m", "glradial", "correct", str(media["v0"]), str(media["v1"]), str(media["i0"]), str(media["i1"]),
+    long = pan_video(tmp_path / "long.mkv", panorama(), n=60)  # last, so that work remains when the signal comes
+    command = [sys.executable, "-m", "glradial", "correct", str(media["v0"]), str(media["v1"]), str(media["i0"]), str(long),
                "--out-dir", str(out), "--workers", "1", *LENS]
-    job = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    job = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
     wait_for_a_done_input(out, job, 120)
     job.send_signal(signal.SIGINT)
     _, err = job.communicate(timeout=60)
@@ -155,9 +156,10 @@ def test_ctrl_c_leaves_the_manifest_consistent(tmp_path, media):
     assert done and all(e["status"] in ("done", "pending") for e in entries.values())
     # every done input's outputs are there, complete; nothing else is (no half file, no staging)
     assert sorted(os.listdir(out)) == sorted(["manifest.json", "report.csv", "report.json", *done])
+    sources = {p.name: p for p in (media["v0"], media["v1"], media["i0"], long)}
     for name in done:
         single = tmp_path / f"single{Path(name).suffix}"
-        assert main(["correct", str(media[Path(name).stem]), str(single), "-y", *LENS]) == 0
+        assert main(["correct", str(sources[name]), str(single), "-y", *LENS]) == 0
         same_output(out / name, single)
     finished = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert finished.returncode == 0, finished.stderr

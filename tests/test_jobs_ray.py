@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
-from job_inputs import ROOT, corrupt, image, pan_video, panorama, pitch_view, rows_of, wait_for_a_done_input
+from job_inputs import ROOT, corrupt, default_sigint, image, pan_video, panorama, pitch_view, rows_of, wait_for_a_done_input
 from test_jobs import same_output
 
 from glradial.cli import main
@@ -45,7 +45,7 @@ def media(tmp_path_factory) -> dict[str, Path]:
 
 def glradial(*args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "glradial", *args], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
 
 
 def busy_actor_pid(deadline: float) -> int | None:
@@ -111,7 +111,8 @@ def test_calibrate_on_ray_then_a_rerun_does_nothing(tmp_path, address, capsys):
 
 def test_ctrl_c_on_ray_leaves_the_manifest_consistent(tmp_path, address, media):
     out = tmp_path / "out"
-    inputs = [str(media[k]) for k in ("v0", "v1", "i0", "i1")]
+    long = pan_video(tmp_path / "long.mkv", panorama(), n=60)  # last, so that work remains when the signal comes
+    inputs = [str(media[k]) for k in ("v0", "v1", "i0")] + [str(long)]
     job = glradial("correct", *inputs, "--k1", "-0.2", "--backend", "cpu", "--out-dir", str(out), "--ray", address, "--workers", "1")
     wait_for_a_done_input(out, job, 300)
     job.send_signal(signal.SIGINT)
@@ -123,5 +124,5 @@ def test_ctrl_c_on_ray_leaves_the_manifest_consistent(tmp_path, address, media):
     assert sorted(os.listdir(out)) == sorted(["manifest.json", "report.csv", "report.json", *done])
     for name in done:
         single = tmp_path / f"single_{name}"
-        assert main(["correct", str(media[Path(name).stem]), str(single), "--k1", "-0.2", "--backend", "cpu"]) == 0
+        assert main(["correct", str(next(p for p in inputs if Path(p).name == name)), str(single), "--k1", "-0.2", "--backend", "cpu"]) == 0
         same_output(out / name, single)
