@@ -109,16 +109,19 @@ def timed_job(make, work, inputs: list[Path], out: Path, options: dict, command:
     close = runner.close
     memory: list[float] = []
 
+    pids = runner.pids()
+    cpu_end: list[float] = []
+
     def close_noting_memory(kill: bool = False) -> None:
-        memory.extend(peak_rss_mb(runner.pids()))
+        memory.extend(peak_rss_mb(pids))
+        cpu_end.append(cpu_seconds(pids))
         close(kill)
 
     runner.close = close_noting_memory
-    pids = runner.pids()
     cpu, start = cpu_seconds(pids), time.perf_counter()
     summary = run_job(command, inputs, out, lambda: runner, options, lambda s: planned_outputs(command, options, s), progress=False)
     seconds = time.perf_counter() - start
-    cpu = cpu_seconds(pids) - cpu
+    cpu = cpu_end[0] - cpu
     assert not summary.failed and len(summary.done) == len(inputs), summary
     shutil.rmtree(out)
     return {"start_s": round(started, 2), "run_s": round(seconds, 2), "workers_cpu_s": round(cpu, 2),
