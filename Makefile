@@ -1,7 +1,7 @@
 # glradial: two commands do all set-up on a fresh Debian/Ubuntu machine: `make demo` and `make test`.
 # Everything goes into the project's own virtual environment (.venv), so a system Python that is
 # externally managed (PEP 668) is never touched. `make demo` installs the runtime dependencies only;
-# `make test` adds the test tools and torch 2.13.0 (the registry's default build; CUDA with triton on
+# `make test` adds the test tools, Ray (the `cluster` extra: the job tests start a real local Ray) and torch 2.13.0 (the registry's default build; CUDA with triton on
 # Linux x86_64, which runs on the CPU; glradial keeps triton's LLVM apart from Mesa's: gl/llvm_guard.py).
 SYSPY ?= python3
 VENV := .venv
@@ -25,7 +25,7 @@ $(RUNTIME_STAMP): pyproject.toml $(PY)
 
 $(DEV_STAMP): pyproject.toml $(PY)
 	$(PY) -m pip install --quiet torch==2.13.0
-	$(PY) -m pip install --quiet -e ".[train,test,bench]"
+	$(PY) -m pip install --quiet -e ".[train,test,bench,cluster]"
 	@touch $@ $(RUNTIME_STAMP)
 
 setup: $(DEV_STAMP)

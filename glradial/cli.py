@@ -26,6 +26,8 @@ from typing import Sequence
 
 from . import __version__
 from .commands import CliError, UsageError
+from .jobs.command_line import add_job_options, check_one_file_form, run_job_command, wants_job
+from .jobs.tasks import JOB_COMMANDS
 
 __all__ = ["main", "build_parser", "COMMANDS", "messages_to_stderr"]
 
@@ -98,6 +100,8 @@ def build_parser() -> argparse.ArgumentParser:
         except Exception as err:  # a broken module must not break the other commands
             add_parser, run = _unavailable(name, f"{type(err).__name__}: {_one_line(err)}")
         sub = add_parser(subparsers)
+        if name in JOB_COMMANDS + ("crops",) and getattr(run, "__module__", "") == f"{__package__}.commands.{name}":
+            add_job_options(sub, name)
         # -q after the command too; SUPPRESS keeps a -q given before the command
         sub.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS, help="no progress bars")
         sub.set_defaults(func=run, _subparser=sub)
@@ -174,6 +178,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     debug = bool(os.environ.get("GLRADIAL_DEBUG"))
     try:
         with _signals_unwind(), messages_to_stderr():
+            if hasattr(args, "workers"):  # a command that runs as a job over many inputs
+                if wants_job(args):
+                    return run_job_command(args)
+                check_one_file_form(args)
             return int(args.func(args) or 0)
     except Terminated as stop:
         sys.stderr.write(f"\n{PROG}: stopped by {signal.Signals(stop.signum).name}\n")

@@ -20,6 +20,7 @@ command line) and :func:`read_lens_file`.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import re
 from pathlib import Path
@@ -28,7 +29,7 @@ from ..errors import Error
 
 __all__ = [
     "CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress",
-    "add_lens_options", "lens_from_args", "read_lens_file", "OPENCV_API_HINT",
+    "add_lens_options", "lens_from_args", "read_lens_file", "OPENCV_API_HINT", "InputPaths", "note", "cached_estimator", "keep_estimators", "estimators_kept",
 ]
 
 _SIZE = re.compile(r"^\s*(\d+)\s*[xX×,]\s*(\d+)\s*$")
@@ -40,6 +41,55 @@ class CliError(Error):
 
 class UsageError(CliError):
     """A wrong combination of options: printed with a pointer to ``--help``, exit status 2."""
+
+
+class InputPaths(argparse.Action):
+    """A command's positional paths (``nargs="+"``), kept as a list in ``dest``; the one-file form
+    reads ``args.input`` (the first) and, where the command has ``OUTPUT``, ``args.output`` (the
+    second). With ``--out-dir`` (a job, :mod:`glradial.jobs`) every path is an input."""
+
+    def __call__(self, parser, namespace, values, option_string=None) -> None:
+        setattr(namespace, self.dest, list(values))
+        namespace.input = values[0]
+        namespace.output = values[1] if len(values) > 1 else None
+
+
+def note(args: argparse.Namespace, *, replace: bool = True, **facts: object) -> None:
+    """Record ``facts`` (frames, shots, the lens ...) for a job's report when the command runs as
+    one input of a job (:mod:`glradial.jobs.tasks` gives ``args.job_facts``); else nothing.
+    ``replace=False`` keeps facts already recorded (an estimate's lens over the one applied)."""
+    store = getattr(args, "job_facts", None)
+    if store is not None:
+        store.update(facts if replace else {k: v for k, v in facts.items() if k not in store})
+
+
+#: whether :func:`cached_estimator` keeps its estimators (set in a job's worker, :func:`keep_estimators`)
+_KEEP = {"estimators": False}
+
+
+def keep_estimators(keep: bool = True) -> None:
+    """Keep the estimators the commands make for the rest of the process (a job's worker: its ONNX
+    sessions serve every file it gets); a one-file command makes its own and frees it."""
+    _KEEP["estimators"] = bool(keep)
+
+
+def estimators_kept() -> bool:
+    return _KEEP["estimators"]
+
+
+def cached_estimator(model: str | None = None, threads: int | None = None):
+    """The :class:`glradial.Estimator` of ``model`` (None: the bundled one) with ``threads``: made
+    once per process where :func:`keep_estimators` was called, else a new one."""
+    return _kept_estimator(model, threads) if _KEEP["estimators"] else _new_estimator(model, threads)
+
+
+def _new_estimator(model: str | None, threads: int | None):
+    from ..camera.pitch_lens import Estimator
+
+    return Estimator(model, threads=threads)
+
+
+_kept_estimator = functools.lru_cache(maxsize=4)(_new_estimator)
 
 
 def parse_size(text: str) -> tuple[int, int]:

@@ -44,7 +44,11 @@ UNITS = {"time_s": "seconds from the first frame", "homography": "pitch (x, y, 1
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser("calibrate", help="the whole camera (lens, focal length, pose) from the pitch markings",
                                    description=DESCRIPTION, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("input", metavar="IMG|FOLDER|VIDEO", help="an image (PNG, JPEG, TIFF), a folder of images or a video")
+    from . import InputPaths
+
+    parser.add_argument("paths", metavar="IMG|FOLDER|VIDEO", nargs="+", action=InputPaths,
+                        help="an image (PNG, JPEG, TIFF), a folder of images or a video; with --out-dir DIR: many (files, "
+                             "folders, globs, @LIST), each calibration in DIR/NAME.json")
     parser.add_argument("--json", action="store_true", help="one JSON object per frame instead of text (with its time and units)")
     parser.add_argument("--overlay", metavar="OUT", help="write the frame with the projected markings (an image; a video's "
                         "last frame; dashed under a DOUBTFUL banner when the camera is doubtful)")

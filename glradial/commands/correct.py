@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..lens.options import METHODS
-from . import UsageError, lens_given, show_progress
+from . import UsageError, cached_estimator, estimators_kept, lens_given, note, show_progress
 from .engine_options import add_opentrackio_options, opentrackio_hook, opentrackio_wanted, write_track_opentrackio
 from .remapping import (
     add_encode_options,
@@ -135,13 +135,12 @@ def _estimated_lens_for(args: argparse.Namespace):
 def _estimate_image(args: argparse.Namespace, image):
     """``--auto`` on an image: the estimate, printed with its stated uncertainty and doubt. A doubtful
     one is reported in one line on stderr and left unapplied (no lens) unless ``--apply-doubtful``."""
-    from ..camera.pitch_lens import Estimator
     from ..lens.lens import Lens, as_lens
     from ..media.frames import to_rgb8
 
     # as 'glradial estimate IMG': auto adds the pitch camera fit's lens where the template fits; a squashed
     # frame (--pixel-aspect) is read in square pixels and the estimate carries the aspect to the stored frame
-    estimator = Estimator(args.model) if args.model is not None else Estimator()
+    estimator = cached_estimator(args.model)
     estimate = estimator.estimate(to_rgb8(image), method=args.method or "auto", pixel_aspect=args.pixel_aspect or 1.0,
                                   pitch=args.pitch is not False)
     lens = as_lens(estimate)
@@ -149,6 +148,8 @@ def _estimate_image(args: argparse.Namespace, image):
     reason = getattr(estimate, "reason", None)
     stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920, {reason})" if method and uncertainty is not None else ""
     print(f"{args.input}: estimated k1={lens.k1:.6f} k2={lens.k2:.6f}{stated}")
+    note(args, k1=lens.k1, k2=lens.k2, method=method, uncertainty_px=uncertainty, reason=reason,
+         doubtful=bool(getattr(estimate, "doubtful", False)))
     if getattr(estimate, "doubtful", False):
         action = "applied anyway (--apply-doubtful)" if args.apply_doubtful else "left uncorrected (--apply-doubtful applies it)"
         print(f"glradial: warning: the estimate of {args.input} is doubtful ({reason}): {action}", file=sys.stderr)
@@ -180,7 +181,7 @@ def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
         # the encoder, its options and the container are checked before the estimation pass: open and drop
         VideoWriter(args.output, info, options=encode, streams=reader.copied, overwrite=args.overwrite).abort()
     given_options = {"every": args.every} if args.every is not None else {}
-    track = track_video(args.input, default_estimator(args.model, args.method), progress=video["progress"],
+    track = track_video(args.input, _video_estimator(args, default_estimator), progress=video["progress"],
                         doubtful_px=args.max_uncertainty or DOUBTFUL_PX, apply_doubtful=bool(args.apply_doubtful),
                         rate=args.rate, **given_options)
     for line in doubtful_warnings(track, args.input):
@@ -192,10 +193,20 @@ def _run_video_auto(args: argparse.Namespace, encode, video: dict) -> int:
         Path(args.output).unlink(missing_ok=True)  # both outputs or neither
         raise
     summary(args.output, written, info.frame_count)
+    note(args, frames=written, shot_list=track.per_shot())
     _print_shots(args.input, track, sidecar)
     if opentrackio_wanted(args):
         write_track_opentrackio(args, track, info)
     return 0
+
+
+def _video_estimator(args: argparse.Namespace, default_estimator):
+    """Pass 1's frame -> lens: the estimation layer's reading without the camera fit (as 'estimate
+    VIDEO'); in a job's worker its kept estimator (:func:`glradial.commands.keep_estimators`)."""
+    if not estimators_kept():
+        return default_estimator(args.model, args.method)
+    estimator, method = cached_estimator(args.model), args.method or "auto"
+    return lambda frame: estimator.estimate(frame, method=method, pitch=False)
 
 
 def _print_shots(source: str, track, sidecar: Path) -> None:

@@ -7,7 +7,7 @@ import json
 
 from ..lens.options import METHODS
 from ..media.image_io import media_kind, read_image
-from . import UsageError, positive_float, positive_int, show_progress
+from . import UsageError, cached_estimator, positive_float, positive_int, show_progress
 from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted, write_image_opentrackio, write_track_opentrackio
 
 DESCRIPTION = """\
@@ -63,7 +63,6 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..camera.pitch_lens import Estimator
     from ..media.frames import to_rgb8
 
     if opentrackio_wanted(args) and len(args.inputs) != 1:
@@ -72,7 +71,7 @@ def run(args: argparse.Namespace) -> int:
     kinds = [media_kind(path) for path in args.inputs]
     if args.pixel_aspect is not None and "video" in kinds:
         raise UsageError(f"--pixel-aspect is for images; {args.inputs[kinds.index('video')]!r} is a video")
-    estimator = Estimator(args.model, threads=args.threads)
+    estimator = cached_estimator(args.model, args.threads)
     for path, kind in zip(args.inputs, kinds):
         if kind == "video":
             from ..video.video_pipeline import track_report, track_video

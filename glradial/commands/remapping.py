@@ -18,7 +18,7 @@ from typing import Callable
 import numpy as np
 
 from ..lens.options import ALPHAS, BACKENDS, FIELD_ORDERS, FITS, INTERPOLATIONS
-from . import UsageError, finite_float
+from . import UsageError, finite_float, note
 
 __all__ = [
     "bitrate", "frame_rate", "add_remap_parser", "add_io_arguments", "add_render_options", "add_encode_options", "check_paths",
@@ -90,8 +90,12 @@ def add_remap_parser(subparsers: argparse._SubParsersAction, name: str, summary_
 
 def add_io_arguments(parser: argparse.ArgumentParser, verb: str) -> None:
     """INPUT, OUTPUT and ``-y``; ``verb`` ("correct", "distort") words the help."""
-    parser.add_argument("input", metavar="INPUT", help=f"image, folder of images, video or image sequence (frame_%%04d.png) to {verb}")
-    parser.add_argument("output", metavar="OUTPUT", help="file, folder or image sequence; a file's extension picks the format")
+    from . import InputPaths
+
+    parser.add_argument("paths", metavar="INPUT OUTPUT", nargs="+", action=InputPaths,
+                        help=f"INPUT: image, folder of images, video or image sequence (frame_%%04d.png) to {verb}; OUTPUT: file, "
+                             "folder or image sequence, a file's extension picks the format. With --out-dir DIR: INPUT [INPUT ...], "
+                             "each a file, folder, glob or @LIST, every output in DIR under its input's name")
     parser.add_argument("-y", "--overwrite", action="store_true", help="replace OUTPUT (and a sidecar) if it exists")
 
 
@@ -338,17 +342,19 @@ def run_with_lens(args: argparse.Namespace, direction: str, kind: str, lens_for=
     if kind == "folder":
         remap_folder(args, lens_for, transform, progress, label)
         return 0
-    remap_image_file(Path(args.input), Path(args.output), _told(lens_for, hook), transform, alpha=args.alpha,
+    remap_image_file(Path(args.input), Path(args.output), _told(lens_for, hook, args), transform, alpha=args.alpha,
                      overwrite=args.overwrite)
+    note(args, frames=1)
     hook.written(1)
     return 0
 
 
-def _told(lens_for, hook: RemapHook):
-    """``lens_for`` that also tells ``hook`` the lens it gives."""
+def _told(lens_for, hook: RemapHook, args: argparse.Namespace):
+    """``lens_for`` that also tells ``hook`` (and a job's report, :func:`note`) the lens it gives."""
     def told(size: tuple[int, int]):
         lens = lens_for(size)
         hook.lens_known(size, lens)
+        note(args, replace=False, k1=lens.k1, k2=lens.k2)
         return lens
 
     return told
@@ -383,6 +389,7 @@ def remap_video(args: argparse.Namespace, direction: str, lens_for, progress: bo
         hook.lens_known(info.size, lens, info=info)
         written = correct_video(args.input, args.output, lambda _i: lens, **video)
     summary(args.output, written, info.frame_count)
+    note(args, frames=written, **({} if getattr(args, "lens_track", None) else {"k1": lens.k1, "k2": lens.k2}))
     hook.written(written)
     return written
 

@@ -45,6 +45,10 @@ class Progress(AbstractContextManager):
         self.count += n
         self._bar.update(n)
 
+    def describe(self, **postfix: object) -> None:
+        """Show ``name=value`` pairs after the bar (e.g. a job's frames and failures)."""
+        self._bar.set_postfix(postfix, refresh=False)
+
     def close(self) -> None:
         self._bar.close()
 

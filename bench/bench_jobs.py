@@ -1,0 +1,195 @@
+"""Jobs over many files: ``glradial correct --auto`` of N short videos on 1 and 2 workers, on the
+local process pool and on Ray actors, and the per-file overhead of each runner on tasks that do
+nothing. Writes docs/figures/bench_jobs.json.
+
+    python bench/bench_jobs.py [--videos 8] [--frames 30] [--size 320x180] [--noop 40]
+
+What is timed: the job (:func:`glradial.jobs.runner.run_job`) with its runner already started
+(pool processes spawned, Ray actors created, each worker warmed by one task of its own: imports,
+ONNX session; Ray itself started once, as a cluster would be), so the speed-up is the work's; the
+start-up and warm-up is reported beside it (``start_s``). The overhead per file is the
+time per no-op task (a task that writes one byte) with 2 workers, and Ray's minus the pool's. The
+memory of one worker is its peak resident set (VmHWM) after the video job, and after one clip of
+``--memory-size`` (1080p by default). The machine is shared:
+the load average before and after each measurement is recorded beside it, since other processes'
+load depresses a speed-up (most where the kernel's autogroup gives each session, not each
+process, a share: ``sched_autogroup``), and so are the cores the workers used (their CPU seconds over the run's):
+one worker that already keeps more than one core busy (decode, correct and encode threads) leaves a
+second less to gain.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+from figures import write_figure
+
+from glradial.cli import build_parser
+from glradial.jobs.command_line import command_options
+from glradial.jobs.pool import ProcessRunner
+from glradial.jobs.runner import run_job
+from glradial.jobs.tasks import CommandWork, planned_outputs
+from glradial.media.video_io import VideoInfo, VideoWriter
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass(frozen=True)
+class NoopWork:
+    """A task that does nothing but write one byte: what remains is the runner's cost per file."""
+
+    def __call__(self, source: str, staging: Path) -> dict:
+        (staging / Path(source).name).write_bytes(b"1")
+        return {"frames": 0}
+
+
+def make_videos(folder: Path, count: int, frames: int, size: tuple[int, int]) -> list[Path]:
+    """``count`` short pans over the shipped field panorama (FFV1), each from another place."""
+    pano = cv2.imread(str(ROOT / "tests" / "data" / "panorama_field_2048x1024.jpg"))[:, :, ::-1]
+    paths = []
+    folder.mkdir(exist_ok=True)
+    for k in range(count):
+        path = folder / f"clip{k}.mkv"
+        with VideoWriter(path, VideoInfo.of(size, 25, codec="ffv1", pix_fmt="gbrp")) as writer:
+            x0 = 100 + 120 * k
+            for i in range(frames):
+                crop = pano[400:670, x0 + 3 * i : x0 + 3 * i + 480]
+                writer.write(cv2.resize(crop, size, interpolation=cv2.INTER_AREA))
+        paths.append(path)
+    return paths
+
+
+def autogroup() -> str | None:
+    """Whether the kernel groups CPU time by session (autogroup): then, on a machine busy with other
+    sessions, all of one job's workers share one session's share, and a second worker gains little."""
+    try:
+        return Path("/proc/sys/kernel/sched_autogroup_enabled").read_text().strip()
+    except OSError:
+        return None
+
+
+def peak_rss_mb(pids: list[int]) -> list[float]:
+    """VmHWM (peak resident set) of each process, MB."""
+    peaks = []
+    for pid in pids:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmHWM:"):
+                peaks.append(int(line.split()[1]) / 1024)
+    return peaks
+
+
+def warm_up(runner, inputs: list[Path], out: Path, options: dict, command: str) -> float:
+    """Give each worker one task (its imports, model and caches loaded) without closing the runner; seconds."""
+    close, runner.close = runner.close, lambda kill=False: None
+    start = time.perf_counter()
+    try:
+        copies = []
+        for i in range(len(runner.slots)):
+            copies.append(out.parent / f"warm{i}{inputs[0].suffix}")
+            shutil.copyfile(inputs[0], copies[-1])
+        run_job(command, copies, out, lambda: runner, options, lambda s: planned_outputs(command, options, s), progress=False)
+    finally:
+        runner.close = close
+        shutil.rmtree(out, ignore_errors=True)
+    return time.perf_counter() - start
+
+
+def cpu_seconds(pids: list[int]) -> float:
+    """User + system CPU time of the processes and their waited-for children, s."""
+    total = 0
+    for pid in pids:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        total += sum(int(v) for v in fields[11:15])  # utime, stime, cutime, cstime
+    return total / os.sysconf("SC_CLK_TCK")
+
+
+def timed_job(make, work, inputs: list[Path], out: Path, options: dict, command: str = "correct") -> dict:
+    """Start the runner and warm each worker (timed), run the job on it (timed), note the workers' peak memory."""
+    load_before = os.getloadavg()[0]
+    runner = make()
+    started = warm_up(runner, inputs, out, options, command)
+    close = runner.close
+    memory: list[float] = []
+
+    pids = runner.pids()
+    cpu_end: list[float] = []
+
+    def close_noting_memory(kill: bool = False) -> None:
+        memory.extend(peak_rss_mb(pids))
+        cpu_end.append(cpu_seconds(pids))
+        close(kill)
+
+    runner.close = close_noting_memory
+    cpu, start = cpu_seconds(pids), time.perf_counter()
+    summary = run_job(command, inputs, out, lambda: runner, options, lambda s: planned_outputs(command, options, s), progress=False)
+    seconds = time.perf_counter() - start
+    cpu = cpu_end[0] - cpu
+    assert not summary.failed and len(summary.done) == len(inputs), summary
+    shutil.rmtree(out)
+    return {"start_s": round(started, 2), "run_s": round(seconds, 2), "workers_cpu_s": round(cpu, 2),
+            "cores_used": round(cpu / seconds, 2), "worker_peak_rss_mb": [round(m) for m in memory],
+            "load_before": round(load_before, 2), "load_after": round(os.getloadavg()[0], 2)}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--videos", type=int, default=8)
+    parser.add_argument("--frames", type=int, default=30)
+    parser.add_argument("--size", default="320x180")
+    parser.add_argument("--noop", type=int, default=40, help="no-op tasks for the per-file overhead")
+    parser.add_argument("--repeats", type=int, default=2, help="runs of each worker count, in turn; the best is kept")
+    parser.add_argument("--memory-size", default="1920x1080", help="frame size of the clip one worker's memory is measured on")
+    args = parser.parse_args()
+    size = tuple(int(v) for v in args.size.split("x"))
+    import ray
+
+    from glradial.jobs.ray_runner import RayRunner
+
+    start = time.perf_counter()
+    ray.init(address="local", num_cpus=2, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    ray_start = time.perf_counter() - start
+    folder = Path(tempfile.mkdtemp(prefix="bench_jobs."))
+    try:
+        videos = make_videos(folder, args.videos, args.frames, size)
+        parsed = build_parser().parse_args(["correct", "x", "--out-dir", "d", "--auto", "--backend", "cpu"])
+        options = command_options(parsed)
+        work = CommandWork("correct", options)
+        results: dict = {"videos": args.videos, "frames": args.frames, "size": list(size), "command": "correct --auto --backend cpu",
+                         "ray_init_s": round(ray_start, 2), "repeats": args.repeats, "sched_autogroup": autogroup()}
+        for name, make in (("pool", lambda w: lambda: ProcessRunner(work, w)), ("ray", lambda w: lambda: RayRunner(work, None, w))):
+            for _ in range(args.repeats):  # 1 and 2 workers in turn, the best run of each kept
+                for workers in (1, 2):
+                    timing = timed_job(make(workers), work, videos, folder / "out", options)
+                    print(name, workers, timing, flush=True)
+                    if f"{name}_{workers}" not in results or timing["run_s"] < results[f"{name}_{workers}"]["run_s"]:
+                        results[f"{name}_{workers}"] = timing
+            results[f"{name}_speedup"] = round(results[f"{name}_1"]["run_s"] / results[f"{name}_2"]["run_s"], 3)
+        noop_inputs = [folder / f"n{i}.txt" for i in range(args.noop)]
+        for path in noop_inputs:
+            path.write_bytes(b"0")
+        noop = NoopWork()
+        for name, make in (("pool", lambda: ProcessRunner(noop, 2)), ("ray", lambda: RayRunner(noop, None, 2))):
+            timing = timed_job(make, noop, noop_inputs, folder / "out", {"noop": True}, command="noop")
+            results[f"noop_{name}_ms_per_file"] = round(1000 * timing["run_s"] / args.noop, 1)
+        results["ray_overhead_ms_per_file"] = round(results["noop_ray_ms_per_file"] - results["noop_pool_ms_per_file"], 1)
+        big = make_videos(folder / "big", 1, args.frames, tuple(int(v) for v in args.memory_size.split("x")))
+        for name, make in (("pool", lambda: ProcessRunner(work, 1)), ("ray", lambda: RayRunner(work, None, 1))):
+            timing = timed_job(make, work, big, folder / "out", options)
+            results[f"{name}_worker_peak_rss_mb_{args.memory_size}"] = timing["worker_peak_rss_mb"][0]
+        print(results, flush=True)
+        write_figure("bench_jobs", results)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+        ray.shutdown()
+
+
+if __name__ == "__main__":
+    sys.exit(main())
