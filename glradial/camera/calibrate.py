@@ -156,6 +156,26 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     stage holds (the fine stage frees it), in place of the strong-lens retry; default none (pinhole
     starts, then the retry where the frame's lens is strong). Never raises for a frame that shows
     no pitch: the estimate is then doubtful with a reason.
+
+    Args:
+        frame: H×W×3 RGB or H×W gray array (uint8, uint16 or float in [0, 1]).
+        pitch: the pitch's markings (metres); default FIFA's 105 × 68 m.
+        first_guess: homographies to start from (above), best first.
+        previous: the previous frame's camera, for a video.
+        lens: a reading of the frame's lens (width-normalised) to start the search from.
+
+    Returns:
+        A :class:`glradial.CameraEstimate` (``doubtful`` and ``reason`` say whether to use it).
+
+    Raises:
+        TypeError: ``frame`` is not an array, or ``lens`` not a :class:`glradial.Lens`.
+        ValueError: a bad ``pitch`` or ``first_guess``.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> empty = glradial.calibrate(np.zeros((90, 160, 3), np.uint8))  # no pitch in sight
+        >>> empty.doubtful, empty.reason, empty.camera is None
+        (True, 'no_markings', True)
     """
     if not isinstance(frame, np.ndarray):
         raise TypeError(f"frame must be a numpy image array, got {type(frame).__name__}")

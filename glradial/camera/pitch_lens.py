@@ -161,7 +161,25 @@ class Estimator(LinesEstimator):
     """:class:`glradial.estimation.estimator.Estimator` (same arguments) whose ``method="auto"`` adds the
     pitch camera fit's lens where the template fits (``pitch=True``, the default; see the module
     docstring). ``pitch=False`` is the estimation layer's ``auto``, unchanged (what video uses: the
-    camera fit costs 0.2-0.4 s a frame)."""
+    camera fit costs 0.2-0.4 s a frame).
+
+    Args:
+        model_path: an ``.onnx`` model (default: the bundled one).
+        threads: onnxruntime intra-op threads (default: onnxruntime's choice).
+        mirror_average: average each frame's reading with its mirror's (default True).
+
+    Raises:
+        FileNotFoundError: ``model_path`` does not exist.
+        glradial.ModelLoadError: the file is not a usable glradial model.
+        ValueError, TypeError: a bad ``threads`` or ``mirror_average``.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> estimator = glradial.Estimator(threads=1)
+        >>> found = estimator(np.zeros((72, 128, 3), np.uint8))  # a blank frame: no evidence
+        >>> found.doubtful, found.reason
+        (True, 'blank_frame')
+    """
 
     def estimate_batch(self, frames: Sequence[np.ndarray], method: Method = "auto", pixel_aspect: float = 1.0,
                        *, pitch: bool = True) -> list[LensEstimate]:
@@ -185,7 +203,29 @@ def estimate(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1
     estimation layer's reading combined with the pitch camera fit's lens where the template fits (the
     CNN/line-fit answer alone elsewhere, and always with ``pitch=False``); ``"net"`` and
     ``"lines"`` as :func:`glradial.estimation.estimator.estimate`. ``pixel_aspect`` for frames stored
-    with non-square pixels. Uses the shared bundled estimator."""
+    with non-square pixels. Uses the shared bundled estimator.
+
+    Args:
+        frame: H×W×3 RGB array (uint8, uint16 or float).
+        method: ``"auto"``, ``"net"`` or ``"lines"``.
+        pixel_aspect: the frame's stored pixel aspect (``fy / fx``, 1 = square).
+        pitch: with ``"auto"``, add the pitch camera fit's lens where the template fits.
+
+    Returns:
+        A :class:`glradial.LensEstimate` (width-normalised ``k1``, ``k2``, its bound in px at 1920
+        wide, and its doubt).
+
+    Raises:
+        ValueError: an unknown ``method``, a bad frame shape or ``pixel_aspect``.
+        TypeError: ``frame`` is not an array.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> noise = np.random.default_rng(0).integers(0, 255, (72, 128, 3), np.uint8)
+        >>> found = glradial.estimate(noise)
+        >>> found.doubtful, found.reason  # said to be doubtful, so correct() leaves the frame alone
+        (True, 'noise_frame')
+    """
     check_method(method)
     found = default_estimator().estimate(frame, method, pixel_aspect)
     return _with_pitch([frame], [found])[0] if method == "auto" and pitch else found

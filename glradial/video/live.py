@@ -87,7 +87,23 @@ class LiveFrame:
     pushed), ``pts`` (the pushed ``av.VideoFrame``'s, else None), the ``image`` (an array, or an
     ``av.VideoFrame`` for a planar YUV frame), the lens ``state`` (applied, reported, uncertainty,
     doubt, shot), its OpenTrackIO ``sample`` (None without a camera) and when it ``arrived``
-    (``time.monotonic()`` s at its push)."""
+    (``time.monotonic()`` s at its push).
+
+    Args:
+        index, timestamp, pts, image, state, sample, arrived: above (made by :class:`LiveCorrector`).
+
+    Raises:
+        Nothing: a plain record.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> with glradial.LiveCorrector((-0.2, 0.0), (64, 36), 25) as live:
+        ...     live.push(np.zeros((36, 64, 3), np.uint8), 0.0)
+        ...     live.finish()
+        ...     frame = live.pull(timeout=None)
+        >>> isinstance(frame, glradial.LiveFrame), frame.index, frame.image.shape
+        (True, 0, (36, 64, 3))
+    """
 
     index: int
     timestamp: float
@@ -202,7 +218,29 @@ class LiveCorrector:
     :class:`~glradial.video.live_lens.BundledEstimator`) and ``auto`` (keywords of
     :class:`~glradial.video.live_lens.OnlineShotLens`, e.g. ``worker="thread"`` for an estimator
     that cannot be pickled) for ``"auto"``, whose worker is started and waited for here; or an
-    OnlineShotLens made beforehand as ``lens`` (closed with this corrector)."""
+    OnlineShotLens made beforehand as ``lens`` (closed with this corrector).
+
+    Args:
+        lens: above.
+        size: the stream's ``(W, H)`` in pixels.
+        rate: frames per second (> 0).
+        max_delay, camera, model, fit, interpolation, backend, codec, frames, estimator, auto: above.
+
+    Raises:
+        ValueError: a bad ``lens``, ``size``, ``rate`` or ``max_delay``, or a lens that folds over
+            inside the frame.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> live = glradial.LiveCorrector(glradial.Lens(-0.2), (64, 36), 25)
+        >>> for i in range(3):
+        ...     live.push(np.full((36, 64, 3), 120, np.uint8), i / 25)
+        >>> live.finish()
+        >>> frames = [live.pull(timeout=None) for _ in range(3)]
+        >>> live.close()
+        >>> [f.index for f in frames], live.stats.corrected
+        ([0, 1, 2], 3)
+    """
 
     def __init__(self, lens: Lens | tuple[float, float] | str | OnlineShotLens, size: tuple[int, int], rate: float | Fraction, *,
                  max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None, fit: str = "same",
@@ -248,8 +286,9 @@ class LiveCorrector:
 
     # -- the caller's side ---------------------------------------------------------------------------
     def push(self, frame: np.ndarray | av.VideoFrame, timestamp: float | None = None) -> None:
-        """Hand over the next frame (module conventions); never blocks: when ``max_delay`` frames
-        already wait, the oldest of them is dropped (counted)."""
+        """Hand over the next frame (module conventions); never blocks: when :data:`MAX_WAITING`
+        frames already wait for correction, the oldest of them is dropped (counted in
+        ``stats.dropped``). ``max_delay`` does not drop: it only counts frames that leave late."""
         arrived = time.monotonic()
         if not isinstance(frame, (np.ndarray, av.VideoFrame)):
             raise TypeError(f"frame must be an H x W x 3 array or an av.VideoFrame, got {type(frame).__name__}")
