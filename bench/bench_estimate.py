@@ -26,6 +26,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from figures import write_figure
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
 from glradial.camera.pitch_lens import Estimator  # noqa: E402
@@ -63,6 +64,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     frame = cv2.GaussianBlur(rng.integers(0, 256, (1080, 1920, 3), dtype=np.uint8), (0, 0), 2.0)
     print(f"model {args.model}")
+    results: dict[str, dict] = {}
     for threads in (1, 2):
         cv2.setNumThreads(threads)
         est = Estimator(args.model, threads=threads)
@@ -89,6 +91,12 @@ def main() -> None:
               f"{net / blur:.2f} / {lines / blur:.2f} / {auto / blur:.2f}")
         print(f"threads {threads}, same frame: estimate(auto) with the pitch camera fit {auto_pitch:.2f} ms (answered from "
               f"{source}), {auto_pitch / auto:.2f} x auto without it; ratio to the blur peer {auto_pitch / blur:.2f}")
+        results[f"threads_{threads}"] = {
+            "noise_1080p_ms": {"resize": resize, "inference": infer, "estimate_net": total, "peer_gaussian_blur": blur},
+            "pitch_1080p_ms": {"detect": detect, "fit": fit, "estimate_net": net, "estimate_lines": lines,
+                               "estimate_auto_no_pitch": auto, "estimate_auto": auto_pitch},
+            "pitch_chains": len(evidence.chains), "auto_answered_from": source}
+    write_figure("bench_estimate", results)
 
 
 if __name__ == "__main__":

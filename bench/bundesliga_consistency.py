@@ -40,6 +40,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from figures import printed_report, write_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -169,7 +170,9 @@ def main() -> None:
                                        "camera": found.get("camera")}) + "\n")
     if dump:
         dump.close()
-    _print(errors)
+    with printed_report() as lines:
+        _print(errors)
+    write_figure("bundesliga_consistency" + ("" if pitch else "_no_pitch"), {"report": lines})
 
 
 if __name__ == "__main__":

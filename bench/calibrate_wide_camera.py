@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from figures import write_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -131,7 +132,9 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
-    print(json.dumps(report(rows), indent=1))
+    summary = report(rows)
+    print(json.dumps(summary, indent=1))
+    write_figure("calibrate_wide_camera", summary)
     return 0
 
 

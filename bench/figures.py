@@ -10,14 +10,16 @@ new measurement changes one generated file, not prose in several.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import io
 import json
 import os
 import platform
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Where the figures live (one JSON file per bench and variant).
@@ -100,3 +102,27 @@ def _finite(value: Any) -> Any:
     if isinstance(value, float) and (value != value or value in (float("inf"), float("-inf"))):
         return None
     return value
+
+
+@contextlib.contextmanager
+def printed_report() -> Iterator[list[str]]:
+    """Collect what a bench prints (its report table) while still printing it: the yielded list
+    holds the printed lines once the block ends. For benches whose figures are a printed table,
+    written as ``write_figure(name, {"report": lines})`` (rendered verbatim in docs/BENCH.md)."""
+    lines: list[str] = []
+    buffer = io.StringIO()
+
+    real = sys.stdout
+
+    class _Both(io.TextIOBase):
+        def write(self, text: str) -> int:
+            real.write(text)
+            buffer.write(text)
+            return len(text)
+
+        def flush(self) -> None:
+            real.flush()
+
+    with contextlib.redirect_stdout(_Both()):
+        yield lines
+    lines.extend(buffer.getvalue().splitlines())

@@ -31,6 +31,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if __name__ == "__main__" and "--checkout" in sys.argv[:-1]:  # the checkout under test, before any import of it
     ROOT = Path(sys.argv[sys.argv.index("--checkout") + 1]).resolve()
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from figures import printed_report, write_figure  # noqa: E402
+
 from glradial.estimation.estimator import Estimator, view_to_frame  # noqa: E402
 from glradial.estimation.lens_estimate import frame_evidence, judge  # noqa: E402
 from glradial.estimation.trust import view_features  # noqa: E402
@@ -130,16 +132,18 @@ def main() -> None:
         rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else list(lines),
                      "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1],
                      **({"err_auto_pitch": errors["auto+pitch"][-1], "pitch": pitched[-1], **readings} if args.pitch else {})})
-    extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if args.pitch else ""
-    print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
-    for name, idx in _groups(samples).items():
-        if not idx:
-            continue
-        el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
-        print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
-              f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
-              + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
-                 f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if args.pitch else ""))
+    with printed_report() as lines:
+        extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if args.pitch else ""
+        print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
+        for name, idx in _groups(samples).items():
+            if not idx:
+                continue
+            el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
+            print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
+                  f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
+                  + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
+                     f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if args.pitch else ""))
+    write_figure("lines_accuracy" + ("_pitch" if args.pitch else ""), {"report": lines})
     if args.dump:
         import json
 

@@ -52,6 +52,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 sys.path.insert(0, str(ROOT / "bench"))
+from figures import write_figure  # noqa: E402
 from pitch_views import _cached, cache_options, collect, offcentre_views, stadiums  # noqa: E402
 
 from glradial.estimation.lens_estimate import judge  # noqa: E402
@@ -128,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"misfit_weight = {weight:.3f} (conformal 90 % of {len(scores)} calibration views with a line fit; "
           f"{int(np.sum(scores > 0))} need it, {int(np.sum(~np.isfinite(scores)))} unmeasured)")
     print(table(evidence, trust, weight))
+    write_figure("misfit_calibration", {"misfit_weight": weight, "calibration_views": len(scores), "report": table(evidence, trust, weight).splitlines()})
     for path in ([args.out] if args.out else []) + ([TRUST_FILE] if args.write else []):
         if not math.isfinite(weight):
             raise SystemExit("misfit_weight is not finite: too many calibration misses the shift does not measure")

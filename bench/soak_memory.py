@@ -22,6 +22,7 @@ import threading
 import time
 
 import numpy as np
+from figures import printed_report, write_figure
 
 from glradial import correct
 from glradial.estimation.estimator import Estimator
@@ -86,12 +87,14 @@ def main() -> None:
     args = parser.parse_args()
     frame = np.random.default_rng(0).integers(0, 256, (180, 320, 3), dtype=np.uint8)
     print(f"frames 320×180 RGB uint8 for threads/correct, 640×360 for estimate; RSS at start {rss_mb():.1f} MB")
-    if args.threads:
-        soak_threads(args.threads, frame)
-    if args.correct:
-        soak_correct(args.correct, frame)
-    if args.estimate:
-        soak_estimate(args.estimate)
+    with printed_report() as lines:
+        if args.threads:
+            soak_threads(args.threads, frame)
+        if args.correct:
+            soak_correct(args.correct, frame)
+        if args.estimate:
+            soak_estimate(args.estimate)
+    write_figure("soak_memory", {"report": lines})
 
 
 if __name__ == "__main__":

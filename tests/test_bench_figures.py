@@ -28,3 +28,12 @@ def test_a_bad_name_is_refused(tmp_path, name):
     figures = load_script("bench/figures.py")
     with pytest.raises(ValueError, match="name"):
         figures.write_figure(name, {}, directory=tmp_path)
+
+
+def test_a_printed_report_is_kept_and_still_printed(capsys):
+    figures = load_script("bench/figures.py")
+    with figures.printed_report() as lines:
+        print("| a | b |")
+        print("| 1 | 2 |")
+    assert lines == ["| a | b |", "| 1 | 2 |"]
+    assert capsys.readouterr().out == "| a | b |\n| 1 | 2 |\n"
