@@ -11,7 +11,7 @@ into a 90 % bound; the test split checks its coverage.
 
 With ``--real DATA`` (a folder holding ``real_football/`` and ``broadcast_bundesliga/``, validation
 only: never trained on) the same per-frame error and scale are measured on real frames instead, and
-the coverage of ``q x error_px`` is reported (docs/MODEL.md, "The error head on real frames"):
+the coverage of ``q x error_px`` is reported (docs/MODEL.md, "The error head"):
 
 * ``real_frames``: the pinhole frames of ``real_football`` (football360 and USL; the 2:1 panorama is
   left out) with the known lenses ``glradial evaluate --frames`` applies (``--lenses`` paper and as

@@ -47,16 +47,35 @@ def _value(value: Any) -> str:
     return str(value).replace("|", "\\|")
 
 
-def _leaves(value: Any, prefix: str = "") -> Iterator[tuple[str, Any]]:
+def _leaves(value: Any, path: tuple[str, ...] = ()) -> Iterator[tuple[tuple[str, ...], Any]]:
     """``(key path, scalar or list of scalars)`` of every leaf of ``value``, in order."""
     if isinstance(value, dict):
         for key, inner in value.items():
-            yield from _leaves(inner, f"{prefix} / {key}" if prefix else str(key))
+            yield from _leaves(inner, (*path, str(key)))
     elif isinstance(value, list) and any(isinstance(v, (dict, list)) for v in value):
         for index, inner in enumerate(value):
-            yield from _leaves(inner, f"{prefix} / {index}" if prefix else str(index))
+            yield from _leaves(inner, (*path, str(index)))
     else:
-        yield prefix or "value", value
+        yield path or ("value",), value
+
+
+def _tables(results: Any) -> list[str]:
+    """The leaves as Markdown tables: one row per parent path, one column per last key; rows with
+    the same columns (in a run) share a table, so a dict of dicts of numbers reads as a matrix."""
+    rows: dict[str, dict[str, Any]] = {}
+    for path, value in _leaves(results):
+        parent = " / ".join(path[:-1]) if len(path) > 1 else ""
+        rows.setdefault(parent, {})[path[-1]] = value
+    lines: list[str] = []
+    previous: tuple[str, ...] | None = None
+    for parent, cells in rows.items():
+        columns = tuple(cells)
+        if columns != previous:
+            lines += ["", "| | " + " | ".join(c.replace("|", "/") for c in columns) + " |",
+                      "| --- |" + " --- |" * len(columns)]
+            previous = columns
+        lines.append(f"| {parent.replace('|', '/')} | " + " | ".join(_value(v) for v in cells.values()) + " |")
+    return lines[1:] + [""] if lines else []
 
 
 def _provenance(record: dict) -> str:
@@ -75,11 +94,8 @@ def render_one(record: dict) -> list[str]:
     lines = [f"## {record['name']}", "", _provenance(record), ""]
     results = record.get("results")
     report = results.pop("report", None) if isinstance(results, dict) else None
-    rows = list(_leaves(results)) if results not in ({}, None) else []
-    if rows:
-        lines += ["| figure | value |", "| --- | --- |"]
-        lines += [f"| {key.replace('|', '/')} | {_value(value)} |" for key, value in rows]
-        lines.append("")
+    if results not in ({}, None):
+        lines += _tables(results)
     if report:
         lines += ["```text", *report, "```", ""]
     return lines

@@ -24,7 +24,7 @@ def test_every_figure_says_how_it_was_measured():
     for path in records:
         record = json.loads(path.read_text())
         assert record["name"] == path.stem
-        assert record["date"][:4] == "2026" and record["command"].startswith("python ")
+        assert record["date"][:4] == "2026" and record["command"].startswith(("python ", "bash scripts/", "glradial "))
         assert record["machine"] and "results" in record
         if "transcribed_from" in record:
             source = record["transcribed_from"].split(",")[0].split(" (")[0]
@@ -43,5 +43,5 @@ def test_a_section_renders_tables_and_reports(tmp_path):
         "name": "x", "date": "2026-11-28T00:00:00Z", "commit": "abc", "dirty": False, "command": "python bench/x.py",
         "machine": {"cpu": "cpu", "logical_cpus": 2}, "results": {"fps": {"a": 1.23456}, "report": ["| t |"]}}))
     text = render.render(tmp_path)
-    assert "| fps / a | 1.235 |" in text and "```text\n| t |\n```" in text
+    assert "| | a |\n| --- | --- |\n| fps | 1.235 |" in text and "```text\n| t |\n```" in text
     assert "commit abc: `python bench/x.py`" in text

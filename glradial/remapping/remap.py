@@ -617,7 +617,7 @@ def cpu_maps(
     rounded to 1/32 px, 6 bytes a sample), or with ``float_maps`` the float32 maps themselves
     (x, y; 8 bytes a sample): OpenCV 5 then interpolates bilinearly at the float32 position (exact
     bilinear), about twice as fast as from fixed-point maps for a single-channel plane, but slower
-    for multi-channel integer images (docs/BENCH.md, "Float maps for the planes"). The arrays are
+    for multi-channel integer images (docs/EXPERIMENTS.md). The arrays are
     shared between callers: read them, never write them."""
     return _cached_maps(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, tuple(size), direction, scale,
                         inverse if direction == "distort" else "", bool(nearest), plane, bool(float_maps))
