@@ -511,3 +511,26 @@ def test_quiet_anywhere_and_progress_on_stderr(tmp_path, capsys):
                 bar.update()
     assert "work" in drawn.getvalue() and "7/7" in drawn.getvalue()
     assert silent.getvalue() == ""
+
+
+def test_correct_image_auto_decodes_the_image_once(tmp_path, monkeypatch, capsys):
+    """Decide, then apply: ``correct --auto`` on an image decodes it once (the estimate and the
+    correction share that decode), and the doubt policy is one function (glradial.lens.doubt)."""
+    import glradial.lens.doubt
+    import glradial.media.image_io as image_io
+
+    source, out = tmp_path / "in.png", tmp_path / "out.png"
+    write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
+    decodes, decisions = [], []
+    real_read, real_applies = image_io.read_image, glradial.lens.doubt.applies
+    monkeypatch.setattr(image_io, "read_image", lambda *a, **k: decodes.append(a[0]) or real_read(*a, **k))
+    monkeypatch.setattr(glradial.lens.doubt, "applies", lambda *a: decisions.append(a) or real_applies(*a))
+    doubtful = glradial.LensEstimate(-0.2, 0.03, uncertainty_px=30.0, method="net", doubtful=True, reason="weak_geometry")
+    monkeypatch.setattr("glradial.camera.pitch_lens.Estimator.estimate", lambda self, frame, **kw: doubtful)
+    assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0
+    assert [str(p) for p in decodes] == [str(source)]
+    assert decisions[0] == (True, "weak_geometry", False)  # decided once, here; the identity lens then applied
+    real = real_read(source)
+    np.testing.assert_array_equal(real_read(out), real)  # doubtful: the image passes through
+    assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu", "--apply-doubtful", "-y"]) == 0
+    np.testing.assert_array_equal(real_read(out), glradial.correct(real, -0.2, 0.03, backend="cpu"))

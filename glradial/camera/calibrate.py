@@ -58,7 +58,8 @@ def check_pitch(pitch: object) -> PitchTemplate:
     return pitch
 
 
-def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb: np.ndarray | None = None,
+def _starts(lines: LinePoints, pitch: PitchTemplate, *, first_guess: list[np.ndarray] | None = None,
+            previous: Camera | CameraEstimate | None = None, rgb: np.ndarray | None = None,
             lens: Lens | None = None) -> list[Camera]:
     if previous is not None:
         cam = previous.camera if isinstance(previous, CameraEstimate) else previous
@@ -196,11 +197,11 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
         return judge(None, len(lines.xy))
     if previous is not None:
         fine_lines = lines.thinned(FINE_POINTS)
-        tracked = judge(refine(_starts(lines, pitch, None, previous)[0], fine_lines.xy, fine_lines.angle, pitch,
+        tracked = judge(refine(_starts(lines, pitch, previous=previous)[0], fine_lines.xy, fine_lines.angle, pitch,
                                gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
         if not tracked.doubtful:
             return tracked
-    judged = judge(_search_fit(_starts(lines, pitch, first_guess, None, rgb, lens), lines, pitch), len(lines.xy))
+    judged = judge(_search_fit(_starts(lines, pitch, first_guess=first_guess, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
     if judged.doubtful and first_guess is None and lens is None:  # a given lens reading already did what the retry does
         judged = _strong_lens_retry(rgb, lines, pitch, judged)
     return judged
@@ -236,7 +237,7 @@ def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate,
     lens = strong_lens(rgb)
     if lens is None:
         return judged
-    retried = judge(_search_fit(_starts(lines, pitch, None, None, rgb, lens), lines, pitch), len(lines.xy))
+    retried = judge(_search_fit(_starts(lines, pitch, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
     if not retried.doubtful or (retried.camera is not None and retried.inliers > judged.inliers):
         return retried
     return judged

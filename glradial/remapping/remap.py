@@ -65,7 +65,7 @@ import numpy as np
 from ..gl import egl
 from ..gl.shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES
 from ..gl.shaderlib import build_program
-from ..lens import lensfuncs
+from ..lens import doubt, lensfuncs
 from ..lens.lens import Lens, Plane, frame_size
 from ..lens.options import (
     BACKENDS,
@@ -833,9 +833,7 @@ def correct(
         >>> bool((glradial.correct(bent, doubtful, backend="cpu") == bent).all())  # not applied
         True
     """
-    if not isinstance(apply_doubtful, (bool, np.bool_)):
-        raise TypeError(f"apply_doubtful must be a bool, got {apply_doubtful!r}")
-    if getattr(lens, "doubtful", False) is True and not apply_doubtful:
+    if not doubt.applies(getattr(lens, "doubtful", False) is True, getattr(lens, "reason", ""), apply_doubtful):
         lens, fit = Lens(0.0, 0.0), "same"
     return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
         work, lens, k2, "undistort", fit, interpolation, fill_values, "exact", backend))

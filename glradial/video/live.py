@@ -51,7 +51,7 @@ import uuid
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import av
 import cv2
@@ -79,6 +79,16 @@ READY_SLOTS = 1
 COSTS_KEPT = 9
 #: OpenTrackIO lens objects kept per lens (a stream changes lens only between shots or on a zoom)
 LENS_OBJECTS = 64
+
+
+class _Waiting(NamedTuple):
+    """A pushed frame waiting for the worker: the ``frame``, its ``timestamp`` (s, from the stream's
+    first), when it ``arrived`` (``time.monotonic()`` s) and its ``index`` on the stream's clock."""
+
+    frame: object
+    timestamp: float
+    arrived: float
+    index: int
 
 
 @dataclass
@@ -287,8 +297,9 @@ class LiveCorrector:
     # -- the caller's side ---------------------------------------------------------------------------
     def push(self, frame: np.ndarray | av.VideoFrame, timestamp: float | None = None) -> None:
         """Hand over the next frame (module conventions); never blocks: when :data:`MAX_WAITING`
-        frames already wait for correction, the oldest of them is dropped (counted in
-        ``stats.dropped``). ``max_delay`` does not drop: it only counts frames that leave late."""
+        frames already wait for correction, the oldest of them is dropped here (counted in
+        ``stats.dropped``). The worker, not this call, drops a frame that could no longer leave
+        within ``max_delay`` frame periods (module docstring)."""
         arrived = time.monotonic()
         if not isinstance(frame, (np.ndarray, av.VideoFrame)):
             raise TypeError(f"frame must be an H x W x 3 array or an av.VideoFrame, got {type(frame).__name__}")
@@ -305,8 +316,8 @@ class LiveCorrector:
             self._last_index = index
             self.stats.pushed += 1
             if len(self._waiting) >= MAX_WAITING:
-                self.stats.drop(self._waiting.popleft()[3])
-            self._waiting.append((frame, stamp if timestamp is not None else stamp - self._first, arrived, index))
+                self.stats.drop(self._waiting.popleft().index)
+            self._waiting.append(_Waiting(frame, stamp if timestamp is not None else stamp - self._first, arrived, index))
             self._cond.notify_all()
 
     def pull(self, timeout: float | None = 0.0, *, leave: bool = True) -> LiveFrame | None:
@@ -387,11 +398,11 @@ class LiveCorrector:
                 if self._stopped or not self._waiting:
                     return None
                 item = self._waiting.popleft()
-                age = time.monotonic() - item[2]
+                age = time.monotonic() - item.arrived
                 cost = float(np.median(self._costs)) if self._costs else 0.0
                 if age * float(self.rate) > self.max_delay or (
                         self._waiting and (age + cost) * float(self.rate) > self.max_delay):
-                    self.stats.drop(item[3])
+                    self.stats.drop(item.index)
                     continue
                 return item
 
@@ -464,7 +475,7 @@ class LiveCorrector:
 
     def _state(self, index: int, frame) -> LensState:
         if self._online is None:
-            return LensState(0, self.lens, self.lens, None, False, "")
+            return LensState(shot=0, applied=self.lens, reported=self.lens, uncertainty_px=None, doubtful=False, reason="")
         return self._online.observe(index, _thumbnail(frame), lambda: _sample_copy(frame))
 
     def _sample(self, index: int, timestamp: float, state: LensState) -> dict:

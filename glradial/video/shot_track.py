@@ -36,6 +36,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..lens import doubt
 from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
@@ -277,7 +278,7 @@ def _track(info, stamps: np.ndarray, shots: _Shots, apply_doubtful: bool, doubtf
         raw_sure[index] = float(getattr(estimate, "uncertainty_px", np.nan))
         method[index] = str(getattr(estimate, "method", "") or "")
         weight[index] = 1.0
-    applied = ~doubtful | (bool(apply_doubtful) & np.array([r != "fold_over" for r in reason], bool))
+    applied = np.array([doubt.applies(bool(d), r, bool(apply_doubtful)) for d, r in zip(doubtful, reason)], bool)
     return LensTrack(info.rate, info.size, shot, lens, raw, weight, time_s=stamps, uncertainty_px=sure,
                      raw_uncertainty_px=raw_sure, method=method, doubtful_px=doubtful_px, doubtful=doubtful,
                      reason=reason, applied=applied)
