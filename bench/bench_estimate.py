@@ -12,7 +12,7 @@ real broadcast frame upscaled to 1080p (``--pitch``, default the USL frame of
 fit, and ``estimate(method="lines")`` / ``"auto"``, with the same peer ratio; ``auto`` is timed twice:
 the estimation layer's (the CNN and the line fit, ``pitch=False``: what ``auto`` was before the pitch
 camera fit was fed back, and what video still uses) and the public ``glradial.Estimator``'s, which also
-runs the camera fit (:mod:`glradial.camera.pitch_lens`; its answer's source is printed).
+runs the camera fit (:mod:`glradial.camera.estimator`; its answer's source is printed).
 Targets (issues 5, 17): net <= 15 ms per 1080p frame, auto <= 40 ms, on one thread.
 """
 
@@ -29,10 +29,10 @@ import numpy as np
 from figures import write_figure
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial.camera.pitch_lens import Estimator  # noqa: E402
-from glradial.estimation.estimator import default_model_path  # noqa: E402
+from glradial.camera.estimator import Estimator  # noqa: E402
 from glradial.estimation.line_fit import fit_lines  # noqa: E402
 from glradial.estimation.lines import detect_chains  # noqa: E402
+from glradial.estimation.net_lines import default_model_path  # noqa: E402
 
 
 def _pitch_frame(path: str) -> np.ndarray:

@@ -80,10 +80,10 @@ def _lens_of(frame: np.ndarray, mode: str):
     """``(lens or None, ms)``: the frame's lens by ``glradial.estimate`` for ``mode == "auto"``."""
     if mode == "none":
         return None, 0.0
-    from glradial.estimation.estimator import estimate
+    from glradial.estimation.net_lines import estimate_net_lines
 
     t0 = time.perf_counter()
-    found = estimate(frame)
+    found = estimate_net_lines(frame)
     return found, (time.perf_counter() - t0) * 1000
 
 

@@ -144,7 +144,7 @@ def _calibrate(rows: list[dict], clip: str) -> None:
     """Split-conformal quantile of keypoint RMS / max(fit RMS, floor) over ``clip``'s answered frames."""
 
     from glradial.camera.estimate import CAMERA_TRUST_FILE, camera_trust
-    from glradial.evaluation.calibrate import conformal_quantile
+    from glradial.evaluation.trust_calibration import conformal_quantile
     from glradial.media.atomic import atomic_write_text
 
     trust = dict(camera_trust())

@@ -105,7 +105,7 @@ def report(rows: list[dict]) -> dict:
 def calibrate_bound(rows: list[dict]) -> float:
     """Split-conformal quantile of marking error / max(fit RMS, floor) over answered views."""
     from glradial.camera.estimate import camera_trust
-    from glradial.evaluation.calibrate import conformal_quantile
+    from glradial.evaluation.trust_calibration import conformal_quantile
 
     floor = camera_trust()["floor_px"]
     return conformal_quantile([r["marking_rms_px"] / max(r["rms_fit_px"], floor) for r in rows

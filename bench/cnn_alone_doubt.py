@@ -20,7 +20,7 @@ correcting helps exactly when ``o < s / 2``. ``q_over`` is the conformal 90 % qu
   that set).
 
 Printed: on the trust records' frames without any line fit, cross-fitted (each fold judged with the
-quantiles of the other; truths as ``glradial.evaluation.calibrate`` scores them), and on the pitch
+quantiles of the other; truths as ``glradial.evaluation.trust_calibration`` scores them), and on the pitch
 views of ``bench/pitch_views.py`` (its ``--evidence`` cache; the quantiles of all records; every
 other frame keeps the shipped verdict): frames corrected, left uncorrected where the answer would
 have helped, corrected and made worse.
@@ -41,7 +41,7 @@ from figures import write_figure  # noqa: E402
 
 from glradial.estimation.lens_estimate import judge  # noqa: E402
 from glradial.estimation.trust import shift_px, shipped_trust  # noqa: E402
-from glradial.evaluation.calibrate import conformal_quantile, load_records  # noqa: E402
+from glradial.evaluation.trust_calibration import conformal_quantile, load_records  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
 
 RULES = ("shipped (stated bound)", "one-sided identity", "one-sided benefit")

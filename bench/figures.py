@@ -57,7 +57,8 @@ def write_figure(name: str, results: Any, argv: list[str] | None = None,
             (``"calibrate_matches"``, ``"bench_video_1920x1080"``); letters, digits, ``_`` and ``-``.
         results: the measured values (JSON-serialisable; NaN is written as ``null``).
         argv: the bench's arguments (default ``sys.argv[1:]``), recorded in ``command``.
-        directory: where to write (default :data:`FIGURES_DIR`; tests pass a temporary folder).
+        directory: where to write (default: the environment's ``GLRADIAL_FIGURES_DIR``, else
+            :data:`FIGURES_DIR`; tests that run a bench set it to a temporary folder).
 
     Returns:
         The path written.
@@ -82,7 +83,9 @@ def write_figure(name: str, results: Any, argv: list[str] | None = None,
         "machine": machine(),
         "results": _finite(results),
     }
-    directory = FIGURES_DIR if directory is None else Path(directory)
+    if directory is None:
+        directory = Path(os.environ.get("GLRADIAL_FIGURES_DIR") or FIGURES_DIR)
+    directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{name}.json"
     tmp = path.with_suffix(".json.tmp")

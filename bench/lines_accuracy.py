@@ -13,7 +13,7 @@ frames with a line fit, and the mean fit time. Groups: real frames (all lenses),
 ``k1 <= -0.6``, 640x360 panorama crops, procedural test crops. Validation data only: no tuning
 should be reported on the same samples without saying so (docs/LINES.md says which were used).
 ``--pitch`` also scores ``auto+pitch``, the public ``glradial.estimate(method="auto")``
-(:mod:`glradial.camera.pitch_lens`: the pitch camera fit's lens where the template fits, ``auto``
+(:mod:`glradial.camera.estimator`: the pitch camera fit's lens where the template fits, ``auto``
 elsewhere), with the share of samples it answered from the pitch (``pitch %``).
 """
 
@@ -33,8 +33,8 @@ if __name__ == "__main__" and "--checkout" in sys.argv[:-1]:  # the checkout und
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 from figures import printed_report, write_figure  # noqa: E402
 
-from glradial.estimation.estimator import Estimator, view_to_frame  # noqa: E402
 from glradial.estimation.lens_estimate import frame_evidence, judge  # noqa: E402
+from glradial.estimation.net_lines import NetLinesEstimator, view_to_frame  # noqa: E402
 from glradial.estimation.trust import view_features  # noqa: E402
 from glradial.evaluation import real_eval  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
@@ -103,12 +103,12 @@ def main() -> None:
     errors: dict = {"lines": [], "auto": [], **({"auto+pitch": []} if args.pitch else {})}
     pitched = []
     has_fit, times, rows = [], [], []
-    estimator = Estimator(threads=1)
+    estimator = NetLinesEstimator(threads=1)
     for s in samples:
         frame = s["frame"]
         view = estimator.preprocess(frame)
         features = view_features(view)
-        # the network's own expected error (error head), as Estimator.estimate passes it: the CNN's bound
+        # the network's own expected error (error head), as NetLinesEstimator.estimate passes it: the CNN's bound
         net_error = estimator.run_with_error(view[None])[1]
         net_error = None if net_error is None else float(net_error[0])
         t0 = time.perf_counter()
@@ -121,7 +121,7 @@ def main() -> None:
         for method in errors:
             e = judge(evidence, method.split("+")[0])
             if method == "auto+pitch":  # what glradial.estimate(method="auto") adds to the estimation layer's auto
-                from glradial.camera import pitch_lens as pl
+                from glradial.camera import estimator as pl
 
                 auto = e
                 e, camera = pl.with_pitch(frame, auto)

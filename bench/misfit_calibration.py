@@ -23,11 +23,11 @@ the width off centre, scored against the centred lens of a simulated checkerboar
 * ``real_panorama_held_out``: 24 off-centre views of the real stadium panorama
   (``real_football/stadium_01_1k_tonemapped.jpg``, pitch-level camera, tilt -10..+8 deg); validation only.
 
-None of these stadiums is used by the trust records (``glradial.evaluation.calibrate``) or by
+None of these stadiums is used by the trust records (``glradial.evaluation.trust_calibration``) or by
 ``bench/pitch_views.py`` (whose ``offcentre`` source, six further stadiums, and the real wide camera
 are a third and fourth check, not seen here).
 
-Calibration (split conformal, :func:`glradial.evaluation.calibrate.conformal_quantile` at 90 %): over
+Calibration (split conformal, :func:`glradial.evaluation.trust_calibration.conformal_quantile` at 90 %): over
 the calibration views with a line fit (where the term can apply), each view's score is the weight
 its bound (with the term off) needs to cover its error, ``sqrt(error² - bound²) / centre_shift_px`` (0 when
 already covered; infinite where the shift is not measured); ``misfit_weight`` is the conformal
@@ -57,7 +57,7 @@ from pitch_views import _cached, cache_options, collect, offcentre_views, stadiu
 
 from glradial.estimation.lens_estimate import judge  # noqa: E402
 from glradial.estimation.trust import TRUST_FILE, load_trust, shipped_trust  # noqa: E402
-from glradial.evaluation.calibrate import conformal_quantile  # noqa: E402
+from glradial.evaluation.trust_calibration import conformal_quantile  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
 
 #: first seed of the calibration stadiums (validation split), stadiums per split, views per stadium

@@ -1,5 +1,5 @@
 """Split-conformal calibration of the lens bound that ``glradial.estimate(method="auto")`` states when
-it answers from the pitch camera fit (:func:`glradial.camera.pitch_lens.lens_bound_px`).
+it answers from the pitch camera fit (:func:`glradial.camera.estimator.lens_bound_px`).
 
 Usage: ``python bench/pitch_lens_bound.py --procedural CAL.json [--test TEST.json] [--bundesliga DUMP.jsonl]
 [--calibrate-clip 2e57b9] [--write]``
@@ -37,7 +37,7 @@ sys.path.insert(0, str(ROOT))
 
 from figures import printed_report, write_figure  # noqa: E402
 
-from glradial.evaluation.calibrate import conformal_quantile  # noqa: E402
+from glradial.evaluation.trust_calibration import conformal_quantile  # noqa: E402
 
 FLOOR_PX = 0.3
 

@@ -275,9 +275,9 @@ def _cached(path: Path | None, make):
 
 def collect(frames: dict, sources: list[str]) -> dict:
     """The :class:`~glradial.estimation.trust.FrameEvidence` of every frame (one CNN session)."""
-    from glradial.estimation.estimator import Estimator
+    from glradial.estimation.net_lines import NetLinesEstimator
 
-    estimator = Estimator(threads=1)
+    estimator = NetLinesEstimator(threads=1)
     out = {}
     for source in sources:
         out[source] = [(name, estimator.evidence_batch([frame])[0], truth) for name, frame, truth in frames[source]]

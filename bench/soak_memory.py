@@ -25,7 +25,7 @@ import numpy as np
 from figures import printed_report, write_figure
 
 from glradial import correct
-from glradial.estimation.estimator import Estimator
+from glradial.estimation.net_lines import NetLinesEstimator
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
@@ -68,7 +68,7 @@ def soak_correct(count: int, frame: np.ndarray) -> None:
 
 
 def soak_estimate(count: int) -> None:
-    estimator = Estimator()
+    estimator = NetLinesEstimator()
     frame = np.random.default_rng(0).integers(0, 256, (360, 640, 3), dtype=np.uint8)
     for _ in range(20):
         estimator.estimate(frame)

@@ -201,7 +201,7 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
 
 
 def test_correct_image_auto_uses_estimator(tmp_path, monkeypatch, capsys):
-    monkeypatch.setattr("glradial.camera.pitch_lens.Estimator.estimate", lambda self, frame, method="auto", pixel_aspect=1.0, pitch=False: Lens(-0.2, 0.03))
+    monkeypatch.setattr("glradial.camera.estimator.Estimator.estimate", lambda self, frame, method="auto", pixel_aspect=1.0, pitch=False: Lens(-0.2, 0.03))
     source, out = tmp_path / "in.png", tmp_path / "out.png"
     write_image(source, cv2.resize(read_image(DATA / "road_straight_lines1.jpg"), (64, 36)))
     assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0
@@ -526,7 +526,7 @@ def test_correct_image_auto_decodes_the_image_once(tmp_path, monkeypatch, capsys
     monkeypatch.setattr(image_io, "read_image", lambda *a, **k: decodes.append(a[0]) or real_read(*a, **k))
     monkeypatch.setattr(glradial.lens.doubt, "applies", lambda *a: decisions.append(a) or real_applies(*a))
     doubtful = glradial.LensEstimate(-0.2, 0.03, uncertainty_px=30.0, method="net", doubtful=True, reason="weak_geometry")
-    monkeypatch.setattr("glradial.camera.pitch_lens.Estimator.estimate", lambda self, frame, **kw: doubtful)
+    monkeypatch.setattr("glradial.camera.estimator.Estimator.estimate", lambda self, frame, **kw: doubtful)
     assert main(["correct", str(source), str(out), "--auto", "--backend", "cpu"]) == 0
     assert [str(p) for p in decodes] == [str(source)]
     assert decisions[0] == (True, "weak_geometry", False)  # decided once, here; the identity lens then applied

@@ -9,7 +9,7 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.estimation.estimator import default_model_path
+from glradial.estimation.net_lines import default_model_path
 from glradial.evaluation.real_eval import Evaluator, broadcast_samples, extended_lenses, paper_lenses
 from glradial.lens.metrics import max_displacement_px
 from net.error_calibration import coverage_report, main, real_errors

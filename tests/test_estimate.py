@@ -1,4 +1,4 @@
-"""glradial.estimation.estimator: the onnxruntime Estimator (errors, preprocessing) and the shipped model's quality."""
+"""glradial.estimation.net_lines: the onnxruntime NetLinesEstimator (errors, preprocessing) and the shipped model's quality."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.estimation.estimator import Estimator, ModelLoadError, default_model_path
+from glradial.estimation.net_lines import ModelLoadError, NetLinesEstimator, default_model_path
 
 SHIPPED = default_model_path()
 needs_shipped = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped model in glradial/models")
@@ -16,24 +16,24 @@ needs_shipped = pytest.mark.skipif(not SHIPPED.is_file(), reason="no shipped mod
 
 def test_missing_model_file_is_a_clear_error(tmp_path):
     with pytest.raises(FileNotFoundError, match="model file not found"):
-        Estimator(tmp_path / "nope.onnx")
+        NetLinesEstimator(tmp_path / "nope.onnx")
 
 
 def test_corrupt_model_file_is_a_clear_error(tmp_path):
     bad = tmp_path / "bad.onnx"
     bad.write_bytes(b"\x08\x07this is not a protobuf" * 10)
     with pytest.raises(ModelLoadError, match="cannot load ONNX model"):
-        Estimator(bad)
+        NetLinesEstimator(bad)
 
 
 def test_bad_threads_argument(tmp_path):
     with pytest.raises(ValueError, match="threads"):
-        Estimator(tmp_path / "x.onnx", threads=0)
+        NetLinesEstimator(tmp_path / "x.onnx", threads=0)
 
 
 @needs_shipped
 def test_shipped_model_metadata_and_bad_frames():
-    est = Estimator(threads=1)
+    est = NetLinesEstimator(threads=1)
     width, height = est.input_size
     assert est.metadata["input_layout"] == "NHWC uint8 RGB"
     assert abs(width / height - 16 / 9) < 0.05
@@ -55,7 +55,7 @@ def test_shipped_model_metadata_and_bad_frames():
 @needs_shipped
 def test_shipped_model_gives_finite_lens_and_consistent_paths(field_panorama):
     frame = np.ascontiguousarray(field_panorama[300:300 + 405, 500:500 + 720])  # a 16:9 view of a real photo
-    est = Estimator(threads=1)
+    est = NetLinesEstimator(threads=1)
     lens = est(frame, method="net")
     assert isinstance(lens, glradial.Lens)
     assert np.isfinite([lens.k1, lens.k2]).all()
@@ -83,7 +83,7 @@ def test_shipped_model_beats_the_mean_baseline_on_held_out_stadiums():
     with CropRenderer(pano, size=(1280, 720), out_size=(384, 216)) as renderer:
         frames = renderer.render(params)[..., :3]
     labels = np.array([(p.k1, p.k2) for p in params])
-    pred = np.array([(lens.k1, lens.k2) for lens in Estimator(threads=1).estimate_batch(list(frames), method="net")])
+    pred = np.array([(lens.k1, lens.k2) for lens in NetLinesEstimator(threads=1).estimate_batch(list(frames), method="net")])
     radii = np.linspace(0.0, 0.7, 64)
 
     def dl(y, k):
@@ -104,17 +104,17 @@ def test_shipped_model_beats_the_mean_baseline_on_held_out_stadiums():
 def test_mirror_average_is_the_mean_of_frame_and_mirror(field_panorama):
     """The default estimate averages the single-pass outputs of the frame and its left-right mirror,
     so it is the same for a frame and its mirror image (a radial lens is mirror-symmetric)."""
-    single = Estimator(threads=1, mirror_average=False)
+    single = NetLinesEstimator(threads=1, mirror_average=False)
     width, height = single.input_size
     # twice the input size: the area resize (an integer factor) commutes with mirroring exactly
     frame = np.ascontiguousarray(field_panorama[200:200 + 2 * height, 300:300 + 2 * width])
     mirror = np.ascontiguousarray(frame[:, ::-1])
     a, b = single(frame, method="net"), single(mirror, method="net")
     assert (a.k1, a.k2) != (b.k1, b.k2)  # the network alone is not mirror-invariant
-    averaged = Estimator(threads=1)
+    averaged = NetLinesEstimator(threads=1)
     both = averaged.estimate_batch([frame, mirror], method="net")
     for lens in both:
         assert lens.k1 == pytest.approx((a.k1 + b.k1) / 2, abs=1e-6)
         assert lens.k2 == pytest.approx((a.k2 + b.k2) / 2, abs=1e-6)
     with pytest.raises(TypeError, match="mirror_average"):
-        Estimator(mirror_average="yes")
+        NetLinesEstimator(mirror_average="yes")

@@ -49,7 +49,7 @@ def test_fixture_schema_is_the_one_glradial_ships_and_accepts_the_standards_exam
 
 
 def test_samples_validate_and_mm_coefficients_come_back(schema):
-    camera = opentrackio.Camera(SIZE, 9.59, 8.5, rate=Fraction(30000, 1001), timecode="09:59:59;28")
+    camera = opentrackio.TrackingCamera(SIZE, 9.59, 8.5, rate=Fraction(30000, 1001), timecode="09:59:59;28")
     lenses = [LENSES[0], LENSES[1], LENSES[3], LENSES[0]]
     samples = opentrackio.track_samples(lenses, camera, uncertainty_px=[2.0, np.nan, 12.0, 1.0],
                                         doubtful=[False, False, True, False], shots=[0, 0, 1, 1])
@@ -73,7 +73,7 @@ def test_samples_validate_and_mm_coefficients_come_back(schema):
     with pytest.raises(ValueError, match="pixel_aspect"):
         engines.openlensio_radial(Lens(-0.1, 0.0, pixel_aspect=1.1), 9.59)
     with pytest.raises(ValueError, match="sensor_width_mm"):
-        opentrackio.Camera(SIZE, 0.0, 8.0)
+        opentrackio.TrackingCamera(SIZE, 0.0, 8.0)
 
 
 def _openlensio_distort(points: np.ndarray, radial, offset, w_mm: float, size) -> np.ndarray:
@@ -92,13 +92,13 @@ def _openlensio_distort(points: np.ndarray, radial, offset, w_mm: float, size) -
 def test_openlensio_formula_maps_points_as_glradial():
     points = _grid(*SIZE)
     for lens in LENSES:
-        obj, _ = opentrackio.lens_object(lens, opentrackio.Camera(SIZE, 9.59, 8.0))
+        obj, _ = opentrackio.lens_object(lens, opentrackio.TrackingCamera(SIZE, 9.59, 8.0))
         offset = np.array([obj["projectionOffset"]["x"], obj["projectionOffset"]["y"]])
         ours = lens.distort_points(points, SIZE)
         theirs = _openlensio_distort(points, obj["distortion"][0]["radial"], offset, 9.59, SIZE)
         assert np.abs(theirs - ours).max() < 1e-6
         # D-U: the same formula maps distorted to undistorted, within the stated fit error
-        fitted, error = opentrackio.lens_object(lens, opentrackio.Camera(SIZE, 9.59, 8.0), model=opentrackio.MODEL_DU)
+        fitted, error = opentrackio.lens_object(lens, opentrackio.TrackingCamera(SIZE, 9.59, 8.0), model=opentrackio.MODEL_DU)
         undistorted = lens.undistort_points(points, SIZE)
         theirs = _openlensio_distort(points, fitted["distortion"][0]["radial"], offset, 9.59, SIZE)
         gap = np.hypot(*(theirs - undistorted).T).max()
@@ -136,7 +136,7 @@ def test_3de4_radial_degree4_undistorts_within_its_stated_error():
 
 
 def test_udp_packet_over_localhost_parses_back():
-    camera = opentrackio.Camera((640, 360), 9.59, 8.0, rate=Fraction(25))
+    camera = opentrackio.TrackingCamera((640, 360), 9.59, 8.0, rate=Fraction(25))
     samples = opentrackio.track_samples([LENSES[0]] * 3, camera)
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver:
         receiver.bind(("127.0.0.1", 0))
@@ -165,7 +165,7 @@ def test_udp_packet_over_localhost_parses_back():
 
 def test_cbor_payload_round_trips(tmp_path):
     cbor2 = pytest.importorskip("cbor2")
-    camera = opentrackio.Camera((640, 360), 9.59, 8.0)
+    camera = opentrackio.TrackingCamera((640, 360), 9.59, 8.0)
     samples = opentrackio.track_samples([LENSES[0], LENSES[2]], camera)
     path = opentrackio.write_samples(tmp_path / "s.cbor", samples, cbor=True)
     with open(path, "rb") as handle:

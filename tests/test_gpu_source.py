@@ -260,11 +260,14 @@ def test_bf16_autocast_runs_the_network_in_bfloat16():
 def test_throughput_bench_runs_and_says_it_measured_a_cpu(tmp_path):
     # bench/bench_train_throughput.py (the lent session's 30 s check) on this CPU: the tiny network,
     # a note that these are no GPU figures, a rate for the step, the GPU source and training from it
+    import os
     import subprocess
     import sys
 
     result = subprocess.run([sys.executable, str(ROOT / "bench/bench_train_throughput.py"), "--seconds", "0.2",
-                             "--sources", "gpu"], capture_output=True, text=True, cwd=tmp_path, timeout=300)
+                             "--sources", "gpu"], capture_output=True, text=True, cwd=tmp_path, timeout=300,
+                            env={**os.environ, "GLRADIAL_FIGURES_DIR": str(tmp_path)})  # not docs/figures/
+    assert (tmp_path / "bench_train_throughput_cpu.json").is_file()
     assert result.returncode == 0, result.stderr
     assert "NOTE: no CUDA device" in result.stdout
     for label in ("step (fixed batch)", "source gpu", "train gpu"):

@@ -297,3 +297,27 @@ def test_ruff_finds_nothing():
     done = subprocess.run([sys.executable, "-m", "ruff", "check", "glradial", "net", "tests", "bench"], cwd=ROOT,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_module_names_are_unique():
+    """A module's file name says where it lives: no two modules of glradial/ share one (``__init__``
+    aside; commands/ mirrors the subcommands, so its modules may repeat a name found elsewhere)."""
+    seen: dict[str, list[str]] = {}
+    for path in _sources():
+        relative = path.relative_to(PACKAGE)
+        if path.name != "__init__.py" and relative.parts[0] != "commands":
+            seen.setdefault(path.name, []).append(relative.as_posix())
+    twice = {name: where for name, where in seen.items() if len(where) > 1}
+    assert not twice, f"module names used twice in glradial/: {twice}"
+
+
+def test_public_class_names_are_unique():
+    """One public class per name across glradial/ (a second ``Camera`` or ``Estimator`` is a second
+    concept under the same word)."""
+    seen: dict[str, list[str]] = {}
+    for path in _sources():
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                seen.setdefault(node.name, []).append(path.relative_to(PACKAGE).as_posix())
+    twice = {name: where for name, where in seen.items() if len(where) > 1}
+    assert not twice, f"public classes defined twice: {twice}"

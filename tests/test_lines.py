@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.estimation.estimator import Estimator, default_model_path
 from glradial.estimation.lens_estimate import LensEstimate
 from glradial.estimation.line_fit import fit_lines
 from glradial.estimation.lines import detect_chains
+from glradial.estimation.net_lines import NetLinesEstimator, default_model_path
 from glradial.estimation.trust import anything_bound, shipped_trust
 from glradial.lens.metrics import manifold_k2, max_displacement_px
 
@@ -108,7 +108,7 @@ def test_letterbox_borders_are_masked():
 
 @needs_shipped
 def test_estimator_methods_and_fallback():
-    est = Estimator(threads=1)
+    est = NetLinesEstimator(threads=1)
     k1, k2 = -0.45, float(manifold_k2(-0.45))
     frame = distorted(pitch(2), k1, k2)
     lines = est.estimate(frame, method="lines")
@@ -148,7 +148,7 @@ def test_blank_and_noise_frames_get_a_low_confidence_finite_answer(kind):
 
 @needs_shipped
 def test_bad_arguments_name_the_argument():
-    est = Estimator(threads=1)
+    est = NetLinesEstimator(threads=1)
     frame = np.zeros((36, 64, 3), np.uint8)
     with pytest.raises(ValueError, match="method"):
         est.estimate(frame, method="x")

@@ -245,9 +245,9 @@ def test_api_auto_passes_a_shot_through_until_it_has_a_lens():
     flagged doubtful, "pending"); a later frame of it gets the shot's lens (applied here with
     apply_doubtful: an estimator that states no bound leaves the shot doubtful); a cut opens shot 1."""
     from glradial import LiveCorrector, correct
-    from glradial.export.opentrackio import Camera
+    from glradial.export.opentrackio import TrackingCamera
 
-    camera = Camera(SIZE, 9.59, 10.0, rate=RATE)
+    camera = TrackingCamera(SIZE, 9.59, 10.0, rate=RATE)
     images = [_image(1)] * 12 + [_image(2)] * 12
     with LiveCorrector("auto", SIZE, RATE, max_delay=20, camera=camera, estimator=lambda frame: (K1, K2),
                        auto={"every": 4, "apply_doubtful": True, "worker": "thread"}) as live:

@@ -213,15 +213,15 @@ def test_export_agrees_with_onnxruntime(tmp_path):
     assert np.ptp(out[:, 0]) > 1e-3
     # the export records the SHA-256 beside the model: the estimator validates and accepts it, and
     # refuses the same file with one flipped byte
-    from glradial.estimation.estimator import Estimator, ModelLoadError
+    from glradial.estimation.net_lines import ModelLoadError, NetLinesEstimator
 
     assert path.with_suffix(".sha256").read_text().split() == [hashlib.sha256(path.read_bytes()).hexdigest(), "m.onnx"]
-    assert Estimator(path, threads=1).input_size == (64, 36)
+    assert NetLinesEstimator(path, threads=1).input_size == (64, 36)
     data = bytearray(path.read_bytes())
     data[-100] ^= 0x01
     path.write_bytes(bytes(data))
     with pytest.raises(ModelLoadError, match="SHA-256"):
-        Estimator(path, threads=1)
+        NetLinesEstimator(path, threads=1)
 
 
 def test_pool_keeps_pairs_adjacent():

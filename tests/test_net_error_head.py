@@ -13,7 +13,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from glradial.estimation.estimator import Estimator  # noqa: E402
+from glradial.estimation.net_lines import NetLinesEstimator  # noqa: E402
 from glradial.lens.metrics import max_displacement_px as numpy_max_displacement_px  # noqa: E402
 from net.export import export_onnx  # noqa: E402
 from net.from_onnx import calibrate_batchnorm, check_against_onnx, rebuild  # noqa: E402
@@ -120,7 +120,7 @@ def test_error_head_only_keeps_the_lens_function(tmp_path):
 def test_estimator_reads_the_error_output(tmp_path):
     model = _trained_like(ModelConfig(**TINY, error_head=True))
     path = export_onnx(model, tmp_path / "m.onnx")
-    estimator = Estimator(path, threads=1)
+    estimator = NetLinesEstimator(path, threads=1)
     assert estimator.has_error_head
     frames = _frames(3)
     k, error = estimator.run_with_error(frames)
@@ -136,7 +136,7 @@ def test_estimator_reads_the_error_output(tmp_path):
 
 
 def test_the_shipped_model_has_an_error_head():
-    estimator = Estimator()
+    estimator = NetLinesEstimator()
     assert estimator.has_error_head
     meta = json.loads(estimator.metadata["model_config"])
     assert meta["error_head"] is True

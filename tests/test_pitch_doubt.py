@@ -21,7 +21,7 @@ from glradial.camera.estimate import camera_trust
 from glradial.camera.line_hypotheses import HEIGHT_RANGE
 from glradial.camera.model import Camera
 from glradial.camera.views import render_view
-from glradial.estimation import estimator as lines_layer
+from glradial.estimation import net_lines as lines_layer
 from glradial.lens.lens import Lens
 from glradial.lens.metrics import manifold_k2
 
@@ -83,7 +83,7 @@ def test_line_drawings_that_are_not_a_pitch_are_doubtful(drawings, name):
     est = glradial.calibrate(frame)
     assert est.doubtful and est.reason in ("no_markings", "too_few_markings", "weak_geometry", "poor_fit"), (name, est.as_dict())
     # so the lens fed back to estimate(method="auto") (the default) is the estimation layer's, bit for bit
-    assert glradial.estimate(frame, pitch=True) == lines_layer.estimate(frame)
+    assert glradial.estimate(frame, pitch=True) == lines_layer.estimate_net_lines(frame)
 
 
 @pytest.fixture(scope="module")
@@ -92,17 +92,17 @@ def rendered_fit():
     truth = Camera.look_at((3.0, -64.0, 18.0), (-25.0, 2.0), 48.0, (1280, 720), Lens(-0.18, 0.0187))
     frame = render_view(truth, seed=5).frame
     fits = []
-    judge = cal.judge
+    judge = cal.judge_fit
 
     def keep(fit, points):
         fits.append((fit, points))
         return judge(fit, points)
 
-    cal.judge = keep
+    cal.judge_fit = keep
     try:
         est = cal.calibrate(frame)
     finally:
-        cal.judge = judge
+        cal.judge_fit = judge
     return fits[-1], est, truth
 
 
@@ -119,19 +119,19 @@ def test_a_rendered_pitch_passes_the_new_rules(rendered_fit):
 def test_doubt_rules_known_answers(rendered_fit):
     (fit, points), _, _ = rendered_fit
     t = camera_trust()
-    assert cal.judge(fit, points).reason == "ok"
-    assert cal.judge(replace(fit, spread=0.5 * t["min_spread"]), points).reason == "weak_geometry"
+    assert cal.judge_fit(fit, points).reason == "ok"
+    assert cal.judge_fit(replace(fit, spread=0.5 * t["min_spread"]), points).reason == "weak_geometry"
     low = fit.camera
     on_grass = Camera(low.rotation, np.r_[low.position[:2], 0.5 * t["min_height_m"]], low.focal, low.size, low.lens)
-    assert cal.judge(replace(fit, camera=on_grass), points).reason == "poor_fit"
+    assert cal.judge_fit(replace(fit, camera=on_grass), points).reason == "poor_fit"
     # above every main-camera position the search starts from (line_hypotheses.HEIGHT_RANGE, 4-80 m): a grid of
     # lines read as a pitch from 86 m up once the support counted the lens's squeeze (tests/test_trust.py)
     too_high = Camera(low.rotation, np.r_[low.position[:2], HEIGHT_RANGE[1] + 5.0], low.focal, low.size, low.lens)
-    assert cal.judge(replace(fit, camera=too_high), points).reason == "poor_fit"
+    assert cal.judge_fit(replace(fit, camera=too_high), points).reason == "poor_fit"
     wide_focal = 0.5 / np.tan(np.radians(t["max_hfov_deg"] + 5) / 2)  # focal (image widths) of a wider lens
     too_wide = Camera(low.rotation, low.position, wide_focal, low.size, low.lens)
     assert too_wide.hfov_deg > t["max_hfov_deg"]
-    assert cal.judge(replace(fit, camera=too_wide), points).reason == "poor_fit"
+    assert cal.judge_fit(replace(fit, camera=too_wide), points).reason == "poor_fit"
 
 
 def test_a_degenerate_icp_step_keeps_the_last_homography():

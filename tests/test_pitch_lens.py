@@ -1,4 +1,4 @@
-"""The lens fed back from the pitch camera fit (glradial.camera.pitch_lens): on a rendered pitch view
+"""The lens fed back from the pitch camera fit (glradial.camera.estimator): on a rendered pitch view
 with an exact lens (the renderer's lens is the oracle), the camera fit's lens is within 1 px (max
 displacement at 1920, issue 34's procedural goal for the lens; held-out procedural views give a median of
 0.2 px and a p90 of 0.63 px, docs/CAMERA.md), and ``glradial.estimate(method="auto")`` (the default:
@@ -14,12 +14,12 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.camera import pitch_lens as pl
+from glradial.camera import estimator as pl
 from glradial.camera.calibrate import calibrate
 from glradial.camera.estimate import CameraEstimate, camera_trust
 from glradial.camera.model import Camera
 from glradial.camera.views import render_view
-from glradial.estimation import estimator as lines_layer
+from glradial.estimation import net_lines as lines_layer
 from glradial.estimation.lens_estimate import LensEstimate
 from glradial.lens.lens import Lens
 from glradial.lens.metrics import manifold_k2, max_displacement_px
@@ -43,7 +43,7 @@ def _error_px(lens, truth: Lens) -> float:
 
 def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     est = glradial.estimate(view.frame)  # the default: the camera fit fed back
-    old = lines_layer.estimate(view.frame)
+    old = lines_layer.estimate_net_lines(view.frame)
     camera = pl.fit_camera(view.frame, old)  # calibrate started from the estimation layer's lens
     assert not camera.doubtful and not old.doubtful
     lens = pl.camera_lens(camera)
@@ -90,7 +90,7 @@ def test_frames_with_no_pitch_evidence_skip_the_camera_fit(monkeypatch):
 
     monkeypatch.setattr(pl, "calibrate", refuse)
     blank = np.full((360, 640, 3), 90, np.uint8)
-    old = lines_layer.estimate(blank)
+    old = lines_layer.estimate_net_lines(blank)
     assert old.reason == "blank_frame"
     assert glradial.estimate(blank) == old and glradial.Estimator(threads=1).estimate(blank) == old
 
@@ -103,9 +103,9 @@ def test_no_pitch_keeps_the_old_answer():
         drawing[y:y + 3] = 20
     for frame in (noise, drawing):
         assert calibrate(frame).doubtful
-        assert glradial.estimate(frame) == lines_layer.estimate(frame)
+        assert glradial.estimate(frame) == lines_layer.estimate_net_lines(frame)
         batch = glradial.Estimator(threads=1).estimate_batch(iter([frame, frame]), pitch=True)  # a generator is read once
-        assert batch == [lines_layer.estimate(frame)] * 2
+        assert batch == [lines_layer.estimate_net_lines(frame)] * 2
 
 
 def test_net_and_lines_never_fit_the_camera(view, monkeypatch):
@@ -114,8 +114,8 @@ def test_net_and_lines_never_fit_the_camera(view, monkeypatch):
 
     monkeypatch.setattr(pl, "calibrate", refuse)
     for method in ("net", "lines"):
-        assert glradial.estimate(view.frame, method=method, pitch=True) == lines_layer.estimate(view.frame, method=method)
-        assert glradial.Estimator(threads=1).estimate(view.frame, method=method, pitch=True) == lines_layer.estimate(view.frame, method=method)
+        assert glradial.estimate(view.frame, method=method, pitch=True) == lines_layer.estimate_net_lines(view.frame, method=method)
+        assert glradial.Estimator(threads=1).estimate(view.frame, method=method, pitch=True) == lines_layer.estimate_net_lines(view.frame, method=method)
 
 
 def test_pitch_lens_policy():
@@ -166,7 +166,7 @@ def test_squashed_view_and_the_command_line(view, tmp_path, capsys):
 
     squashed = cv2.resize(view.frame, (640, 640), interpolation=cv2.INTER_AREA)
     est = glradial.estimate(squashed, pixel_aspect=16 / 9, pitch=True)
-    old = lines_layer.estimate(squashed, pixel_aspect=16 / 9)
+    old = lines_layer.estimate_net_lines(squashed, pixel_aspect=16 / 9)
     expected = pl.pitch_lens(pl.fit_camera(lines_layer.square_pixels(squashed, 16 / 9), old), old)
     assert est == expected and est.method == "pitch" and est.pixel_aspect == pytest.approx(16 / 9)
     path = tmp_path / "view.png"
@@ -180,7 +180,7 @@ def test_squashed_view_and_the_command_line(view, tmp_path, capsys):
     assert f"k1={row['k1']:.6f}" in capsys.readouterr().out
     assert main(["estimate", str(path), "--json", "--no-pitch"]) == 0  # the estimation layer's answer
     row = json.loads(capsys.readouterr().out)
-    assert row["method"] == "lines" and _error_px(Lens(row["k1"], row["k2"]), lines_layer.estimate(view.frame)) < 0.5
+    assert row["method"] == "lines" and _error_px(Lens(row["k1"], row["k2"]), lines_layer.estimate_net_lines(view.frame)) < 0.5
     assert main(["correct", str(path), str(tmp_path / "out2.png"), "--auto", "--no-pitch"]) == 0
     assert f"k1={row['k1']:.6f}" in capsys.readouterr().out
 

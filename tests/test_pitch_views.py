@@ -57,14 +57,14 @@ def test_a_stand_dominated_view_is_a_pitch_whatever_its_green_share():
     lower part, where the lens bends them most, kept): under a fifth of the view is pitch green, which
     the old gate called ``not_a_pitch``; the grass region (the whole width, in the lower part) says
     pitch, and the lens is read within its bound (measured 6.9 px, bound 11 px) and corrected."""
-    from glradial.estimation.estimator import default_estimator
+    from glradial.estimation.net_lines import default_net_lines_estimator
     from glradial.estimation.trust import view_features
 
     frame = _frame(100)
     rows = int(0.65 * frame.shape[0])
     rng = np.random.default_rng(0)
     frame[:rows] = np.clip(rng.normal(0, 20, (rows, frame.shape[1], 3)) + np.array([140, 120, 130]), 0, 255).astype(np.uint8)
-    features = view_features(default_estimator().preprocess(frame))
+    features = view_features(default_net_lines_estimator().preprocess(frame))
     assert features.green < 0.25 and features.grass > 0.1 and features.grass_width == 1.0
     estimate = glradial.estimate(frame)
     error = float(max_displacement_px(np.array([estimate.k1, estimate.k2]), TRUTH))

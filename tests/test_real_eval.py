@@ -12,8 +12,8 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.estimation.estimator import default_model_path
 from glradial.estimation.lens_estimate import LensEstimate
+from glradial.estimation.net_lines import default_model_path
 from glradial.evaluation.real_eval import Sample, centre_16_9, extended_lenses, frames_in, load_calibrated, markdown, self_consistent_items, self_consistent_truth, summarise
 from glradial.lens.lens import Lens, lens_to_pixels, pixels_to_lens
 from glradial.lens.metrics import manifold_k2, max_displacement_px

@@ -358,12 +358,12 @@ def test_a_shot_is_judged_by_benefit_like_a_frame():
     frame (a near-pinhole lens), and other reasons (fold_over) stand."""
     from types import SimpleNamespace
 
-    from glradial.video.shot_fit import ShotLens, judged_by_benefit
+    from glradial.video.shot_fit import FittedShotLens, judged_by_benefit
 
     no_samples = SimpleNamespace(samples=[])
 
-    def shot(k1: float, bound: float, reason: str = "uncertain") -> ShotLens:
-        return ShotLens((k1, 0.0), 0.0, bound, True, reason, 3, 0, 1.0, False, "joint")
+    def shot(k1: float, bound: float, reason: str = "uncertain") -> FittedShotLens:
+        return FittedShotLens((k1, 0.0), 0.0, bound, True, reason, 3, 0, 1.0, False, "joint")
 
     strong, weak = -0.3, -0.01
     shift_strong = float(max_displacement_px(np.array([strong, manifold_k2(strong)]), np.zeros(2)))

@@ -20,11 +20,11 @@ import numpy as np
 import pytest
 
 import glradial
-from glradial.estimation.estimator import Estimator, default_model_path, view_box, view_to_frame
 from glradial.estimation.lens_estimate import LensEstimate, judge
+from glradial.estimation.net_lines import NetLinesEstimator, default_model_path, view_box, view_to_frame
 from glradial.estimation.trust import REASONS, TRUST_FILE, FrameEvidence, TrustModel, anything_bound, load_trust, shift_px, shipped_trust, view_features
-from glradial.evaluation.calibrate import Record, conformal_quantile, coverage_table, cross_check
 from glradial.evaluation.real_eval import applied_lenses, self_consistent_map, self_consistent_truth
+from glradial.evaluation.trust_calibration import Record, conformal_quantile, coverage_table, cross_check
 from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_displacement_px, radial_map
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
@@ -233,7 +233,7 @@ def test_off_domain_and_degenerate_frames_are_doubtful_or_covered_never_nan(meth
     """A road photo, test patterns, grass only, blank, noise, a 5×3 frame: every estimate is finite;
     with auto/lines each is doubtful (the true lens of the patterns and the synthetic frames is none;
     the road photo's camera is calibrated, k1 ≈ -0.25: the bound of a doubtful answer spans it)."""
-    est = Estimator(threads=1)
+    est = NetLinesEstimator(threads=1)
     for name, frame in _off_domain_frames().items():
         with warnings.catch_warnings():
             warnings.simplefilter("error")
@@ -514,7 +514,7 @@ def test_stated_bound_covers_a_real_frame_with_known_lenses():
     meta = json.loads(SHIPPED_FRAME.with_suffix(".json").read_text())
     frame = cv2.imread(str(SHIPPED_FRAME))[:, :, ::-1].copy()
     frame = glradial.correct(frame, glradial.Lens(*(meta["own_lens"][k] for k in ("k1", "k2"))), fit="crop", backend="cpu")
-    est = Estimator(threads=1)
+    est = NetLinesEstimator(threads=1)
     inside = []
     for k in applied_lenses(12, 29):
         e = est.estimate(apply_lens(frame, *k), method="auto")

@@ -125,7 +125,7 @@ def _reason(fit: Fit, t: dict) -> str:
     return "ok"
 
 
-def judge(fit: Fit | None, points: int) -> CameraEstimate:
+def judge_fit(fit: Fit | None, points: int) -> CameraEstimate:
     """The estimate of a refined fit (or of none) under the doubt policy of ``camera_trust.json``."""
     t = camera_trust()
     if fit is None:
@@ -153,7 +153,7 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     the dictionary of synthetic views where it finds nothing). ``previous``: the previous frame's camera (a
     video): refined from there with shorter gates, falling back to a fresh search when that fit is
     doubtful. ``lens``: a reading of the frame's lens (e.g. the estimation layer's,
-    :mod:`glradial.camera.pitch_lens`) that the search undistorts the white lines with and the coarse
+    :mod:`glradial.camera.estimator`) that the search undistorts the white lines with and the coarse
     stage holds (the fine stage frees it), in place of the strong-lens retry; default none (pinhole
     starts, then the retry where the frame's lens is strong). Never raises for a frame that shows
     no pitch: the estimate is then doubtful with a reason.
@@ -194,14 +194,14 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
     """:func:`calibrate` of the uint8 RGB frame ``rgb`` whose white-line points ``lines``
     (:func:`glradial.camera.white_lines.line_points`) are already extracted (arguments checked)."""
     if len(lines.xy) < camera_trust()["min_points"]:
-        return judge(None, len(lines.xy))
+        return judge_fit(None, len(lines.xy))
     if previous is not None:
         fine_lines = lines.thinned(FINE_POINTS)
-        tracked = judge(refine(_starts(lines, pitch, previous=previous)[0], fine_lines.xy, fine_lines.angle, pitch,
+        tracked = judge_fit(refine(_starts(lines, pitch, previous=previous)[0], fine_lines.xy, fine_lines.angle, pitch,
                                gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
         if not tracked.doubtful:
             return tracked
-    judged = judge(_search_fit(_starts(lines, pitch, first_guess=first_guess, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
+    judged = judge_fit(_search_fit(_starts(lines, pitch, first_guess=first_guess, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
     if judged.doubtful and first_guess is None and lens is None:  # a given lens reading already did what the retry does
         judged = _strong_lens_retry(rgb, lines, pitch, judged)
     return judged
@@ -237,7 +237,7 @@ def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate,
     lens = strong_lens(rgb)
     if lens is None:
         return judged
-    retried = judge(_search_fit(_starts(lines, pitch, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
+    retried = judge_fit(_search_fit(_starts(lines, pitch, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
     if not retried.doubtful or (retried.camera is not None and retried.inliers > judged.inliers):
         return retried
     return judged

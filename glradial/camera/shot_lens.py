@@ -12,7 +12,7 @@ bend are what a shot's few-to-few-hundred noisy frames can fix.
 Fit (:func:`fit_shot_lens`): over the shot's sure frames (not doubtful), a robust weighted least
 squares of the lens's radial map (:func:`glradial.lens.metrics.radial_map`) at radii up to the 16:9
 corner, in px of a 1920-wide frame (the unit of :func:`glradial.lens.metrics.max_displacement_px`),
-each frame weighted by the inverse of its lens bound (:func:`glradial.camera.pitch_lens.lens_bound_px`,
+each frame weighted by the inverse of its lens bound (:func:`glradial.camera.estimator.lens_bound_px`,
 relative to the shot's median), plain least squares first, then under a Huber loss at the scale of
 the residuals' spread (:data:`HUBER_SPREAD`, at least :data:`ROBUST_PX` px): a frame whose own
 lens is far off (a bad fit that was still judged sure) barely moves the shot's. At least
@@ -38,10 +38,10 @@ from ..lens.lens import Lens
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, radial_map
 from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
-from .calibrate import FINE_POINTS, calibrate_points, check_pitch, judge
+from .calibrate import FINE_POINTS, calibrate_points, check_pitch, judge_fit
 from .estimate import CameraEstimate
+from .estimator import lens_bound_px
 from .model import Camera
-from .pitch_lens import lens_bound_px
 from .refine import refine
 from .white_lines import LinePoints, line_points
 
@@ -172,7 +172,7 @@ def refit_with_lens(estimate: CameraEstimate, lines: LinePoints, shot: ShotLens,
         if fit is None:
             return estimate
         cam = fit.camera
-    refit = judge(fit, len(lines.xy))
+    refit = judge_fit(fit, len(lines.xy))
     if refit.doubtful:
         return estimate
     # the lens at the focal length the last pass ended on (it moved by a small fraction of a percent)

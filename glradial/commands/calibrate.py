@@ -146,7 +146,7 @@ def _write_opentrackio(args: argparse.Namespace, estimates, extra, size: tuple[i
     the camera's transform (pitch metres; OpenTrackIO pan/tilt/roll); a frame with no camera is left
     out, a doubtful one is flagged."""
     from ..export.engines import MODEL_NAMES
-    from ..export.opentrackio import Camera as OtioCamera
+    from ..export.opentrackio import TrackingCamera as OtioCamera
     from ..export.opentrackio import track_samples, validate_sample, write_samples
     from ..lens.lens import Lens
 

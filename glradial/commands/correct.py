@@ -145,7 +145,7 @@ def _estimate_image(args: argparse.Namespace, image):
     """The lens ``--auto`` applies to ``image`` (RGB array): the estimate, printed with its stated
     uncertainty and doubt; a doubtful one is reported in one line on stderr and, unless
     ``--apply-doubtful``, decided against (the identity lens: the image passes through)."""
-    from ..camera.pitch_lens import Estimator
+    from ..camera.estimator import Estimator
     from ..lens import doubt
     from ..lens.lens import Lens
     from ..media.frames import to_rgb8

@@ -63,7 +63,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..camera.pitch_lens import Estimator
+    from ..camera.estimator import Estimator
     from ..media.frames import to_rgb8
 
     if opentrackio_wanted(args) and len(args.inputs) != 1:

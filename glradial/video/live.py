@@ -37,7 +37,7 @@ Conventions:
   lens a frame got). Its worker is a separate process started with ``spawn``: a script that makes
   an ``"auto"`` corrector needs the ``if __name__ == "__main__":`` guard, or passes
   ``auto={"worker": "thread"}``.
-* ``camera`` (:class:`glradial.export.opentrackio.Camera`): each frame gets its OpenTrackIO sample
+* ``camera`` (:class:`glradial.export.opentrackio.TrackingCamera`): each frame gets its OpenTrackIO sample
   (:func:`glradial.export.opentrackio.frame_sample`), with ``custom.glradial`` k1, k2 (the lens
   reported: the estimate even where it is not applied), uncertainty and doubt as for files.
 """

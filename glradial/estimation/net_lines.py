@@ -5,7 +5,7 @@ Convention:
     accepted: gray is repeated, alpha dropped), dtype uint8 (0..255) or float32/float64 in [0, 1].
     Any size and aspect ratio: the network sees the frame's centred 16:9 view (:func:`view_box`: the
     full width of a taller frame, the full height of a wider one; never squashed), resized with area
-    interpolation (``cv2.INTER_AREA``) to its input (``Estimator.input_size``, ``(W, H)``, e.g.
+    interpolation (``cv2.INTER_AREA``) to its input (``NetLinesEstimator.input_size``, ``(W, H)``, e.g.
     384 x 216), as in training (crops rendered as 1280 x 720 frames). Its answer refers to that view
     and is converted to the frame's own width-normalised lens (:func:`view_to_frame`): the same
     ``(k1, k2)`` for a view as wide as the frame, ``Lens.rescale(W_view / W)`` for a narrower one.
@@ -112,7 +112,7 @@ def _as_frame(frame: Any, index: int | None = None) -> np.ndarray:
     return rgb
 
 
-class Estimator:
+class NetLinesEstimator:
     """An onnxruntime session of the distortion model, created once and reused.
 
     ``model_path``: an ``.onnx`` file (default: the bundled :func:`default_model_path`).
@@ -253,22 +253,22 @@ class Estimator:
     __call__ = estimate
 
 
-_default: Estimator | None = None
+_default: NetLinesEstimator | None = None
 _default_lock = threading.Lock()
 
 
-def default_estimator() -> Estimator:
-    """The shared :class:`Estimator` of the bundled model, created on first use."""
+def default_net_lines_estimator() -> NetLinesEstimator:
+    """The shared :class:`NetLinesEstimator` of the bundled model, created on first use."""
     global _default
     with _default_lock:
         if _default is None:
-            _default = Estimator()
+            _default = NetLinesEstimator()
         return _default
 
 
-def estimate(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0) -> LensEstimate:
+def estimate_net_lines(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1.0) -> LensEstimate:
     """Estimate the radial lens of one RGB frame with the bundled model and the frame's lines
     (``method``: ``"auto"``, ``"net"`` or ``"lines"``; ``pixel_aspect`` for frames stored with
-    non-square pixels; see :meth:`Estimator.estimate_batch`)."""
+    non-square pixels; see :meth:`NetLinesEstimator.estimate_batch`)."""
     check_method(method)
-    return default_estimator().estimate(frame, method, pixel_aspect)
+    return default_net_lines_estimator().estimate(frame, method, pixel_aspect)

@@ -3,7 +3,7 @@ conformal, calibrated on some clips and checked on the others.
 
 Usage (in a checkout with ../shared beside it; collecting takes ~8 min on one core, fitting seconds)::
 
-    python -m glradial.evaluation.calibrate [--data ../shared/data] [--records docs/eval/trust_records.json] [--recollect] [--write]
+    python -m glradial.evaluation.trust_calibration [--data ../shared/data] [--records docs/eval/trust_records.json] [--recollect] [--write]
         [--report docs/eval/trust.md]
 
 Steps:
@@ -219,7 +219,7 @@ def fit(records: list[Record], base: TrustModel) -> TrustModel:
     rich = [r for r in lined if r.line_rich]
     disagree = np.array([r.evidence.disagreement_px for r in (rich or lined)])
     return replace(trust, disagree_max_px=conformal_quantile(disagree, DISAGREE_QUANTILE),
-                   note=f"python -m glradial.evaluation.calibrate on {len(records)} validation frames")
+                   note=f"python -m glradial.evaluation.trust_calibration on {len(records)} validation frames")
 
 
 def _soft_quantile(soft: list[Record], trust: TrustModel) -> float:
@@ -297,9 +297,9 @@ def coverage_table(rows: list[dict]) -> list[tuple[str, int, float, float, float
 def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel, n_records: int) -> str:
     """Markdown of the cross-fitted check (docs/eval/trust.md)."""
     lines = ["# Trust: coverage of the stated 90 % bound on real validation frames", "",
-             "Command: `python -m glradial.evaluation.calibrate --records docs/eval/trust_records.json --write "
+             "Command: `python -m glradial.evaluation.trust_calibration --records docs/eval/trust_records.json --write "
              "--report docs/eval/trust.md` (add `--recollect` to measure the evidence again, ~8 min; module "
-             "docstring of `glradial/evaluation/calibrate.py`). Split conformal, cross-fitted: every frame is judged with the bound "
+             "docstring of `glradial/evaluation/trust_calibration.py`). Split conformal, cross-fitted: every frame is judged with the bound "
              "calibrated on the other fold (other clips, other real frames, other poses, other stadiums). "
              "Method `auto`. Errors: max displacement over the 16:9 frame, px at 1920; broadcast and real "
              "frames self-consistent (applied lens composed with the reading of the unmodified frame).", "",
@@ -328,7 +328,7 @@ def report(rows: list[dict], models: dict[int, TrustModel], shipped: TrustModel,
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m glradial.evaluation.calibrate", description=__doc__.split("\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m glradial.evaluation.trust_calibration", description=__doc__.split("\n")[0])
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[3] / "shared" / "data"),
                         help="folder with broadcast_bundesliga/ and real_football/ (default ../shared/data)")
     parser.add_argument("--records", default="docs/eval/trust_records.json",
@@ -348,7 +348,7 @@ def main(argv: list[str] | None = None) -> int:
 
         data = Path(args.data)
         if not (data / "broadcast_bundesliga").is_dir():
-            raise SystemExit(f"glradial.evaluation.calibrate: {data}/broadcast_bundesliga not found (give --data)")
+            raise SystemExit(f"glradial.evaluation.trust_calibration: {data}/broadcast_bundesliga not found (give --data)")
         records = collect(data, Evaluator(threads=args.threads))
         save_records(records, records_path)
     base = shipped_trust()

@@ -1,6 +1,6 @@
 """The lens of a frame from both kinds of evidence: the joint camera fit to the pitch template
 (:func:`glradial.camera.calibrate.calibrate`) where the template fits, combined with the estimation
-layer's reading (the CNN and the line fit, :mod:`glradial.estimation.estimator`); the estimation
+layer's reading (the CNN and the line fit, :mod:`glradial.estimation.net_lines`); the estimation
 layer's reading alone where it does not.
 
 ``method="auto"`` of :func:`estimate` and :class:`Estimator` (what ``glradial.estimate`` and
@@ -42,7 +42,7 @@ minimise the self-consistent median of Bundesliga clip 2e57b9 (a 0.1 grid by a 0
 weights that leave the procedural stadium crops as they were; clip 42ba34 is held out.
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
-must not import it, so the estimation layer's :class:`~glradial.estimation.estimator.Estimator` stays
+must not import it, so the estimation layer's :class:`~glradial.estimation.net_lines.NetLinesEstimator` stays
 the CNN-plus-lines estimator and this module composes the two.
 """
 
@@ -52,9 +52,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..estimation.estimator import Estimator as LinesEstimator
-from ..estimation.estimator import default_estimator, square_pixels
 from ..estimation.lens_estimate import LensEstimate, check_method
+from ..estimation.net_lines import NetLinesEstimator, default_net_lines_estimator, square_pixels
 from ..estimation.trust import NO_EVIDENCE_REASONS, shift_px
 from ..lens.lens import Lens
 from ..lens.metrics import manifold_k2, max_displacement
@@ -157,8 +156,8 @@ def _as_list(frames: object) -> object:
     return list(frames)  # type: ignore[call-overload]
 
 
-class Estimator(LinesEstimator):
-    """:class:`glradial.estimation.estimator.Estimator` (same arguments) whose ``method="auto"`` adds the
+class Estimator(NetLinesEstimator):
+    """:class:`glradial.estimation.net_lines.NetLinesEstimator` (same arguments) whose ``method="auto"`` adds the
     pitch camera fit's lens where the template fits (``pitch=True``, the default; see the module
     docstring). ``pitch=False`` is the estimation layer's ``auto``, unchanged (what video uses: the
     camera fit costs 0.2-0.4 s a frame).
@@ -183,7 +182,7 @@ class Estimator(LinesEstimator):
 
     def estimate_batch(self, frames: Sequence[np.ndarray], method: Method = "auto", pixel_aspect: float = 1.0,
                        *, pitch: bool = True) -> list[LensEstimate]:
-        """:meth:`glradial.estimation.estimator.Estimator.estimate_batch`, then, for ``method="auto"`` and ``pitch``, the camera fit."""
+        """:meth:`glradial.estimation.net_lines.NetLinesEstimator.estimate_batch`, then, for ``method="auto"`` and ``pitch``, the camera fit."""
         frames = _as_list(frames)
         found = super().estimate_batch(frames, method, pixel_aspect)  # type: ignore[arg-type]
         if method != "auto" or not pitch:
@@ -202,7 +201,7 @@ def estimate(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1
     """Estimate the radial lens of one RGB frame (``glradial.estimate``): ``"auto"`` (default) is the
     estimation layer's reading combined with the pitch camera fit's lens where the template fits (the
     CNN/line-fit answer alone elsewhere, and always with ``pitch=False``); ``"net"`` and
-    ``"lines"`` as :func:`glradial.estimation.estimator.estimate`. ``pixel_aspect`` for frames stored
+    ``"lines"`` as :func:`glradial.estimation.net_lines.estimate_net_lines`. ``pixel_aspect`` for frames stored
     with non-square pixels. Uses the shared bundled estimator.
 
     Args:
@@ -227,5 +226,5 @@ def estimate(frame: np.ndarray, method: Method = "auto", pixel_aspect: float = 1
         (True, 'noise_frame')
     """
     check_method(method)
-    found = default_estimator().estimate(frame, method, pixel_aspect)
+    found = default_net_lines_estimator().estimate(frame, method, pixel_aspect)
     return _with_pitch([frame], [found])[0] if method == "auto" and pitch else found
