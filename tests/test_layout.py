@@ -321,3 +321,12 @@ def test_public_class_names_are_unique():
                 seen.setdefault(node.name, []).append(path.relative_to(PACKAGE).as_posix())
     twice = {name: where for name, where in seen.items() if len(where) > 1}
     assert not twice, f"public classes defined twice: {twice}"
+
+
+def test_tests_mirror_the_package():
+    """tests/ holds one folder per glradial sub-package (plus net/ and bench/, the checkout's other
+    code); project-wide tests (layout, docs, packaging) stay at its top."""
+    packages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")} | {"net", "bench"}
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and p.name not in {"data", "__pycache__"}}
+    assert folders <= packages, f"test folders that mirror no package: {sorted(folders - packages)}"
+    assert len(folders) >= 10, folders

@@ -57,7 +57,7 @@ from ..media.atomic import atomic_path
 from .crops import CropParams, PanoramaRenderers, crop_labels, load_panorama, sample_crop_params
 
 #: Newton steps of the exact inverse when crops come from the paper's distribution: 3 steps from the
-#: Drap-Lefevre seed reach 1e-9 lens units on every such lens (see tests/test_crop_producer.py); any
+#: Drap-Lefevre seed reach 1e-9 lens units on every such lens (see tests/synthesis/test_crop_producer.py); any
 #: other ``ranges``, and paired batches (whose shipped training runs used it), use the full default
 #: of common.glsl.
 PAPER_NEWTON_STEPS = 3

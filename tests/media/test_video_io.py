@@ -27,7 +27,7 @@ FFPROBE = shutil.which("ffprobe")
 pytestmark = pytest.mark.skipif(FFMPEG is None or FFPROBE is None, reason="needs the ffmpeg and ffprobe commands (make setup installs them)")
 
 K1, K2 = -0.25, 0.05
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _ffmpeg(*args: str) -> None:

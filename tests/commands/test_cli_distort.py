@@ -74,7 +74,7 @@ def test_distort_crop_is_undone_by_correct_full_on_an_exr_with_values_to_50(tmp_
     channels = {"R": value, "G": 51.0 - value, "B": value / 2, "A": np.ones_like(value), "Z": (3 * value).astype(np.float16)}
     source, distorted, back = tmp_path / "in.exr", tmp_path / "d.exr", tmp_path / "c.exr"
     write_exr(source, ExrImage(channels))
-    # the GL path here; the CPU path interpolates float frames from float maps too (tests/test_float_maps.py)
+    # the GL path here; the CPU path interpolates float frames from float maps too (tests/remapping/test_float_maps.py)
     common = ["--k1", str(K1), "--k2", str(K2), "--backend", "gl", "-q"]
     assert main(["distort", str(source), str(distorted), "--fit", "crop", *common]) == 0
     assert main(["correct", str(distorted), str(back), "--fit", "full", *common]) == 0

@@ -19,7 +19,7 @@ import glradial
 from glradial.estimation.trust import shift_px
 from glradial.lens.metrics import max_displacement_px
 
-VIDEO = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real_wide_camera" / "wide_pitch_camera.mp4"
+VIDEO = Path(__file__).resolve().parents[2].parent / "shared" / "data" / "real_wide_camera" / "wide_pitch_camera.mp4"
 TRUTH = np.array([-0.6615, 0.4098])
 
 

@@ -356,16 +356,16 @@ def test_parser_imports_nothing_heavy():
     probe = ("import sys\nfrom glradial.cli import build_parser\nbuild_parser()\n"
              "print([m for m in ('torch', 'moderngl', 'onnxruntime') if m in sys.modules])")
     done = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=60,
-                          cwd=Path(__file__).resolve().parent.parent)
+                          cwd=Path(__file__).resolve().parents[2])
     assert done.returncode == 0 and done.stdout.strip() == "[]", done.stdout + done.stderr
 
 
 def test_python_dash_m_runs():
     done = subprocess.run([sys.executable, "-m", "glradial", "--help"], capture_output=True, text=True, timeout=60,
-                          cwd=Path(__file__).resolve().parent.parent)
+                          cwd=Path(__file__).resolve().parents[2])
     assert done.returncode == 0 and "correct" in done.stdout and "stmap" in done.stdout
     done = subprocess.run([sys.executable, "-m", "glradial", "correct", "x.png", "y.png", "--k1", "1", "--auto"],
-                          capture_output=True, text=True, timeout=60, cwd=Path(__file__).resolve().parent.parent)
+                          capture_output=True, text=True, timeout=60, cwd=Path(__file__).resolve().parents[2])
     assert done.returncode == 2 and done.stderr.count("\n") == 1 and done.stderr.startswith("glradial: error:")
 
 

@@ -96,7 +96,7 @@ def test_correct_matches_cv2_undistort(ctx, photos, k, dtype, channels, backend)
         if backend == "cpu" and dtype != np.float32:
             # integer frames: the same 1/32-px fixed-point maps as cv2.undistort, so nearly identical
             assert errors.mean() <= 0.01, (name, errors.mean())
-        else:  # exact float positions (the shader; float frames on the CPU: tests/test_float_maps.py)
+        else:  # exact float positions (the shader; float frames on the CPU: tests/remapping/test_float_maps.py)
             assert errors.mean() <= 0.25, (name, errors.mean())
             assert np.percentile(errors, 99) <= 2.5, (name, np.percentile(errors, 99))
 

@@ -19,7 +19,7 @@ from glradial.lens.lens import Lens, lens_to_pixels, pixels_to_lens
 from glradial.lens.metrics import manifold_k2, max_displacement_px
 from glradial.remapping.remap import distort
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 
 

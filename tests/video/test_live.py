@@ -24,7 +24,7 @@ import cv2
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 K1, K2 = -0.2, 0.03
 SIZE, RATE, SECONDS = (320, 180), 25, 2
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None,

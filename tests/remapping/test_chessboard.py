@@ -9,7 +9,7 @@ principal point is ~31 px right of and ~30 px below the centre and fx != fy, bot
 Measure: the 9×6 inner corners (cv2.findChessboardCorners + cornerSubPix) form 6 rows and 9
 columns; for each, a total-least-squares line fit; the RMS perpendicular residual over all 15 lines,
 in input-frame pixels (residuals of the fit='full' output are multiplied by its scale s).
-Measured (python3 -m pytest tests/test_chessboard.py): before 1.91 px; after 0.81 px with both
+Measured (python3 -m pytest tests/remapping/test_chessboard.py): before 1.91 px; after 0.81 px with both
 backends (0.75 px with the centred approximation f = sqrt(fx fy) used before the principal point
 was modelled); OpenCV's own full model (off-centre, tangential) on the points: 0.80 px; the
 opposite lens (sign flipped): 3.27 px. The ~0.75-0.8 px floor is detection noise and the

@@ -4,7 +4,7 @@
 Oracles: OpenCV's own distortion model (``cv2.projectPoints`` with the camera matrix ``fx = fy =
 width``, so its coefficients are glradial's width-normalised ones) draws the straight lines of a
 distorted picture independently of glradial; a clip's frames carry a known lens by construction
-(:mod:`glradial.video.clips`, checked against ``glradial.correct`` in tests/test_shots.py); ffprobe
+(:mod:`glradial.video.clips`, checked against ``glradial.correct`` in tests/video/test_shots.py); ffprobe
 says which frames are B-frames.
 """
 
@@ -169,7 +169,7 @@ def test_the_frames_right_after_a_cut_carry_the_new_zoom_lens(gl_ctx, tmp_path):
     -0.12, about 10 px of lens change per frame at 1920) whose first frame the sparse decode skips:
     the cut is placed on it, and the frames from the cut to the shot's first decoded frame carry the
     zoom's lens at their own zoom (within 6 px of the truth, the zoom test's tolerance in
-    tests/test_shots.py), not the first decoded frame's (which would be off by more than that)."""
+    tests/video/test_shots.py), not the first decoded frame's (which would be off by more than that)."""
     import glradial
     from glradial.video.video_pipeline import track_video
 

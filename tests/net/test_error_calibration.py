@@ -14,7 +14,7 @@ from glradial.evaluation.real_eval import Evaluator, broadcast_samples, extended
 from glradial.lens.metrics import max_displacement_px
 from net.error_calibration import coverage_report, main, real_errors
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 
 

@@ -27,7 +27,7 @@ from net.gpu_augment import DeviceAugment, gaussian_blur, jpeg_artefacts  # noqa
 from net.gpu_source import GpuCropSource  # noqa: E402
 from net.torch_crops import TorchCropRenderer  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 #: A seam crop (pan 170: u wraps inside it), a lens near fold-over (its series is rejected: the
 #: Newton path), a barrel lens whose corners have no inverse (0 there), a pincushion lens.
 SPECIAL = [CropParams(170.0, -10.0, 1.0, 50.0, -0.66, 0.34), CropParams(0.0, 0.0, 0.0, 90.0, -0.6, 0.05),

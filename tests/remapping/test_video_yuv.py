@@ -34,7 +34,7 @@ from glradial.remapping.planes import black, chroma_siting, remap_planes, yuv_pl
 
 FFMPEG = shutil.which("ffmpeg")
 pytestmark = pytest.mark.skipif(FFMPEG is None, reason="needs the ffmpeg command (make setup installs it)")
-FRAME = Path(__file__).resolve().parents[1] / "glradial" / "data" / "usl_broadcast_0195.jpg"
+FRAME = Path(__file__).resolve().parents[2] / "glradial" / "data" / "usl_broadcast_0195.jpg"
 LENS = Lens(-0.25, 0.05)
 #: output scale of the ramp test (a fit number: p_u = SCALE q), so that a siting error shows everywhere
 SCALE = 1.5

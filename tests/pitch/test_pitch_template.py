@@ -11,7 +11,7 @@ import pytest
 
 from glradial.pitch import KEYPOINT_NAMES, PitchTemplate
 
-LABELS = Path(__file__).resolve().parents[2] / "shared/data/broadcast_bundesliga/keypoints/keypoints.json"
+LABELS = Path(__file__).resolve().parents[3] / "shared/data/broadcast_bundesliga/keypoints/keypoints.json"
 
 
 def _distance_to_markings(template: PitchTemplate, points: np.ndarray) -> np.ndarray:

@@ -20,7 +20,7 @@ from glradial.pitch import PitchTemplate
 SIZE = (1280, 720)
 #: pitch_template's homographies take corner-origin pitch coordinates; first_guess centre-spot ones.
 TO_CORNER = np.array([[1.0, 0.0, pitch_template.LENGTH / 2], [0.0, 1.0, pitch_template.WIDTH / 2], [0.0, 0.0, 1.0]])
-ROAD = Path(__file__).resolve().parents[1].parent / "shared/data/road_straight_lines1.jpg"
+ROAD = Path(__file__).resolve().parents[2].parent / "shared/data/road_straight_lines1.jpg"
 
 
 @pytest.fixture(scope="module")

@@ -12,7 +12,7 @@ from glradial.lens import lensfuncs
 from glradial.synthesis.crop_producer import PAPER_NEWTON_STEPS, crop_batches, plan_batch
 from glradial.synthesis.crops import CropRenderer, render_crops, sample_crop_params
 
-PANO = str(Path(__file__).parent / "data" / "panorama_field_2048x1024.jpg")
+PANO = str(Path(__file__).parents[1] / "data" / "panorama_field_2048x1024.jpg")
 
 
 def test_stream_is_deterministic_and_labelled(ctx, field_panorama) -> None:
@@ -189,7 +189,7 @@ def _run_script(tmp_path: Path, text: str) -> "subprocess.CompletedProcess[str]"
     script = tmp_path / "train_script.py"
     script.write_text(text)
     (tmp_path / "tmp").mkdir()
-    root = str(Path(__file__).resolve().parents[1])
+    root = str(Path(__file__).resolve().parents[2])
     env = {**os.environ, "TMPDIR": str(tmp_path / "tmp"), "PYTHONPATH": root + os.pathsep + os.environ.get("PYTHONPATH", "")}
     # 60 s: the script takes a few seconds on a loaded 2-core machine; before the fix it never ended (the
     # parent blocked writing the pickled panorama into the pipe of a worker that had died while starting).

@@ -27,7 +27,7 @@ from net.loss import (  # noqa: E402
 from net.model import DistortionNet, ModelConfig, inference_model  # noqa: E402
 from net.train import TrainConfig, step_loss  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 TINY = dict(input_size=(64, 36), stem_channels=8, stages=[(1, 8, 1, 2), (2, 12, 1, 2)], feature_channels=16,
             head_hidden=8)
 

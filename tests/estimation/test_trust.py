@@ -29,7 +29,7 @@ from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2,
 
 needs_shipped = pytest.mark.skipif(not default_model_path().is_file(), reason="no shipped model in glradial/models")
 needs_ffmpeg = pytest.mark.skipif(shutil.which("ffmpeg") is None, reason="no ffmpeg CLI")
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 SHIPPED_FRAME = Path(glradial.__file__).parent / "data" / "usl_broadcast_0195.jpg"
 GRASS, WHITE = (40, 110, 40), (230, 230, 230)
 

@@ -91,7 +91,7 @@ def test_evaluate_out_of_domain_panorama_is_an_argument(tmp_path, capsys):
 
     from glradial.cli import main
 
-    field = Path(__file__).parent / "data" / "panorama_field_2048x1024.jpg"
+    field = Path(__file__).parents[1] / "data" / "panorama_field_2048x1024.jpg"
     out = tmp_path / "eval"
     base = ["evaluate", "--n", "4", "--test-panoramas", "1", "--panorama-size", "256x128",
             "--cache-dir", str(tmp_path / "cache"), "--threads", "1", "--ood-n", "3"]

@@ -21,7 +21,7 @@ from glradial.export import engines, opentrackio, opentrackio_udp, overscan
 from glradial.export.stmap import lens_stmap, unreal_stmap
 from glradial.lens import Lens
 
-DATA = Path(__file__).parent / "data" / "opentrackio"
+DATA = Path(__file__).parents[1] / "data" / "opentrackio"
 SIZE = (1920, 1080)
 LENSES = [Lens(-0.2, 0.02), Lens(-0.35, 0.12), Lens(0.1, 0.0), Lens(-0.15, 0.01, 0.012, -0.008)]
 

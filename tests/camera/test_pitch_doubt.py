@@ -26,7 +26,7 @@ from glradial.lens.lens import Lens
 from glradial.lens.metrics import manifold_k2
 
 GRASS, WHITE = (40, 110, 40), (230, 230, 230)
-ROAD = Path(__file__).parent / "data" / "road_straight_lines1.jpg"
+ROAD = Path(__file__).parents[1] / "data" / "road_straight_lines1.jpg"
 LENS = Lens(-0.3, float(manifold_k2(-0.3)))
 
 
@@ -125,7 +125,7 @@ def test_doubt_rules_known_answers(rendered_fit):
     on_grass = Camera(low.rotation, np.r_[low.position[:2], 0.5 * t["min_height_m"]], low.focal, low.size, low.lens)
     assert cal.judge_fit(replace(fit, camera=on_grass), points).reason == "poor_fit"
     # above every main-camera position the search starts from (line_hypotheses.HEIGHT_RANGE, 4-80 m): a grid of
-    # lines read as a pitch from 86 m up once the support counted the lens's squeeze (tests/test_trust.py)
+    # lines read as a pitch from 86 m up once the support counted the lens's squeeze (tests/estimation/test_trust.py)
     too_high = Camera(low.rotation, np.r_[low.position[:2], HEIGHT_RANGE[1] + 5.0], low.focal, low.size, low.lens)
     assert cal.judge_fit(replace(fit, camera=too_high), points).reason == "poor_fit"
     wide_focal = 0.5 / np.tan(np.radians(t["max_hfov_deg"] + 5) / 2)  # focal (image widths) of a wider lens

@@ -15,7 +15,7 @@ import glradial
 from glradial.gl.egl import release_objects
 from glradial.gl.shaderlib import shader_path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 K1, K2 = -0.28, 0.06  # a broadcast barrel lens near the Lopez-Antequera manifold
 
 

@@ -251,7 +251,7 @@ def test_k2_residual_head_starts_on_the_manifold():
     assert k1.std() > 0
 
 
-@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[1] / "net" / "configs").glob("*.json")),
+@pytest.mark.parametrize("path", sorted((Path(__file__).resolve().parents[2] / "net" / "configs").glob("*.json")),
                          ids=lambda p: p.name)
 def test_every_shipped_training_config_loads_and_fits_the_parameter_budget(path):
     # make train and the README's recipe run these files: a stale key or a model over the paper's
@@ -359,7 +359,7 @@ def test_the_shipped_stage_config_describes_the_shipped_model():
 
     from net.train import TrainConfig
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     cfg = TrainConfig.from_json(root / "net" / "configs" / "stage11_error_head.json")
     props = {p.key: p.value for p in onnx.load(str(root / "glradial" / "models" / "glradial_k1k2.onnx")).metadata_props}
     assert ModelConfig.from_dict(cfg.model) == ModelConfig.from_dict(json.loads(props["model_config"]))
