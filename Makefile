@@ -35,6 +35,7 @@ demo: $(RUNTIME_STAMP)
 
 test: $(DEV_STAMP)
 	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q --doctest-modules glradial
 
 bench: $(DEV_STAMP)
 	$(PY) bench/bench_correct.py

@@ -21,6 +21,7 @@ import time
 
 import cv2
 import numpy as np
+from figures import write_figure
 
 from glradial import correct
 from glradial.gl import egl
@@ -85,6 +86,7 @@ def main() -> None:
     sizes = [(1280, 720), (1920, 1080)] + ([(3840, 2160)] if args.uhd else [])
     rng = np.random.default_rng(0)
     print(f"{'frame':>16} {'path':>16} {'ms/frame':>9} {'fps':>7} {'÷ cv2.remap':>11}")
+    results: dict[str, dict] = {}
     for w, h in sizes:
         for channels in (3, 4):
             frame = rng.integers(0, 256, (h, w, channels), dtype=np.uint8)
@@ -104,8 +106,12 @@ def main() -> None:
             label = f"{w}×{h} {'RGB' if channels == 3 else 'RGBA'}"
             for name, ms in timings.items():
                 print(f"{label:>16} {name:>16} {ms:9.2f} {1000 / ms:7.1f} {ms / base:11.2f}")
-            upload, draw, readback = gl_stages(frame, max(3, frames // 2))
-            print(f"{label:>16} {'gl stages':>16}  upload {upload:.2f} ms, draw {draw:.2f} ms, readback {readback:.2f} ms")
+            results[label] = {"ms_per_frame": timings, "ratio_to_cv2_remap": {n: ms / base for n, ms in timings.items()}}
+            if channels == 3:  # RGBA goes through the premultiplied float path (remapping/alpha.py): other textures
+                upload, draw, readback = gl_stages(frame, max(3, frames // 2))
+                print(f"{label:>16} {'gl stages':>16}  upload {upload:.2f} ms, draw {draw:.2f} ms, readback {readback:.2f} ms")
+                results[label]["gl_stages_ms"] = {"upload": upload, "draw": draw, "readback": readback}
+    write_figure("bench_correct", {"lens": {"k1": K1, "k2": K2}, "renderer": egl.renderer_name(ctx), "frames": results})
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from figures import write_figure
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
@@ -102,18 +103,24 @@ def main() -> int:
                 rates[name].append(crops_per_second(run, count))
     for renderer in renderers:
         renderer.release()
-    median = {name: float(np.median(values)) for name, values in rates.items()}
+    report({name: float(np.median(values)) for name, values in rates.items()}, args.rounds)
+    return 0
+
+
+def report(median: dict[str, float], rounds: int) -> None:
+    """Print the median crops/s of each case with its ratio to py360convert's, and write the figure."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(f"{args.rounds} interleaved rounds, load average at the end: {load:.1f}")
+    print(f"{rounds} interleaved rounds, load average at the end: {load:.1f}")
     print(f"{'case':40s} {'crops/s':>9s} {'vs py360convert.e2p':>20s}")
+    ratios = {}
     for name, value in median.items():
         if name.startswith("py360"):
             continue
-        ref = median["py360convert.e2p 224x224" if name.startswith("224") else "py360convert.e2p 1280x720"]
-        print(f"{name:40s} {value:9.1f} {value / ref:19.1f}x")
+        ratios[name] = value / median["py360convert.e2p 224x224" if name.startswith("224") else "py360convert.e2p 1280x720"]
+        print(f"{name:40s} {value:9.1f} {ratios[name]:19.1f}x")
     for name in ("py360convert.e2p 224x224", "py360convert.e2p 1280x720"):
         print(f"{name:40s} {median[name]:9.1f}")
-    return 0
+    write_figure("bench_crops", {"crops_per_s": median, "ratio_to_py360convert": ratios, "rounds": rounds})
 
 
 if __name__ == "__main__":

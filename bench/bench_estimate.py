@@ -12,7 +12,7 @@ real broadcast frame upscaled to 1080p (``--pitch``, default the USL frame of
 fit, and ``estimate(method="lines")`` / ``"auto"``, with the same peer ratio; ``auto`` is timed twice:
 the estimation layer's (the CNN and the line fit, ``pitch=False``: what ``auto`` was before the pitch
 camera fit was fed back, and what video still uses) and the public ``glradial.Estimator``'s, which also
-runs the camera fit (:mod:`glradial.camera.pitch_lens`; its answer's source is printed).
+runs the camera fit (:mod:`glradial.camera.estimator`; its answer's source is printed).
 Targets (issues 5, 17): net <= 15 ms per 1080p frame, auto <= 40 ms, on one thread.
 """
 
@@ -26,12 +26,13 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from figures import write_figure
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # run from a checkout without installing
-from glradial.camera.pitch_lens import Estimator  # noqa: E402
-from glradial.estimation.estimator import default_model_path  # noqa: E402
+from glradial.camera.estimator import Estimator  # noqa: E402
 from glradial.estimation.line_fit import fit_lines  # noqa: E402
 from glradial.estimation.lines import detect_chains  # noqa: E402
+from glradial.estimation.net_lines import default_model_path  # noqa: E402
 
 
 def _pitch_frame(path: str) -> np.ndarray:
@@ -63,6 +64,7 @@ def main() -> None:
     rng = np.random.default_rng(0)
     frame = cv2.GaussianBlur(rng.integers(0, 256, (1080, 1920, 3), dtype=np.uint8), (0, 0), 2.0)
     print(f"model {args.model}")
+    results: dict[str, dict] = {}
     for threads in (1, 2):
         cv2.setNumThreads(threads)
         est = Estimator(args.model, threads=threads)
@@ -89,6 +91,12 @@ def main() -> None:
               f"{net / blur:.2f} / {lines / blur:.2f} / {auto / blur:.2f}")
         print(f"threads {threads}, same frame: estimate(auto) with the pitch camera fit {auto_pitch:.2f} ms (answered from "
               f"{source}), {auto_pitch / auto:.2f} x auto without it; ratio to the blur peer {auto_pitch / blur:.2f}")
+        results[f"threads_{threads}"] = {
+            "noise_1080p_ms": {"resize": resize, "inference": infer, "estimate_net": total, "peer_gaussian_blur": blur},
+            "pitch_1080p_ms": {"detect": detect, "fit": fit, "estimate_net": net, "estimate_lines": lines,
+                               "estimate_auto_no_pitch": auto, "estimate_auto": auto_pitch},
+            "pitch_chains": len(evidence.chains), "auto_answered_from": source}
+    write_figure("bench_estimate", results)
 
 
 if __name__ == "__main__":

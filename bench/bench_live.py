@@ -50,10 +50,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from glradial.commands import parse_size  # noqa: E402
-
-sys.path.insert(0, str(ROOT / "bench"))
 from figures import write_figure  # noqa: E402
+
+from glradial.commands import parse_size  # noqa: E402
 
 
 def make_clip(path: Path, size: tuple[int, int], rate: int, seconds: float, k1: float, k2: float) -> Path:
@@ -284,6 +283,7 @@ def main() -> None:
     size, (k1, k2) = args.size, (args.k1, args.k2)
     tag = f"{size[0]}x{size[1]}"
     print(f"bench_live: {tag}, {args.seconds:g} s, lens k1={k1} k2={k2}, {os.cpu_count()} CPU cores", flush=True)
+    results: dict[str, dict] = {}
     if not {"fixed", "capacity"} <= skip:
         clip = make_clip(args.work / f"clip_{tag}_{args.rate}p.ts", size, args.rate, args.seconds, k1, k2)
         frames = int(round(args.seconds * args.rate))
@@ -295,7 +295,7 @@ def main() -> None:
                   f"{r['samples'] / max(r['written'], 1):.1%}; delay p50 {r['p50']:.2f} p95 {r['p95']:.2f} max {r['max']:.2f} frames; "
                   f"PSNR vs cv2.undistort min {r['psnr_min']:.1f} median {r['psnr_median']:.1f} dB", flush=True)
         for backend in ([] if "capacity" in skip else args.backends.split(",")):
-            r = run_capacity(clip, args.work, k1, k2, backend)
+            r = results[f"capacity, fixed lens, {args.rate}p, {backend}"] = run_capacity(clip, args.work, k1, k2, backend)
             print(f"capacity, fixed lens, {args.rate}p, backend {backend}: {r['fps']:.1f} fps flat out = {r['ratio']:.2f} x "
                   f"the stream rate ({r['written']} of {r['read']} frames)", flush=True)
     if "auto" not in skip:
@@ -307,7 +307,8 @@ def main() -> None:
               f"{r['dropped']}, late {r['late']}); delay p50 {r['p50']:.2f} p95 {r['p95']:.2f} max {r['max']:.2f} frames; "
               f"samples' lens after 1 s vs applied: median {r['err_median']:.1f} px, p95 {r['err_p95']:.1f} px at 1920, "
               f"{r['within_8px']:.0%} within 8 px; {r['sure']:.0%} of frames sure (lens applied)", flush=True)
-
+    if results:
+        write_figure(f"bench_live_{tag}", results)
     if {"fixed", "auto"} - skip:
         write_figure("live_start" if tag == "1280x720" else f"live_start_{tag}", figures)
 

@@ -16,6 +16,7 @@ import math
 import time
 
 import numpy as np
+from figures import write_figure
 
 from glradial.gl.egl import renderer_name, thread_context
 from glradial.synthesis.stadium import StadiumRenderer
@@ -60,6 +61,7 @@ def main() -> None:
     size = tuple(int(v) for v in args.size.lower().split("x"))
     ctx = thread_context()
     print(f"renderer: {renderer_name(ctx)}; size {size[0]}x{size[1]}")
+    results: dict[str, dict] = {}
     with StadiumRenderer(ctx) as renderer:
         renderer.render(sample_style(0), (64, 32))  # compile and warm up
         out = np.empty((size[1], size[0], 3), np.uint8)
@@ -71,10 +73,14 @@ def main() -> None:
             for ss in (1, 2, 3):
                 wall, cpu = _timed(lambda: renderer.render(style.with_overrides(supersample=ss), size, out=out))
                 line.append(f"ss={ss}: {wall:5.1f} s wall {cpu:5.1f} s cpu ({wall / peer_wall:4.2f}x peer)")
+                results[f"{size[0]}x{size[1]} seed {seed} ss={ss}"] = {"wall_s": wall, "cpu_s": cpu, "peer_wall_s": peer_wall,
+                                                                     "ratio_to_numpy_peer": wall / peer_wall}
             print(" | ".join(line), flush=True)
         if args.full:
             wall, cpu = _timed(lambda: renderer.render(sample_style(args.seeds[0]), (8192, 4096)))
             print(f"8192x4096 seed {args.seeds[0]} (default ss=2): {wall:.1f} s wall {cpu:.1f} s cpu")
+            results[f"8192x4096 seed {args.seeds[0]} ss=2"] = {"wall_s": wall, "cpu_s": cpu}
+    write_figure("bench_stadium", results)
 
 
 if __name__ == "__main__":

@@ -25,6 +25,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from figures import write_figure  # noqa: E402
+
 import glradial  # noqa: E402
 from glradial.gl import egl  # noqa: E402
 
@@ -69,6 +71,7 @@ def main() -> int:
     ctx = egl.create_context()
     remapper = glradial.Remapper(ctx)
     print(f"renderer: {egl.renderer_name(ctx)}")
+    results: dict[str, dict] = {"renderer": egl.renderer_name(ctx)}
     for text in args.sizes:
         size = tuple(int(v) for v in text.lower().split("x"))
         for dtype, label in (("f1", "RGBA8"), ("f2", "RGBA16F")):
@@ -84,10 +87,12 @@ def main() -> int:
                 median = statistics.median(values)
                 print(f"{text} {label:8s} {name:40s} {median:8.2f} ms/frame {1e3 / median:8.1f} fps  "
                       f"{cpu / median:5.2f}x the CPU path's speed")
+                results[f"{text} {label} {name}"] = {"ms_per_frame": median, "speed_vs_cpu_path": cpu / median}
             for obj in objects:
                 obj.release()
     remapper.release()
     egl.destroy_context(ctx)
+    write_figure("bench_texture", results)
     return 0
 
 

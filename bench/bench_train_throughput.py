@@ -36,6 +36,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 import torch  # noqa: E402
+from figures import write_figure  # noqa: E402
 
 from net.train import AMP, Run, TrainConfig, batch_source, build_run, panorama_source, rank_shards, train_step  # noqa: E402
 
@@ -143,7 +144,13 @@ def measure_source(run: Run, name: str, shards, meter: BusyMeter, fixed: dict | 
     return fed
 
 
+#: every phase's figures, by label, for :func:`write_figure` at the end of the run
+FIGURES: dict[str, dict] = {}
+
+
 def report(label: str, result: dict, fixed: dict | None) -> None:
+    """Print one phase's samples/s (and its ratio to the fixed-batch step) and keep it in :data:`FIGURES`."""
+    FIGURES[label] = {**result, "ratio_to_fixed_batch": None if fixed is None else result["samples_s"] / fixed["samples_s"]}
     busy = "n/a" if result["busy"] is None else f"{result['busy']:.0f} %"
     share = "n/a" if result["event_share"] is None else f"{100 * result['event_share']:.0f} %"
     ratio = "" if fixed is None else f"  ({result['samples_s'] / fixed['samples_s']:.2f}x the fixed-batch step)"
@@ -203,6 +210,7 @@ def main() -> int:
         rng = np.random.default_rng(0)
         for source_name in [s for s in args.sources.split(",") if s]:
             measure_source(run, source_name, shards, meter, fixed, args.seconds, rng)
+    write_figure("bench_train_throughput_" + ("gpu" if cuda else "cpu"), {"device": name, **FIGURES})
     return 0
 
 

@@ -45,6 +45,7 @@ import time
 from pathlib import Path
 
 import av
+from figures import write_figure
 
 from glradial.media.video_io import EncodeOptions
 from glradial.video import video_pipeline
@@ -219,97 +220,104 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
+def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip: Path) -> tuple[dict, dict, dict]:
+    """``(best, passes, stages)``: the best time (s) of each path over ``args.repeats`` turns, the
+    best times of ``--auto``'s two passes (s) and the correction stage alone (ms/frame)."""
+    options = EncodeOptions(codec="libx264", crf=args.crf, preset=args.preset)
+    estimator = default_estimator()
+
+    def ffmpeg() -> None:
+        subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-c:v", "libx264", "-crf", f"{args.crf:g}",
+                        "-preset", args.preset, "-pix_fmt", "yuv420p", "-c:a", "copy", str(tmp / "ffmpeg.mp4")], check=True)
+
+    def fixed() -> None:
+        correct_video(clip, tmp / "fixed.mp4", lambda _i: (K1, K2), backend=args.backend, progress=False,
+                      options=options, overwrite=True)
+
+    def fixed_rgb() -> None:  # the same, forced through RGB (the path before pass 2 worked in YUV)
+        space = video_pipeline.correction_space
+        video_pipeline.correction_space = lambda *_args: ("rgb", "forced by the bench")
+        try:
+            fixed()
+        finally:
+            video_pipeline.correction_space = space
+
+    passes: dict[str, float] = {"pass 1": float("inf"), "pass 2": float("inf")}
+
+    def auto() -> None:
+        start = time.perf_counter()
+        # doubtful shots applied too: the correction pass does the same work as the fixed lens
+        track = track_video(clip, estimator, progress=False, apply_doubtful=True)
+        middle = time.perf_counter()
+        correct_video(clip, tmp / "auto.mp4", track.lens_for, backend=args.backend, progress=False,
+                      options=options, overwrite=True, frames_expected=track.n_frames)
+        passes["pass 1"] = min(passes["pass 1"], middle - start)
+        passes["pass 2"] = min(passes["pass 2"], time.perf_counter() - middle)
+
+    def fixed_32() -> None:  # the planes from fixed-point maps (as before the float maps)
+        with fixed_point_maps():
+            fixed()
+
+    track = track_video(clip, estimator, progress=False, apply_doubtful=True)
+    stages = stage_times(clip, tmp)
+    paths = {"ffmpeg": ffmpeg, "pyav": lambda: pyav_transcode(clip, tmp / "pyav.mp4", args.crf, args.preset),
+             "fixed lens": fixed, "--auto": auto, "fixed, RGB": fixed_rgb,
+             # pass 1 decoding every frame (as before the sparse decode)
+             "pass 1, all": lambda: track_video(clip, estimator, progress=False, apply_doubtful=True, sparse=False),
+             # pass 2 alone, the per-frame lens of one earlier pass 1
+             "pass 2": lambda: correct_video(clip, tmp / "pass2.mp4", track.lens_for, backend=args.backend, progress=False,
+                                             options=options, overwrite=True, frames_expected=track.n_frames),
+             "fixed, 1/32-px maps": fixed_32}
+    best = {name: float("inf") for name in paths}
+    for _ in range(args.repeats):
+        for name, run in paths.items():
+            start = time.perf_counter()
+            run()
+            best[name] = min(best[name], time.perf_counter() - start)
+    return best, passes, stages
+
+
+def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict) -> dict:
+    """Print the figures and return them (frames/s, ms/frame and the ratios the targets name)."""
+    fps = {name: args.frames / seconds for name, seconds in best.items()}
+    ms = {name: 1e3 * seconds / args.frames for name, seconds in {**best, **passes}.items()}
+    ratios = {"fixed / ffmpeg": fps["fixed lens"] / fps["ffmpeg"], "fixed / pyav": fps["fixed lens"] / fps["pyav"],
+              "--auto / fixed": fps["--auto"] / fps["fixed lens"], "fixed RGB / ffmpeg": fps["fixed, RGB"] / fps["ffmpeg"],
+              "fixed YUV / fixed RGB": fps["fixed lens"] / fps["fixed, RGB"],
+              "fixed / fixed 1/32-px maps (time)": best["fixed lens"] / best["fixed, 1/32-px maps"],
+              "pass 1 sparse / all (time)": passes["pass 1"] / best["pass 1, all"],
+              "pass 2 / fixed (time)": best["pass 2"] / best["fixed lens"]}
+    print(f"clip: {args.clip} over {args.frame.name}, {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
+          f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}; load average {os.getloadavg()[0]:.1f}")
+    for name, value in fps.items():
+        print(f"  {name:19s} {value:6.1f} frames/s")
+    print(f"  --auto pass 1 (decode, cuts, shot evidence and fit) {ms['pass 1']:.1f} ms/frame, pass 2 (correct + encode) "
+          f"{ms['pass 2']:.1f} ms/frame; fixed lens {ms['fixed lens']:.1f} ms/frame")
+    print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
+          f"YUV {stages['YUV']:.1f} ms/frame, YUV from 1/32-px maps {stages['YUV 1/32']:.1f} ms/frame")
+    for name, value in ratios.items():
+        target = "  (target >= 0.8)" if name in ("fixed / ffmpeg", "--auto / fixed") else ""
+        print(f"{name:34s}: {value:.2f}{target}")
+    return {"fps": fps, "ms_per_frame": ms, "correction_stage_ms_per_frame": stages, "ratios": ratios,
+            "clip": args.clip, "size": args.size, "frames": args.frames, "preset": args.preset, "crf": args.crf,
+            "backend": args.backend, "repeats": args.repeats}
+
+
 def main() -> int:
     args = parse_args()
     if shutil.which("ffmpeg") is None:
         sys.exit("bench_video needs the ffmpeg command (make setup installs it)")
     size = tuple(int(v) for v in args.size.split("x"))
-    for name, ms in map_times(size).items():
+    maps = map_times(size)
+    for name, ms in maps.items():
         print(f"new-lens maps at {args.size}: {name:30s} {ms:6.1f} ms")
-    options = EncodeOptions(codec="libx264", crf=args.crf, preset=args.preset)
-    estimator = default_estimator()
     with tempfile.TemporaryDirectory() as folder:
-        tmp = Path(folder)
-        clip = tmp / "clip.mp4"
+        clip = Path(folder) / "clip.mp4"
         make_clip(clip, size, args.frames, args.clip, args.frame)
-
-        def ffmpeg() -> None:
-            subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(clip), "-c:v", "libx264", "-crf", f"{args.crf:g}",
-                            "-preset", args.preset, "-pix_fmt", "yuv420p", "-c:a", "copy", str(tmp / "ffmpeg.mp4")], check=True)
-
-        def pyav() -> None:
-            pyav_transcode(clip, tmp / "pyav.mp4", args.crf, args.preset)
-
-        def fixed() -> None:
-            correct_video(clip, tmp / "fixed.mp4", lambda _i: (K1, K2), backend=args.backend, progress=False,
-                          options=options, overwrite=True)
-
-        def fixed_rgb() -> None:  # the same, forced through RGB (the path before pass 2 worked in YUV)
-            space = video_pipeline.correction_space
-            video_pipeline.correction_space = lambda *_args: ("rgb", "forced by the bench")
-            try:
-                fixed()
-            finally:
-                video_pipeline.correction_space = space
-
-        def pass1_full() -> None:  # pass 1 decoding every frame (as before the sparse decode)
-            track_video(clip, estimator, progress=False, apply_doubtful=True, sparse=False)
-
-        passes: dict[str, float] = {"pass 1": float("inf"), "pass 2": float("inf")}
-
-        def auto() -> None:
-            start = time.perf_counter()
-            # doubtful shots applied too: the correction pass does the same work as the fixed lens
-            track = track_video(clip, estimator, progress=False, apply_doubtful=True)
-            middle = time.perf_counter()
-            correct_video(clip, tmp / "auto.mp4", track.lens_for, backend=args.backend, progress=False,
-                          options=options, overwrite=True, frames_expected=track.n_frames)
-            passes["pass 1"] = min(passes["pass 1"], middle - start)
-            passes["pass 2"] = min(passes["pass 2"], time.perf_counter() - middle)
-
-        def fixed_32() -> None:  # the planes from fixed-point maps (as before the float maps)
-            with fixed_point_maps():
-                fixed()
-
-        track = track_video(clip, estimator, progress=False, apply_doubtful=True)
-
-        def pass2() -> None:  # pass 2 alone, the per-frame lens of one earlier pass 1
-            correct_video(clip, tmp / "pass2.mp4", track.lens_for, backend=args.backend, progress=False,
-                          options=options, overwrite=True, frames_expected=track.n_frames)
-
-        stages = stage_times(clip, tmp)
-        paths = {"ffmpeg": ffmpeg, "pyav": pyav, "fixed lens": fixed, "--auto": auto, "fixed, RGB": fixed_rgb,
-                 "pass 1, all": pass1_full, "pass 2": pass2, "fixed, 1/32-px maps": fixed_32}
-        best = {name: float("inf") for name in paths}
-        for _ in range(args.repeats):
-            for name, run in paths.items():
-                start = time.perf_counter()
-                run()
-                best[name] = min(best[name], time.perf_counter() - start)
-    fps = {name: args.frames / seconds for name, seconds in best.items()}
-    print(f"clip: {args.clip} over {args.frame.name}, {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
-          f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}")
-    for name, value in fps.items():
-        print(f"  {name:19s} {value:6.1f} frames/s")
-    print(f"  --auto pass 1 (decode, cuts, shot evidence and fit) {1e3 * passes['pass 1'] / args.frames:.1f} ms/frame, "
-          f"pass 2 (correct + encode) {1e3 * passes['pass 2'] / args.frames:.1f} ms/frame; fixed lens "
-          f"{1e3 * best['fixed lens'] / args.frames:.1f} ms/frame")
-    print(f"  pass 1 decoding every frame {1e3 * best['pass 1, all'] / args.frames:.1f} ms/frame "
-          f"(sparse / all: {passes['pass 1'] / best['pass 1, all']:.2f})")
-    print(f"  pass 2 alone {1e3 * best['pass 2'] / args.frames:.1f} ms/frame against the fixed lens's "
-          f"{1e3 * best['fixed lens'] / args.frames:.1f} (taking turns; pass 2 / fixed time "
-          f"{best['pass 2'] / best['fixed lens']:.2f})")
-    print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
-          f"YUV {stages['YUV']:.1f} ms/frame (YUV / RGB time: {stages['YUV'] / stages['RGB']:.2f}), "
-          f"YUV from 1/32-px maps {stages['YUV 1/32']:.1f} ms/frame")
-    print(f"fixed lens / fixed with 1/32-px maps (time): {best['fixed lens'] / best['fixed, 1/32-px maps']:.2f}")
-    print(f"fixed lens / ffmpeg : {fps['fixed lens'] / fps['ffmpeg']:.2f}  (target >= 0.8)")
-    print(f"fixed lens, RGB / ffmpeg : {fps['fixed, RGB'] / fps['ffmpeg']:.2f}; YUV / RGB : "
-          f"{fps['fixed lens'] / fps['fixed, RGB']:.2f}; load average {os.getloadavg()[0]:.1f}")
-    print(f"fixed lens / pyav   : {fps['fixed lens'] / fps['pyav']:.2f}")
-    print(f"--auto / fixed lens : {fps['--auto'] / fps['fixed lens']:.2f}  (target >= 0.8)")
+        best, passes, stages = timed_paths(args, size, Path(folder), clip)
+    results = report(args, best, passes, stages)
+    write_figure(f"bench_video_{args.clip}_{args.size}", {**results, "new_lens_maps_ms": maps})
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())

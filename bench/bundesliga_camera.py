@@ -43,6 +43,8 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from figures import printed_report, write_figure  # noqa: E402
+
 from glradial.camera.first_guess import first_guess  # noqa: E402
 from glradial.pitch import PitchTemplate  # noqa: E402
 
@@ -78,10 +80,10 @@ def _lens_of(frame: np.ndarray, mode: str):
     """``(lens or None, ms)``: the frame's lens by ``glradial.estimate`` for ``mode == "auto"``."""
     if mode == "none":
         return None, 0.0
-    from glradial.estimation.estimator import estimate
+    from glradial.estimation.net_lines import estimate_net_lines
 
     t0 = time.perf_counter()
-    found = estimate(frame)
+    found = estimate_net_lines(frame)
     return found, (time.perf_counter() - t0) * 1000
 
 
@@ -168,11 +170,13 @@ def main() -> None:
     print(f"1080p GaussianBlur (sigma 1), one thread: {blur:.2f} ms; lens: {args.lens}"
           + (f" (glradial.estimate median {statistics.median(r['lens_ms'] for r in rows):.0f} ms, not in the times below)"
              if args.lens != "none" else ""))
-    for clip in CLIPS:
-        part = [r for r in rows if r["clip"] == clip]
-        if part:
-            print(f"{clip}: {summary(part, blur)}")
-    print(f"all   : {summary(rows, blur)}")
+    with printed_report() as lines:
+        for clip in CLIPS:
+            part = [r for r in rows if r["clip"] == clip]
+            if part:
+                print(f"{clip}: {summary(part, blur)}")
+        print(f"all   : {summary(rows, blur)}")
+    write_figure(f"bundesliga_camera_{args.lens}", {"report": lines, "blur_ms": blur})
     if args.time_1080p:
         print(time_1080p(Path(args.data), blur))
     if args.csv:

@@ -17,14 +17,14 @@ against the applied lens alone ("raw"). Frames, lenses and CNN readings are cach
 ``--cache``; ``--checkout`` runs another checkout (one that has ``self_consistent_map``) on the same
 cache.
 
-Methods: ``net``, ``lines`` and ``auto`` of the estimation layer (``glradial.estimation.estimator``: the
+Methods: ``net``, ``lines`` and ``auto`` of the estimation layer (``glradial.estimation.net_lines``: the
 CNN and the line fit; ``auto`` there is what ``glradial.estimate`` answered before the pitch camera fit
 was fed back), and ``auto+pitch``, the public ``glradial.estimate(method="auto")``
-(:mod:`glradial.camera.pitch_lens`: the camera fit's lens where the pitch template fits, the estimation
+(:mod:`glradial.camera.estimator`: the camera fit's lens where the pitch template fits, the estimation
 layer's ``auto`` elsewhere), with the share of samples it answered from the pitch and how often its
 stated bound covered its self-consistent error there; ``pitch alone``: the camera fit's lens alone where
 it fits (``auto`` elsewhere), with the bound of ``lens_bound_px``. ``--no-pitch`` (or a checkout without
-``glradial.camera.pitch_lens``) leaves it out; both rows come from ``pitch_lens.with_pitch``, the function
+``glradial.camera.estimator``) leaves it out; both rows come from ``estimator.with_pitch``, the function
 ``glradial.estimate`` itself calls (a checkout with ``pitch_lens`` but without it: use ``--no-pitch``). ``--dump FILE`` writes one JSON line per scored sample
 and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS, its
 reason, markings, support, field of view and lens; the
@@ -40,6 +40,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from figures import printed_report, write_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -90,7 +91,7 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
     evidence = estimator.evidence_batch([frame])[0]  # what estimate() judges, gathered once for the three methods
     out = {method: judge(evidence, method) for method in ("net", "lines", "auto")}
     if pitch:
-        from glradial.camera import pitch_lens as pl
+        from glradial.camera import estimator as pl
         from glradial.estimation.lens_estimate import LensEstimate
 
         # what glradial.estimate(method="auto") answers: the estimation layer's auto with the camera fit fed back
@@ -129,15 +130,15 @@ def main() -> None:
     parser.add_argument("--dump", help="write per-sample results (JSON lines) here")
     args = parser.parse_args()
     sys.path.insert(0, args.checkout)
-    from glradial.estimation.estimator import Estimator
+    from glradial.estimation.net_lines import NetLinesEstimator
     from glradial.lens.metrics import max_displacement_px
 
     try:
-        import glradial.camera.pitch_lens  # noqa: F401
+        import glradial.camera.estimator  # noqa: F401
         pitch = not args.no_pitch
     except ImportError:  # a checkout from before the lens was fed back
         pitch = False
-    estimator = Estimator(threads=1)
+    estimator = NetLinesEstimator(threads=1)
 
     cache = Path(args.cache)
     samples = pickle.loads(cache.read_bytes()) if cache.is_file() else _build(Path(args.frames), cache)
@@ -169,7 +170,9 @@ def main() -> None:
                                        "camera": found.get("camera")}) + "\n")
     if dump:
         dump.close()
-    _print(errors)
+    with printed_report() as lines:
+        _print(errors)
+    write_figure("bundesliga_consistency" + ("" if pitch else "_no_pitch"), {"report": lines})
 
 
 if __name__ == "__main__":

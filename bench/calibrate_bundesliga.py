@@ -28,6 +28,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from figures import printed_report, write_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Frames whose own labels leave more than this (px) under a plain homography have inconsistent labels
@@ -67,10 +68,12 @@ def main(argv: list[str] | None = None) -> int:
     names = sorted(labels["frames"])[: args.limit or None]
     if args.shots:
         own, shot = _shot_rows(args.frames, labels, names)
-        print("Each frame's own camera, tracked through its segment:")
-        _report(own)
-        print("\nWith the segment's lens as a function of the zoom (glradial.calibrate_shot):")
-        _report(shot)
+        with printed_report() as lines:
+            print("Each frame's own camera, tracked through its segment:")
+            _report(own)
+            print("\nWith the segment's lens as a function of the zoom (glradial.calibrate_shot):")
+            _report(shot)
+        write_figure("calibrate_bundesliga_shots", {"report": lines})
         return 0
     rows = []
     for name in names:
@@ -78,7 +81,9 @@ def main(argv: list[str] | None = None) -> int:
         t = time.perf_counter()
         est = calibrate(img)
         rows.append(_row(name, est, labels, time.perf_counter() - t))
-    _report(rows)
+    with printed_report() as lines:
+        _report(rows)
+    write_figure("calibrate_bundesliga", {"report": lines})
     if args.calibrate_clip:
         _calibrate(rows, args.calibrate_clip)
     if args.json:
@@ -139,7 +144,7 @@ def _calibrate(rows: list[dict], clip: str) -> None:
     """Split-conformal quantile of keypoint RMS / max(fit RMS, floor) over ``clip``'s answered frames."""
 
     from glradial.camera.estimate import CAMERA_TRUST_FILE, camera_trust
-    from glradial.evaluation.calibrate import conformal_quantile
+    from glradial.evaluation.trust_calibration import conformal_quantile
     from glradial.media.atomic import atomic_write_text
 
     trust = dict(camera_trust())

@@ -7,7 +7,7 @@ Frames: the ``wide_camera`` source of ``bench/pitch_views.py`` (N = 30 frames sp
 checkerboard lens (k1 -0.6615, k2 +0.4098, centred; the camera's real principal point is off centre,
 so a centred model keeps a misfit of a few px). Per frame: the camera's verdict, its lens's error
 (max displacement at 1920 wide, :func:`glradial.lens.metrics.max_displacement_px`) against the
-checkerboard lens and the camera lens's own bound (:func:`glradial.camera.pitch_lens.lens_bound_px`),
+checkerboard lens and the camera lens's own bound (:func:`glradial.camera.estimator.lens_bound_px`),
 the focal length and field of view (a static camera: they should agree across frames), and what
 ``glradial.estimate(frame)`` (the default ``method="auto"``) reads: its error, bound and verdict.
 Nothing is fitted here.
@@ -27,6 +27,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from figures import write_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -35,7 +36,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 def _row(name: str, frame: np.ndarray, truth: tuple) -> dict:
     import glradial
-    from glradial.camera.pitch_lens import lens_bound_px
+    from glradial.camera.estimator import lens_bound_px
     from glradial.lens.metrics import max_displacement_px
 
     k_true = np.array(truth, float)
@@ -131,7 +132,9 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(rows[-1]), file=sys.stderr, flush=True)
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
-    print(json.dumps(report(rows), indent=1))
+    summary = report(rows)
+    print(json.dumps(summary, indent=1))
+    write_figure("calibrate_wide_camera", summary)
     return 0
 
 

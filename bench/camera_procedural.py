@@ -34,6 +34,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import numpy as np  # noqa: E402
+from figures import write_figure  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -104,7 +105,7 @@ def report(rows: list[dict]) -> dict:
 def calibrate_bound(rows: list[dict]) -> float:
     """Split-conformal quantile of marking error / max(fit RMS, floor) over answered views."""
     from glradial.camera.estimate import camera_trust
-    from glradial.evaluation.calibrate import conformal_quantile
+    from glradial.evaluation.trust_calibration import conformal_quantile
 
     floor = camera_trust()["floor_px"]
     return conformal_quantile([r["marking_rms_px"] / max(r["rms_fit_px"], floor) for r in rows
@@ -153,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
         seed = args.seed if args.seed is not None else (0 if args.calibrate else 10000)
         rows = run_views(args.views, seed)
         summary = report(rows)
+        write_figure("camera_procedural", {"views": args.views, "seed": seed, **summary})
         if args.calibrate:
             from glradial.camera.estimate import CAMERA_TRUST_FILE
             from glradial.media.atomic import atomic_write_text

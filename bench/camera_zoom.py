@@ -32,6 +32,7 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_name, "1")
 
 import numpy as np  # noqa: E402
+from figures import write_figure  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -110,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {s['answered']:.0%} | {s.get('lens_median_px', float('nan')):.2f} / {s.get('lens_p90_px', float('nan')):.2f} | "
               f"{s.get('lens_over_2px', float('nan')):.0%} | {s.get('focal_median_pct', float('nan')):.3f} % | "
               f"{s.get('kp_median_px', float('nan')):.2f} px | {from_shot:.0%} |")
+    write_figure("camera_zoom", {name: summary(rows, key) for name, key in (("per frame", "frame_est"), ("per shot", "shot_est"))})
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
     return 0

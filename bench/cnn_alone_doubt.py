@@ -20,7 +20,7 @@ correcting helps exactly when ``o < s / 2``. ``q_over`` is the conformal 90 % qu
   that set).
 
 Printed: on the trust records' frames without any line fit, cross-fitted (each fold judged with the
-quantiles of the other; truths as ``glradial.evaluation.calibrate`` scores them), and on the pitch
+quantiles of the other; truths as ``glradial.evaluation.trust_calibration`` scores them), and on the pitch
 views of ``bench/pitch_views.py`` (its ``--evidence`` cache; the quantiles of all records; every
 other frame keeps the shipped verdict): frames corrected, left uncorrected where the answer would
 have helped, corrected and made worse.
@@ -37,9 +37,11 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from figures import write_figure  # noqa: E402
+
 from glradial.estimation.lens_estimate import judge  # noqa: E402
 from glradial.estimation.trust import shift_px, shipped_trust  # noqa: E402
-from glradial.evaluation.calibrate import conformal_quantile, load_records  # noqa: E402
+from glradial.evaluation.trust_calibration import conformal_quantile, load_records  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
 
 RULES = ("shipped (stated bound)", "one-sided identity", "one-sided benefit")
@@ -135,7 +137,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--evidence", type=Path, default=None, help="bench/pitch_views.py's --evidence cache")
     args = parser.parse_args(argv)
     trust, records = shipped_trust(), load_records(args.records)
-    print("\n".join(records_table(records, trust)))
+    lines = records_table(records, trust)
+    print("\n".join(lines))
     if args.evidence is not None:
         sys.path.insert(0, str(ROOT / "bench"))
         from pitch_views import NOT_PITCH_SOURCES
@@ -143,7 +146,10 @@ def main(argv: list[str] | None = None) -> int:
         q_err, q_over = quantiles(records, trust)
         print(f"\nall records: q_no_lines_rel {q_err:.2f} (shipped {trust.q_no_lines_rel:.2f}), q_over {q_over:.2f}")
         with open(args.evidence, "rb") as f:
-            print("\n".join(views_table(pickle.load(f), NOT_PITCH_SOURCES, q_err, q_over, trust)))
+            views = views_table(pickle.load(f), NOT_PITCH_SOURCES, q_err, q_over, trust)
+        print("\n".join(views))
+        lines += ["", f"all records: q_no_lines_rel {q_err:.2f}, q_over {q_over:.2f}", "", *views]
+    write_figure("cnn_alone_doubt", {"report": lines})
     return 0
 
 

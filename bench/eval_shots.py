@@ -36,6 +36,8 @@ from unittest import mock
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's glradial, not an installed one
+from figures import write_figure  # noqa: E402
+
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
 from glradial.video import shot_track  # noqa: E402
 from glradial.video.clips import read_truth  # noqa: E402
@@ -199,6 +201,7 @@ def main() -> None:
     if used:
         print(f"BOUND_SCALE (pans, zooms): in use {BOUND_SCALE}, needed {report['bound_scale_needed']}")
         print(f"STATIC_BOUND_SCALE: in use {STATIC_BOUND_SCALE}, needed {report['static_bound_scale_needed']}")
+    write_figure("eval_shots_" + "_".join(folder.name for folder in args.clips), {k: v for k, v in report.items() if k != "shots"})
     if args.json:
         args.json.write_text(json.dumps(report, indent=1) + "\n")
     if args.md:

@@ -10,14 +10,16 @@ new measurement changes one generated file, not prose in several.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import io
 import json
 import os
 import platform
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Where the figures live (one JSON file per bench and variant).
@@ -55,7 +57,8 @@ def write_figure(name: str, results: Any, argv: list[str] | None = None,
             (``"calibrate_matches"``, ``"bench_video_1920x1080"``); letters, digits, ``_`` and ``-``.
         results: the measured values (JSON-serialisable; NaN is written as ``null``).
         argv: the bench's arguments (default ``sys.argv[1:]``), recorded in ``command``.
-        directory: where to write (default :data:`FIGURES_DIR`; tests pass a temporary folder).
+        directory: where to write (default: the environment's ``GLRADIAL_FIGURES_DIR``, else
+            :data:`FIGURES_DIR`; tests that run a bench set it to a temporary folder).
 
     Returns:
         The path written.
@@ -80,7 +83,9 @@ def write_figure(name: str, results: Any, argv: list[str] | None = None,
         "machine": machine(),
         "results": _finite(results),
     }
-    directory = FIGURES_DIR if directory is None else Path(directory)
+    if directory is None:
+        directory = Path(os.environ.get("GLRADIAL_FIGURES_DIR") or FIGURES_DIR)
+    directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{name}.json"
     tmp = path.with_suffix(".json.tmp")
@@ -100,3 +105,27 @@ def _finite(value: Any) -> Any:
     if isinstance(value, float) and (value != value or value in (float("inf"), float("-inf"))):
         return None
     return value
+
+
+@contextlib.contextmanager
+def printed_report() -> Iterator[list[str]]:
+    """Collect what a bench prints (its report table) while still printing it: the yielded list
+    holds the printed lines once the block ends. For benches whose figures are a printed table,
+    written as ``write_figure(name, {"report": lines})`` (rendered verbatim in docs/BENCH.md)."""
+    lines: list[str] = []
+    buffer = io.StringIO()
+
+    real = sys.stdout
+
+    class _Both(io.TextIOBase):
+        def write(self, text: str) -> int:
+            real.write(text)
+            buffer.write(text)
+            return len(text)
+
+        def flush(self) -> None:
+            real.flush()
+
+    with contextlib.redirect_stdout(_Both()):
+        yield lines
+    lines.extend(buffer.getvalue().splitlines())

@@ -24,6 +24,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from figures import printed_report, write_figure
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -94,7 +95,9 @@ def main() -> None:
     rows = readings(args.frames)
     if args.json:
         args.json.write_text(json.dumps(rows))
-    report(rows)
+    with printed_report() as lines:
+        report(rows)
+    write_figure("labels_lens", {"report": lines})
 
 
 if __name__ == "__main__":

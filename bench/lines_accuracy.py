@@ -13,7 +13,7 @@ frames with a line fit, and the mean fit time. Groups: real frames (all lenses),
 ``k1 <= -0.6``, 640x360 panorama crops, procedural test crops. Validation data only: no tuning
 should be reported on the same samples without saying so (docs/LINES.md says which were used).
 ``--pitch`` also scores ``auto+pitch``, the public ``glradial.estimate(method="auto")``
-(:mod:`glradial.camera.pitch_lens`: the pitch camera fit's lens where the template fits, ``auto``
+(:mod:`glradial.camera.estimator`: the pitch camera fit's lens where the template fits, ``auto``
 elsewhere), with the share of samples it answered from the pitch (``pitch %``).
 """
 
@@ -31,8 +31,10 @@ ROOT = Path(__file__).resolve().parents[1]
 if __name__ == "__main__" and "--checkout" in sys.argv[:-1]:  # the checkout under test, before any import of it
     ROOT = Path(sys.argv[sys.argv.index("--checkout") + 1]).resolve()
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
-from glradial.estimation.estimator import Estimator, view_to_frame  # noqa: E402
+from figures import printed_report, write_figure  # noqa: E402
+
 from glradial.estimation.lens_estimate import frame_evidence, judge  # noqa: E402
+from glradial.estimation.net_lines import NetLinesEstimator, view_to_frame  # noqa: E402
 from glradial.estimation.trust import view_features  # noqa: E402
 from glradial.evaluation import real_eval  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
@@ -101,12 +103,12 @@ def main() -> None:
     errors: dict = {"lines": [], "auto": [], **({"auto+pitch": []} if args.pitch else {})}
     pitched = []
     has_fit, times, rows = [], [], []
-    estimator = Estimator(threads=1)
+    estimator = NetLinesEstimator(threads=1)
     for s in samples:
         frame = s["frame"]
         view = estimator.preprocess(frame)
         features = view_features(view)
-        # the network's own expected error (error head), as Estimator.estimate passes it: the CNN's bound
+        # the network's own expected error (error head), as NetLinesEstimator.estimate passes it: the CNN's bound
         net_error = estimator.run_with_error(view[None])[1]
         net_error = None if net_error is None else float(net_error[0])
         t0 = time.perf_counter()
@@ -119,7 +121,7 @@ def main() -> None:
         for method in errors:
             e = judge(evidence, method.split("+")[0])
             if method == "auto+pitch":  # what glradial.estimate(method="auto") adds to the estimation layer's auto
-                from glradial.camera import pitch_lens as pl
+                from glradial.camera import estimator as pl
 
                 auto = e
                 e, camera = pl.with_pitch(frame, auto)
@@ -130,16 +132,18 @@ def main() -> None:
         rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else list(lines),
                      "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1],
                      **({"err_auto_pitch": errors["auto+pitch"][-1], "pitch": pitched[-1], **readings} if args.pitch else {})})
-    extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if args.pitch else ""
-    print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
-    for name, idx in _groups(samples).items():
-        if not idx:
-            continue
-        el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
-        print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
-              f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
-              + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
-                 f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if args.pitch else ""))
+    with printed_report() as lines:
+        extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if args.pitch else ""
+        print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
+        for name, idx in _groups(samples).items():
+            if not idx:
+                continue
+            el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
+            print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
+                  f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
+                  + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
+                     f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if args.pitch else ""))
+    write_figure("lines_accuracy" + ("_pitch" if args.pitch else ""), {"report": lines})
     if args.dump:
         import json
 

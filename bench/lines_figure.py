@@ -31,9 +31,9 @@ def main() -> None:
     args = parser.parse_args()
     sys.path.insert(0, args.checkout)
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from glradial.estimation.estimator import Estimator
     from glradial.estimation.line_fit import fit_lines
     from glradial.estimation.lines import detect_chains
+    from glradial.estimation.net_lines import NetLinesEstimator
     from glradial.lens.lens import lens_to_pixels
 
     if args.template:
@@ -46,7 +46,7 @@ def main() -> None:
         from glradial.remapping.remap import distort
 
         frame = distort(frame, args.k1, args.k2, fit="crop", backend="cpu")
-    estimator = Estimator(threads=1)
+    estimator = NetLinesEstimator(threads=1)
     net = tuple(float(v) for v in estimator.run(estimator.preprocess(frame)[None])[0])
     evidence = detect_chains(frame, lens_hint=net)
     fit = fit_lines(evidence, prior=net)

@@ -23,11 +23,11 @@ the width off centre, scored against the centred lens of a simulated checkerboar
 * ``real_panorama_held_out``: 24 off-centre views of the real stadium panorama
   (``real_football/stadium_01_1k_tonemapped.jpg``, pitch-level camera, tilt -10..+8 deg); validation only.
 
-None of these stadiums is used by the trust records (``glradial.evaluation.calibrate``) or by
+None of these stadiums is used by the trust records (``glradial.evaluation.trust_calibration``) or by
 ``bench/pitch_views.py`` (whose ``offcentre`` source, six further stadiums, and the real wide camera
 are a third and fourth check, not seen here).
 
-Calibration (split conformal, :func:`glradial.evaluation.calibrate.conformal_quantile` at 90 %): over
+Calibration (split conformal, :func:`glradial.evaluation.trust_calibration.conformal_quantile` at 90 %): over
 the calibration views with a line fit (where the term can apply), each view's score is the weight
 its bound (with the term off) needs to cover its error, ``sqrt(error² - bound²) / centre_shift_px`` (0 when
 already covered; infinite where the shift is not measured); ``misfit_weight`` is the conformal
@@ -52,11 +52,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
 sys.path.insert(0, str(ROOT / "bench"))
+from figures import write_figure  # noqa: E402
 from pitch_views import _cached, cache_options, collect, offcentre_views, stadiums  # noqa: E402
 
 from glradial.estimation.lens_estimate import judge  # noqa: E402
 from glradial.estimation.trust import TRUST_FILE, load_trust, shipped_trust  # noqa: E402
-from glradial.evaluation.calibrate import conformal_quantile  # noqa: E402
+from glradial.evaluation.trust_calibration import conformal_quantile  # noqa: E402
 from glradial.lens.metrics import max_displacement_px  # noqa: E402
 
 #: first seed of the calibration stadiums (validation split), stadiums per split, views per stadium
@@ -128,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"misfit_weight = {weight:.3f} (conformal 90 % of {len(scores)} calibration views with a line fit; "
           f"{int(np.sum(scores > 0))} need it, {int(np.sum(~np.isfinite(scores)))} unmeasured)")
     print(table(evidence, trust, weight))
+    write_figure("misfit_calibration", {"misfit_weight": weight, "calibration_views": len(scores), "report": table(evidence, trust, weight).splitlines()})
     for path in ([args.out] if args.out else []) + ([TRUST_FILE] if args.write else []):
         if not math.isfinite(weight):
             raise SystemExit("misfit_weight is not finite: too many calibration misses the shift does not measure")

@@ -1,5 +1,5 @@
 """Split-conformal calibration of the lens bound that ``glradial.estimate(method="auto")`` states when
-it answers from the pitch camera fit (:func:`glradial.camera.pitch_lens.lens_bound_px`).
+it answers from the pitch camera fit (:func:`glradial.camera.estimator.lens_bound_px`).
 
 Usage: ``python bench/pitch_lens_bound.py --procedural CAL.json [--test TEST.json] [--bundesliga DUMP.jsonl]
 [--calibrate-clip 2e57b9] [--write]``
@@ -35,7 +35,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from glradial.evaluation.calibrate import conformal_quantile  # noqa: E402
+from figures import printed_report, write_figure  # noqa: E402
+
+from glradial.evaluation.trust_calibration import conformal_quantile  # noqa: E402
 
 FLOOR_PX = 0.3
 
@@ -86,11 +88,14 @@ def main(argv: list[str] | None = None) -> int:
         sets.update({f"Bundesliga {clip}" + (" (calibration)" if clip == args.calibrate_clip else " (held out)"): v
                      for clip, v in sorted(clips.items())})
     q = max(q_proc, q_real or 0.0)
-    for name, label in ((q_proc, "procedural"), (q_real, "Bundesliga"), (q, "shipped (the larger)")):
-        if name is not None:
-            print(f"coverage with the {label} quantile {name:.3f}:")
-            for set_name, (e, r) in sets.items():
-                _covers(set_name, e, r, name)
+    with printed_report() as lines:
+        for name, label in ((q_proc, "procedural"), (q_real, "Bundesliga"), (q, "shipped (the larger)")):
+            if name is not None:
+                print(f"coverage with the {label} quantile {name:.3f}:")
+                for set_name, (e, r) in sets.items():
+                    _covers(set_name, e, r, name)
+    write_figure("pitch_lens_bound", {"procedural_quantile": q_proc, "bundesliga_quantile": q_real, "shipped_quantile": q,
+                                      "report": lines})
     if args.write:
         from glradial.camera.estimate import CAMERA_TRUST_FILE
         from glradial.media.atomic import atomic_write_text

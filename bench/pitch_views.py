@@ -62,6 +62,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))  # run from a checkout without installing
+from figures import write_figure  # noqa: E402
+
 from glradial.estimation.lens_estimate import judge  # noqa: E402
 from glradial.estimation.trust import load_trust, shipped_trust  # noqa: E402
 from glradial.lens.metrics import manifold_k2, max_displacement_px  # noqa: E402
@@ -273,9 +275,9 @@ def _cached(path: Path | None, make):
 
 def collect(frames: dict, sources: list[str]) -> dict:
     """The :class:`~glradial.estimation.trust.FrameEvidence` of every frame (one CNN session)."""
-    from glradial.estimation.estimator import Estimator
+    from glradial.estimation.net_lines import NetLinesEstimator
 
-    estimator = Estimator(threads=1)
+    estimator = NetLinesEstimator(threads=1)
     out = {}
     for source in sources:
         out[source] = [(name, estimator.evidence_batch([frame])[0], truth) for name, frame, truth in frames[source]]
@@ -396,6 +398,7 @@ def main(argv: list[str] | None = None) -> int:
     trust = load_trust(args.trust) if args.trust else shipped_trust()
     rows = score(evidence, trust)
     print(markdown(rows))
+    write_figure("pitch_views", {s: {k: v for k, v in r.items() if k != "_raw"} for s, r in rows.items()})
     if args.list:
         print("\n" + listing(evidence, trust))
     if args.json:

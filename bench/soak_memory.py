@@ -22,9 +22,10 @@ import threading
 import time
 
 import numpy as np
+from figures import printed_report, write_figure
 
 from glradial import correct
-from glradial.estimation.estimator import Estimator
+from glradial.estimation.net_lines import NetLinesEstimator
 
 PAGE = os.sysconf("SC_PAGE_SIZE")
 
@@ -67,7 +68,7 @@ def soak_correct(count: int, frame: np.ndarray) -> None:
 
 
 def soak_estimate(count: int) -> None:
-    estimator = Estimator()
+    estimator = NetLinesEstimator()
     frame = np.random.default_rng(0).integers(0, 256, (360, 640, 3), dtype=np.uint8)
     for _ in range(20):
         estimator.estimate(frame)
@@ -86,12 +87,14 @@ def main() -> None:
     args = parser.parse_args()
     frame = np.random.default_rng(0).integers(0, 256, (180, 320, 3), dtype=np.uint8)
     print(f"frames 320×180 RGB uint8 for threads/correct, 640×360 for estimate; RSS at start {rss_mb():.1f} MB")
-    if args.threads:
-        soak_threads(args.threads, frame)
-    if args.correct:
-        soak_correct(args.correct, frame)
-    if args.estimate:
-        soak_estimate(args.estimate)
+    with printed_report() as lines:
+        if args.threads:
+            soak_threads(args.threads, frame)
+        if args.correct:
+            soak_correct(args.correct, frame)
+        if args.estimate:
+            soak_estimate(args.estimate)
+    write_figure("soak_memory", {"report": lines})
 
 
 if __name__ == "__main__":

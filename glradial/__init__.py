@@ -17,7 +17,7 @@ __version__ = "0.1.0"
 if TYPE_CHECKING:
     from .camera.calibrate import calibrate
     from .camera.estimate import CameraEstimate
-    from .camera.pitch_lens import Estimator, estimate
+    from .camera.estimator import Estimator, estimate
     from .camera.shot_lens import ShotCalibration, ShotCalibrator, ShotLens, calibrate_shot
     from .errors import Error, GLUnavailableError, LensTrackError, ModelLoadError, ShaderCompileError
     from .estimation.lens_estimate import LensEstimate

@@ -5,7 +5,19 @@ from __future__ import annotations
 
 
 class Error(Exception):
-    """Base of the errors glradial defines: ``except glradial.Error`` catches all of them."""
+    """Base of the errors glradial defines: ``except glradial.Error`` catches all of them.
+
+    Args:
+        *args: the message (one string), as for any ``Exception``.
+
+    Raises:
+        Nothing itself; glradial raises its subclasses.
+
+    Example:
+        >>> import glradial
+        >>> issubclass(glradial.LensTrackError, glradial.Error), issubclass(glradial.Error, ValueError)
+        (True, False)
+    """
 
 
 class GLUnavailableError(Error, RuntimeError, ValueError):
@@ -15,18 +27,74 @@ class GLUnavailableError(Error, RuntimeError, ValueError):
     A ``RuntimeError`` (the environment is at fault) that is also a ``ValueError``, so callers that
     catch bad-input errors at the API boundary catch it too; the message names the library and the
     packages that provide it.
+
+    Args:
+        *args: the message (one string).
+
+    Raises:
+        Nothing itself; raised by the first call that needs a GL context.
+
+    Example:
+        >>> import glradial
+        >>> err = glradial.GLUnavailableError("libEGL.so.1 not found (apt-get install libegl1)")
+        >>> isinstance(err, RuntimeError) and isinstance(err, ValueError)
+        True
     """
 
 
 class ShaderCompileError(Error, RuntimeError):
-    """A GLSL program failed to compile or link; the message names file and line."""
+    """A GLSL program failed to compile or link; the message names file and line.
+
+    Args:
+        *args: the message (one string: the program's files and the driver's log, explained).
+
+    Raises:
+        Nothing itself; raised by :mod:`glradial.gl.shaderlib` when a program is built.
+
+    Example:
+        >>> import glradial
+        >>> try:
+        ...     raise glradial.ShaderCompileError("remap.frag:12: undeclared identifier")
+        ... except RuntimeError as err:
+        ...     print(type(err).__name__, err)
+        ShaderCompileError remap.frag:12: undeclared identifier
+    """
 
 
 class ModelLoadError(Error, RuntimeError, ValueError):
     """The model file exists but is not a usable glradial ONNX model (corrupt, wrong graph,
-    checksum mismatch). Also a ``ValueError``: a bad model is bad input to the caller."""
+    checksum mismatch). Also a ``ValueError``: a bad model is bad input to the caller.
+
+    Args:
+        *args: the message (one string, naming the file and what is wrong with it).
+
+    Raises:
+        Nothing itself; raised by :class:`glradial.Estimator` when it loads a model.
+
+    Example:
+        >>> import glradial, tempfile, pathlib
+        >>> bad = pathlib.Path(tempfile.mkdtemp()) / "broken.onnx"
+        >>> _ = bad.write_bytes(b"not an ONNX graph")
+        >>> try:
+        ...     glradial.Estimator(bad)
+        ... except glradial.ModelLoadError:
+        ...     print("refused")
+        refused
+    """
 
 
 class LensTrackError(Error, ValueError):
     """A lens-track sidecar (CSV or JSON) that cannot be read: the message names the file and the
-    line of the first bad row. Also a ``ValueError``."""
+    line of the first bad row. Also a ``ValueError``.
+
+    Args:
+        *args: the message (one string, naming the file and the first bad row).
+
+    Raises:
+        Nothing itself; raised where a lens track is read (:mod:`glradial.video.lens_track`).
+
+    Example:
+        >>> import glradial
+        >>> issubclass(glradial.LensTrackError, ValueError)
+        True
+    """

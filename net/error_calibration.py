@@ -11,7 +11,7 @@ into a 90 % bound; the test split checks its coverage.
 
 With ``--real DATA`` (a folder holding ``real_football/`` and ``broadcast_bundesliga/``, validation
 only: never trained on) the same per-frame error and scale are measured on real frames instead, and
-the coverage of ``q x error_px`` is reported (docs/MODEL.md, "The error head on real frames"):
+the coverage of ``q x error_px`` is reported (docs/MODEL.md, "The error head"):
 
 * ``real_frames``: the pinhole frames of ``real_football`` (football360 and USL; the 2:1 panorama is
   left out) with the known lenses ``glradial evaluate --frames`` applies (``--lenses`` paper and as
@@ -35,10 +35,10 @@ from pathlib import Path
 
 import numpy as np
 
-from glradial.estimation.estimator import Estimator
-from glradial.evaluation.calibrate import COVERAGE, conformal_quantile
+from glradial.estimation.net_lines import NetLinesEstimator
 from glradial.evaluation.evaluation import EvaluationSettings, render_test_crops
 from glradial.evaluation.real_eval import applied_lenses, broadcast_frames, folder_sources, self_consistent_items, self_consistent_truth
+from glradial.evaluation.trust_calibration import COVERAGE, conformal_quantile
 from glradial.lens.metrics import max_displacement_px
 from glradial.lens.options import check_positive
 from glradial.media.atomic import atomic_path
@@ -52,7 +52,7 @@ SHIPPED_VAL_Q = 1.82
 def crop_errors(model: str, split: str, n: int, seed: int, panoramas: int, cache_dir: str) -> dict[str, np.ndarray]:
     """True and predicted lenses, error and predicted scale (both px at 1920) of ``n`` crops: the
     crops ``glradial evaluate`` renders for these settings."""
-    estimator = Estimator(model)
+    estimator = NetLinesEstimator(model)
     settings = EvaluationSettings(n=n, panoramas=panoramas, split=split, seed=seed, cache_dir=cache_dir)
     frames, params, _ = render_test_crops(settings, estimator.input_size)
     truth = crop_labels(params)
@@ -63,14 +63,14 @@ def crop_errors(model: str, split: str, n: int, seed: int, panoramas: int, cache
     return {"truth": truth, "pred": k, "error_px": error, "scale_px": scale}
 
 
-def _estimator_with_head(model: str) -> Estimator:
-    estimator = Estimator(model)
+def _estimator_with_head(model: str) -> NetLinesEstimator:
+    estimator = NetLinesEstimator(model)
     if not estimator.has_error_head:
         raise ValueError(f"model {model} has no error head (no 'error_px' output)")
     return estimator
 
 
-def _read(estimator: Estimator, frames: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _read(estimator: NetLinesEstimator, frames: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """The network's mirror-averaged ``(k1, k2)`` (N x 2) and ``error_px`` (N) of ``frames``."""
     k, scale = estimator.run_with_error(np.stack([estimator.preprocess(f) for f in frames]))
     return np.asarray(k, np.float64), np.asarray(scale, np.float64).reshape(-1)
@@ -122,7 +122,7 @@ def _stats(error: np.ndarray, scale: np.ndarray, q: float) -> str:
 def coverage_report(result: dict[str, np.ndarray], q_val: float = SHIPPED_VAL_Q) -> str:
     """Markdown tables: per source (and clip) the median error and ``error_px``, the 90 % quantile of
     error / ``error_px``, the coverage and median bound of ``q_val x error_px``; then split conformal:
-    ``q`` (:func:`glradial.evaluation.calibrate.conformal_quantile`, 90 %) on one part, checked on the other."""
+    ``q`` (:func:`glradial.evaluation.trust_calibration.conformal_quantile`, 90 %) on one part, checked on the other."""
     q_val = check_positive("q_val", q_val)
     error, scale, source = result["error_px"], result["scale_px"], result["source"]
     keys = [f"{s}/{g}" for s, g in zip(source, result["group"])]

@@ -6,7 +6,7 @@ Usage::
     python -m net.evaluate --model runs/gpu384b/best.pt --out runs/gpu384b/eval [--split val] [--n 800]
 
 The options, the test set, the metrics and the report are those of ``glradial evaluate`` (see
-``glradial evaluate --help``); an ``.onnx`` model goes through :class:`glradial.estimation.estimator.Estimator`
+``glradial evaluate --help``); an ``.onnx`` model goes through :class:`glradial.estimation.net_lines.NetLinesEstimator`
 exactly as there.
 """
 
@@ -19,7 +19,7 @@ import numpy as np
 
 from glradial.cli import messages_to_stderr
 from glradial.commands.evaluate import add_arguments, settings
-from glradial.estimation.estimator import default_model_path
+from glradial.estimation.net_lines import default_model_path
 from glradial.evaluation.evaluation import PREDICT_BATCH, OnnxPredictor, evaluate, summary
 
 

@@ -20,7 +20,7 @@ nearest levels are read bilinearly and blended. Levels are 2 × 2 box averages r
 the local linear map, as ``CROP_SUPERSAMPLE_X/Y`` do. Output values are rounded to 8 bits, as the
 GL atlas stores them.
 
-How close this is to the GL renderer (tests/test_gpu_source.py): bilinear reads and level selection
+How close this is to the GL renderer (tests/net/test_gpu_source.py): bilinear reads and level selection
 differ between drivers in their last bits (llvmpipe takes one level of detail per quad, in fixed
 point), so the twin is held to the GL crops within a fraction of a grey level on a smooth panorama
 and to a few hundredths of a pixel in the position of sharp edges.

@@ -7,7 +7,7 @@ random) without ``close()``. A run that ends with a signal (SIGABRT: "terminate 
 active exception") or another non-zero status counts as failed. The outcome is a race between the
 workers' native calls and the interpreter's finalization: the rate depends on the machine's load,
 so compare variants (and versions, with ``PYTHONPATH`` pointing at each checkout) in the same
-conditions. The deterministic form of the same failure is ``tests/test_live_exit.py``.
+conditions. The deterministic form of the same failure is ``tests/video/test_live_exit.py``.
 
 Run from a checkout: ``PYTHONPATH=. python scripts/live_exit_rate.py [--runs 30] [--lens fixed|auto|autothread] [--backend cpu|gl]
 [--frames 60] [--linger 0.05]``; prints ``failed/runs`` and the exit statuses seen.

@@ -3,6 +3,7 @@ each test that uses it, and the real photographs of tests/data (copies of ../sha
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import cv2
@@ -10,6 +11,8 @@ import numpy as np
 import pytest
 
 DATA = Path(__file__).parent / "data"
+# the shared helpers beside this file (repo_scripts, pitch_template) for the tests in the sub-folders
+sys.path.insert(0, str(Path(__file__).parent))
 
 
 @pytest.fixture(scope="session")

@@ -4,7 +4,7 @@ exception type, a hang or a silently wrong result; the CLI prints exactly one
 ``glradial: error: ...`` line naming the option. One test id per bad call.
 
 Also: the GL and CPU backends give the same answer or the same error at the edges of the numeric
-policy (glradial.remapping.remap.check_numeric_policy), and the Estimator validates models at load.
+policy (glradial.remapping.remap.check_numeric_policy), and the NetLinesEstimator validates models at load.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from glradial import Lens, Remapper, cli, correct, distort, fit_scale
-from glradial.estimation.estimator import Estimator, ModelLoadError, default_model_path
+from glradial.estimation.net_lines import ModelLoadError, NetLinesEstimator, default_model_path
 from glradial.export.stmap import lens_stmap, read_stmap
 from glradial.lens.lens import corner_radius, frame_size, lens_to_pixels, pixels_to_lens
 from glradial.synthesis.crops import CropParams, CropRenderer, render_crops, sample_crop_params
@@ -278,10 +278,10 @@ def _est(env):
     return env["estimator"]
 
 
-case("Estimator-threads-zero", lambda env: Estimator(threads=0), ValueError, "threads")
-case("Estimator-threads-str", lambda env: Estimator(threads="2"), ValueError, "threads")
-case("Estimator-threads-bool", lambda env: Estimator(threads=True), ValueError, "threads")
-case("Estimator-mirror_average", lambda env: Estimator(mirror_average="no"), TypeError, "mirror_average")
+case("NetLinesEstimator-threads-zero", lambda env: NetLinesEstimator(threads=0), ValueError, "threads")
+case("NetLinesEstimator-threads-str", lambda env: NetLinesEstimator(threads="2"), ValueError, "threads")
+case("NetLinesEstimator-threads-bool", lambda env: NetLinesEstimator(threads=True), ValueError, "threads")
+case("NetLinesEstimator-mirror_average", lambda env: NetLinesEstimator(mirror_average="no"), TypeError, "mirror_average")
 case("estimate-str", lambda env: _est(env).estimate("frame.png"), TypeError, "frame")
 case("estimate-tiny", lambda env: _est(env).estimate(np.zeros((1, 1, 3), np.uint8)), ValueError, "frame")
 case("estimate-2ch", lambda env: _est(env).estimate(np.zeros((36, 64, 2), np.uint8)), ValueError, "frame")
@@ -292,13 +292,13 @@ case("estimate_batch-item", lambda env: _est(env).estimate_batch([np.zeros((36, 
 case("estimator-run-shape", lambda env: _est(env).run(np.zeros((1, 10, 10, 3), np.uint8)), ValueError, "images")
 for _name in ("n_by_3", "symbolic", "nan_output", "two_outputs", "float_input", "rank3_input", "rank3_output",
               "size_disagrees", "bad_input_size", "wrong_names", "corrupt_bundled", "garbage_checksum", "not_onnx"):
-    case(f"Estimator-model-{_name}", lambda env, n=_name: Estimator(env["models"][n], threads=1), ModelLoadError, "")
-case("Estimator-model-missing", lambda env: Estimator(env["models"]["n_by_3"].with_name("absent.onnx")), FileNotFoundError, "model file not found")
+    case(f"NetLinesEstimator-model-{_name}", lambda env, n=_name: NetLinesEstimator(env["models"][n], threads=1), ModelLoadError, "")
+case("NetLinesEstimator-model-missing", lambda env: NetLinesEstimator(env["models"]["n_by_3"].with_name("absent.onnx")), FileNotFoundError, "model file not found")
 
 
 @pytest.fixture(scope="module")
 def env(gl_ctx, tmp_path_factory):
-    return {"ctx": gl_ctx, "estimator": Estimator(threads=1), "models": _make_models(tmp_path_factory.mktemp("models"))}
+    return {"ctx": gl_ctx, "estimator": NetLinesEstimator(threads=1), "models": _make_models(tmp_path_factory.mktemp("models"))}
 
 
 @pytest.mark.parametrize("call, errors, words", [pytest.param(c, e, w, id=n) for n, c, e, w in CASES])
@@ -515,7 +515,7 @@ def test_valid_user_model_without_checksum_loads_and_gives_one_lens_per_frame(en
     mirror_average=False with two frames gives two lenses (it used to give three for an N×3 model)."""
     frames = [np.full((72, 128, 3), level, np.uint8) for level in (51, 204)]
     for name in ("valid", "valid_symbolic_meta"):
-        estimator = Estimator(env["models"][name], threads=1, mirror_average=False)
+        estimator = NetLinesEstimator(env["models"][name], threads=1, mirror_average=False)
         assert estimator.input_size == (64, 36)
         lenses = estimator.estimate_batch(frames)
         assert len(lenses) == 2
@@ -532,7 +532,7 @@ def test_valid_user_model_without_checksum_loads_and_gives_one_lens_per_frame(en
 )
 def test_bad_models_name_the_problem(env, name, words):
     with pytest.raises(ModelLoadError, match=None) as info:
-        Estimator(env["models"][name], threads=1)
+        NetLinesEstimator(env["models"][name], threads=1)
     assert words in str(info.value) and env["models"][name].name in str(info.value)
 
 

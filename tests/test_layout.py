@@ -1,7 +1,7 @@
 """The package's shape holds: sub-packages in a declared layer order (no import runs upward, none
 in a circle), no circle between modules (imports inside functions included) in glradial/ or net/,
-no private name imported from another module, no function over 60 lines of code in glradial/ or
-net/, the public names the README and docs use import, and ruff finds nothing. All read the source
+no private name imported from another module, no function over 60 lines of code in glradial/,
+net/, bench/ or scripts/, the public names the README and docs use import, and ruff finds nothing. All read the source
 with ``ast`` (nothing is imported except in the public-names test)."""
 
 from __future__ import annotations
@@ -164,7 +164,7 @@ def _long_functions(paths: list[Path]) -> list[str]:
     return long
 
 
-@pytest.mark.parametrize("package", [PACKAGE, NET], ids=["glradial", "net"])
+@pytest.mark.parametrize("package", [PACKAGE, NET, ROOT / "bench", ROOT / "scripts"], ids=["glradial", "net", "bench", "scripts"])
 def test_no_function_over_60_lines(package: Path):
     long = _long_functions(_modules(package))
     assert not long, f"functions over {MAX_FUNCTION_LINES} lines of code:\n" + "\n".join(long)
@@ -297,3 +297,36 @@ def test_ruff_finds_nothing():
     done = subprocess.run([sys.executable, "-m", "ruff", "check", "glradial", "net", "tests", "bench"], cwd=ROOT,
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stdout + done.stderr
+
+
+def test_module_names_are_unique():
+    """A module's file name says where it lives: no two modules of glradial/ share one (``__init__``
+    aside; commands/ mirrors the subcommands, so its modules may repeat a name found elsewhere)."""
+    seen: dict[str, list[str]] = {}
+    for path in _sources():
+        relative = path.relative_to(PACKAGE)
+        if path.name != "__init__.py" and relative.parts[0] != "commands":
+            seen.setdefault(path.name, []).append(relative.as_posix())
+    twice = {name: where for name, where in seen.items() if len(where) > 1}
+    assert not twice, f"module names used twice in glradial/: {twice}"
+
+
+def test_public_class_names_are_unique():
+    """One public class per name across glradial/ (a second ``Camera`` or ``Estimator`` is a second
+    concept under the same word)."""
+    seen: dict[str, list[str]] = {}
+    for path in _sources():
+        for node in ast.parse(path.read_text(encoding="utf-8")).body:
+            if isinstance(node, ast.ClassDef) and not node.name.startswith("_"):
+                seen.setdefault(node.name, []).append(path.relative_to(PACKAGE).as_posix())
+    twice = {name: where for name, where in seen.items() if len(where) > 1}
+    assert not twice, f"public classes defined twice: {twice}"
+
+
+def test_tests_mirror_the_package():
+    """tests/ holds one folder per glradial sub-package (plus net/ and bench/, the checkout's other
+    code); project-wide tests (layout, docs, packaging) stay at its top."""
+    packages = {p.parent.name for p in PACKAGE.glob("*/__init__.py")} | {"net", "bench"}
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and p.name not in {"data", "__pycache__"}}
+    assert folders <= packages, f"test folders that mirror no package: {sorted(folders - packages)}"
+    assert len(folders) >= 10, folders

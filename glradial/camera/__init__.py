@@ -15,9 +15,9 @@ from ..lazy import attach
 if TYPE_CHECKING:
     from .calibrate import calibrate
     from .estimate import REASONS, CameraEstimate
+    from .estimator import Estimator, lens_bound_px, pitch_lens
     from .first_guess import Candidate
     from .model import Camera, decompose_homography
-    from .pitch_lens import Estimator, lens_bound_px, pitch_lens
     from .shot_lens import ShotCalibration, ShotCalibrator, ShotLens, calibrate_shot, fit_shot_lens
     from .views import random_camera, render_view
 

@@ -58,7 +58,8 @@ def check_pitch(pitch: object) -> PitchTemplate:
     return pitch
 
 
-def _starts(lines: LinePoints, pitch: PitchTemplate, first_guess, previous, rgb: np.ndarray | None = None,
+def _starts(lines: LinePoints, pitch: PitchTemplate, *, first_guess: list[np.ndarray] | None = None,
+            previous: Camera | CameraEstimate | None = None, rgb: np.ndarray | None = None,
             lens: Lens | None = None) -> list[Camera]:
     if previous is not None:
         cam = previous.camera if isinstance(previous, CameraEstimate) else previous
@@ -124,7 +125,7 @@ def _reason(fit: Fit, t: dict) -> str:
     return "ok"
 
 
-def judge(fit: Fit | None, points: int) -> CameraEstimate:
+def judge_fit(fit: Fit | None, points: int) -> CameraEstimate:
     """The estimate of a refined fit (or of none) under the doubt policy of ``camera_trust.json``."""
     t = camera_trust()
     if fit is None:
@@ -152,10 +153,30 @@ def calibrate(frame: np.ndarray, *, pitch: PitchTemplate | None = None,
     the dictionary of synthetic views where it finds nothing). ``previous``: the previous frame's camera (a
     video): refined from there with shorter gates, falling back to a fresh search when that fit is
     doubtful. ``lens``: a reading of the frame's lens (e.g. the estimation layer's,
-    :mod:`glradial.camera.pitch_lens`) that the search undistorts the white lines with and the coarse
+    :mod:`glradial.camera.estimator`) that the search undistorts the white lines with and the coarse
     stage holds (the fine stage frees it), in place of the strong-lens retry; default none (pinhole
     starts, then the retry where the frame's lens is strong). Never raises for a frame that shows
     no pitch: the estimate is then doubtful with a reason.
+
+    Args:
+        frame: H×W×3 RGB or H×W gray array (uint8, uint16 or float in [0, 1]).
+        pitch: the pitch's markings (metres); default FIFA's 105 × 68 m.
+        first_guess: homographies to start from (above), best first.
+        previous: the previous frame's camera, for a video.
+        lens: a reading of the frame's lens (width-normalised) to start the search from.
+
+    Returns:
+        A :class:`glradial.CameraEstimate` (``doubtful`` and ``reason`` say whether to use it).
+
+    Raises:
+        TypeError: ``frame`` is not an array, or ``lens`` not a :class:`glradial.Lens`.
+        ValueError: a bad ``pitch`` or ``first_guess``.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> empty = glradial.calibrate(np.zeros((90, 160, 3), np.uint8))  # no pitch in sight
+        >>> empty.doubtful, empty.reason, empty.camera is None
+        (True, 'no_markings', True)
     """
     if not isinstance(frame, np.ndarray):
         raise TypeError(f"frame must be a numpy image array, got {type(frame).__name__}")
@@ -173,14 +194,14 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
     """:func:`calibrate` of the uint8 RGB frame ``rgb`` whose white-line points ``lines``
     (:func:`glradial.camera.white_lines.line_points`) are already extracted (arguments checked)."""
     if len(lines.xy) < camera_trust()["min_points"]:
-        return judge(None, len(lines.xy))
+        return judge_fit(None, len(lines.xy))
     if previous is not None:
         fine_lines = lines.thinned(FINE_POINTS)
-        tracked = judge(refine(_starts(lines, pitch, None, previous)[0], fine_lines.xy, fine_lines.angle, pitch,
+        tracked = judge_fit(refine(_starts(lines, pitch, previous=previous)[0], fine_lines.xy, fine_lines.angle, pitch,
                                gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
         if not tracked.doubtful:
             return tracked
-    judged = judge(_search_fit(_starts(lines, pitch, first_guess, None, rgb, lens), lines, pitch), len(lines.xy))
+    judged = judge_fit(_search_fit(_starts(lines, pitch, first_guess=first_guess, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
     if judged.doubtful and first_guess is None and lens is None:  # a given lens reading already did what the retry does
         judged = _strong_lens_retry(rgb, lines, pitch, judged)
     return judged
@@ -216,7 +237,7 @@ def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate,
     lens = strong_lens(rgb)
     if lens is None:
         return judged
-    retried = judge(_search_fit(_starts(lines, pitch, None, None, rgb, lens), lines, pitch), len(lines.xy))
+    retried = judge_fit(_search_fit(_starts(lines, pitch, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
     if not retried.doubtful or (retried.camera is not None and retried.inliers > judged.inliers):
         return retried
     return judged

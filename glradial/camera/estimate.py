@@ -65,7 +65,29 @@ def _of_camera(name: str, doc: str) -> property:
 
 @dataclass(frozen=True)
 class CameraEstimate:
-    """The camera of one frame with its confidence (see the module docstring)."""
+    """The camera of one frame with its confidence (see the module docstring).
+
+    Args:
+        camera: the fitted :class:`glradial.camera.model.Camera` (``None``: none found).
+        uncertainty_px: 90 % bound on the markings' RMS reprojection error, px at 1280 wide (> 0).
+        doubtful: True when the camera should not be used as if sure.
+        reason: one of :data:`REASONS`, ``"ok"`` exactly when not doubtful.
+        markings, rms_px, inliers, support, focal_sd: the fit's evidence (module docstring).
+
+    Raises:
+        ValueError: an unknown ``reason``, one not matching ``doubtful``, a sure estimate without
+            a camera, or ``uncertainty_px <= 0``.
+
+    Example:
+        >>> import math, glradial
+        >>> none = glradial.CameraEstimate(None, math.inf, True, "no_markings")
+        >>> none.lens is None, none.as_dict()["reason"]
+        (True, 'no_markings')
+        >>> none.project([[0.0, 0.0]])
+        Traceback (most recent call last):
+        ...
+        ValueError: no camera was found in this frame (reason: no_markings)
+    """
 
     camera: Camera | None
     uncertainty_px: float

@@ -32,7 +32,7 @@ import cv2
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..estimation.estimator import estimate
+from ..estimation.net_lines import estimate_net_lines
 from ..lens.lens import Lens
 from ..lens.metrics import max_displacement_px
 from .circle_hypotheses import circle_homographies, ellipses, template_radius
@@ -397,12 +397,12 @@ def _spacing(points: np.ndarray) -> float:
 
 
 def strong_lens(frame_rgb: np.ndarray) -> Lens | None:
-    """The lens the estimation layer's line fit (:func:`glradial.estimation.estimator.estimate`,
+    """The lens the estimation layer's line fit (:func:`glradial.estimation.net_lines.estimate_net_lines`,
     ``method="lines"``) reads in a uint8 RGB frame when it is strong (:data:`STRONG_LENS_PX`) and
     usable on the frame, else ``None``. Its doubt verdict is not used: the reading is only where the
     camera fit starts (``first_guess(..., lens=)`` and the refinement's initial lens), and the
     camera's own doubt policy judges the result."""
-    reading = estimate(frame_rgb, "lines")
+    reading = estimate_net_lines(frame_rgb, "lines")
     lens = Lens(float(reading.k1), float(reading.k2))
     if float(max_displacement_px(np.array([lens.k1, lens.k2]), np.zeros(2))) < STRONG_LENS_PX:
         return None

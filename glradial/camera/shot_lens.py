@@ -12,7 +12,7 @@ bend are what a shot's few-to-few-hundred noisy frames can fix.
 Fit (:func:`fit_shot_lens`): over the shot's sure frames (not doubtful), a robust weighted least
 squares of the lens's radial map (:func:`glradial.lens.metrics.radial_map`) at radii up to the 16:9
 corner, in px of a 1920-wide frame (the unit of :func:`glradial.lens.metrics.max_displacement_px`),
-each frame weighted by the inverse of its lens bound (:func:`glradial.camera.pitch_lens.lens_bound_px`,
+each frame weighted by the inverse of its lens bound (:func:`glradial.camera.estimator.lens_bound_px`,
 relative to the shot's median), plain least squares first, then under a Huber loss at the scale of
 the residuals' spread (:data:`HUBER_SPREAD`, at least :data:`ROBUST_PX` px): a frame whose own
 lens is far off (a bad fit that was still judged sure) barely moves the shot's. At least
@@ -38,10 +38,10 @@ from ..lens.lens import Lens
 from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, radial_map
 from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
-from .calibrate import FINE_POINTS, calibrate_points, check_pitch, judge
+from .calibrate import FINE_POINTS, calibrate_points, check_pitch, judge_fit
 from .estimate import CameraEstimate
+from .estimator import lens_bound_px
 from .model import Camera
-from .pitch_lens import lens_bound_px
 from .refine import refine
 from .white_lines import LinePoints, line_points
 
@@ -68,7 +68,23 @@ class ShotLens:
     """A shot's lens as a function of the focal length: ``k1(f) = sum_j k1_poly[j] u^j`` and
     likewise ``k2``, with ``u = ln(f / focal_ref)`` (width-normalised ``k1``, ``k2``; ``f`` and
     ``focal_ref`` in image widths). ``frames`` sure frames made it, their focal lengths spanning
-    ``focal_range`` (image widths)."""
+    ``focal_range`` (image widths).
+
+    Args:
+        k1_poly, k2_poly: the polynomials' coefficients, constant first.
+        focal_ref: the reference focal length (image widths).
+        focal_range: the sure frames' smallest and largest focal length (image widths).
+        frames: how many sure frames the fit used.
+
+    Raises:
+        ValueError: from :meth:`lens_at`, a focal length that is not a positive number.
+
+    Example:
+        >>> import math, glradial
+        >>> shot = glradial.ShotLens((-0.2, 0.05), (0.03, 0.0), 1.5, (1.2, 1.9), 40)
+        >>> shot.degree, shot.lens_at(1.5).k1, round(shot.lens_at(1.5 * math.e).k1, 6)
+        (1, -0.2, -0.15)
+    """
 
     k1_poly: tuple[float, ...]
     k2_poly: tuple[float, ...]
@@ -156,7 +172,7 @@ def refit_with_lens(estimate: CameraEstimate, lines: LinePoints, shot: ShotLens,
         if fit is None:
             return estimate
         cam = fit.camera
-    refit = judge(fit, len(lines.xy))
+    refit = judge_fit(fit, len(lines.xy))
     if refit.doubtful:
         return estimate
     # the lens at the focal length the last pass ended on (it moved by a small fraction of a percent)
@@ -167,7 +183,22 @@ def refit_with_lens(estimate: CameraEstimate, lines: LinePoints, shot: ShotLens,
 class ShotCalibrator:
     """Calibrates the frames of one shot, one at a time (:meth:`add`), and at its end (:meth:`finish`)
     refits them with the shot's lens model (module docstring). Keeps each frame's white-line points
-    (a few thousand per frame), not the frames."""
+    (a few thousand per frame), not the frames.
+
+    Args:
+        pitch: the pitch's markings (default FIFA's 105 × 68 m).
+
+    Raises:
+        ValueError: a bad ``pitch``; :meth:`add` raises ``TypeError`` for a frame that is not an array.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> calibrator = glradial.ShotCalibrator()
+        >>> calibrator.add(np.zeros((90, 160, 3), np.uint8)).reason
+        'no_markings'
+        >>> calibrator.finish().lens_model is None  # too few sure frames for a shot lens
+        True
+    """
 
     pitch: PitchTemplate | None = None
     _estimates: list[CameraEstimate] = field(default_factory=list, repr=False)
@@ -205,7 +236,20 @@ class ShotCalibrator:
 class ShotCalibration:
     """One shot's cameras: ``estimates`` (per frame, with the shot's lens where ``from_shot``),
     ``frame_estimates`` (each frame's own, before the shot model) and ``lens_model`` (the
-    :class:`ShotLens`, ``None`` when the shot had too few sure frames)."""
+    :class:`ShotLens`, ``None`` when the shot had too few sure frames).
+
+    Args:
+        estimates, frame_estimates, lens_model, from_shot: above (one entry per frame).
+
+    Raises:
+        Nothing: a plain record made by :meth:`ShotCalibrator.finish`.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> shot = glradial.calibrate_shot([np.zeros((90, 160, 3), np.uint8)] * 2)
+        >>> isinstance(shot, glradial.ShotCalibration), shot.from_shot
+        (True, [False, False])
+    """
 
     estimates: list[CameraEstimate]
     frame_estimates: list[CameraEstimate]
@@ -217,7 +261,27 @@ def calibrate_shot(frames: Iterable[np.ndarray], *, pitch: PitchTemplate | None 
     """The cameras of the frames of **one shot** (no cut inside: split a video at its cuts first,
     e.g. with :func:`glradial.video.cuts.detect_cuts`) with one lens
     per shot as a function of the measured focal length (module docstring). ``frames``: uint8/uint16/
-    float RGB or gray arrays of one size, consumed one at a time."""
+    float RGB or gray arrays of one size, consumed one at a time.
+
+    Args:
+        frames: the shot's frames (a list, a generator or an N×H×W×C array).
+        pitch: the pitch's markings (default FIFA's 105 × 68 m).
+
+    Returns:
+        A :class:`glradial.ShotCalibration`.
+
+    Raises:
+        TypeError: ``frames`` is not an iterable of frames (e.g. one frame).
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> glradial.calibrate_shot(np.zeros((90, 160, 3), np.uint8))
+        Traceback (most recent call last):
+        ...
+        TypeError: frames must be an iterable of frames (a list, a generator, an N x H x W x C array), got ndarray of shape (90, 160, 3)
+        >>> [e.reason for e in glradial.calibrate_shot(np.zeros((2, 90, 160, 3), np.uint8)).estimates]
+        ['no_markings', 'no_markings']
+    """
     if isinstance(frames, np.ndarray) and frames.ndim < 4 or not isinstance(frames, Iterable):
         raise TypeError(f"frames must be an iterable of frames (a list, a generator, an N x H x W x C array), got {type(frames).__name__}"
                         f"{' of shape ' + str(frames.shape) if isinstance(frames, np.ndarray) else ''}")

@@ -84,7 +84,7 @@ def cached_estimator(model: str | None = None, threads: int | None = None):
 
 
 def _new_estimator(model: str | None, threads: int | None):
-    from ..camera.pitch_lens import Estimator
+    from ..camera.estimator import Estimator
 
     return Estimator(model, threads=threads)
 

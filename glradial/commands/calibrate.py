@@ -152,7 +152,7 @@ class _Outputs:
         rate, capture frame rate, timestamp, the source's timecode); the camera transform (pitch metres; OpenTrackIO pan/tilt/roll) only where
         the camera is sure, or with --doubtful-transforms."""
         from ..export.engines import MODEL_NAMES
-        from ..export.opentrackio import Camera as OtioCamera
+        from ..export.opentrackio import TrackingCamera as OtioCamera
         from ..export.opentrackio import camera_transform, frame_sample, validate_sample
         from ..lens.lens import Lens
 

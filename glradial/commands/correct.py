@@ -10,6 +10,7 @@ from ..lens.options import METHODS
 from . import UsageError, cached_estimator, estimators_kept, lens_given, note, show_progress
 from .engine_options import add_opentrackio_options, opentrackio_hook, opentrackio_wanted, write_track_opentrackio
 from .remapping import (
+    VIDEO_OPTIONS,
     add_encode_options,
     add_remap_parser,
     add_render_options,
@@ -17,6 +18,7 @@ from .remapping import (
     check_encode_options,
     check_paths,
     refuse_same_file,
+    reject_for,
     run_with_lens,
     summary,
     video_alpha,
@@ -111,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f"--pitch is for images (a video's shots are read without the camera fit); {args.input!r} is a {kind}")
     hook = opentrackio_hook(args, kind)
     if kind == "image" and args.auto:
-        return run_with_lens(args, "undistort", kind, _estimated_lens_for(args), video_only=AUTO_VIDEO_OPTIONS, hook=hook)
+        return _correct_image_auto(args, hook)
     if kind != "video" or given or args.lens_track:
         return run_with_lens(args, "undistort", kind, video_only=AUTO_VIDEO_OPTIONS, hook=hook)
     from ..media.video_io import EncodeOptions, is_sequence
@@ -125,37 +127,44 @@ def run(args: argparse.Namespace) -> int:
     return _run_video_auto(args, encode, video)
 
 
-def _estimated_lens_for(args: argparse.Namespace):
-    """``lens_for`` of an image with ``--auto``: reads INPUT and estimates its lens."""
+def _correct_image_auto(args: argparse.Namespace, hook) -> int:
+    """``--auto`` on an image: decide, then apply. The image is decoded once; its lens is decided here
+    (the estimate, then the doubt policy, :func:`glradial.lens.doubt.applies`) and handed to the
+    apply step as a plain lens. The cheap checks (options, an existing OUTPUT) come first."""
+    from ..media.atomic import check_overwrite
     from ..media.image_io import read_image
 
-    return lambda _size: _estimate_image(args, read_image(args.input, order="rgb"))
+    reject_for(args, VIDEO_OPTIONS + AUTO_VIDEO_OPTIONS, "videos")
+    check_overwrite(Path(args.output), args.overwrite)
+    image = read_image(args.input, order="rgb")
+    lens = _estimate_image(args, image)
+    return run_with_lens(args, "undistort", "image", video_only=AUTO_VIDEO_OPTIONS, hook=hook, lens=lens, image=image)
 
 
 def _estimate_image(args: argparse.Namespace, image):
-    """``--auto`` on an image: the estimate, printed with its stated uncertainty and doubt. A doubtful
-    one is reported in one line on stderr and left unapplied (no lens) unless ``--apply-doubtful``."""
-    from ..lens.lens import Lens, as_lens
+    """The lens ``--auto`` applies to ``image`` (RGB array): the estimate, printed with its stated
+    uncertainty and doubt; a doubtful one is reported in one line on stderr and, unless
+    ``--apply-doubtful``, decided against (the identity lens: the image passes through)."""
+    from ..lens import doubt
+    from ..lens.lens import Lens
     from ..media.frames import to_rgb8
 
     # as 'glradial estimate IMG': auto adds the pitch camera fit's lens where the template fits; a squashed
     # frame (--pixel-aspect) is read in square pixels and the estimate carries the aspect to the stored frame
     estimator = cached_estimator(args.model)
-    estimate = estimator.estimate(to_rgb8(image), method=args.method or "auto", pixel_aspect=args.pixel_aspect or 1.0,
-                                  pitch=args.pitch is not False)
-    lens = as_lens(estimate)
-    method, uncertainty = getattr(estimate, "method", None), getattr(estimate, "uncertainty_px", None)
-    reason = getattr(estimate, "reason", None)
+    found = estimator.estimate(to_rgb8(image), method=args.method or "auto", pixel_aspect=args.pixel_aspect or 1.0,
+                               pitch=args.pitch is not False)
+    method, uncertainty = getattr(found, "method", None), getattr(found, "uncertainty_px", None)
+    doubtful, reason = bool(getattr(found, "doubtful", False)), getattr(found, "reason", None)
     stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920, {reason})" if method and uncertainty is not None else ""
-    print(f"{args.input}: estimated k1={lens.k1:.6f} k2={lens.k2:.6f}{stated}")
-    note(args, k1=lens.k1, k2=lens.k2, method=method, uncertainty_px=uncertainty, reason=reason,
-         doubtful=bool(getattr(estimate, "doubtful", False)))
-    if getattr(estimate, "doubtful", False):
+    print(f"{args.input}: estimated k1={found.k1:.6f} k2={found.k2:.6f}{stated}")
+    note(args, k1=found.k1, k2=found.k2, method=method, uncertainty_px=uncertainty, reason=reason, doubtful=doubtful)
+    if doubtful:
         action = "applied anyway (--apply-doubtful)" if args.apply_doubtful else "left uncorrected (--apply-doubtful applies it)"
         print(f"glradial: warning: the estimate of {args.input} is doubtful ({reason}): {action}", file=sys.stderr)
-        if not args.apply_doubtful:
-            return Lens(0.0, 0.0)
-    return Lens(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect)
+    if not doubt.applies(doubtful, reason or "", bool(args.apply_doubtful)):
+        return Lens(0.0, 0.0)
+    return Lens(found.k1, found.k2, found.cx, found.cy, found.pixel_aspect)
 
 
 def _auto_sidecar(args: argparse.Namespace) -> Path:

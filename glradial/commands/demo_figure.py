@@ -137,9 +137,9 @@ def estimate_and_report(frame: np.ndarray, true_lens, args: argparse.Namespace, 
         print("glradial demo: no model shipped (glradial/models/glradial_k1k2.onnx is missing): skipping estimation and "
               "correcting with the true lens", flush=True)
         return true_lens
-    from ..estimation.estimator import Estimator
+    from ..estimation.net_lines import NetLinesEstimator
 
-    estimate = Estimator(model).estimate(frame, method=args.method)
+    estimate = NetLinesEstimator(model).estimate(frame, method=args.method)
     size = (frame.shape[1], frame.shape[0])
     error = float(max_displacement_px((true_lens.k1, true_lens.k2), (estimate.k1, estimate.k2), radius=corner_radius(size)))
     log(f"estimated with {model.name} (method {args.method} -> {estimate.method}, {estimate.chains} line chains)")
@@ -156,7 +156,7 @@ def _find_model(explicit: str | None) -> Path | None:
         if not path.is_file():
             raise FileNotFoundError(f"model file {explicit!r} does not exist")
         return path
-    from ..estimation.estimator import default_model_path
+    from ..estimation.net_lines import default_model_path
 
     path = default_model_path()
     return path if path.is_file() else None

@@ -82,12 +82,12 @@ def sensor_mm(args: argparse.Namespace) -> tuple[float | None, float | None]:
 
 def camera_from_args(args: argparse.Namespace, size: tuple[int, int], rate: Fraction | None = None,
                      timecode: str | None = None, *, what: str = "OpenTrackIO samples"):
-    """The :class:`glradial.export.opentrackio.Camera` of the options; ``UsageError`` naming the
+    """The :class:`glradial.export.opentrackio.TrackingCamera` of the options; ``UsageError`` naming the
     option to give when the sensor width or the focal length is missing (never a zero)."""
-    from ..export.opentrackio import Camera
+    from ..export.opentrackio import TrackingCamera
 
     width_mm, height_mm = _camera_numbers(args, what)
-    return Camera(size, width_mm, args.focal_mm, height_mm, rate=rate, timecode=timecode)
+    return TrackingCamera(size, width_mm, args.focal_mm, height_mm, rate=rate, timecode=timecode)
 
 
 def _camera_numbers(args: argparse.Namespace, what: str, focal_measured: bool = False) -> tuple[float, float | None]:

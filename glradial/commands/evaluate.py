@@ -72,7 +72,7 @@ def settings(args: argparse.Namespace, command: str):
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..estimation.estimator import default_model_path
+    from ..estimation.net_lines import default_model_path
     from ..evaluation.evaluation import OnnxPredictor, evaluate, summary
 
     if args.frames or args.calibrated or args.broadcast:

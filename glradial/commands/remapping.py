@@ -270,10 +270,10 @@ def _alpha_for(choice: str, path: Path) -> str:
 
 
 def remap_image_file(source: Path, target: Path, lens_for: Callable[[tuple[int, int]], object], transform: Transform,
-                     *, alpha: str = "auto", overwrite: bool = False) -> None:
-    """Read ``source``, apply ``transform`` with ``lens_for((W, H))`` and write ``target`` (atomic,
-    depth kept). EXR to EXR goes channel by channel (:func:`glradial.media.exr_io.channel_groups`), every
-    channel and its HALF/FLOAT type kept."""
+                     *, alpha: str = "auto", overwrite: bool = False, image: np.ndarray | None = None) -> None:
+    """Read ``source`` (or take ``image``, the caller's decode of it, as RGB), apply ``transform`` with
+    ``lens_for((W, H))`` and write ``target`` (atomic, depth kept). EXR to EXR goes channel by channel
+    (:func:`glradial.media.exr_io.channel_groups`), every channel and its HALF/FLOAT type kept."""
     from ..media.atomic import check_overwrite
     from ..media.image_io import read_image, write_image
 
@@ -282,7 +282,7 @@ def remap_image_file(source: Path, target: Path, lens_for: Callable[[tuple[int, 
     if source.suffix.lower() == ".exr" and target.suffix.lower() == ".exr":
         _remap_exr(source, target, lens_for, transform, convention, overwrite)
         return
-    image = read_image(source, order="rgb")
+    image = read_image(source, order="rgb") if image is None else image
     lens = lens_for((image.shape[1], image.shape[0]))
     write_image(target, transform(image, lens, convention), order="rgb", overwrite=overwrite)
 
@@ -321,15 +321,19 @@ def remap_folder(args: argparse.Namespace, lens_for, transform: Transform, progr
 
 def run_with_lens(args: argparse.Namespace, direction: str, kind: str, lens_for=None, *,
                   video_only: tuple[str, ...] = (), hook: RemapHook | None = None, transform: Transform | None = None,
-                  **extra: object) -> int:
+                  lens: object = None, image: np.ndarray | None = None, **extra: object) -> int:
     """The work of ``correct``/``distort`` once INPUT's ``kind`` (:func:`check_paths`) and the lens
     are known: ``lens_for((W, H))`` (default: the command line's, :func:`lens_from_args`) or, for a
     video, ``--lens-track``. Images and folders refuse the video options (and ``video_only``).
     ``hook``: told the lens and the end of an image's or a video's work (not a folder's).
     ``transform``: an image's remap (default: :func:`image_transform` of ``direction``; a video's
-    is always that). ``extra``: keywords of the remap (``inverse=`` for distort)."""
+    is always that). ``lens``: the lens already decided for an image INPUT (instead of ``lens_for``);
+    ``image``: that INPUT already decoded (RGB), not read again. ``extra``: keywords of the remap
+    (``inverse=`` for distort)."""
     from . import lens_from_args, show_progress
 
+    if lens is not None:
+        lens_for = lambda _size: lens  # noqa: E731  (decided before: no call back into the command)
     lens_for = lens_for or (lambda size: lens_from_args(args, size))
     hook = hook or RemapHook()
     progress = show_progress(args)
@@ -343,7 +347,7 @@ def run_with_lens(args: argparse.Namespace, direction: str, kind: str, lens_for=
         remap_folder(args, lens_for, transform, progress, label)
         return 0
     remap_image_file(Path(args.input), Path(args.output), _told(lens_for, hook, args), transform, alpha=args.alpha,
-                     overwrite=args.overwrite)
+                     overwrite=args.overwrite, image=image)
     note(args, frames=1)
     hook.written(1)
     return 0

@@ -36,6 +36,27 @@ class LensEstimate(Lens):
 
     Usable wherever a ``Lens`` is (``.k1``, ``.k2`` and every ``Lens`` method). ``uncertainty_px``
     is finite and positive; larger means less sure.
+
+    Args:
+        k1, k2, cx, cy, pixel_aspect: as :class:`glradial.Lens`.
+        uncertainty_px: the calibrated bound on the correction's error, px at 1920 wide (> 0; given
+            by name, like the rest).
+        method: which reading it is (``"net"``, ``"lines"``, ``"pitch"`` ...: ``glradial.lens.options.SOURCES``).
+        chains: how many line chains the line fit used (0 for the CNN).
+        doubtful: True when the estimate should not be applied as if sure.
+        reason: ``"ok"`` exactly when not doubtful, else why (``glradial.estimation.trust.REASONS``).
+
+    Raises:
+        ValueError: a bad number, an unknown ``method`` or ``reason``, or ``reason`` not matching ``doubtful``.
+        TypeError: ``doubtful`` is not a bool.
+
+    Example:
+        >>> import glradial
+        >>> est = glradial.LensEstimate(-0.21, 0.04, uncertainty_px=3.5, method="lines", chains=12)
+        >>> est.lens, est.doubtful
+        (Lens(k1=-0.21, k2=0.04, cx=0.0, cy=0.0, pixel_aspect=1.0), False)
+        >>> sorted(est.as_dict())[:3]
+        ['chains', 'doubtful', 'k1']
     """
 
     _: KW_ONLY  # after Lens's k1, k2, cx, cy, pixel_aspect: these are given by name

@@ -40,7 +40,7 @@ and are tried as conics.
 Uncertainty: the cost's curvature at the minimum (a quadratic fitted to a 3 x 3 stencil) gives a
 covariance of ``(k1, k2)``, scaled by the reduced chi² when above 1; :attr:`LineFit.sigma_px` is the
 largest standard deviation of the radial displacement over the 16:9 frame, in px at 1920 wide
-(:data:`glradial.lens.metrics.REPORT_WIDTH`). It is a raw 1-sigma figure; :mod:`glradial.estimation.estimator`
+(:data:`glradial.lens.metrics.REPORT_WIDTH`). It is a raw 1-sigma figure; :mod:`glradial.estimation.net_lines`
 turns it into a calibrated 90 % bound.
 """
 

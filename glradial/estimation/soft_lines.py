@@ -16,7 +16,7 @@ mowing stripes of such a frame is a soft, low-contrast ramp that gives neither. 
   of its grey levels to 0 and 255), so the faint stripe and board edges reach the detector's
   thresholds. The stretch is one linear map for the whole frame on purpose: a local equalisation
   (CLAHE) bends each tile's tone curve differently, which moves the gradient maximum of a soft
-  ramp; on the blurred stripe test scenes of ``tests/test_soft_lines.py`` it left 1-2 chains that
+  ramp; on the blurred stripe test scenes of ``tests/estimation/test_soft_lines.py`` it left 1-2 chains that
   a lens straightens where the linear stretch leaves 2-5, and errors of up to 54 px against at most 5.4 px;
 
 then the same ridge/edge detection, orientation pieces, linking (with the CNN's lens as the hint)

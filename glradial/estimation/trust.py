@@ -27,7 +27,7 @@ Bound (split conformal):
     * a frame with no pitch evidence (blank, noise, not a pitch): at least the largest displacement
       between the answer and any lens of the real range (k1 in [-1.0, 0.4], k2 on the manifold): "anything".
     ``floor``, ``a``, ``w``, ``q_lines``, ``q_net``, ``q_no_lines`` and their ``_rel`` forms are calibrated on validation frames of some clips and
-    checked on the others by :mod:`glradial.evaluation.calibrate` (``python -m glradial.evaluation.calibrate``), which writes
+    checked on the others by :mod:`glradial.evaluation.trust_calibration` (``python -m glradial.evaluation.trust_calibration``), which writes
     them to ``glradial/data/trust.json`` (loaded here; docs/LINES.md, "Confidence").
 
 Doubt by benefit (:attr:`glradial.LensEstimate.reason`, first match wins; :data:`REASONS`): an
@@ -88,7 +88,7 @@ GREEN_WINDOW = 12
 #: GRASS_WIDE of the view's width, or GRASS_NARROW with painted lines on it (a white-line fit with a
 #: vanishing-point family). Any share of the frame: wide views, stands, sky, roofs, tracks.
 GRASS_CLOSE, GRASS_MIN_AREA, GRASS_LOW, GRASS_MIN_FILL, GRASS_WIDE, GRASS_NARROW = 5, 0.05, 0.4, 0.25, 0.6, 0.3
-#: The shipped calibration (written by ``python -m glradial.evaluation.calibrate``).
+#: The shipped calibration (written by ``python -m glradial.evaluation.trust_calibration``).
 TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "trust.json"
 
 

@@ -8,8 +8,8 @@ from typing import TYPE_CHECKING
 from ..lazy import attach
 
 if TYPE_CHECKING:
-    from .calibrate import conformal_quantile
     from .evaluation import EvaluationSettings, OnnxPredictor, evaluate
     from .real_eval import evaluate_folder, self_consistent_truth
+    from .trust_calibration import conformal_quantile
 
 __getattr__, __dir__, __all__ = attach(__name__, __file__)

@@ -1,6 +1,6 @@
 """Evaluation of a distortion estimator on held-out crops: metrics, breakdowns, report (no torch).
 
-Used by ``glradial evaluate`` (an ONNX model through :class:`glradial.estimation.estimator.Estimator`) and by
+Used by ``glradial evaluate`` (an ONNX model through :class:`glradial.estimation.net_lines.NetLinesEstimator`) and by
 ``python -m net.evaluate`` in a checkout (which adds ``.pt`` checkpoints through torch). Needs
 NumPy, OpenCV, onnxruntime and a GL context; plots need matplotlib and are skipped, with a message,
 without it.
@@ -150,13 +150,13 @@ def breakdown(pred: np.ndarray, labels: np.ndarray, values: np.ndarray, bins: li
 
 
 class OnnxPredictor:
-    """Predicts through :class:`glradial.estimation.estimator.Estimator` (the shipped path, area resize and
+    """Predicts through :class:`glradial.estimation.net_lines.NetLinesEstimator` (the shipped path, area resize and
     mirror averaging included; ``mirror_average=False`` runs the network once per crop)."""
 
     def __init__(self, path: str | os.PathLike, threads: int | None = None, mirror_average: bool = True):
-        from ..estimation.estimator import Estimator
+        from ..estimation.net_lines import NetLinesEstimator
 
-        self.estimator = Estimator(path, threads=threads, mirror_average=mirror_average)
+        self.estimator = NetLinesEstimator(path, threads=threads, mirror_average=mirror_average)
         self.input_size = self.estimator.input_size
 
     def __call__(self, frames: np.ndarray) -> np.ndarray:

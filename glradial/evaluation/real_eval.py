@@ -35,8 +35,8 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from ..errors import Error
-from ..estimation.estimator import view_box
 from ..estimation.lens_estimate import LensEstimate, judge
+from ..estimation.net_lines import view_box
 from ..estimation.trust import FrameEvidence
 from ..lens.lens import Lens
 from ..lens.metrics import CORNER_RADIUS_16_9, PAPER_SIZE, manifold_k2, max_displacement_px
@@ -133,7 +133,7 @@ def read_broadcast(path: str | Path) -> np.ndarray:
 
 def centre_16_9(frame: np.ndarray) -> np.ndarray:
     """The frame's centred 16:9 view, the one the network sees
-    (:func:`glradial.estimation.estimator.view_box`; the whole frame if within 1 % of 16:9)."""
+    (:func:`glradial.estimation.net_lines.view_box`; the whole frame if within 1 % of 16:9)."""
     x0, y0, w, h = view_box((frame.shape[1], frame.shape[0]))
     if (w, h) == (frame.shape[1], frame.shape[0]):
         return frame
@@ -220,9 +220,9 @@ class Evaluator:
     """Runs the three methods on frames; one CNN session (``threads`` as :class:`glradial.Estimator`)."""
 
     def __init__(self, model: str | None = None, threads: int | None = None) -> None:
-        from ..estimation.estimator import Estimator
+        from ..estimation.net_lines import NetLinesEstimator
 
-        self.estimator = Estimator(model, threads=threads)
+        self.estimator = NetLinesEstimator(model, threads=threads)
 
     def evidence(self, frame: np.ndarray) -> FrameEvidence:
         """The frame's :class:`glradial.estimation.trust.FrameEvidence` (CNN and line fit)."""

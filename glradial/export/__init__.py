@@ -10,7 +10,7 @@ from ..lazy import attach
 if TYPE_CHECKING:
     from . import engines, opentrackio, opentrackio_udp, overscan
     from .engines import MODEL_DU, MODEL_NAMES, MODEL_UD, lens_from_openlensio, openlensio_du_fit, openlensio_radial, tde4_radial_deg4, unreal_spherical
-    from .opentrackio import SENSOR_PRESETS, Camera, encode_sample, lens_object, require_cbor2, track_samples, validate_sample, write_samples
+    from .opentrackio import SENSOR_PRESETS, TrackingCamera, encode_sample, lens_object, require_cbor2, track_samples, validate_sample, write_samples
     from .opentrackio_udp import ENCODING_CBOR, ENCODING_JSON, parse_address, send_payloads
     from .overscan import distort_overscanned, overscan_factor, overscan_size, track_overscan, uv_maps
     from .stmap import check_stmap_path, lens_stmap, read_stmap, unreal_stmap, write_stmap

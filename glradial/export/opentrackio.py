@@ -40,7 +40,7 @@ from .engines import MODEL_DU, MODEL_UD, openlensio_du_fit, openlensio_radial, p
 from .overscan import overscan_factor
 
 __all__ = [
-    "PROTOCOL", "SENSOR_PRESETS", "Camera", "lens_object", "track_samples", "validate_sample", "encode_sample",
+    "PROTOCOL", "SENSOR_PRESETS", "TrackingCamera", "lens_object", "track_samples", "validate_sample", "encode_sample",
     "write_samples", "parse_timecode", "timecode_at", "require_cbor2", "frame_sample", "camera_transform",
     "camera_frame_sample",
 ]
@@ -53,7 +53,7 @@ SENSOR_PRESETS = dict(zip(SENSORS, [(9.59, 5.39)], strict=True))
 
 
 @dataclass(frozen=True)
-class Camera:
+class TrackingCamera:
     """What a sample says about the camera: frame ``size`` (W, H) px, the active sensor's width (and
     height; default ``width · H / W``) in mm, the pinhole focal length in mm, the frame ``rate``
     (frames per second, exact) and the ``timecode`` of frame 0 (``HH:MM:SS:FF``, ``;`` before FF
@@ -132,7 +132,7 @@ def timecode_at(start: str, index: int, rate: Fraction) -> dict:
     return value
 
 
-def lens_object(lens: Lens, camera: Camera, *, model: str = MODEL_UD, overscan: float | None = None) -> tuple[dict, float | None]:
+def lens_object(lens: Lens, camera: TrackingCamera, *, model: str = MODEL_UD, overscan: float | None = None) -> tuple[dict, float | None]:
     """The sample's ``lens`` object for ``lens`` (``model``: :data:`MODEL_UD` exact or
     :data:`MODEL_DU` fitted) and the fit's largest error in px (None for U-D). ``overscan``: the
     factor to state (default: :func:`overscan_factor` of the lens)."""
@@ -155,7 +155,7 @@ def lens_object(lens: Lens, camera: Camera, *, model: str = MODEL_UD, overscan: 
     }, error
 
 
-def _static(camera: Camera, n_frames: int | None, overscan_max: float) -> dict:
+def _static(camera: TrackingCamera, n_frames: int | None, overscan_max: float) -> dict:
     width, height = camera.size
     block: dict = {
         "camera": {
@@ -171,7 +171,7 @@ def _static(camera: Camera, n_frames: int | None, overscan_max: float) -> dict:
     return block
 
 
-def _timing(camera: Camera, index: int) -> dict:
+def _timing(camera: TrackingCamera, index: int) -> dict:
     timing: dict = {"mode": "external", "sequenceNumber": index}
     if camera.rate is not None:
         timing["sampleRate"] = _rational(camera.rate)
@@ -189,7 +189,7 @@ def _number(values: Sequence[float] | None, index: int) -> float | None:
 
 def track_samples(
     lenses: np.ndarray | Sequence[Lens],
-    camera: Camera,
+    camera: TrackingCamera,
     *,
     model: str = MODEL_UD,
     uncertainty_px: Sequence[float] | None = None,
@@ -238,7 +238,7 @@ def _sample(glradial_lens: Lens, lens_and_error: tuple[dict, float | None], stat
     return sample
 
 
-def frame_sample(lens: Lens, camera: Camera, index: int, source_id: str, *, model: str = MODEL_UD,
+def frame_sample(lens: Lens, camera: TrackingCamera, index: int, source_id: str, *, model: str = MODEL_UD,
                  uncertainty_px: float | None = None, doubtful: bool | None = None, shot: int | None = None,
                  timestamp_s: float | None = None, lens_and_error: tuple[dict, float | None] | None = None) -> dict:
     """The validated sample of one frame of a stream (a live source: no duration, the overscan its

@@ -36,8 +36,22 @@ def shader_dir() -> Path:
     them in another renderer: ``common.glsl`` (the lens functions), ``sampling.glsl``,
     ``correct.frag``, ``distort.frag`` ... (docs/SHADERS.md). Package data in an installed wheel,
     the checkout's ``shaders/`` in the editable install ``make setup`` makes (where
-    ``importlib.resources.files("glradial.shaders")`` cannot find them); ``FileNotFoundError`` when
-    neither holds them."""
+    ``importlib.resources.files("glradial.shaders")`` cannot find them).
+
+    Args:
+        None.
+
+    Returns:
+        The folder (an absolute :class:`pathlib.Path`).
+
+    Raises:
+        FileNotFoundError: neither place holds ``common.glsl`` (a broken install).
+
+    Example:
+        >>> import glradial
+        >>> (glradial.shader_dir() / "common.glsl").is_file()
+        True
+    """
     here = Path(__file__).resolve().parents[1]  # the glradial package
     for candidate in (here / "shaders", here.parent / "shaders"):
         if (candidate / "common.glsl").is_file():
@@ -49,7 +63,24 @@ def shader_dir() -> Path:
 
 
 def shader_path(name: str) -> Path:
-    """Path of one shader file by name (e.g. ``"common.glsl"``)."""
+    """Path of one of glradial's shader files by name.
+
+    Args:
+        name: the file name inside :func:`shader_dir` (e.g. ``"common.glsl"``, ``"correct.frag"``).
+
+    Returns:
+        The file's absolute path.
+
+    Raises:
+        FileNotFoundError: no shader of that name (or the shader folder is missing).
+
+    Example:
+        >>> import glradial
+        >>> glradial.shader_path("common.glsl").name
+        'common.glsl'
+        >>> "distort" in glradial.shader_path("common.glsl").read_text()
+        True
+    """
     path = shader_dir() / name
     if not path.is_file():
         raise FileNotFoundError(f"no shader named {name!r} in {shader_dir()}")

@@ -151,6 +151,26 @@ class Lens:
     y down; 0, 0 = the centre, the paper's model and the estimator's); ``pixel_aspect = fy / fx``
     (1 = square pixels). See the module docstring for the lens coordinates they define. None of the
     five numbers changes when a frame is resized. ``Lens(0, 0)`` is a pinhole.
+
+    Args:
+        k1: second-order radial coefficient (width-normalised; negative: barrel).
+        k2: fourth-order radial coefficient (width-normalised).
+        cx: principal point's horizontal offset from the image centre, in image widths (x right).
+        cy: principal point's vertical offset from the image centre, in image widths (y down).
+        pixel_aspect: ``fy / fx`` (1 = square pixels), > 0.
+
+    Raises:
+        ValueError: a coefficient that is not a finite real number, or ``pixel_aspect <= 0``.
+
+    Example:
+        >>> import glradial
+        >>> lens = glradial.Lens(-0.2, 0.05)
+        >>> float(lens.forward_radius(0.5))  # 0.5 (1 - 0.2 * 0.25 + 0.05 * 0.0625)
+        0.4765625
+        >>> round(float(lens.inverse_radius(lens.forward_radius(0.5))), 9)
+        0.5
+        >>> round(lens.frame_radius((1920, 1080)), 4)  # the 16:9 corner, lens units
+        0.5737
     """
 
     k1: float = 0.0

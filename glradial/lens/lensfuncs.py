@@ -1,6 +1,6 @@
 """NumPy twins of the lens functions in ``shaders/common.glsl``.
 
-Every function here has a GLSL function of the same name in ``common.glsl``; ``tests/test_twins.py``
+Every function here has a GLSL function of the same name in ``common.glsl``; ``tests/lens/test_twins.py``
 renders each GLSL function into a float texture and holds the two together. Change both or neither.
 
 Convention (docs/DESIGN.md, written once here and in the GLSL header):

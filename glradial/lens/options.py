@@ -35,7 +35,7 @@ BACKENDS: tuple[str, ...] = ("auto", "gl", "cpu")
 #: values of the estimators' ``method`` argument
 METHODS: tuple[str, ...] = ("auto", "net", "lines")
 #: values of ``LensEstimate.method`` (which method produced the numbers): the CNN, the line fit, or the
-#: joint camera fit to the pitch template (``method="auto"`` where the template fits: glradial.camera.pitch_lens)
+#: joint camera fit to the pitch template (``method="auto"`` where the template fits: glradial.camera.estimator)
 SOURCES: tuple[str, ...] = ("net", "lines", "pitch")
 #: how a 4-channel frame stores alpha (glradial.remapping.alpha)
 ALPHAS: tuple[str, ...] = ("straight", "premultiplied")

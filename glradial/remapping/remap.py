@@ -65,7 +65,7 @@ import numpy as np
 from ..gl import egl
 from ..gl.shaderlib import TEXTURE_FORMATS as _TEXTURE_DTYPES
 from ..gl.shaderlib import build_program
-from ..lens import lensfuncs
+from ..lens import doubt, lensfuncs
 from ..lens.lens import Lens, Plane, frame_size
 from ..lens.options import (
     BACKENDS,
@@ -283,7 +283,28 @@ def fit_scale(
 ) -> float:
     """The scale ``s`` a fit uses on a ``(W, H)`` frame (closed form, see
     :meth:`glradial.Lens.fit_scale`): correction shows ``p_u = s q`` at output lens point ``q``,
-    distortion samples the input at ``P⁻¹(q) / s``. ``s > 1`` zooms out, ``s < 1`` zooms in."""
+    distortion samples the input at ``P⁻¹(q) / s``. ``s > 1`` zooms out, ``s < 1`` zooms in.
+
+    Args:
+        lens: a :class:`glradial.Lens` or ``(k1, k2)`` (width-normalised).
+        size: the frame's ``(W, H)`` in pixels.
+        fit: ``"same"`` (1), ``"crop"`` (no empty border), ``"full"`` (the whole frame kept) or a number.
+        direction: ``"undistort"`` (what :func:`correct` uses) or ``"distort"``.
+
+    Returns:
+        The scale ``s`` (dimensionless, > 0).
+
+    Raises:
+        TypeError: ``lens`` is neither a Lens nor a pair of numbers.
+        ValueError: a bad size, fit or direction, or a lens that folds over inside the frame.
+
+    Example:
+        >>> import glradial
+        >>> glradial.fit_scale((-0.2, 0.0), (1920, 1080))
+        1.0
+        >>> round(glradial.fit_scale((-0.2, 0.0), (1920, 1080), "full"), 4)  # the whole input shown
+        1.0838
+    """
     if not isinstance(lens, Lens):
         try:
             k1, k2 = lens  # type: ignore[misc]
@@ -304,6 +325,22 @@ class Remapper:
     the frame size, channel count and dtype stay the same, and frames are read back into a NumPy
     array (``out=`` to reuse one). Use on the thread that made the context; ``release()`` or
     ``with Remapper() as r:`` frees everything.
+
+    Args:
+        ctx: a caller's ``moderngl.Context`` to work on, or ``None`` (default) for its own headless
+            EGL context.
+
+    Raises:
+        TypeError: ``ctx`` is neither ``None`` nor a moderngl context.
+        glradial.GLUnavailableError: no OpenGL 3.3 context can be made (``ctx=None``).
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> frame = np.full((36, 64, 3), 200, np.uint8)
+        >>> with glradial.Remapper() as remapper:
+        ...     out = remapper.correct(frame, glradial.Lens(-0.2, 0.0))
+        >>> out.shape, out.dtype, int(out[18, 32, 0])  # the centre does not move
+        ((36, 64, 3), dtype('uint8'), 200)
     """
 
     def __init__(self, ctx: moderngl.Context | None = None) -> None:
@@ -580,7 +617,7 @@ def cpu_maps(
     rounded to 1/32 px, 6 bytes a sample), or with ``float_maps`` the float32 maps themselves
     (x, y; 8 bytes a sample): OpenCV 5 then interpolates bilinearly at the float32 position (exact
     bilinear), about twice as fast as from fixed-point maps for a single-channel plane, but slower
-    for multi-channel integer images (docs/BENCH.md, "Float maps for the planes"). The arrays are
+    for multi-channel integer images (docs/EXPERIMENTS.md). The arrays are
     shared between callers: read them, never write them."""
     return _cached_maps(lens.k1, lens.k2, lens.cx, lens.cy, lens.pixel_aspect, tuple(size), direction, scale,
                         inverse if direction == "distort" else "", bool(nearest), plane, bool(float_maps))
@@ -766,10 +803,37 @@ def correct(
     Doubt policy: a lens that says it is doubtful (a :class:`glradial.LensEstimate` with
     ``doubtful=True``, see its ``reason``) is not applied: the result is the frame unchanged (a
     checked copy, as with no lens at ``fit="same"``), unless ``apply_doubtful=True``.
+
+    Args:
+        frame: H×W, H×W×C or N×H×W×C array (uint8, uint16, float32 or float64).
+        lens: a :class:`glradial.Lens`, or ``k1`` (width-normalised) with ``k2`` next.
+        k2: the fourth-order coefficient when ``lens`` is a number (default 0).
+        fit: ``"same"``, ``"crop"``, ``"full"`` or a scale (:func:`fit_scale`).
+        interpolation: ``"nearest"``, ``"linear"`` or ``"cubic"``.
+        fill: value of pixels the lens never reaches (one number, or one per channel).
+        backend: ``"auto"`` (GL when available), ``"gl"`` or ``"cpu"`` (``cv2.remap``).
+        alpha: ``"straight"`` or ``"premultiplied"`` (4-channel frames).
+        apply_doubtful: apply a doubtful :class:`glradial.LensEstimate` all the same.
+
+    Returns:
+        The corrected frame(s): a new array of the same shape and dtype.
+
+    Raises:
+        ValueError: see above (fold-over, bad shapes, unknown options).
+        TypeError: see above (non-arrays, dtypes, coefficients, a Lens with ``k2``).
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> frame = np.zeros((54, 96), np.float32); frame[27, :] = 1.0  # a horizontal line
+        >>> bent = glradial.distort(frame, -0.3, backend="cpu")
+        >>> back = glradial.correct(bent, -0.3, backend="cpu")
+        >>> bool(abs(back[27, 20:76] - 1.0).max() < 0.05)  # straight again through the centre
+        True
+        >>> doubtful = glradial.LensEstimate(-0.3, 0.0, doubtful=True, reason="too_few_lines")
+        >>> bool((glradial.correct(bent, doubtful, backend="cpu") == bent).all())  # not applied
+        True
     """
-    if not isinstance(apply_doubtful, (bool, np.bool_)):
-        raise TypeError(f"apply_doubtful must be a bool, got {apply_doubtful!r}")
-    if getattr(lens, "doubtful", False) is True and not apply_doubtful:
+    if not doubt.applies(getattr(lens, "doubtful", False) is True, getattr(lens, "reason", ""), apply_doubtful):
         lens, fit = Lens(0.0, 0.0), "same"
     return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
         work, lens, k2, "undistort", fit, interpolation, fill_values, "exact", backend))
@@ -796,6 +860,24 @@ def distort(
     corner: docs/CROPS.md). Same conventions and
     errors as :func:`correct`; ``correct(distort(x, lens), lens) ≈ x`` for the same scale
     (``fit="same"``, the same number, or "crop" here with "full" there). ``alpha``: as in :func:`correct`.
+
+    Args:
+        frame, lens, k2, fit, interpolation, fill, backend, alpha: as in :func:`correct`.
+        inverse: ``"exact"`` or ``"drap"`` (above).
+
+    Returns:
+        The distorted frame(s): a new array of the same shape and dtype.
+
+    Raises:
+        ValueError, TypeError: as :func:`correct`, and for an unknown ``inverse``.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> frame = np.zeros((54, 96), np.float32); frame[10, :] = 1.0  # a line above the centre
+        >>> bent = glradial.distort(frame, -0.3, backend="cpu")
+        >>> rows = bent.argmax(axis=0)  # the line's row in each column
+        >>> int(rows[48]), bool(rows[12] > rows[48])  # barrel: pulled towards the centre, more far out
+        (10, True)
     """
     return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
         work, lens, k2, "distort", fit, interpolation, fill_values, inverse, backend))

@@ -57,7 +57,7 @@ from ..media.atomic import atomic_path
 from .crops import CropParams, PanoramaRenderers, crop_labels, load_panorama, sample_crop_params
 
 #: Newton steps of the exact inverse when crops come from the paper's distribution: 3 steps from the
-#: Drap-Lefevre seed reach 1e-9 lens units on every such lens (see tests/test_crop_producer.py); any
+#: Drap-Lefevre seed reach 1e-9 lens units on every such lens (see tests/synthesis/test_crop_producer.py); any
 #: other ``ranges``, and paired batches (whose shipped training runs used it), use the full default
 #: of common.glsl.
 PAPER_NEWTON_STEPS = 3
@@ -374,6 +374,33 @@ def crop_batches(
     ``LP_NUM_THREADS``, llvmpipe's thread count), each keeping up to ``prefetch`` batches ready.
     Determinism: see the module docstring. Close the stream (``close()`` or ``with``) to stop the
     workers.
+
+    Args:
+        panoramas: the panoramas (arrays or paths), at least one.
+        batch_size: crops per batch (>= 1; even with ``paired``).
+        seed: the stream's seed (>= 0); the same seed gives the same batches.
+        size, out_size, inverse, supersample: as :class:`glradial.CropRenderer` (pixels).
+        workers: rendering processes (0: in this process).
+        ranges: overrides of the crop distribution (:func:`glradial.sample_crop_params` keys).
+        panoramas_per_batch, cache, prefetch: as above (counts, >= 1).
+        lp_num_threads: llvmpipe threads per worker (``None``: Mesa's default).
+        paired: batches of lens pairs.
+
+    Returns:
+        A :class:`glradial.synthesis.crop_producer.CropProducer`: an endless iterator of
+        ``CropBatch(images N×h×w×3 uint8, labels N×2 float32 (k1, k2), params, panorama, index)``.
+
+    Raises:
+        ValueError: an empty ``panoramas`` or a count, seed, inverse or range out of bounds.
+        TypeError: ``paired`` is not a bool.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> panorama = np.random.default_rng(0).integers(0, 255, (64, 128, 3), np.uint8)
+        >>> with glradial.crop_batches([panorama], 2, seed=1, size=(64, 36), out_size=(32, 32)) as stream:
+        ...     batch = next(stream)
+        >>> batch.images.shape, batch.labels.shape
+        ((2, 32, 32, 3), (2, 2))
     """
     items = list(panoramas)
     if not items:

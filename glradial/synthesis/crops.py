@@ -56,6 +56,20 @@ class CropParams:
     from behind, the right side dips), ``hfov`` (horizontal field of view of the undistorted frame,
     in (0, 180)) in degrees; ``k1``, ``k2`` in width-normalised lens units of the 16:9 frame
     (default 0: an undistorted perspective view of the panorama).
+
+    Args:
+        pan, tilt, roll, hfov: degrees (convention above).
+        k1, k2: the crop's lens (width-normalised).
+
+    Raises:
+        ValueError: a value that is not a finite number, ``tilt`` outside [-90, 90] or ``hfov``
+            outside (0, 180).
+
+    Example:
+        >>> import glradial
+        >>> crop = glradial.CropParams(pan=30.0, tilt=-10.0, roll=0.0, hfov=60.0, k1=-0.2)
+        >>> crop.lens
+        Lens(k1=-0.2, k2=0.0, cx=0.0, cy=0.0, pixel_aspect=1.0)
     """
 
     pan: float
@@ -156,6 +170,25 @@ def sample_crop_params(
     :func:`lens_covers_frame` on ``size`` are redrawn (whole draws are rejected, not returned).
     Deterministic per ``seed``: draws come in fixed chunks from ``numpy.random.default_rng(seed)``,
     so ``sample_crop_params(n, s)`` is a prefix of ``sample_crop_params(m, s)`` for ``n <= m``.
+
+    Args:
+        n: how many crops (>= 0).
+        seed: the generator's seed (>= 0).
+        size: the frame ``(W, H)`` in pixels the lenses must cover.
+        k2_noise: standard deviation of ``k2`` around the manifold (width-normalised).
+        **ranges: overrides (above); degrees for angles.
+
+    Returns:
+        ``n`` :class:`glradial.CropParams`.
+
+    Raises:
+        ValueError: a bad ``n``, ``seed`` or range (unknown key, low > high).
+
+    Example:
+        >>> import glradial
+        >>> crops = glradial.sample_crop_params(3, seed=7, hfov=50.0)
+        >>> [c.hfov for c in crops], crops[:2] == glradial.sample_crop_params(2, seed=7, hfov=50.0)
+        ([50.0, 50.0, 50.0], True)
     """
     if isinstance(n, bool) or not isinstance(n, (numbers.Integral, np.integer)) or n < 0:
         raise ValueError(f"n must be a non-negative integer, got {n!r}")
@@ -341,6 +374,24 @@ class CropRenderer:
     texture memory; Mesa llvmpipe samples it faster). Use it on the thread and process that made ``ctx`` (default:
     ``thread_context()``) and :meth:`release` it (or use ``with``). Panoramas wider than
     ``GL_MAX_TEXTURE_SIZE`` are downscaled (area filter) with a ``RuntimeWarning``.
+
+    Args:
+        panorama: equirectangular (2:1) H×W, H×W×3 or H×W×4 array (uint8, uint16 or float32).
+        size, out_size: frame and output ``(W, H)`` in pixels (above).
+        inverse, supersample, anisotropy, newton_steps, series_inverse: above.
+        ctx: a moderngl context (default: the thread's glradial context).
+
+    Raises:
+        TypeError: ``ctx`` is not a moderngl context, or the panorama is not an array.
+        ValueError: bad sizes, options or panorama shape.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> panorama = np.full((64, 128, 3), 90, np.uint8)
+        >>> with glradial.CropRenderer(panorama, size=(64, 36)) as renderer:
+        ...     crops = renderer.render([glradial.CropParams(0.0, 0.0, 0.0, 60.0, k1=-0.1)])
+        >>> crops.shape, int(crops[0, 18, 32, 1])  # a flat panorama stays flat
+        ((1, 36, 64, 3), 90)
     """
 
     def __init__(
@@ -598,7 +649,25 @@ def render_crops(
     inverse: InverseMethod = "exact",
     supersample: int | tuple[int, int] | Literal["auto"] = 1,
 ) -> np.ndarray:
-    """Render ``params`` from ``panorama`` once -> ``(N, h, w, C)`` of its dtype (see :class:`CropRenderer`)."""
+    """Render ``params`` from ``panorama`` once (a :class:`CropRenderer` made and released).
+
+    Args:
+        panorama, size, out_size, inverse, supersample: as :class:`CropRenderer`.
+        params: the crops (:class:`CropParams`).
+
+    Returns:
+        ``(N, h, w, C)`` array of the panorama's dtype (``(w, h)`` = ``out_size`` or ``size``).
+
+    Raises:
+        ValueError, TypeError: as :class:`CropRenderer`.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> panorama = np.full((64, 128), 1000, np.uint16)
+        >>> crops = glradial.render_crops(panorama, glradial.sample_crop_params(2, seed=0), size=(32, 18))
+        >>> crops.shape, crops.dtype
+        ((2, 18, 32), dtype('uint16'))
+    """
     with CropRenderer(panorama, size=size, out_size=out_size, inverse=inverse, supersample=supersample) as renderer:
         return renderer.render(params)
 

@@ -240,6 +240,21 @@ class StadiumRenderer:
     wider than the texture limit allows) into one reused framebuffer and read back into the output
     array. Use as a context manager or call :meth:`release`. One renderer belongs to the thread
     that made it (its context is ``ctx`` or the thread's glradial context).
+
+    Args:
+        ctx: a moderngl context (default: the thread's glradial context).
+
+    Raises:
+        TypeError: ``ctx`` is neither ``None`` nor a moderngl context.
+        glradial.GLUnavailableError: no GL context can be made.
+
+    Example:
+        >>> import glradial
+        >>> from glradial.synthesis.stadium_style import sample_style
+        >>> with glradial.StadiumRenderer() as renderer:
+        ...     panorama = renderer.render(sample_style(3), (64, 32))
+        >>> panorama.shape, panorama.dtype
+        ((32, 64, 3), dtype('uint8'))
     """
 
     def __init__(self, ctx: moderngl.Context | None = None):
@@ -352,6 +367,23 @@ def stadium_panorama(seed: int, size: tuple[int, int] = (8192, 4096), **style: A
     :class:`~glradial.synthesis.stadium_style.StadiumStyle` (e.g. ``lighting="night"``, ``supersample=1``);
     the camera position always comes from the seed. Deterministic: the same seed, size and
     overrides give the same pixels on one driver. Uses the calling thread's GL context.
+
+    Args:
+        seed: the stadium's seed (>= 0).
+        size: ``(W, H)`` pixels.
+        **style: :class:`~glradial.synthesis.stadium_style.StadiumStyle` fields to override.
+
+    Returns:
+        H×W×3 uint8 RGB array.
+
+    Raises:
+        ValueError: a bad seed, size or style field.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> a = glradial.stadium_panorama(5, (64, 32), supersample=1)
+        >>> a.shape, bool(np.array_equal(a, glradial.stadium_panorama(5, (64, 32), supersample=1)))
+        ((32, 64, 3), True)
     """
     st = sample_style(seed)
     if style:

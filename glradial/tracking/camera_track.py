@@ -11,7 +11,7 @@ kept. Each frame:
    no previous frame or the motion was not found);
 2. **measure**: the white-line points refit from the prediction (the short tracking gates of
    :func:`glradial.calibrate`, lens free), judged by
-   :func:`glradial.camera.calibrate.judge` (the doubt rule is calibrate's, untouched). Without any
+   :func:`glradial.camera.calibrate.judge_fit` (the doubt rule is calibrate's, untouched). Without any
    camera yet, glradial's full search runs instead, at most every :data:`SEARCH_EVERY` frames. A still
    camera pools the white-line points of up to :data:`POOL` earlier frames :data:`POOL_SPACING` apart
    (players cover other parts of the lines in each), so its measurement sees more of the markings
@@ -51,7 +51,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
-from ..camera.calibrate import FINE_POINTS, TRACK_GATES, calibrate_points, check_pitch, judge
+from ..camera.calibrate import FINE_POINTS, TRACK_GATES, calibrate_points, check_pitch, judge_fit
 from ..camera.estimate import CameraEstimate
 from ..camera.model import Camera
 from ..camera.refine import refine
@@ -318,10 +318,10 @@ class CameraTracker:
                 return None
         pooled = _pooled([*self._pool, lines])
         if len(pooled.xy) < 12:
-            return judge(None, len(pooled.xy))
+            return judge_fit(None, len(pooled.xy))
         fine = pooled.thinned(FINE_POINTS)
         fit = refine(predicted, fine.xy, fine.angle, self.pitch, gates=TRACK_GATES, lens_from=1, support_xy=pooled.xy)
-        return judge(fit, len(pooled.xy))
+        return judge_fit(fit, len(pooled.xy))
 
 
 def _pooled(pool: Iterable[LinePoints]) -> LinePoints:

@@ -37,7 +37,7 @@ Conventions:
   lens a frame got). Its worker is a separate process started with ``spawn``: a script that makes
   an ``"auto"`` corrector needs the ``if __name__ == "__main__":`` guard, or passes
   ``auto={"worker": "thread"}``.
-* ``camera`` (:class:`glradial.export.opentrackio.Camera`): each frame gets its OpenTrackIO sample
+* ``camera`` (:class:`glradial.export.opentrackio.TrackingCamera`): each frame gets its OpenTrackIO sample
   (:func:`glradial.export.opentrackio.frame_sample`), with ``custom.glradial`` k1, k2 (the lens
   reported: the estimate even where it is not applied), uncertainty and doubt as for files.
 * ``tracker`` (with ``camera``; :func:`glradial.tracking.live_camera.camera_tracker`): each frame's
@@ -57,7 +57,7 @@ import uuid
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field, replace
 from fractions import Fraction
-from typing import Callable
+from typing import Callable, NamedTuple
 
 import av
 import cv2
@@ -89,13 +89,39 @@ LENS_OBJECTS = 64
 IDENTITY = Lens(0.0, 0.0)
 
 
+class _Waiting(NamedTuple):
+    """A pushed frame waiting for the worker: the ``frame``, its ``timestamp`` (s, from the stream's
+    first), when it ``arrived`` (``time.monotonic()`` s) and its ``index`` on the stream's clock."""
+
+    frame: object
+    timestamp: float
+    arrived: float
+    index: int
+
+
 @dataclass
 class LiveFrame:
     """A corrected frame: ``index`` (its number on the source's clock), ``timestamp`` (s, as
     pushed), ``pts`` (the pushed ``av.VideoFrame``'s, else None), the ``image`` (an array, or an
     ``av.VideoFrame`` for a planar YUV frame), the lens ``state`` (applied, reported, uncertainty,
     doubt, shot), its OpenTrackIO ``sample`` (None without a camera) and when it ``arrived``
-    (``time.monotonic()`` s at its push)."""
+    (``time.monotonic()`` s at its push).
+
+    Args:
+        index, timestamp, pts, image, state, sample, arrived: above (made by :class:`LiveCorrector`).
+
+    Raises:
+        Nothing: a plain record.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> with glradial.LiveCorrector((-0.2, 0.0), (64, 36), 25) as live:
+        ...     live.push(np.zeros((36, 64, 3), np.uint8), 0.0)
+        ...     live.finish()
+        ...     frame = live.pull(timeout=None)
+        >>> isinstance(frame, glradial.LiveFrame), frame.index, frame.image.shape
+        (True, 0, (36, 64, 3))
+    """
 
     index: int
     timestamp: float
@@ -216,7 +242,29 @@ class LiveCorrector:
     :class:`~glradial.video.live_lens.BundledEstimator`) and ``auto`` (keywords of
     :class:`~glradial.video.live_lens.OnlineShotLens`, e.g. ``worker="thread"`` for an estimator
     that cannot be pickled) for ``"auto"``, whose worker is started and waited for here; or an
-    OnlineShotLens made beforehand as ``lens`` (closed with this corrector)."""
+    OnlineShotLens made beforehand as ``lens`` (closed with this corrector).
+
+    Args:
+        lens: above.
+        size: the stream's ``(W, H)`` in pixels.
+        rate: frames per second (> 0).
+        max_delay, camera, model, fit, interpolation, backend, codec, frames, estimator, auto: above.
+
+    Raises:
+        ValueError: a bad ``lens``, ``size``, ``rate`` or ``max_delay``, or a lens that folds over
+            inside the frame.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> live = glradial.LiveCorrector(glradial.Lens(-0.2), (64, 36), 25)
+        >>> for i in range(3):
+        ...     live.push(np.full((36, 64, 3), 120, np.uint8), i / 25)
+        >>> live.finish()
+        >>> frames = [live.pull(timeout=None) for _ in range(3)]
+        >>> live.close()
+        >>> [f.index for f in frames], live.stats.corrected
+        ([0, 1, 2], 3)
+    """
 
     def __init__(self, lens: Lens | tuple[float, float] | str | OnlineShotLens | None, size: tuple[int, int],
                  rate: float | Fraction, *, max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None,
@@ -268,8 +316,10 @@ class LiveCorrector:
 
     # -- the caller's side ---------------------------------------------------------------------------
     def push(self, frame: np.ndarray | av.VideoFrame, timestamp: float | None = None) -> None:
-        """Hand over the next frame (module conventions); never blocks: when ``max_delay`` frames
-        already wait, the oldest of them is dropped (counted)."""
+        """Hand over the next frame (module conventions); never blocks: when :data:`MAX_WAITING`
+        frames already wait for correction, the oldest of them is dropped here (counted in
+        ``stats.dropped``). The worker, not this call, drops a frame that could no longer leave
+        within ``max_delay`` frame periods (module docstring)."""
         arrived = time.monotonic()
         if not isinstance(frame, (np.ndarray, av.VideoFrame)):
             raise TypeError(f"frame must be an H x W x 3 array or an av.VideoFrame, got {type(frame).__name__}")
@@ -286,8 +336,8 @@ class LiveCorrector:
             self._last_index = index
             self.stats.pushed += 1
             if len(self._waiting) >= MAX_WAITING:
-                self.stats.drop(self._waiting.popleft()[3])
-            self._waiting.append((frame, stamp if timestamp is not None else stamp - self._first, arrived, index))
+                self.stats.drop(self._waiting.popleft().index)
+            self._waiting.append(_Waiting(frame, stamp if timestamp is not None else stamp - self._first, arrived, index))
             self._cond.notify_all()
 
     def pull(self, timeout: float | None = 0.0, *, leave: bool = True) -> LiveFrame | None:
@@ -370,11 +420,11 @@ class LiveCorrector:
                 if self._stopped or not self._waiting:
                     return None
                 item = self._waiting.popleft()
-                age = time.monotonic() - item[2]
+                age = time.monotonic() - item.arrived
                 cost = float(np.median(self._costs)) if self._costs else 0.0
                 if age * float(self.rate) > self.max_delay or (
                         self._waiting and (age + cost) * float(self.rate) > self.max_delay):
-                    self.stats.drop(item[3])
+                    self.stats.drop(item.index)
                     continue
                 return item
 
@@ -462,7 +512,8 @@ class LiveCorrector:
 
     def _state(self, index: int, frame) -> LensState:
         if self._online is None:
-            return LensState(0, self.lens, self.lens or IDENTITY, None, False, "")
+            return LensState(shot=0, applied=self.lens, reported=self.lens or IDENTITY, uncertainty_px=None, doubtful=False,
+                             reason="")
         return self._online.observe(index, _thumbnail(frame), lambda: _sample_copy(frame))
 
     def _sample(self, index: int, timestamp: float, state: LensState, tracked=None) -> dict:

@@ -39,6 +39,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..lens import doubt
 from ..lens.lens import Lens, corner_radius
 from ..lens.options import LIVE_WORKERS, UNTIL_SURE, check_choice
 from .cuts import ShotDetector
@@ -237,11 +238,14 @@ class OnlineShotLens:
         fit, last_sure = self._fits.get(shot), self._last_sure
         held = last_sure if self.until_sure == "last" else None
         if fit is None:
-            return LensState(shot, held, last_sure or Lens(0.0, 0.0), None, True, PENDING)
+            return LensState(shot=shot, applied=held, reported=last_sure or Lens(0.0, 0.0), uncertainty_px=None,
+                             doubtful=True, reason=PENDING)
         if not fit.doubtful:
-            return LensState(shot, fit.lens, fit.lens, fit.uncertainty_px, False, "")
-        applied = fit.lens if self.apply_doubtful and fit.reason != "fold_over" else held
-        return LensState(shot, applied, fit.lens, fit.uncertainty_px, True, fit.reason)
+            return LensState(shot=shot, applied=fit.lens, reported=fit.lens, uncertainty_px=fit.uncertainty_px,
+                             doubtful=False, reason="")
+        applied = fit.lens if doubt.applies(True, fit.reason, self.apply_doubtful) else held
+        return LensState(shot=shot, applied=applied, reported=fit.lens, uncertainty_px=fit.uncertainty_px,
+                         doubtful=True, reason=fit.reason)
 
     def close(self) -> None:
         """Stop the worker: a process abandons the sample in progress (terminated after 5 s); a thread,

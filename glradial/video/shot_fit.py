@@ -96,7 +96,7 @@ from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_di
 from .frame_motion import Matches, homography_of
 from .lens_track import DOUBTFUL_PX
 
-__all__ = ["ShotSample", "ShotEvidence", "ShotLens", "fit_shot", "joint_fit", "ZOOM_MIN", "BOUND_SCALE",
+__all__ = ["ShotSample", "ShotEvidence", "FittedShotLens", "fit_shot", "joint_fit", "ZOOM_MIN", "BOUND_SCALE",
            "STATIC_BOUND_SCALE", "BOUND_FLOOR_PX"]
 
 #: a shot whose sampled log zoom spans more than this (about 6 % in focal length) gets the zoom model
@@ -200,7 +200,7 @@ def _estimates(samples: list[ShotSample]) -> list[Lens]:
 
 
 @dataclass(frozen=True)
-class ShotLens:
+class FittedShotLens:
     """The lens of one shot (see the module docstring). ``theta`` the model's parameters
     (``[a0, b0]`` or ``[a0, a1, a2, b0]``), ``centre`` the log zoom they are centred on, ``chains``
     and ``matches`` the evidence that agreed with the fit, ``views`` the independent views counted;
@@ -474,7 +474,7 @@ def _sigma_px(problem: _Problem, result, radius: float) -> float:
     return worst * REPORT_WIDTH
 
 
-def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometry", static: bool = False) -> ShotLens:
+def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometry", static: bool = False) -> FittedShotLens:
     """The shot read from its per-frame estimates alone: their median, stating their median bound
     (:data:`NO_GEOMETRY_PX` where they state none; never less for being many: they read the same
     picture) plus their spread (the largest maximum displacement between the median and any of
@@ -499,10 +499,10 @@ def _fallback(evidence: ShotEvidence, doubtful_px: float, why: str = "no_geometr
     if 2 * len(theirs) > len(estimates):
         reason = max(set(theirs), key=theirs.count)
     theta = (float(k[0]), float(k[1] - manifold_k2(k[0])))
-    return ShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False, "frames", static=static)
+    return FittedShotLens(theta, 0.0, bound, bool(reason), reason, 0, 0, 1.0, False, "frames", static=static)
 
 
-def _zoom_of_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> ShotLens | None:
+def _zoom_of_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> FittedShotLens | None:
     """A zoom read by its per-frame estimates and its frame pairs, following the zoom:
     ``k1(z) = L + a1 (z - zbar)`` (``z`` the measured log zoom; a generic first-order model in the
     log of the focal length, as :mod:`glradial.camera.shot_lens` fits for the pitch camera: nothing
@@ -557,7 +557,7 @@ def _zoom_of_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> Sho
     frames = _fallback(evidence, doubtful_px, why)  # the estimates' own doubt, as for one lens
     reason = frames.reason if frames.reason not in ("", why) else why if not stated <= doubtful_px else ""
     theta = (level - slope * zbar, slope, 0.0, b0)
-    return ShotLens(theta, centre, stated, bool(reason), reason, 0, sum(len(m) for _, _, m in evidence.pairs), views,
+    return FittedShotLens(theta, centre, stated, bool(reason), reason, 0, sum(len(m) for _, _, m in evidence.pairs), views,
                     True, "frames")
 
 
@@ -596,7 +596,7 @@ def _px_per_k1(k1: np.ndarray, b0: float, step: float = 1e-3) -> np.ndarray:
     return max_displacement_px(there, here) / step
 
 
-def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> ShotLens:
+def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius: float = CORNER_RADIUS_16_9) -> FittedShotLens:
     """The lens of one shot from all its evidence (see the module docstring). ``doubtful_px``: a
     bound above it makes the shot doubtful unless correcting helps even at the bound
     (:func:`judged_by_benefit`); ``radius``: the frame's corner radius (lens units)."""
@@ -605,7 +605,7 @@ def fit_shot(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX, radius
     return judged_by_benefit(_chosen(evidence, doubtful_px, radius), evidence)
 
 
-def _read_by_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> ShotLens:
+def _read_by_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> FittedShotLens:
     """The shot read by its per-frame estimates alone: a zoom's lens following the zoom where they
     allow (:func:`_zoom_of_frames`), else their one lens (:func:`_fallback`)."""
     if evidence.camera() == "zoom":
@@ -615,7 +615,7 @@ def _read_by_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> Sho
     return _fallback(evidence, doubtful_px, why)
 
 
-def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> ShotLens:
+def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> FittedShotLens:
     """The joint fit or the frames' median (:func:`fit_shot`), before the benefit verdict."""
     shot = joint_fit(evidence, doubtful_px=doubtful_px, radius=radius)
     if shot is None:
@@ -633,7 +633,7 @@ def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> ShotLe
     return shot
 
 
-def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
+def judged_by_benefit(shot: FittedShotLens, evidence: ShotEvidence) -> FittedShotLens:
     """Doubt by benefit for a shot, as for a frame (:func:`glradial.estimation.trust.benefit_doubt`):
     a shot that is doubtful only because its bound exceeds ``doubtful_px`` (``uncertain``,
     ``no_geometry``) is sure when that bound stays below the smallest shift of its lens from the
@@ -661,7 +661,7 @@ def judged_by_benefit(shot: ShotLens, evidence: ShotEvidence) -> ShotLens:
 
 
 def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
-              radius: float = CORNER_RADIUS_16_9) -> ShotLens | None:
+              radius: float = CORNER_RADIUS_16_9) -> FittedShotLens | None:
     """The joint fit of the shot's chains and matches alone (``None``: no geometric evidence, see
     the module docstring); :func:`fit_shot` weighs it against the per-frame estimates."""
     estimates = _estimates(evidence.samples)
@@ -690,12 +690,12 @@ def joint_fit(evidence: ShotEvidence, *, doubtful_px: float = DOUBTFUL_PX,
 
 
 def _result(problem: _Problem, result, views: float, centre: float, zooming: bool, static: bool,
-            doubtful_px: float, radius: float) -> ShotLens:
+            doubtful_px: float, radius: float) -> FittedShotLens:
     sigma = _sigma_px(problem, result, CORNER_RADIUS_16_9)
     bound = (STATIC_BOUND_SCALE if static else BOUND_SCALE) * sigma + BOUND_FLOOR_PX
     lenses = problem.lenses(result.x)
     folds = any(Lens(float(k1), float(k2)).fold_radius() <= radius for k1, k2 in lenses)
     reason = "fold_over" if folds else "uncertain" if not bound <= doubtful_px else ""
     matches = sum(len(m) for _, _, m in problem.pairs)
-    return ShotLens(tuple(float(v) for v in result.x), centre, float(bound), bool(reason), reason,
+    return FittedShotLens(tuple(float(v) for v in result.x), centre, float(bound), bool(reason), reason,
                     problem.chains.n, matches, views, zooming, "joint", float(sigma), static)

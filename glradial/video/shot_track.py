@@ -21,7 +21,7 @@ evidence is fitted jointly (:func:`glradial.video.shot_fit.fit_shot`) and droppe
 shot's evidence, never its frames. Every frame then gets its shot's lens at its zoom (the log zoom
 of the samples, interpolated linearly between them).
 
-Doubt policy: a doubtful shot (:class:`~glradial.video.shot_fit.ShotLens` ``doubtful``/``reason``) is
+Doubt policy: a doubtful shot (:class:`~glradial.video.shot_fit.FittedShotLens` ``doubtful``/``reason``) is
 marked in the track and, unless ``apply_doubtful``, not applied (its frames pass through
 uncorrected); a lens that folds over inside the frame (``fold_over``) is never applied.
 """
@@ -36,6 +36,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..lens import doubt
 from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
@@ -44,7 +45,7 @@ from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .pipelined import Pipelined
 from .shot_evidence import ShotCollector
-from .shot_fit import ShotLens, fit_shot
+from .shot_fit import FittedShotLens, fit_shot
 
 __all__ = ["track_shots", "CutCheck", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO",
            "ESTIMATE_WIDTH"]
@@ -75,7 +76,7 @@ class _Shots:
         self.estimator, self.estimate_every = estimator, estimate_every
         self.doubtful_px, self.radius = doubtful_px, radius
         self.starts: list[int] = []
-        self.fits: list[ShotLens] = []
+        self.fits: list[FittedShotLens] = []
         self.sampled: list[tuple[np.ndarray, np.ndarray]] = []
         self.estimates: list[tuple[int, Lens]] = []
         self.collector: ShotCollector | None = None
@@ -277,7 +278,7 @@ def _track(info, stamps: np.ndarray, shots: _Shots, apply_doubtful: bool, doubtf
         raw_sure[index] = float(getattr(estimate, "uncertainty_px", np.nan))
         method[index] = str(getattr(estimate, "method", "") or "")
         weight[index] = 1.0
-    applied = ~doubtful | (bool(apply_doubtful) & np.array([r != "fold_over" for r in reason], bool))
+    applied = np.array([doubt.applies(bool(d), r, bool(apply_doubtful)) for d, r in zip(doubtful, reason)], bool)
     return LensTrack(info.rate, info.size, shot, lens, raw, weight, time_s=stamps, uncertainty_px=sure,
                      raw_uncertainty_px=raw_sure, method=method, doubtful_px=doubtful_px, doubtful=doubtful,
                      reason=reason, applied=applied)

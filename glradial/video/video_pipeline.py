@@ -75,10 +75,10 @@ MAP_REUSE_PX = 1.0 / 64.0
 
 def default_estimator(model: str | os.PathLike | None = None, method: str | None = None) -> EstimatorFn:
     """The bundled estimator (:class:`glradial.Estimator`), as a frame -> lens function; ``method``
-    (e.g. "auto", "net", "lines") is handed to ``Estimator.estimate`` when given."""
-    from ..estimation.estimator import Estimator
+    (e.g. "auto", "net", "lines") is handed to ``NetLinesEstimator.estimate`` when given."""
+    from ..estimation.net_lines import NetLinesEstimator
 
-    estimator = Estimator(model) if model is not None else Estimator()
+    estimator = NetLinesEstimator(model) if model is not None else NetLinesEstimator()
     if method is None:
         return lambda frame: estimator.estimate(frame)
     return lambda frame: estimator.estimate(frame, method=method)

@@ -1,0 +1,47 @@
+"""docs/FIGURES.md is what scripts/render_figures.py renders from docs/figures/*.json, every record
+says how it was measured, and every bench writes its figures there (bench/figures.py)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from repo_scripts import load_script
+
+ROOT = Path(__file__).resolve().parents[1]
+#: bench/ files that measure nothing a document quotes: the figures module itself and a picture maker
+NOT_FIGURES = {"figures.py", "lines_figure.py"}
+
+
+def test_the_figures_document_is_up_to_date():
+    render = load_script("scripts/render_figures.py")
+    assert render.main(["--check"]) == 0, "run python scripts/render_figures.py"
+
+
+def test_every_figure_says_how_it_was_measured():
+    records = sorted((ROOT / "docs" / "figures").glob("*.json"))
+    assert records
+    for path in records:
+        record = json.loads(path.read_text())
+        assert record["name"] == path.stem
+        assert record["date"][:4] == "2026" and record["command"].startswith(("python ", "bash scripts/", "glradial "))
+        assert record["machine"] and "results" in record
+        if "transcribed_from" in record:
+            source = record["transcribed_from"].split(",")[0].split(" (")[0]
+            assert source.endswith(".md"), source
+
+
+def test_every_bench_writes_its_figures():
+    silent = [p.name for p in sorted((ROOT / "bench").glob("*.py"))
+              if p.name not in NOT_FIGURES and "write_figure(" not in p.read_text()]
+    assert not silent, f"benches that write no figure (bench/figures.py write_figure): {silent}"
+
+
+def test_a_section_renders_tables_and_reports(tmp_path):
+    render = load_script("scripts/render_figures.py")
+    (tmp_path / "x.json").write_text(json.dumps({
+        "name": "x", "date": "2026-11-28T00:00:00Z", "commit": "abc", "dirty": False, "command": "python bench/x.py",
+        "machine": {"cpu": "cpu", "logical_cpus": 2}, "results": {"fps": {"a": 1.23456}, "report": ["| t |"]}}))
+    text = render.render(tmp_path)
+    assert "| | a |\n| --- | --- |\n| fps | 1.235 |" in text and "```text\n| t |\n```" in text
+    assert "commit abc: `python bench/x.py`" in text
