@@ -270,7 +270,7 @@ def camera_transform(position_m: Sequence[float], pan_tilt_roll_deg: Sequence[fl
     return {"translation": {"x": x, "y": y, "z": z}, "rotation": {"pan": -pan, "tilt": -tilt, "roll": roll}, "id": "camera"}
 
 
-def camera_frame_sample(fields: dict, camera: Camera, index: int, source_id: str, *, model: str = MODEL_UD,
+def camera_frame_sample(fields: dict, camera: TrackingCamera, index: int, source_id: str, *, model: str = MODEL_UD,
                         timestamp_s: float | None = None, lens_objects: dict | None = None) -> dict:
     """The validated sample of one frame of a stream whose whole camera is tracked: ``fields`` the
     frame's fields as ``glradial calibrate --json`` writes them (``k1``, ``k2``, ``focal`` in image

@@ -2,7 +2,7 @@
 --workers N``, glradial/jobs): inputs expanded, outputs equal to the one-file commands', a corrupt
 input recorded while the rest completes, a rerun that does nothing and says so, a worker killed
 mid-task, Ctrl-C leaving the manifest consistent, estimate JSON, crops shards. The same
-on a real Ray cluster: tests/test_jobs_ray.py."""
+on a real Ray cluster: tests/jobs/test_jobs_ray.py."""
 
 from __future__ import annotations
 
@@ -167,7 +167,7 @@ def test_ctrl_c_leaves_the_manifest_consistent(tmp_path, media):
 
 
 def test_estimate_writes_what_json_prints(tmp_path, media, capsys):
-    """NAME.json is what the one-file command prints with --json (calibrate's: tests/test_jobs_ray.py)."""
+    """NAME.json is what the one-file command prints with --json (calibrate's: tests/jobs/test_jobs_ray.py)."""
     assert main(["estimate", str(media["i0"]), "--out-dir", str(tmp_path / "est"), "--workers", "1", "--no-pitch"]) == 0
     capsys.readouterr()
     assert main(["estimate", str(media["i0"]), "--json", "--no-pitch"]) == 0

@@ -1,6 +1,6 @@
 """``glradial live`` over SRT on loopback (listener and caller modes, in and out), relayed by the
 system's ffmpeg where PyAV's wheels lack libsrt; ffmpeg is the peer. The corrected frames are
-checked against OpenCV's undistortion (the oracle of tests/test_live.py); a missing SRT is a clear
+checked against OpenCV's undistortion (the oracle of tests/video/test_live.py); a missing SRT is a clear
 error. Each test lasts a few seconds."""
 
 from __future__ import annotations
