@@ -239,7 +239,26 @@ class CameraTracker:
     :class:`TrackStep` (a few hundred bytes) for :func:`track_cameras`' backward pass when
     ``keep_steps``. ``measure_every``: once a sure camera is held, the markings are measured on every
     this many frames (1: every frame; the motion carries the others), on any frame that zooms and on
-    any frame whose motion was not found. Not thread-safe: one tracker per stream, used from one thread."""
+    any frame whose motion was not found. Not thread-safe: one tracker per stream, used from one thread.
+
+    Args:
+        pitch: the pitch template (default: the standard 105 x 68 m pitch).
+        measure_every: above (frames, >= 1).
+        keep_steps: keep each frame's :class:`TrackStep` for a backward pass.
+
+    Raises:
+        ValueError: ``measure_every`` is not a whole number >= 1; ``push`` with a ``time`` that is not
+            a finite number.
+        TypeError: ``push`` with a ``frame`` that is not a numpy array.
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> tracker = glradial.CameraTracker()
+        >>> grass = np.full((72, 128, 3), (40, 120, 40), np.uint8)  # no markings: no camera, said so
+        >>> est = tracker.push(grass, 0.0)
+        >>> est.doubtful, est.reason, est.camera is None
+        (True, 'no_markings', True)
+    """
 
     def __init__(self, pitch: PitchTemplate | None = None, *, measure_every: int = MEASURE_EVERY,
                  keep_steps: bool = False) -> None:
@@ -367,7 +386,26 @@ def track_cameras(frames: Iterable[np.ndarray], *, pitch: PitchTemplate | None =
     frame once ``lag`` to ``2 lag`` later frames are read (the backward pass runs once per block over
     them), each shot's last frames at its end. ``is_cut(frame)``: whether a frame starts a new shot
     (e.g. :meth:`glradial.video.cuts.ShotDetector.update`; default: one shot). Keeps the undecided
-    frames' records only, not the frames."""
+    frames' records only, not the frames.
+
+    Args:
+        frames: the video's frames (RGB or gray arrays, one size), in order.
+        pitch: the pitch template (default: the standard pitch).
+        lag: above (frames, >= 0).
+        is_cut: above.
+
+    Returns:
+        An iterator of ``(index, CameraEstimate)``, every frame once, in order.
+
+    Raises:
+        ValueError: ``lag`` is not a whole number >= 0 (when iteration starts).
+
+    Example:
+        >>> import numpy as np, glradial
+        >>> grass = np.full((72, 128, 3), (40, 120, 40), np.uint8)
+        >>> [(i, est.doubtful) for i, est in glradial.track_cameras([grass, grass], lag=0)]
+        [(0, True), (1, True)]
+    """
     if isinstance(lag, bool) or not isinstance(lag, int) or lag < 0:
         raise ValueError(f"lag must be a whole number of frames >= 0, got {lag!r}")
     pitch = check_pitch(pitch)
