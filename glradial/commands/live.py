@@ -224,11 +224,11 @@ def _sample_camera(args: argparse.Namespace, info):
     per frame (the 1 mm here is replaced in every sample that has a camera)."""
     if not args.camera:
         return camera_from_args(args, info.size, info.rate, info.timecode)
-    from ..export.opentrackio import Camera
+    from ..export.opentrackio import TrackingCamera
     from .engine_options import sensor_mm
 
     width_mm, height_mm = sensor_mm(args)
-    return Camera(info.size, width_mm, 1.0, height_mm, rate=info.rate, timecode=info.timecode)
+    return TrackingCamera(info.size, width_mm, 1.0, height_mm, rate=info.rate, timecode=info.timecode)
 
 
 def _status_printer(quiet: bool):

@@ -118,13 +118,13 @@ def test_tracker_says_lost_after_a_cut_and_pending_before_any_fit():
 
 def test_camera_samples_validate_and_carry_the_calibrate_json_fields():
     from glradial.camera.calibrate import calibrate
-    from glradial.export.opentrackio import Camera, camera_frame_sample
+    from glradial.export.opentrackio import TrackingCamera, camera_frame_sample
     from glradial.tracking.live_camera import LiveCamera
 
     cameras, frames = _shot(1)
     estimate = calibrate(frames[0])
     assert not estimate.doubtful
-    otio = Camera(SIZE, 9.59, 1.0, rate=RATE, timecode="10:00:00:00")
+    otio = TrackingCamera(SIZE, 9.59, 1.0, rate=RATE, timecode="10:00:00:00")
     live = LiveCamera(3, estimate, False, "ok", estimate.uncertainty_px, 0)
     sample = camera_frame_sample(live.fields(), otio, 3, NIL, timestamp_s=0.12)
     assert _validator().is_valid(sample)
