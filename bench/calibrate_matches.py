@@ -184,11 +184,14 @@ def _figures(sel: list[dict]) -> dict:
     ans = [r for r in sel if r["answered"]]
     rms = np.array([r["rms_px"] for r in ans])
     wrong = int(np.sum(rms > WRONG_PX))
+    # beyond 10 px on a frame whose own labels no homography fits: the labels may be what is wrong
+    doubtful_labels = sum(r["rms_px"] > WRONG_PX and not r["floor_px"] <= CONSISTENT_PX for r in ans)
     ms = 1000 * np.array([r["seconds"] for r in sel])
     out = {"frames": len(sel), "answered": len(ans) / len(sel),
            **{f"acc_{lim:g}px": sum(r["answered"] and r["rms_px"] <= lim for r in sel) / len(sel) for lim in WITHIN_PX},
            "median_rms_px": float(np.median(rms)) if len(rms) else float("nan"),
-           "wrong_answered": wrong, "wrong_share_of_answered": wrong / len(ans) if ans else 0.0,
+           "wrong_answered": wrong, "wrong_with_inconsistent_labels": doubtful_labels,
+           "wrong_share_of_answered": wrong / len(ans) if ans else 0.0,
            "bound_covers": float(np.mean([r["bound_px"] >= r["rms_px"] for r in ans])) if ans else float("nan"),
            "ms_median": float(np.median(ms)), "ms_p90": float(np.percentile(ms, 90)),
            "floor_median_px": float(np.nanmedian([r["floor_px"] for r in sel]))}
@@ -205,7 +208,8 @@ def report(summary: dict) -> None:
     for name, f in summary.items():
         ratio = f" (x{f['ratio_to_blur_median']:.0f})" if "ratio_to_blur_median" in f else ""
         print(f"| {name} | {f['frames']} | {f['answered']:.0%} | {f['acc_5px']:.0%} | {f['acc_10px']:.0%} | "
-              f"{f['median_rms_px']:.2f} | {f['wrong_answered']} ({f['wrong_share_of_answered']:.0%}) | "
+              f"{f['median_rms_px']:.2f} | {f['wrong_answered']} ({f['wrong_share_of_answered']:.0%}; "
+              f"{f['wrong_with_inconsistent_labels']} floor > {CONSISTENT_PX:g}) | "
               f"{f['bound_covers']:.0%} | {f['ms_median']:.0f} / {f['ms_p90']:.0f}{ratio} | {f['floor_median_px']:.2f} |")
 
 

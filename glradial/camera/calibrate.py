@@ -14,7 +14,6 @@ with that lens, the starts carrying it (:func:`_strong_lens_retry`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -22,11 +21,11 @@ import numpy as np
 from ..lens.lens import Lens
 from ..media.frames import to_rgb8
 from ..pitch.template import PitchTemplate
+from .doubt import doubt_features, doubt_reason
 from .estimate import CameraEstimate, camera_trust
 from .first_guess import first_guess as search
 from .first_guess import strong_lens
 from .first_views import first_views
-from .line_hypotheses import HEIGHT_RANGE
 from .model import Camera, decompose_homography
 from .refine import Fit, refine
 from .white_lines import LinePoints, line_points
@@ -107,23 +106,6 @@ def _check_first_guess(first_guess: object) -> list[np.ndarray]:
     return hs
 
 
-def _reason(fit: Fit, t: dict) -> str:
-    """Why ``fit`` is doubtful under the thresholds ``t`` (``"ok"`` when it is not)."""
-    if fit.inliers < t["min_points"] or len(fit.elements) < t["min_elements"]:
-        return "too_few_markings"
-    if fit.spread < t["min_spread"]:
-        return "weak_geometry"  # one family of parallel image lines: nothing fixes the metric
-    if not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
-        return "weak_geometry"
-    if not t["min_height_m"] <= fit.camera.position[2] <= HEIGHT_RANGE[1] or fit.camera.hfov_deg > t["max_hfov_deg"]:
-        # a camera on the grass, above any main-camera position the search starts from, or wider than a
-        # broadcast lens: lines fitted, not a pitch
-        return "poor_fit"
-    if fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
-        return "poor_fit"
-    return "ok"
-
-
 def judge(fit: Fit | None, points: int) -> CameraEstimate:
     """The estimate of a refined fit (or of none) under the doubt policy of ``camera_trust.json``."""
     t = camera_trust()
@@ -131,7 +113,7 @@ def judge(fit: Fit | None, points: int) -> CameraEstimate:
         reason = "no_markings" if points < t["min_points"] else "poor_fit"
         return CameraEstimate(None, NO_CAMERA_PX, True, reason)
     bound = t["quantile"] * max(fit.rms_px, t["floor_px"])
-    reason = _reason(fit, t)
+    reason = doubt_reason(doubt_features(fit), t)
     return CameraEstimate(fit.camera, bound, reason != "ok", reason, fit.elements, fit.rms_px, fit.inliers, fit.support,
                           fit.log_focal_sd)
 

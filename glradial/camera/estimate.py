@@ -4,7 +4,7 @@ Convention (as :class:`glradial.LensEstimate`): ``uncertainty_px`` is a 90 % bou
 reprojection error of the pitch markings in the frame (px of a 1280-wide frame): split-conformal, the
 fit's own residual RMS (at least ``floor_px``) times a quantile (``glradial/data/camera_trust.json``).
 The quantile is calibrated on the real Bundesliga clip 2e57b9 against its hand-labelled keypoints
-(``bench/calibrate_bundesliga.py --calibrate-clip 2e57b9``) and checked on the other clip, 42ba34: on
+(``bench/calibrate_matches.py --calibrate-match 2e57b9``) and checked on the other clip, 42ba34: on
 procedural views the same calibration gives a quantile of about 1.2, which covers none of the answered
 Bundesliga frames (real lines are wider, blurred, and the pitch is not exactly nominal), so the real clip sets it;
 against labels with ~3 px of click noise it is conservative for the true error.
