@@ -169,8 +169,9 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
 
 
 def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -> Fit | None:
-    """The best fit from ``starts``: a coarse stage (lens held at each start's) from every start, the
-    :data:`FINE_STARTS` best of them refined with the lens free."""
+    """The best fit from ``starts``: a coarse stage (lens held at each start's) from every start, then
+    the :data:`FINE_STARTS` best of them refined with the lens free, best first, stopping at the first
+    fine fit the doubt rule passes (the others are only refined while none does)."""
     fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
     coarse = []
     for cam in starts:
@@ -181,10 +182,14 @@ def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -
             if fit.support >= EARLY_SUPPORT and fit.share >= EARLY_SHARE:
                 coarse = [fit]  # a start that already explains the frame: no need to try the others
                 break
-    coarse = sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]
-    fine = [refine(f.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
-                   support_xy=lines.xy) for f in coarse]
-    fits = [f for f in fine if f is not None]
+    fits = []
+    for start in sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]:
+        fit = refine(start.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
+                     support_xy=lines.xy)
+        if fit is not None:
+            if doubt_reason(doubt_features(fit), camera_trust()) == "ok":
+                return fit
+            fits.append(fit)
     return max(fits, key=_score) if fits else None
 
 
