@@ -2,7 +2,7 @@
 (validation only: nothing is fitted on these frames or labels).
 
 Usage: ``python bench/calibrate_matches.py [--matches 2e57b9,video_1] [--limit N] [--json ROWS.json]
-[--no-1080p] [--shots] [--calibrate-match MATCH]``
+[--no-1080p] [--rows ROWS.json ...] [--shots] [--calibrate-match MATCH]``
 
 Matches (file-name prefixes): Bundesliga ``2e57b9``, ``42ba34`` (``shared/data/broadcast_bundesliga``),
 ``08fd33``, ``121364`` and the World Cup 2022 ``video_1`` (``shared/data/broadcast_more``). Each
@@ -25,7 +25,9 @@ ratio. ``--no-1080p`` skips that pass (ms then from the 1280 x 720 run).
 ``--json``: one row per frame with everything the doubt rule reads, for each fit the method judged
 (the search's, then the strong-lens retry's): ``fits`` (:func:`glradial.camera.doubt.doubt_features`
 plus that fit's own keypoint RMS), so a doubt rule can be re-scored offline (``bench/doubt_rules.py``)
-without re-running calibrate. Figures: ``docs/figures/calibrate_matches.json`` (bench/figures.py).
+without re-running calibrate; ``--rows`` summarises such files (e.g. of processes run on parts of
+the matches). Figures: ``docs/figures/calibrate_matches.json`` (bench/figures.py), written when all
+five matches are in and no ``--limit``.
 
 ``--shots``: each segment (``MATCH_SEGMENT_FRAME`` names) through :class:`glradial.ShotCalibrator`
 as one shot (frames in index order); two tables: each frame's own camera and the shot model's.
@@ -223,6 +225,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--limit", type=int, default=0, help="first N labelled frames of each match (0: all)")
     parser.add_argument("--json", type=Path, help="write the per-frame rows here")
     parser.add_argument("--no-1080p", action="store_true", help="skip the timed 1920 x 1080 pass")
+    parser.add_argument("--rows", type=Path, nargs="+", metavar="ROWS.json",
+                        help="summarise the rows of earlier --json runs (e.g. one per process) instead of calibrating")
+    parser.add_argument("--figure", default="calibrate_matches", help="the figure's name (docs/figures/NAME.json)")
     parser.add_argument("--shots", action="store_true",
                         help="calibrate each segment (MATCH_SEGMENT) as one shot (glradial.calibrate_shot, frames in index "
                              "order): each frame's own camera, tracked, against the shot's lens as a function of the zoom")
@@ -244,8 +249,8 @@ def main(argv: list[str] | None = None) -> int:
         print("\nWith the segment's lens as a function of the zoom (glradial.calibrate_shot):")
         report(summarise(shot))
         return 0
-    rows = []
-    for i, (name, path, labels) in enumerate(frames):
+    rows = [] if not args.rows else [r for f in args.rows for r in json.loads(f.read_text()) if r["match"] in matches]
+    for i, (name, path, labels) in enumerate([] if args.rows else frames):
         print(f"[{i + 1}/{len(frames)}]", end=" ", file=sys.stderr)
         rows.append(score_frame(name, path, labels, kp, not args.no_1080p))
     summary = summarise(rows)
@@ -256,10 +261,10 @@ def main(argv: list[str] | None = None) -> int:
         from glradial.media.atomic import atomic_write_text
 
         atomic_write_text(args.json, json.dumps(rows, indent=1))
-    if not args.limit and not args.shots:
+    if not args.limit and {r["match"] for r in rows} == set(MATCHES):  # the figure is of all five matches
         from figures import write_figure
 
-        write_figure("calibrate_matches", summary)
+        write_figure(args.figure, summary)
     return 0
 
 
