@@ -2,7 +2,7 @@
 (validation only: nothing is fitted on these frames or labels).
 
 Usage: ``python bench/calibrate_matches.py [--matches 2e57b9,video_1] [--limit N] [--json ROWS.json]
-[--no-1080p] [--rows ROWS.json ...] [--shots] [--calibrate-match MATCH]``
+[--no-1080p] [--rows ROWS.json ...] [--figure NAME] [--shots]``
 
 Matches (file-name prefixes): Bundesliga ``2e57b9``, ``42ba34`` (``shared/data/broadcast_bundesliga``),
 ``08fd33``, ``121364`` and the World Cup 2022 ``video_1`` (``shared/data/broadcast_more``). Each
@@ -31,8 +31,7 @@ five matches are in and no ``--limit``.
 
 ``--shots``: each segment (``MATCH_SEGMENT_FRAME`` names) through :class:`glradial.ShotCalibrator`
 as one shot (frames in index order); two tables: each frame's own camera and the shot model's.
-``--calibrate-match MATCH``: the bound's quantile (split conformal, 90 %) on that match's answered
-frames, written to ``glradial/data/camera_trust.json``; the other matches check it.
+The doubt thresholds and the bound are chosen from the ``--json`` rows by ``bench/doubt_rules.py``.
 """
 
 from __future__ import annotations
@@ -231,9 +230,6 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--shots", action="store_true",
                         help="calibrate each segment (MATCH_SEGMENT) as one shot (glradial.calibrate_shot, frames in index "
                              "order): each frame's own camera, tracked, against the shot's lens as a function of the zoom")
-    parser.add_argument("--calibrate-match", metavar="MATCH",
-                        help="calibrate the bound's quantile on this match's answered frames (split conformal, 90 %%) "
-                             "and write it to glradial/data/camera_trust.json; the other matches check it")
     args = parser.parse_args(argv)
     matches = [m.strip() for m in args.matches.split(",") if m.strip()]
     unknown = [m for m in matches if m not in MATCHES]
@@ -255,8 +251,6 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(score_frame(name, path, labels, kp, not args.no_1080p))
     summary = summarise(rows)
     report(summary)
-    if args.calibrate_match:
-        _calibrate(rows, args.calibrate_match)
     if args.json:
         from glradial.media.atomic import atomic_write_text
 
@@ -292,26 +286,6 @@ def _shot_rows(frames: list, kp: np.ndarray) -> tuple[list[dict], list[dict]]:
                             "rms_px": keypoint_rms(e.camera, kp, labels), "bound_px": e.uncertainty_px,
                             "rms_fit_px": e.rms_px, "floor_px": homography_floor(kp, labels), "seconds": dt})
     return own, shot
-
-
-def _calibrate(rows: list[dict], match: str) -> None:
-    """Split-conformal quantile of keypoint RMS / max(fit RMS, floor) over ``match``'s answered frames."""
-    from glradial.camera.estimate import CAMERA_TRUST_FILE, camera_trust
-    from glradial.evaluation.calibrate import conformal_quantile
-    from glradial.media.atomic import atomic_write_text
-
-    trust = dict(camera_trust())
-    floor = trust["floor_px"]
-    scores = [r["rms_px"] / max(r["rms_fit_px"], floor) for r in rows
-              if r["match"] == match and r["answered"] and r["floor_px"] <= CONSISTENT_PX]
-    if not scores:
-        raise SystemExit(f"no answered frame in match {match!r}")
-    q = conformal_quantile(scores)
-    trust.update({"quantile": round(q, 3), "source": f"bench/calibrate_matches.py --calibrate-match {match}: split-conformal "
-                  f"90 % of keypoint RMS (hand labels) / fit RMS over its {len(scores)} answered frames with consistent "
-                  f"labels (homography floor <= {CONSISTENT_PX} px)"})
-    atomic_write_text(CAMERA_TRUST_FILE, json.dumps(trust, indent=2) + "\n")
-    print(f"quantile {q:.3f} (match {match}, {len(scores)} answered frames) written to {CAMERA_TRUST_FILE}")
 
 
 if __name__ == "__main__":

@@ -3,11 +3,10 @@
 Convention (as :class:`glradial.LensEstimate`): ``uncertainty_px`` is a 90 % bound on the RMS
 reprojection error of the pitch markings in the frame (px of a 1280-wide frame): split-conformal, the
 fit's own residual RMS (at least ``floor_px``) times a quantile (``glradial/data/camera_trust.json``).
-The quantile is calibrated on the real Bundesliga clip 2e57b9 against its hand-labelled keypoints
-(``bench/calibrate_matches.py --calibrate-match 2e57b9``) and checked on the other clip, 42ba34: on
-procedural views the same calibration gives a quantile of about 1.2, which covers none of the answered
-Bundesliga frames (real lines are wider, blurred, and the pitch is not exactly nominal), so the real clip sets it;
-against labels with ~3 px of click noise it is conservative for the true error.
+The quantile and the floor are chosen on the five shared real matches' hand-labelled keypoints
+(``bench/doubt_rules.py``, leave one match out: docs/CAMERA.md, "Across matches"); on procedural views
+the same calibration gives a quantile of about 1.2 (real lines are wider, blurred, the pitch is not
+exactly nominal, and the labels carry ~1-3 px of click noise), so the real matches set it.
 ``doubtful`` and ``reason`` say whether to use it (one of :data:`REASONS`; ``"ok"`` exactly when not
 doubtful). ``markings``: labels of the template elements the fit used
 (:meth:`glradial.pitch.PitchTemplate.elements`); ``rms_px`` the fit's RMS distance of the white-line
