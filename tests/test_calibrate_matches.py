@@ -78,3 +78,20 @@ def test_replay_answers_the_first_fit_the_rule_passes():
     assert summary["08fd33"]["answered"] == pytest.approx(2 / 3)
     assert summary["08fd33"]["acc_10px"] == pytest.approx(1 / 3)
     assert summary["08fd33"]["wrong_answered"] == 1
+
+
+def test_element_support_counts_markings_drawn_where_the_frame_has_none():
+    """A rendered view (exact camera known): its own camera draws every marking on evidence; the same
+    camera moved 6 m along the pitch draws most of them on bare grass."""
+    from glradial.camera.refine import element_support, template_samples
+    from glradial.camera.views import render_view
+    from glradial.camera.white_lines import line_points
+
+    truth = Camera.look_at((3.0, -64.0, 18.0), (-25.0, 2.0), 48.0, (1280, 720), Lens(-0.18, 0.0187))
+    xy = line_points(render_view(truth, seed=5).frame).xy
+    samples = template_samples(PitchTemplate())
+    support, drawn, missing = element_support(truth, samples, xy)
+    assert support > 0.95 and drawn >= 6 and missing == 0
+    moved = Camera.look_at((9.0, -64.0, 18.0), (-19.0, 2.0), 48.0, (1280, 720), truth.lens)
+    support, drawn_moved, missing = element_support(moved, samples, xy)
+    assert support < 0.5 and missing >= drawn_moved // 2

@@ -27,14 +27,15 @@ def directions(elements: tuple[str, ...], pitch: PitchTemplate | None = None) ->
 
 def doubt_features(fit: Fit) -> dict[str, float]:
     """The doubt evidence of ``fit`` (JSON-ready): ``rms_fit_px`` (inliers' RMS, px at 1280),
-    ``inliers``, ``share`` (inliers / evidence points), ``support`` (share of the drawn markings the
+    ``inliers``, ``share`` (inliers / evidence points), ``pitch_share`` (the same among
+    the points the camera puts on the pitch), ``support`` (share of the drawn markings the
     frame shows), ``spread`` (direction spread of the inliers, 0 to 1), ``drawn`` / ``missing`` (markings drawn in the
     frame / those the frame barely shows: :func:`glradial.camera.refine.element_support`), ``elements`` (markings with
     enough inliers), ``directions`` (:func:`directions`), ``log_focal_sd``, ``height_m`` (camera above
     the pitch), ``hfov_deg``, ``tilt_deg``, ``roll_deg``, ``k1``, ``k2``."""
     cam = fit.camera
     _, tilt, roll = cam.pan_tilt_roll
-    return {"rms_fit_px": fit.rms_px, "inliers": fit.inliers, "share": fit.share, "support": fit.support,
+    return {"rms_fit_px": fit.rms_px, "inliers": fit.inliers, "share": fit.share, "pitch_share": fit.pitch_share, "support": fit.support,
             "spread": fit.spread, "drawn": fit.drawn, "missing": fit.missing, "elements": len(fit.elements), "directions": directions(fit.elements),
             "log_focal_sd": fit.log_focal_sd if math.isfinite(fit.log_focal_sd) else 1e3,
             "height_m": float(cam.position[2]), "hfov_deg": cam.hfov_deg, "tilt_deg": tilt, "roll_deg": roll,

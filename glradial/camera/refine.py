@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 from ..lens.lens import Lens
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
-from .model import Camera, project_many
+from .model import Camera, lens_points_to_pitch, project_many
 from .white_lines import DETECT_WIDTH
 
 #: Residuals are in px of a frame this wide.
@@ -58,6 +58,9 @@ MIN_ELEMENT_POINTS = 12
 #: :data:`SAMPLE_STEP` metres) project inside it where a line would be detectable, and as missing when
 #: less than :data:`MISSING_SHARE` of those have evidence (a marking drawn where the frame shows none).
 MIN_DRAWN_SAMPLES, MISSING_SHARE = 8, 0.2
+#: Evidence points that the camera puts on the pitch (within this margin, metres, of its outline) are
+#: the ones a right camera should explain (those off it: crowd, boards, graphics).
+PITCH_MARGIN_M = 2.0
 
 
 @dataclass(frozen=True)
@@ -103,7 +106,8 @@ class Fit:
     far the inliers' line directions are from one direction: ``1 - |mean(exp(2i angle))|``, 0 when every
     inlier runs the same way, e.g. parallel lines only; about 1 for two perpendicular families or a
     circle), ``drawn`` (markings drawn in the frame: :data:`MIN_DRAWN_SAMPLES`) and ``missing`` (those of
-    them the frame barely shows: :data:`MISSING_SHARE`)."""
+    them the frame barely shows: :data:`MISSING_SHARE`), ``pitch_share`` (inliers among the evidence
+    points the camera puts on the pitch: :data:`PITCH_MARGIN_M`; 0 when none)."""
 
     camera: Camera
     rms_px: float
@@ -116,6 +120,7 @@ class Fit:
     spread: float = 1.0
     drawn: int = 0
     missing: int = 0
+    pitch_share: float = 0.0
 
 
 def _camera(x: np.ndarray, base: Camera) -> Camera:
@@ -268,8 +273,18 @@ def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result, s
     rms = float(np.sqrt(np.mean(inl ** 2))) if len(inl) else math.inf
     spread = 1.0 - float(abs(np.mean(np.exp(2j * angle[use])))) if use.any() else 0.0
     share, drawn, missing = element_support(camera, samples, support_xy)
+    on = _on_pitch(camera, xy, samples)
     return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1),
-               share, spread, drawn, missing)
+               share, spread, drawn, missing, float(use[on].mean()) if on.any() else 0.0)
+
+
+def _on_pitch(camera: Camera, xy: np.ndarray, samples: Samples) -> np.ndarray:
+    """Which evidence points ``xy`` ``camera`` puts on the pitch (the template's extent plus
+    :data:`PITCH_MARGIN_M`)."""
+    half = np.abs(samples.points).max(axis=0) + PITCH_MARGIN_M
+    m = lens_points_to_pitch(camera, xy)
+    with np.errstate(invalid="ignore"):
+        return (np.abs(m[:, 0]) <= half[0]) & (np.abs(m[:, 1]) <= half[1])
 
 
 def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
