@@ -3,7 +3,8 @@
 * :func:`line_points` (:class:`LinePoints`), what the camera is **fitted** to: sub-pixel centres of
   bright thin ridges (the line detector's Hessian ridges,
   :func:`glradial.estimation.lines.bright_ridges`) on a copy at most :data:`DETECT_WIDTH` px wide,
-  brighter than their neighbourhood by :data:`WHITE_CONTRAST` grey levels, kept on the pitch region
+  brighter than their neighbourhood by :data:`WHITE_CONTRAST` grey levels (more on a grainy frame:
+  :data:`GRAIN_SIGMAS` times its :func:`grain`), kept on the pitch region
   (:func:`pitch_region`: the largest area of the pitch's own green, closed over its lines and
   players); letterboxes and a border margin are masked. Points are returned in pixels of the
   **distorted frame at its own resolution** (centres at integers), with their line direction
@@ -48,6 +49,11 @@ GREEN_FRAME_SHARE = 0.15
 #: box around it (detection copy): mowing stripes and grain are not.
 WHITE_CONTRAST = 14.0
 BACKGROUND_BOX = 21
+#: ...and at least GRAIN_SIGMAS times the frame's grain (:func:`grain`: the robust sigma of the
+#: detection copy minus its GRAIN_BLUR-sigma blur, where lines are looked for): a grainy, noisy or
+#: blocky frame raises the bar so its speckle is not taken for lines (a noise peak clears 4 sigmas with
+#: odds under 1e-4); broadcast frames have a grain of 1-3 grey levels, under WHITE_CONTRAST / 4.
+GRAIN_SIGMAS, GRAIN_BLUR = 4.0, 2.0
 
 
 #: Width (px) of the work copy. The first guess needs lines, not detail: 640 px keeps a 12 cm line at
@@ -140,11 +146,22 @@ def line_points(frame: np.ndarray) -> LinePoints:
     x, y, angle = bright_ridges(gray, valid & grass)
     background = cv2.blur(gray, (BACKGROUND_BOX, BACKGROUND_BOX))
     r, c = np.clip(np.rint(y).astype(np.intp), 0, height - 1), np.clip(np.rint(x).astype(np.intp), 0, width - 1)
-    white = gray[r, c] - background[r, c] > WHITE_CONTRAST
+    white = gray[r, c] - background[r, c] > max(WHITE_CONTRAST, GRAIN_SIGMAS * grain(gray, valid & grass))
     x, y, angle = x[white], y[white], angle[white]
     s = width_full / width
     xy = np.stack([(x + 0.5) * s - 0.5, (y + 0.5) * s - 0.5], axis=1)
     return LinePoints(xy, angle, (width_full, height_full))
+
+
+def grain(gray: np.ndarray, where: np.ndarray) -> float:
+    """The grain (grey levels) of the float32 ``gray`` over the uint8 mask ``where``: 1.4826 times the
+    median absolute deviation of ``gray`` minus its :data:`GRAIN_BLUR`-sigma Gaussian blur (noise,
+    film grain and compression; lines are too few and stripes or shade too smooth to move it); 0
+    where fewer than 100 pixels are given."""
+    residual = (gray - cv2.GaussianBlur(gray, (0, 0), GRAIN_BLUR))[where > 0]
+    if len(residual) < 100:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
 
 
 @dataclass(frozen=True)
