@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from glradial.camera.white_lines import WHITE_CONTRAST, grain, line_points, white_lines
+from glradial.camera.white_lines import WHITE_CONTRAST, grain, grass_background, line_points, white_lines
 
 SIZE = (1280, 720)
 GRASS = np.array([60.0, 120.0, 45.0])  # RGB
@@ -114,3 +114,21 @@ def test_grain_raises_the_bar():
     d = np.min([_distance(found.xy, line) for line in LINES], axis=0)
     assert np.mean(d <= 1.5) >= 0.9
     assert np.mean([_coverage(found.xy, line, 1.5) for line in LINES]) >= 0.5
+
+
+def test_a_line_at_the_foot_of_a_bright_board_is_measured_against_the_grass():
+    # a far touchline 6-22 px below a bright ad board (grey 230, not green): the box around the line
+    # reaches into the board, whose rows raise its mean by about as much as the line's 20 grey levels
+    # stand out (the whole box's mean found 41 % of it); the mean of the grass in the box does not rise
+    line = ((60.0, 206.0), (1220.0, 222.0))
+    frame = _frame(20, 3, lines=[line])
+    board = 230 + np.random.default_rng(2).normal(0.0, 12.0, (200, 1280, 1))  # textured: not a letterbox
+    frame[:200] = np.clip(np.round(board), 0, 255).astype(np.uint8)
+    assert _coverage(line_points(frame).xy, line, 1.5) >= 0.6
+    gray = cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY).astype(np.float32)
+    green = np.repeat((np.arange(720) >= 200)[:, None], 1280, axis=1).astype(np.uint8)
+    x = np.arange(100, 1200)
+    on_line = grass_background(gray, green)[np.round(206 + 16 * (x - 60) / 1160).astype(int), x]
+    # the grass's level within 3 grey levels (mottle and grain), plus what the line itself (3 of the
+    # box's 21 rows, 20 levels) adds over its green rows
+    assert abs(float(np.median(on_line)) - float(np.median(gray[260:400]))) <= 3.0 + 20 * 3 / 11
