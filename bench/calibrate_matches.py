@@ -23,7 +23,7 @@ scaled to px at 1280, is in the rows as ``rms_1080p_px``); beside it, the peer
 ratio. ``--no-1080p`` skips that pass (ms then from the 1280 x 720 run).
 
 ``--json``: one row per frame with everything the doubt rule reads, for each fit the method judged
-(the search's, then the strong-lens retry's): ``fits`` (:func:`glradial.camera.doubt.doubt_features`
+(the search's, then the strong-lens retry's): ``fits`` (:func:`glradial.camera.calibrate.doubt_features`
 plus that fit's own keypoint RMS), so a doubt rule can be re-scored offline (``bench/doubt_rules.py``)
 without re-running calibrate; ``--rows`` summarises such files (e.g. of processes run on parts of
 the matches). Figures: ``docs/figures/calibrate_matches.json`` (bench/figures.py), written when all
@@ -121,7 +121,7 @@ class Recorder:
         self.module, self.judge, self.fits = cal, cal.judge, []
 
     def __enter__(self) -> "Recorder":
-        from glradial.camera.doubt import doubt_features
+        from glradial.camera.calibrate import doubt_features
 
         def recording(fit, points):
             est = self.judge(fit, points)

@@ -4,7 +4,7 @@ choose its thresholds leave one match out (validation: thresholds only, no model
 Usage: ``python bench/doubt_rules.py ROWS.json [--max-wrong 0.01] [--ship]``
 
 Each row holds every fit calibrate judged on that frame (the search's, then the strong-lens retry's
-where the first was declined), with its doubt features (:func:`glradial.camera.doubt.doubt_features`)
+where the first was declined), with its doubt features (:func:`glradial.camera.calibrate.doubt_features`)
 and its own keypoint RMS. A rule (the shipped ``camera_trust.json`` with some thresholds replaced) is
 replayed as calibrate applies it (:func:`replay`): the search's fit is answered when the rule passes
 it; otherwise the retry's, when one was recorded and passes. Caveat: a retry is recorded only where the
@@ -104,7 +104,7 @@ def choose_bound(rows: list[dict], t: dict) -> dict:
 
 
 def _answered_fit(row: dict, t: dict) -> dict | None:
-    from glradial.camera.doubt import doubt_reason
+    from glradial.camera.calibrate import doubt_reason
 
     return next((f for f in row["fits"] if "support" in f and doubt_reason(f, t) == "ok"), None)
 

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from repo_scripts import load_script
 
-from glradial.camera.doubt import directions, doubt_reason
+from glradial.camera.calibrate import directions, doubt_reason
 from glradial.camera.estimate import camera_trust
 from glradial.camera.model import Camera
 from glradial.lens.lens import Lens
