@@ -42,7 +42,13 @@ AXIS_RANGE, MAX_ELLIPSES = (6.0, 800.0), 3
 #: out, the arc's other pieces join); kept when at least MIN_INLIER_SHARE of the group lies on the
 #: last one and its pixels lie on it with an RMS of at most MAX_TRIMMED_RMS px (pixels spread evenly
 #: over the +-TRIM_PX band would give 1.44 px; a painted line 2-3 px wide gives 0.6-0.9 px).
-TRIM_PX, FIT_ROUNDS, MIN_INLIER_SHARE, MAX_TRIMMED_RMS = 2.5, 5, 0.5, 1.1
+TRIM_PX, FIT_ROUNDS, MIN_INLIER_SHARE, MAX_TRIMMED_RMS = 2.5, 3, 0.5, 1.1
+#: The group's own first fit must pass within TRIM_PX of this share of its pixels (an arc whose
+#: pieces carry a player's limb or a line's end reaches 0.34-0.45 before the refits; pixels of no
+#: common ellipse stay far under).
+FIRST_SHARE = 0.25
+#: Each fit takes at most about this many of its pixels, evenly spread (every k-th).
+FIT_POINTS = 300
 #: The halfway line passes the ellipse's centre within this share of its smaller semi-axis.
 DIAMETER_OFFSET = 0.35
 #: Where the circle's centre may be seen between the far and the near crossing (share of the way).
@@ -77,8 +83,8 @@ def _conic(ellipse) -> np.ndarray:
 
 
 def _distances(conic: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Sampson distances (px) of ``points`` (N x 2) from the conic."""
-    x = np.column_stack([points, np.ones(len(points))])
+    """Sampson distances (px) of ``points`` (N x 2, or N x 3 homogeneous with w = 1) from the conic."""
+    x = points if points.shape[1] == 3 else np.column_stack([points, np.ones(len(points))])
     cx = x @ conic
     value = np.sum(cx * x, axis=1)
     grad = 2 * np.hypot(cx[:, 0], cx[:, 1])
@@ -104,16 +110,15 @@ def curved(points: np.ndarray, line: Line) -> bool:
     :data:`CURVE_MIN`, :data:`CURVE_SIGMAS` standard errors from zero."""
     if len(points) < 8:
         return False
-    s = (points - line.centre) @ np.array([-line.abc[1], line.abc[0]])
-    s = (s - s.mean()) / max(float(np.std(s)), 1e-9)
+    along = (points - line.centre) @ np.array([-line.abc[1], line.abc[0]])
+    scale = max(float(np.std(along)), 1e-9)
+    s = (along - along.mean()) / scale
+    a = np.stack([np.ones_like(s), s, s * s - 1.0])  # 3 x N: the quadratic's basis, centred
     r = points @ line.abc[:2] + line.abc[2]
-    a = np.column_stack([np.ones_like(s), s, s * s - 1.0])
-    coef, *_ = np.linalg.lstsq(a, r, rcond=None)
-    dof = max(len(r) - 3, 1)
-    sigma2 = float(np.sum((r - a @ coef) ** 2)) / dof
-    cov = sigma2 * np.linalg.inv(a.T @ a)
-    scale = max(float(np.std((points - line.centre) @ np.array([-line.abc[1], line.abc[0]]))), 1e-9) ** 2
-    c, sd = abs(coef[2]) / scale, np.sqrt(cov[2, 2]) / scale
+    normal = a @ a.T
+    coef = np.linalg.solve(normal, a @ r)
+    sigma2 = float(np.sum((r - coef @ a) ** 2)) / max(len(r) - 3, 1)
+    c, sd = abs(coef[2]) / scale**2, np.sqrt(sigma2 * np.linalg.inv(normal)[2, 2]) / scale**2
     return bool(c >= CURVE_MIN and c >= CURVE_SIGMAS * sd)
 
 
@@ -128,19 +133,25 @@ def _off_lines(points: np.ndarray, lines: list[Line]) -> np.ndarray:
     return points[keep]
 
 
-def _fit_ellipse(pts: np.ndarray, pool: np.ndarray) -> tuple[int, np.ndarray, tuple] | None:
+def _fit_ellipse(pts: np.ndarray, pool: np.ndarray, found: list[tuple]) -> tuple[int, np.ndarray, tuple] | None:
     """``(pixels on it, conic, cv2 ellipse)`` fitted to the pixels ``pts`` (N x 2), then refit to the
     pixels of ``pool`` (the group's and the other components') within :data:`TRIM_PX` of it until
     they stay the same (:data:`FIT_ROUNDS` at most), so an arc broken by players or a line is fitted
-    whole; ``None`` when its axes leave :data:`AXIS_RANGE`, under :data:`MIN_INLIER_SHARE` of ``pts``
-    stay on it or its pixels lie on it with an RMS above :data:`MAX_TRIMMED_RMS`."""
+    whole (``pool``: N x 3, homogeneous); ``None`` when its axes leave :data:`AXIS_RANGE`, under
+    :data:`MIN_INLIER_SHARE` of ``pts`` stay on it, its pixels lie on it with an RMS above
+    :data:`MAX_TRIMMED_RMS`, or a refit meets one of the ellipses ``found`` from other groups."""
     inliers, count = pts, -1
     for _ in range(FIT_ROUNDS):
-        ellipse = cv2.fitEllipse(inliers.astype(np.float32))
+        step = max(1, len(inliers) // FIT_POINTS)  # evenly thinned: the cost, not the fit, grows with more
+        ellipse = cv2.fitEllipse(inliers[::step, :2].astype(np.float32))
         axes = np.array(ellipse[1]) / 2
         if not (np.all(np.isfinite(axes)) and AXIS_RANGE[0] <= axes.min() and axes.max() <= AXIS_RANGE[1]):
             return None
+        if count >= 0 and any(_same_ellipse(ellipse, other[2]) for other in found):
+            return None  # the same arc reached from another group
         conic = _conic(ellipse)
+        if count < 0 and np.mean(np.abs(_distances(conic, pts)) <= TRIM_PX) < FIRST_SHARE:
+            return None  # the group's pixels are not one arc (a player, a board, two markings)
         inliers = pool[np.abs(_distances(conic, pool)) <= TRIM_PX]
         if len(inliers) < 2 * MIN_COMPONENT_PIXELS or len(inliers) == count:
             break
@@ -165,14 +176,18 @@ def ellipses(points: np.ndarray, lines: list[Line], shape: tuple[int, int]) -> l
     label_of = labels[iy, ix]
     pieces = {k: rest[label_of == k] for k in big[:MAX_COMPONENTS]}
     groups = [[k] for k in pieces] + [[a, b] for i, a in enumerate(pieces) for b in list(pieces)[i + 1:]]
-    found = []
+    pool = np.column_stack([rest, np.ones(len(rest))])
+    found: list[tuple] = []
+    covered: list[set] = []  # the components on each ellipse found: a group of them gives it again
     for group in groups:
         pts = np.concatenate([pieces[k] for k in group])
-        if len(pts) < 2 * MIN_COMPONENT_PIXELS:
+        if len(pts) < 2 * MIN_COMPONENT_PIXELS or any(set(group) <= c for c in covered):
             continue
-        fitted = _fit_ellipse(pts, rest)
+        fitted = _fit_ellipse(pts, pool, found)
         if fitted is not None:
             found.append(fitted)
+            covered.append({k for k, p in pieces.items()
+                            if np.mean(np.abs(_distances(fitted[1], p)) <= TRIM_PX) >= MIN_INLIER_SHARE})
     kept: list[tuple[np.ndarray, tuple]] = []
     for _, conic, ellipse in sorted(found, key=lambda f: -f[0]):
         if len(kept) < MAX_ELLIPSES and not any(_same_ellipse(ellipse, other) for _, other in kept):
