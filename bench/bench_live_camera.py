@@ -45,10 +45,13 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 from bench_live import _free_port, _live, _report  # noqa: E402
-from calibrate_bundesliga import DATA, _floor  # noqa: E402
+from calibrate_matches import DATA as SHARED_DATA  # noqa: E402
+from calibrate_matches import homography_floor as _floor  # noqa: E402
 from figures import write_figure  # noqa: E402
 
 from glradial.commands import parse_size  # noqa: E402
+
+DATA = SHARED_DATA / "broadcast_bundesliga"
 
 SPEC = ROOT.parent / "shared" / "specs" / "opentrackio" / "schema.json"
 #: the labels' frame size (px)

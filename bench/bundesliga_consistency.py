@@ -1,12 +1,14 @@
-"""Self-consistent error of net / lines / auto on the Bundesliga broadcast frames (validation only).
+"""Self-consistent error of net / lines / auto on the five shared matches' broadcast frames (validation only).
 
-Usage: ``python bench/bundesliga_consistency.py [--frames DIR] [--cache /tmp/bundesliga.pkl] [--checkout PATH]
-[--no-pitch] [--dump FILE]``
+Usage: ``python bench/bundesliga_consistency.py [--frames DIR ...] [--matches 2e57b9,...] [--limit N]
+[--cache /tmp/matches_consistency.pkl] [--checkout PATH] [--no-pitch] [--dump FILE]``
 
-Each frame of ``DIR`` (../shared/data/broadcast_bundesliga: 640 x 640 files of 16:9 frames) is
+Each frame of the ``DIR`` folders (default ../shared/data/broadcast_bundesliga and broadcast_more: 640 x
+640 files of 16:9 frames; grouped by match, ``bench/calibrate_matches.py``'s ``match_of``; ``--limit N``:
+N frames per match, evenly spread) is
 resized to 1280 x 720 (bicubic) and distorted with 2 paper and 2 extended lenses
 (:func:`glradial.evaluation.real_eval.paper_lenses` / ``extended_lenses``, seeds 7000 + i and
-8000 + i) by ``glradial.distort`` at ``fit="crop"``. The frames' own lens is unknown, so a reading of
+8000 + i, i the frame's index in its folder) by ``glradial.distort`` at ``fit="crop"``. The frames' own lens is unknown, so a reading of
 a distorted frame is scored against the applied lens composed with the same method's reading of the
 unmodified frame: the exact composite radial map (own lens, then the crop scale, then the applied
 lens; ``glradial.evaluation.real_eval.self_consistent_map``), with no refit to ``(k1, k2)`` (a
@@ -28,7 +30,7 @@ it fits (``auto`` elsewhere), with the bound of ``lens_bound_px``. ``--no-pitch`
 ``glradial.estimate`` itself calls (a checkout with ``pitch_lens`` but without it: use ``--no-pitch``). ``--dump FILE`` writes one JSON line per scored sample
 and method (clip, frame, applied lens, reading, error, stated bound, source, the camera fit's marking RMS, its
 reason, markings, support, field of view and lens; the
-unmodified frame's readings too, with ``truth`` null).
+unmodified frame's readings too, with ``truth`` null). Figures: ``docs/figures/lens_consistency_matches.json``.
 """
 
 from __future__ import annotations
@@ -43,23 +45,44 @@ import numpy as np
 from figures import printed_report, write_figure
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))
+DATA = ROOT.parent / "shared" / "data"
 
 
-def _build(folder: Path, cache: Path) -> list[dict]:
+def _build(folders: list[Path], cache: Path, matches: list[str], limit: int) -> list[dict]:
+    from calibrate_matches import match_of
+
     from glradial.evaluation.real_eval import Evaluator, extended_lenses, paper_lenses, read_broadcast
     from glradial.remapping.remap import distort
 
     evaluator = Evaluator(threads=1)
     out = []
-    for i, path in enumerate(sorted(folder.glob("*.jpg"))):
+    for path, i in _frames(folders, matches, limit):
         image = read_broadcast(path)
         lenses = paper_lenses(2, 7000 + i) + extended_lenses(2, 8000 + i)
         items = [(None, image)] + [((k1, k2), distort(image, k1, k2, fit="crop", backend="cpu")) for k1, k2 in lenses]
         for truth, frame in items:
             k = evaluator.estimator.run(evaluator.estimator.preprocess(frame)[None])[0]
-            out.append({"clip": path.name.split("_")[0], "frame": path.name, "truth": truth, "image": frame,
+            out.append({"clip": match_of(path.stem), "frame": path.name, "truth": truth, "image": frame,
                         "net": (float(k[0]), float(k[1]))})
     cache.write_bytes(pickle.dumps(out))
+    return out
+
+
+def _frames(folders: list[Path], matches: list[str], limit: int) -> list[tuple[Path, int]]:
+    """``(file, its index in its folder: the lenses' seed)`` of each frame of ``matches``; with ``limit``,
+    that many per match, evenly spread over the match's sorted frames."""
+    from calibrate_matches import match_of
+
+    by_match: dict[str, list[tuple[Path, int]]] = {}
+    for folder in folders:
+        for i, path in enumerate(sorted(folder.glob("*.jpg"))):
+            if match_of(path.stem) in matches:
+                by_match.setdefault(match_of(path.stem), []).append((path, i))
+    out = []
+    for items in by_match.values():
+        keep = np.unique(np.linspace(0, len(items) - 1, limit).round().astype(int)) if limit else range(len(items))
+        out += [items[k] for k in keep]
     return out
 
 
@@ -123,8 +146,10 @@ def _print(errors: dict) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--frames", default=str(ROOT.parent / "shared/data/broadcast_bundesliga"))
-    parser.add_argument("--cache", default="/tmp/bundesliga.pkl")
+    parser.add_argument("--frames", nargs="+", default=[str(DATA / "broadcast_bundesliga"), str(DATA / "broadcast_more")])
+    parser.add_argument("--matches", default="2e57b9,42ba34,08fd33,121364,video_1", help="comma-separated match prefixes")
+    parser.add_argument("--limit", type=int, default=0, help="N frames per match, evenly spread (0: all)")
+    parser.add_argument("--cache", default="/tmp/matches_consistency.pkl")
     parser.add_argument("--checkout", default=str(ROOT))
     parser.add_argument("--no-pitch", action="store_true", help="leave out auto+pitch (the camera fit's lens)")
     parser.add_argument("--dump", help="write per-sample results (JSON lines) here")
@@ -141,7 +166,9 @@ def main() -> None:
     estimator = NetLinesEstimator(threads=1)
 
     cache = Path(args.cache)
-    samples = pickle.loads(cache.read_bytes()) if cache.is_file() else _build(Path(args.frames), cache)
+    matches = [m.strip() for m in args.matches.split(",") if m.strip()]
+    samples = (pickle.loads(cache.read_bytes()) if cache.is_file()
+               else _build([Path(f) for f in args.frames], cache, matches, args.limit))
     own: dict = {}
     errors: dict = {}
     dump = open(args.dump, "w") if args.dump else None
@@ -172,7 +199,10 @@ def main() -> None:
         dump.close()
     with printed_report() as lines:
         _print(errors)
-    write_figure("bundesliga_consistency" + ("" if pitch else "_no_pitch"), {"report": lines})
+    write_figure("lens_consistency_matches", {"frames_per_match": args.limit or "all", "self_consistent_px": {
+        f"{group} / {method}": {"n": len(v), "median": float(np.median([r[0] for r in v])),
+                                "p90": float(np.percentile([r[0] for r in v], 90))} for (group, method), v in sorted(errors.items())},
+        "report": lines})
 
 
 if __name__ == "__main__":

@@ -8,8 +8,8 @@ lenses on the Lopez-Antequera manifold, k1 in [-0.35, 0.05]) rendered by
 :func:`glradial.camera.views.render_view` at 1280 x 720 (grass with mowing stripes and grain, players,
 a stand band, the lens applied with exact maps). Test views use seeds ``S, S+1, ...`` (default 10000);
 ``--calibrate`` uses seeds 0.. instead and writes the procedural quantile (``procedural_quantile``) to
-``glradial/data/camera_trust.json``; the shipped bound uses ``quantile``, calibrated on a real clip
-(``bench/calibrate_bundesliga.py --calibrate-clip``), the larger.
+``glradial/data/camera_trust.json``; the shipped bound uses ``quantile``, calibrated on the real matches
+(``bench/doubt_rules.py --ship``), the larger.
 
 Per view: the keypoint reprojection RMS (the template's 32 keypoints that fall in the frame, px at
 1280 x 720), the marking error (RMS over the template sampled every metre, in-frame; what the bound

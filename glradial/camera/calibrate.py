@@ -108,21 +108,73 @@ def _check_first_guess(first_guess: object) -> list[np.ndarray]:
     return hs
 
 
-def _reason(fit: Fit, t: dict) -> str:
-    """Why ``fit`` is doubtful under the thresholds ``t`` (``"ok"`` when it is not)."""
-    if fit.inliers < t["min_points"] or len(fit.elements) < t["min_elements"]:
-        return "too_few_markings"
-    if fit.spread < t["min_spread"]:
-        return "weak_geometry"  # one family of parallel image lines: nothing fixes the metric
-    if not math.isfinite(fit.log_focal_sd) or fit.log_focal_sd > t["max_log_focal_sd"]:
-        return "weak_geometry"
-    if not t["min_height_m"] <= fit.camera.position[2] <= HEIGHT_RANGE[1] or fit.camera.hfov_deg > t["max_hfov_deg"]:
+# The doubt evidence and rule: the one place calibrate's judgement and the benches that choose its
+# thresholds (bench/calibrate_matches.py, bench/doubt_rules.py) read them from.
+
+
+def directions(elements: tuple[str, ...], pitch: PitchTemplate | None = None) -> int:
+    """How many independent marking directions the elements labelled ``elements`` give: lines along the
+    pitch (x), lines across it (y), curves (the circle and the arcs); 0 to 3."""
+    kinds = {}
+    for e in (pitch or PitchTemplate()).elements():
+        if e.kind == "arc":
+            kinds[e.label] = "curve"
+        else:
+            kinds[e.label] = "along" if abs(e.b[0] - e.a[0]) >= abs(e.b[1] - e.a[1]) else "across"
+    return len({kinds[label] for label in elements if label in kinds})
+
+
+def doubt_features(fit: Fit) -> dict[str, float]:
+    """The doubt evidence of ``fit`` (JSON-ready): ``rms_fit_px`` (inliers' RMS, px at 1280),
+    ``inliers``, ``share`` (inliers / evidence points), ``pitch_share`` (the same among
+    the points the camera puts on the pitch), ``support`` (share of the drawn markings the
+    frame shows), ``spread`` (direction spread of the inliers, 0 to 1), ``drawn`` / ``missing`` (markings drawn in the
+    frame / those the frame barely shows: :func:`glradial.camera.refine.element_support`), ``elements`` (markings with
+    enough inliers), ``directions`` (:func:`directions`), ``log_focal_sd``, ``height_m`` (camera above
+    the pitch), ``hfov_deg``, ``tilt_deg``, ``roll_deg``, ``k1``, ``k2``."""
+    cam = fit.camera
+    _, tilt, roll = cam.pan_tilt_roll
+    return {"rms_fit_px": fit.rms_px, "inliers": fit.inliers, "share": fit.share, "pitch_share": fit.pitch_share, "support": fit.support,
+            "spread": fit.spread, "drawn": fit.drawn, "missing": fit.missing, "elements": len(fit.elements), "directions": directions(fit.elements),
+            "log_focal_sd": fit.log_focal_sd if math.isfinite(fit.log_focal_sd) else 1e3,
+            "height_m": float(cam.position[2]), "hfov_deg": cam.hfov_deg, "tilt_deg": tilt, "roll_deg": roll,
+            "k1": cam.lens.k1, "k2": cam.lens.k2}
+
+
+def doubt_checks(features: dict, t: dict) -> list[tuple[str, str]]:
+    """The doubt rule, each check once: ``(reason, what failed in numbers)`` for every check the fit with
+    the evidence ``features`` (:func:`doubt_features`) fails under the thresholds ``t``
+    (``glradial/data/camera_trust.json``: how each was chosen is said there), in the order the reasons
+    take precedence; ``[]`` when it is sure. Pixels at 1280 wide."""
+    f = features
+    checks = (
+        ("too_few_markings", f["inliers"] < t["min_points"], f"inliers {f['inliers']} < {t['min_points']}"),
+        ("too_few_markings", f["elements"] < t["min_elements"], f"markings {f['elements']} < {t['min_elements']}"),
+        ("weak_geometry", f["directions"] < t["min_directions"], f"directions {f['directions']} < {t['min_directions']}"),
+        # one family of parallel image lines, or nothing else fixes the focal length
+        ("weak_geometry", f["spread"] < t["min_spread"], f"direction spread {f['spread']:.3f} < {t['min_spread']}"),
+        ("weak_geometry", f["log_focal_sd"] > t["max_log_focal_sd"],
+         f"focal sd {f['log_focal_sd']:.3f} > {t['max_log_focal_sd']}"),
         # a camera on the grass, above any main-camera position the search starts from, or wider than a
         # broadcast lens: lines fitted, not a pitch
-        return "poor_fit"
-    if fit.support < t["min_support"] or fit.rms_px > t["max_rms_px"]:
-        return "poor_fit"
-    return "ok"
+        ("poor_fit", not t["min_height_m"] <= f["height_m"] <= HEIGHT_RANGE[1],
+         f"height {f['height_m']:.1f} m outside {t['min_height_m']}-{HEIGHT_RANGE[1]} m"),
+        ("poor_fit", f["hfov_deg"] > t["max_hfov_deg"], f"hfov {f['hfov_deg']:.1f} deg > {t['max_hfov_deg']} deg"),
+        # markings drawn where the frame shows none, or not on the lines it shows
+        ("poor_fit", f["support"] < t["min_support"], f"support {f['support']:.2f} < {t['min_support']}"),
+        ("poor_fit", f["rms_fit_px"] > t["max_rms_px"], f"rms {f['rms_fit_px']:.2f} px > {t['max_rms_px']} px"),
+        # whole markings missing, or most of the frame's line evidence left unexplained
+        ("poor_fit", f["missing"] > t["max_missing"], f"missing markings {f['missing']} > {t['max_missing']:g}"),
+        ("poor_fit", f["share"] < t["min_share"], f"explained share {f['share']:.2f} < {t['min_share']}"),
+    )
+    return [(reason, text) for reason, failed, text in checks if failed]
+
+
+def doubt_reason(features: dict, t: dict) -> str:
+    """Why a fit with the evidence ``features`` is doubtful (the first of :func:`doubt_checks`);
+    ``"ok"`` when it is not."""
+    failed = doubt_checks(features, t)
+    return failed[0][0] if failed else "ok"
 
 
 def judge_fit(fit: Fit | None, points: int) -> CameraEstimate:
@@ -132,9 +184,10 @@ def judge_fit(fit: Fit | None, points: int) -> CameraEstimate:
         reason = "no_markings" if points < t["min_points"] else "poor_fit"
         return CameraEstimate(None, NO_CAMERA_PX, True, reason)
     bound = t["quantile"] * max(fit.rms_px, t["floor_px"])
-    reason = _reason(fit, t)
-    return CameraEstimate(fit.camera, bound, reason != "ok", reason, fit.elements, fit.rms_px, fit.inliers, fit.support,
-                          fit.log_focal_sd)
+    failed = doubt_checks(doubt_features(fit), t)
+    reason = failed[0][0] if failed else "ok"
+    return CameraEstimate(fit.camera, bound, bool(failed), reason, fit.elements, fit.rms_px, fit.inliers, fit.support,
+                          fit.log_focal_sd, detail="; ".join(text for _, text in failed))
 
 
 def _score(fit: Fit) -> float:  # on the coarse stage's thinned points and on the fine stage's, alike
@@ -208,8 +261,9 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
 
 
 def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -> Fit | None:
-    """The best fit from ``starts``: a coarse stage (lens held at each start's) from every start, the
-    :data:`FINE_STARTS` best of them refined with the lens free."""
+    """The best fit from ``starts``: a coarse stage (lens held at each start's) from every start, then
+    the :data:`FINE_STARTS` best of them refined with the lens free, best first, stopping at the first
+    fine fit the doubt rule passes (the others are only refined while none does)."""
     fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
     coarse = []
     for cam in starts:
@@ -220,10 +274,14 @@ def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -
             if fit.support >= EARLY_SUPPORT and fit.share >= EARLY_SHARE:
                 coarse = [fit]  # a start that already explains the frame: no need to try the others
                 break
-    coarse = sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]
-    fine = [refine(f.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
-                   support_xy=lines.xy) for f in coarse]
-    fits = [f for f in fine if f is not None]
+    fits = []
+    for start in sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]:
+        fit = refine(start.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
+                     support_xy=lines.xy)
+        if fit is not None:
+            if doubt_reason(doubt_features(fit), camera_trust()) == "ok":
+                return fit
+            fits.append(fit)
     return max(fits, key=_score) if fits else None
 
 

@@ -24,14 +24,31 @@ from .white_lines import Line
 
 #: The centre circle is looked for within this distance (m) of the centre spot in the template.
 CIRCLE_SEARCH_M = 20.0
-#: Mask pixels this close (px) to a straight line are left out of the ellipse search.
+#: Mask pixels this close (px) to a straight line are left out of the ellipse search...
 LINE_BAND = 3.0
+#: ...unless the line is a piece of a curve: its pixels bend, along it, with a curvature (the
+#: quadratic term of their offset from it, 1/px) of at least CURVE_MIN, CURVE_SIGMAS standard errors
+#: from zero. A flattened centre circle's sides are cut into Hough lines; their curvature at a
+#: 640-px work copy is 1e-3 or more (b / a² of an ellipse of semi-axes a, b ≤ 320 px), a touchline
+#: bent by a broadcast lens under 1e-4 (a few px of sagitta over the frame).
+CURVE_MIN, CURVE_SIGMAS = 3e-4, 3.0
 #: Components (8-connected) of the remaining pixels tried, largest first, alone and in pairs, and the
 #: fewest pixels one needs.
 MAX_COMPONENTS, MIN_COMPONENT_PIXELS = 6, 25
-#: An ellipse is kept when the RMS distance (px) of its pixels is at most MAX_ELLIPSE_RMS, its
-#: semi-axes are within AXIS_RANGE (px), and it keeps at most MAX_ELLIPSES of the best.
-MAX_ELLIPSE_RMS, AXIS_RANGE, MAX_ELLIPSES = 1.5, (6.0, 800.0), 3
+#: An ellipse's semi-axes are within AXIS_RANGE (px); at most MAX_ELLIPSES of the best are kept.
+AXIS_RANGE, MAX_ELLIPSES = (6.0, 800.0), 3
+#: The fit is refit (at most FIT_ROUNDS times) to the pixels within TRIM_PX of the last ellipse,
+#: from the group's components and the others (a player's limb or a line touching the circle drops
+#: out, the arc's other pieces join); kept when at least MIN_INLIER_SHARE of the group lies on the
+#: last one and its pixels lie on it with an RMS of at most MAX_TRIMMED_RMS px (pixels spread evenly
+#: over the +-TRIM_PX band would give 1.44 px; a painted line 2-3 px wide gives 0.6-0.9 px).
+TRIM_PX, FIT_ROUNDS, MIN_INLIER_SHARE, MAX_TRIMMED_RMS = 2.5, 3, 0.5, 1.1
+#: The group's own first fit must pass within TRIM_PX of this share of its pixels (an arc whose
+#: pieces carry a player's limb or a line's end reaches 0.34-0.45 before the refits; pixels of no
+#: common ellipse stay far under).
+FIRST_SHARE = 0.25
+#: Each fit takes at most about this many of its pixels, evenly spread (every k-th).
+FIT_POINTS = 300
 #: The halfway line passes the ellipse's centre within this share of its smaller semi-axis.
 DIAMETER_OFFSET = 0.35
 #: Where the circle's centre may be seen between the far and the near crossing (share of the way).
@@ -65,30 +82,89 @@ def _conic(ellipse) -> np.ndarray:
     return c
 
 
-def _rms(conic: np.ndarray, points: np.ndarray) -> float:
-    """RMS Sampson distance (px) of ``points`` (N x 2) from the conic."""
-    x = np.column_stack([points, np.ones(len(points))])
+def _distances(conic: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Sampson distances (px) of ``points`` (N x 2, or N x 3 homogeneous with w = 1) from the conic."""
+    x = points if points.shape[1] == 3 else np.column_stack([points, np.ones(len(points))])
     cx = x @ conic
     value = np.sum(cx * x, axis=1)
     grad = 2 * np.hypot(cx[:, 0], cx[:, 1])
-    return float(np.sqrt(np.mean((value / np.maximum(grad, 1e-12)) ** 2)))
+    return value / np.maximum(grad, 1e-12)
+
+
+def _rms(conic: np.ndarray, points: np.ndarray) -> float:
+    """RMS Sampson distance (px) of ``points`` (N x 2) from the conic."""
+    return float(np.sqrt(np.mean(_distances(conic, points) ** 2)))
+
+
+def _near(points: np.ndarray, line: Line) -> np.ndarray:
+    """Which ``points`` lie within :data:`LINE_BAND` of ``line`` along its extent."""
+    d = np.array([-line.abc[1], line.abc[0]])
+    lo, hi = np.sort(line.ends @ d)
+    along = points @ d
+    return (np.abs(points @ line.abc[:2] + line.abc[2]) <= LINE_BAND) & (along >= lo - 2) & (along <= hi + 2)
+
+
+def curved(points: np.ndarray, line: Line) -> bool:
+    """Whether the pixels ``points`` of ``line`` bend along it: the least-squares quadratic of their
+    offset from the line against their position along it has a curvature (1/px) of at least
+    :data:`CURVE_MIN`, :data:`CURVE_SIGMAS` standard errors from zero."""
+    if len(points) < 8:
+        return False
+    along = (points - line.centre) @ np.array([-line.abc[1], line.abc[0]])
+    scale = max(float(np.std(along)), 1e-9)
+    s = (along - along.mean()) / scale
+    a = np.stack([np.ones_like(s), s, s * s - 1.0])  # 3 x N: the quadratic's basis, centred
+    r = points @ line.abc[:2] + line.abc[2]
+    normal = a @ a.T
+    coef = np.linalg.solve(normal, a @ r)
+    sigma2 = float(np.sum((r - coef @ a) ** 2)) / max(len(r) - 3, 1)
+    c, sd = abs(coef[2]) / scale**2, np.sqrt(sigma2 * np.linalg.inv(normal)[2, 2]) / scale**2
+    return bool(c >= CURVE_MIN and c >= CURVE_SIGMAS * sd)
 
 
 def _off_lines(points: np.ndarray, lines: list[Line]) -> np.ndarray:
-    """The ``points`` farther than :data:`LINE_BAND` from every line's extent."""
+    """The ``points`` farther than :data:`LINE_BAND` from every straight line's extent (the pixels of
+    lines that are pieces of a curve, :func:`curved`, stay)."""
     keep = np.ones(len(points), bool)
     for line in lines:
-        d = np.array([-line.abc[1], line.abc[0]])
-        lo, hi = np.sort(line.ends @ d)
-        along = points @ d
-        keep &= ~((np.abs(points @ line.abc[:2] + line.abc[2]) <= LINE_BAND) & (along >= lo - 2) & (along <= hi + 2))
+        near = _near(points, line)
+        if not curved(points[near], line):
+            keep &= ~near
     return points[keep]
+
+
+def _fit_ellipse(pts: np.ndarray, pool: np.ndarray, found: list[tuple]) -> tuple[int, np.ndarray, tuple] | None:
+    """``(pixels on it, conic, cv2 ellipse)`` fitted to the pixels ``pts`` (N x 2), then refit to the
+    pixels of ``pool`` (the group's and the other components') within :data:`TRIM_PX` of it until
+    they stay the same (:data:`FIT_ROUNDS` at most), so an arc broken by players or a line is fitted
+    whole (``pool``: N x 3, homogeneous); ``None`` when its axes leave :data:`AXIS_RANGE`, under
+    :data:`MIN_INLIER_SHARE` of ``pts`` stay on it, its pixels lie on it with an RMS above
+    :data:`MAX_TRIMMED_RMS`, or a refit meets one of the ellipses ``found`` from other groups."""
+    inliers, count = pts, -1
+    for _ in range(FIT_ROUNDS):
+        step = max(1, len(inliers) // FIT_POINTS)  # evenly thinned: the cost, not the fit, grows with more
+        ellipse = cv2.fitEllipse(inliers[::step, :2].astype(np.float32))
+        axes = np.array(ellipse[1]) / 2
+        if not (np.all(np.isfinite(axes)) and AXIS_RANGE[0] <= axes.min() and axes.max() <= AXIS_RANGE[1]):
+            return None
+        if count >= 0 and any(_same_ellipse(ellipse, other[2]) for other in found):
+            return None  # the same arc reached from another group
+        conic = _conic(ellipse)
+        if count < 0 and np.mean(np.abs(_distances(conic, pts)) <= TRIM_PX) < FIRST_SHARE:
+            return None  # the group's pixels are not one arc (a player, a board, two markings)
+        inliers = pool[np.abs(_distances(conic, pool)) <= TRIM_PX]
+        if len(inliers) < 2 * MIN_COMPONENT_PIXELS or len(inliers) == count:
+            break
+        count = len(inliers)
+    if len(inliers) < 2 * MIN_COMPONENT_PIXELS or np.mean(np.abs(_distances(conic, pts)) <= TRIM_PX) < MIN_INLIER_SHARE:
+        return None
+    return (len(inliers), conic, ellipse) if _rms(conic, inliers) <= MAX_TRIMMED_RMS else None
 
 
 def ellipses(points: np.ndarray, lines: list[Line], shape: tuple[int, int]) -> list[tuple[np.ndarray, tuple]]:
     """Ellipses among the mask pixels ``points`` (N x 2, px of a work copy of ``shape`` (H, W)) not
-    on the straight ``lines``: ``(conic 3 x 3, cv2 ellipse)`` of the best fits to one or two of its
-    largest components, most pixels first."""
+    on the straight ``lines`` (:func:`_off_lines`): ``(conic 3 x 3, cv2 ellipse)`` of the fits to one or
+    two of its largest components (:func:`_fit_ellipse`), distinct, most pixels on them first."""
     rest = _off_lines(points, lines)
     if len(rest) < MIN_COMPONENT_PIXELS:
         return []
@@ -100,20 +176,30 @@ def ellipses(points: np.ndarray, lines: list[Line], shape: tuple[int, int]) -> l
     label_of = labels[iy, ix]
     pieces = {k: rest[label_of == k] for k in big[:MAX_COMPONENTS]}
     groups = [[k] for k in pieces] + [[a, b] for i, a in enumerate(pieces) for b in list(pieces)[i + 1:]]
-    found = []
+    pool = np.column_stack([rest, np.ones(len(rest))])
+    found: list[tuple] = []
+    covered: list[set] = []  # the components on each ellipse found: a group of them gives it again
     for group in groups:
         pts = np.concatenate([pieces[k] for k in group])
-        if len(pts) < 2 * MIN_COMPONENT_PIXELS:
+        if len(pts) < 2 * MIN_COMPONENT_PIXELS or any(set(group) <= c for c in covered):
             continue
-        ellipse = cv2.fitEllipse(pts.astype(np.float32))
-        axes = np.array(ellipse[1]) / 2
-        if not (np.all(np.isfinite(axes)) and AXIS_RANGE[0] <= axes.min() and axes.max() <= AXIS_RANGE[1]):
-            continue
-        conic = _conic(ellipse)
-        if _rms(conic, pts) <= MAX_ELLIPSE_RMS:
-            found.append((len(pts), conic, ellipse))
-    found.sort(key=lambda f: -f[0])
-    return [(conic, ellipse) for _, conic, ellipse in found[:MAX_ELLIPSES]]
+        fitted = _fit_ellipse(pts, pool, found)
+        if fitted is not None:
+            found.append(fitted)
+            covered.append({k for k, p in pieces.items()
+                            if np.mean(np.abs(_distances(fitted[1], p)) <= TRIM_PX) >= MIN_INLIER_SHARE})
+    kept: list[tuple[np.ndarray, tuple]] = []
+    for _, conic, ellipse in sorted(found, key=lambda f: -f[0]):
+        if len(kept) < MAX_ELLIPSES and not any(_same_ellipse(ellipse, other) for _, other in kept):
+            kept.append((conic, ellipse))
+    return kept
+
+
+def _same_ellipse(a: tuple, b: tuple) -> bool:
+    """Whether two ``cv2`` ellipses have centres and axes within :data:`TRIM_PX` of each other (the
+    same pixels fitted from two groups)."""
+    return bool(np.hypot(a[0][0] - b[0][0], a[0][1] - b[0][1]) <= TRIM_PX
+                and np.all(np.abs(np.sort(a[1]) - np.sort(b[1])) <= 2 * TRIM_PX))
 
 
 def _meet(conic: np.ndarray, lines: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -3,11 +3,10 @@
 Convention (as :class:`glradial.LensEstimate`): ``uncertainty_px`` is a 90 % bound on the RMS
 reprojection error of the pitch markings in the frame (px of a 1280-wide frame): split-conformal, the
 fit's own residual RMS (at least ``floor_px``) times a quantile (``glradial/data/camera_trust.json``).
-The quantile is calibrated on the real Bundesliga clip 2e57b9 against its hand-labelled keypoints
-(``bench/calibrate_bundesliga.py --calibrate-clip 2e57b9``) and checked on the other clip, 42ba34: on
-procedural views the same calibration gives a quantile of about 1.2, which covers none of the answered
-Bundesliga frames (real lines are wider, blurred, and the pitch is not exactly nominal), so the real clip sets it;
-against labels with ~3 px of click noise it is conservative for the true error.
+The quantile and the floor are chosen on the five shared real matches' hand-labelled keypoints
+(``bench/doubt_rules.py``, leave one match out: docs/CAMERA.md, "Across matches"); on procedural views
+the same calibration gives a quantile of about 1.2 (real lines are wider, blurred, the pitch is not
+exactly nominal, and the labels carry ~1-3 px of click noise), so the real matches set it.
 ``doubtful`` and ``reason`` say whether to use it (one of :data:`REASONS`; ``"ok"`` exactly when not
 doubtful). ``markings``: labels of the template elements the fit used
 (:meth:`glradial.pitch.PitchTemplate.elements`); ``rms_px`` the fit's RMS distance of the white-line
@@ -73,6 +72,9 @@ class CameraEstimate:
         doubtful: True when the camera should not be used as if sure.
         reason: one of :data:`REASONS`, ``"ok"`` exactly when not doubtful.
         markings, rms_px, inliers, support, focal_sd: the fit's evidence (module docstring).
+        carried: frames since the last sure measurement (0: measured on this frame).
+        detail: the doubt rule's failed checks in numbers
+            (:func:`glradial.camera.calibrate.doubt_checks`; ``""`` when sure).
 
     Raises:
         ValueError: an unknown ``reason``, one not matching ``doubtful``, a sure estimate without
@@ -99,6 +101,7 @@ class CameraEstimate:
     support: float = 0.0
     focal_sd: float = math.inf
     carried: int = 0
+    detail: str = ""
 
     def __post_init__(self) -> None:
         if self.camera is not None and degenerate(self.camera):  # no impossible numbers leave glradial
@@ -138,24 +141,16 @@ class CameraEstimate:
 
     @property
     def why(self) -> str:
-        """The doubt in numbers: each of the shipped thresholds (``camera_trust.json``) the estimate's
-        own figures fail, e.g. ``"support 0.73 < 0.83; rms 3.10 px > 2.50 px"`` (px at 1280); ``""``
-        when it is sure, the reason alone where no figure says more."""
+        """The doubt in numbers: each check of the doubt rule the fit fails (:attr:`detail`, thresholds
+        of ``camera_trust.json``), e.g. ``"support 0.70 < 0.725; rms 3.10 px > 2.5 px"`` (px at 1280);
+        ``""`` when it is sure, the reason alone where no figure says more."""
         if not self.doubtful:
             return ""
-        t = camera_trust()
         if self.camera is None:
             if self.inliers:
                 return "the fit is degenerate (no camera kept)"
             return "no camera found"
-        checks = ((self.inliers < t["min_points"], f"inliers {self.inliers} < {t['min_points']}"),
-                  (len(self.markings) < t["min_elements"], f"markings {len(self.markings)} < {t['min_elements']}"),
-                  (self.focal_sd > t["max_log_focal_sd"], f"focal sd {self.focal_sd:.3f} > {t['max_log_focal_sd']}"),
-                  (self.position[2] < t["min_height_m"], f"height {self.position[2]:.1f} m < {t['min_height_m']} m"),
-                  (self.hfov_deg > t["max_hfov_deg"], f"hfov {self.hfov_deg:.1f} deg > {t['max_hfov_deg']} deg"),
-                  (self.support < t["min_support"], f"support {self.support:.2f} < {t['min_support']}"),
-                  (self.rms_px > t["max_rms_px"], f"rms {self.rms_px:.2f} px > {t['max_rms_px']} px"))
-        failed = [text for bad, text in checks if bad]
+        failed = [self.detail] if self.detail else []
         if self.reason == "track_lost":
             failed.insert(0, f"carried {self.carried} frames, bound {self.uncertainty_px:.1f} px")
         return "; ".join(failed) or self.reason

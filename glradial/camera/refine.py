@@ -28,7 +28,7 @@ from scipy.spatial.transform import Rotation
 from ..lens.lens import Lens
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
-from .model import Camera, project_many
+from .model import Camera, lens_points_to_pitch, project_many
 from .white_lines import DETECT_WIDTH
 
 #: Residuals are in px of a frame this wide.
@@ -54,6 +54,13 @@ SUPPORT_PX = 4.0
 LINE_WIDTH_M, MIN_VISIBLE_PX = 0.12, 1.0
 #: An element counts as used when at least this many inliers lie on it.
 MIN_ELEMENT_POINTS = 12
+#: An element counts as drawn in the frame when at least this many of its samples (every
+#: :data:`SAMPLE_STEP` metres) project inside it where a line would be detectable, and as missing when
+#: less than :data:`MISSING_SHARE` of those have evidence (a marking drawn where the frame shows none).
+MIN_DRAWN_SAMPLES, MISSING_SHARE = 8, 0.2
+#: Evidence points that the camera puts on the pitch (within this margin, metres, of its outline) are
+#: the ones a right camera should explain (those off it: crowd, boards, graphics).
+PITCH_MARGIN_M = 2.0
 
 
 @dataclass(frozen=True)
@@ -98,7 +105,9 @@ class Fit:
     :data:`SUPPORT_PX`: low when the camera draws markings where the frame has none), ``spread`` (how
     far the inliers' line directions are from one direction: ``1 - |mean(exp(2i angle))|``, 0 when every
     inlier runs the same way, e.g. parallel lines only; about 1 for two perpendicular families or a
-    circle)."""
+    circle), ``drawn`` (markings drawn in the frame: :data:`MIN_DRAWN_SAMPLES`) and ``missing`` (those of
+    them the frame barely shows: :data:`MISSING_SHARE`), ``pitch_share`` (inliers among the evidence
+    points the camera puts on the pitch: :data:`PITCH_MARGIN_M`; 0 when none)."""
 
     camera: Camera
     rms_px: float
@@ -109,6 +118,9 @@ class Fit:
     cost: float
     support: float = 0.0
     spread: float = 1.0
+    drawn: int = 0
+    missing: int = 0
+    pitch_share: float = 0.0
 
 
 def _camera(x: np.ndarray, base: Camera) -> Camera:
@@ -260,8 +272,19 @@ def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result, s
         sd = math.inf
     rms = float(np.sqrt(np.mean(inl ** 2))) if len(inl) else math.inf
     spread = 1.0 - float(abs(np.mean(np.exp(2j * angle[use])))) if use.any() else 0.0
+    share, drawn, missing = element_support(camera, samples, support_xy)
+    on = _on_pitch(camera, xy, samples)
     return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1),
-               support(camera, samples, support_xy), spread)
+               share, spread, drawn, missing, float(use[on].mean()) if on.any() else 0.0)
+
+
+def _on_pitch(camera: Camera, xy: np.ndarray, samples: Samples) -> np.ndarray:
+    """Which evidence points ``xy`` ``camera`` puts on the pitch (the template's extent plus
+    :data:`PITCH_MARGIN_M`)."""
+    half = np.abs(samples.points).max(axis=0) + PITCH_MARGIN_M
+    m = lens_points_to_pitch(camera, xy)
+    with np.errstate(invalid="ignore"):
+        return (np.abs(m[:, 0]) <= half[0]) & (np.abs(m[:, 1]) <= half[1])
 
 
 def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
@@ -269,6 +292,13 @@ def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
     enough to detect (:data:`LINE_WIDTH_M` seen at least :data:`MIN_VISIBLE_PX` wide on the detection
     copy, the lens's squeeze included: :func:`lens_width_scale`), with an evidence point within
     :data:`SUPPORT_PX` (0 when none is inside)."""
+    return element_support(camera, samples, xy)[0]
+
+
+def element_support(camera: Camera, samples: Samples, xy: np.ndarray) -> tuple[float, int, int]:
+    """``(support, drawn, missing)``: :func:`support`, the number of markings drawn in the frame (at
+    least :data:`MIN_DRAWN_SAMPLES` detectable samples) and how many of those have evidence at less
+    than :data:`MISSING_SHARE` of their samples."""
     proj, ok = _segments(camera, samples)
     width, height = camera.size
     uv, depth = camera.undistorted_lens_points(samples.points)
@@ -279,9 +309,13 @@ def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
     ok &= (proj[:, 0] >= 0) & (proj[:, 0] <= width - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= height - 1)
     ok &= seen_px >= MIN_VISIBLE_PX
     if not ok.any() or len(xy) == 0:
-        return 0.0
+        return 0.0, 0, 0
     d, _ = cKDTree(xy).query(proj[ok])
-    return float(np.mean(d * REFERENCE_WIDTH / width < SUPPORT_PX))
+    near = d * REFERENCE_WIDTH / width < SUPPORT_PX
+    n = np.bincount(samples.element[ok], minlength=len(samples.labels))
+    hit = np.bincount(samples.element[ok], weights=near, minlength=len(samples.labels))
+    drawn = n >= MIN_DRAWN_SAMPLES
+    return float(np.mean(near)), int(drawn.sum()), int(np.sum(drawn & (hit < MISSING_SHARE * n)))
 
 
 def lens_width_scale(lens: Lens, uv: np.ndarray, tangent: np.ndarray) -> np.ndarray:

@@ -3,7 +3,8 @@
 * :func:`line_points` (:class:`LinePoints`), what the camera is **fitted** to: sub-pixel centres of
   bright thin ridges (the line detector's Hessian ridges,
   :func:`glradial.estimation.lines.bright_ridges`) on a copy at most :data:`DETECT_WIDTH` px wide,
-  brighter than their neighbourhood by :data:`WHITE_CONTRAST` grey levels, kept on the pitch region
+  brighter than their neighbourhood by :data:`WHITE_CONTRAST` grey levels (more on a grainy frame:
+  :data:`GRAIN_SIGMAS` times its :func:`grain`), kept on the pitch region
   (:func:`pitch_region`: the largest area of the pitch's own green, closed over its lines and
   players); letterboxes and a border margin are masked. Points are returned in pixels of the
   **distorted frame at its own resolution** (centres at integers), with their line direction
@@ -44,10 +45,21 @@ GRASS_OPEN = 5
 HUE_HALF_WINDOW = 7
 #: ...required only of frames where at least this share of the pixels is green.
 GREEN_FRAME_SHARE = 0.15
-#: A white line is this many grey levels (0..255) brighter than the mean of a :data:`BACKGROUND_BOX` px
-#: box around it (detection copy): mowing stripes and grain are not.
+#: A white line is this many grey levels (0..255) brighter than the mean of the grass in a
+#: :data:`BACKGROUND_BOX` px box around it (detection copy): mowing stripes and grain are not.
 WHITE_CONTRAST = 14.0
 BACKGROUND_BOX = 21
+#: The box's mean is taken over its pitch-green pixels when at least this share of it is green
+#: (:func:`grass_background`): the grass beside a line, not an ad board or a graphic over it.
+BACKGROUND_GRASS_SHARE = 0.2
+#: ...and at least GRAIN_SIGMAS times the frame's grain (:func:`grain`: the robust sigma of the
+#: detection copy minus its GRAIN_BLUR-sigma blur, where lines are looked for): a grainy, noisy or
+#: blocky frame raises the bar so its speckle is not taken for lines (a noise peak clears 4 sigmas with
+#: odds under 1e-4); broadcast frames have a grain of 1-3 grey levels, under WHITE_CONTRAST / 4.
+GRAIN_SIGMAS, GRAIN_BLUR = 4.0, 2.0
+#: The grain's medians are taken over every GRAIN_STRIDE-th pixel (tens of thousands remain: the
+#: robust sigma within a percent).
+GRAIN_STRIDE = 7
 
 
 #: Width (px) of the work copy. The first guess needs lines, not detail: 640 px keeps a 12 cm line at
@@ -100,18 +112,27 @@ class LinePoints:
         return LinePoints(self.xy[keep], self.angle[keep], self.size)
 
 
-def pitch_region(frame: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """uint8 mask (detection size) of the pitch: the largest connected region of pitch green, closed
-    over its lines and players (:data:`GRASS_CLOSE` px) and grown by :data:`GRASS_GROW` px so the
-    lines at its edge count. All ones when the frame is not green enough to tell (under
-    :data:`GREEN_FRAME_SHARE` of it pitch green)."""
+def grass_pixels(frame: np.ndarray, shape: tuple[int, int]) -> np.ndarray | None:
+    """uint8 mask (``shape``, the detection size) of the pixels of the pitch's own green (the frame
+    area-resized; :func:`glradial.estimation.trust.pitch_green`, :data:`HUE_HALF_WINDOW`); ``None``
+    for a gray frame or one not green enough to tell (under :data:`GREEN_FRAME_SHARE` pitch green)."""
     if frame.ndim != 3:
-        return np.ones(shape, np.uint8)
+        return None
     small = cv2.resize(frame, (shape[1], shape[0]), interpolation=cv2.INTER_AREA)
     band, own = pitch_green(small, 2 * HUE_HALF_WINDOW + 1)
     if float(np.count_nonzero(band)) / band.size < GREEN_FRAME_SHARE:
+        return None
+    return own.astype(np.uint8)  # this pitch's own green (stands and boards are other hues)
+
+
+def pitch_region(frame: np.ndarray, shape: tuple[int, int], green: np.ndarray | None = None) -> np.ndarray:
+    """uint8 mask (detection size) of the pitch: the largest connected region of pitch green
+    (``green``, or :func:`grass_pixels` of ``frame``), closed over its lines and players
+    (:data:`GRASS_CLOSE` px) and grown by :data:`GRASS_GROW` px so the lines at its edge count. All
+    ones when the frame is not green enough to tell."""
+    green = grass_pixels(frame, shape) if green is None else green
+    if green is None:
         return np.ones(shape, np.uint8)
-    green = own.astype(np.uint8)  # this pitch's own green (stands and boards are other hues)
     green = cv2.morphologyEx(green, cv2.MORPH_OPEN, np.ones((GRASS_OPEN, GRASS_OPEN), np.uint8))
     closed = cv2.morphologyEx(green, cv2.MORPH_CLOSE, np.ones((GRASS_CLOSE, GRASS_CLOSE), np.uint8))
     count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
@@ -120,6 +141,22 @@ def pitch_region(frame: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     largest = 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
     pitch = (labels == largest).astype(np.uint8)
     return cv2.dilate(pitch, np.ones((GRASS_GROW, GRASS_GROW), np.uint8))
+
+
+def grass_background(gray: np.ndarray, green: np.ndarray | None) -> np.ndarray:
+    """The grey level (float32, ``gray``'s shape) a line is measured against: the mean of the
+    :data:`BACKGROUND_BOX` px box around each pixel over its pitch-green pixels (``green``, uint8)
+    where that is darker than the whole box's mean, so a line at the foot of a bright ad board or
+    beside a white graphic is measured against the grass beside it, not the board (and a line in a
+    shadow, whose grass is not the sunlit pitch green, as before: against the whole box); the plain
+    box mean where under :data:`BACKGROUND_GRASS_SHARE` of the box is green (or no ``green``)."""
+    plain = cv2.blur(gray, (BACKGROUND_BOX, BACKGROUND_BOX))
+    if green is None:
+        return plain
+    weight = green.astype(np.float32)
+    share = cv2.blur(weight, (BACKGROUND_BOX, BACKGROUND_BOX))
+    on_grass = cv2.blur(gray * weight, (BACKGROUND_BOX, BACKGROUND_BOX)) / np.maximum(share, 1e-6)
+    return np.where(share >= BACKGROUND_GRASS_SHARE, np.minimum(on_grass, plain), plain)
 
 
 def line_points(frame: np.ndarray) -> LinePoints:
@@ -133,18 +170,31 @@ def line_points(frame: np.ndarray) -> LinePoints:
     gray = gray_copy(frame if frame.ndim == 2 else frame[..., :3], DETECT_WIDTH)
     height, width = gray.shape
     x0, y0, x1, y1 = content_box(gray)
-    grass = pitch_region(frame[..., :3] if frame.ndim == 3 else frame, (height, width))
+    green = grass_pixels(frame[..., :3] if frame.ndim == 3 else frame, (height, width))
+    grass = pitch_region(frame, (height, width), green)
     valid = np.zeros((height, width), np.uint8)
     m = BORDER_MARGIN
     valid[y0 + m: y1 - m, x0 + m: x1 - m] = 1
     x, y, angle = bright_ridges(gray, valid & grass)
-    background = cv2.blur(gray, (BACKGROUND_BOX, BACKGROUND_BOX))
+    background = grass_background(gray, green)
     r, c = np.clip(np.rint(y).astype(np.intp), 0, height - 1), np.clip(np.rint(x).astype(np.intp), 0, width - 1)
-    white = gray[r, c] - background[r, c] > WHITE_CONTRAST
+    white = gray[r, c] - background[r, c] > max(WHITE_CONTRAST, GRAIN_SIGMAS * grain(gray, valid & grass))
     x, y, angle = x[white], y[white], angle[white]
     s = width_full / width
     xy = np.stack([(x + 0.5) * s - 0.5, (y + 0.5) * s - 0.5], axis=1)
     return LinePoints(xy, angle, (width_full, height_full))
+
+
+def grain(gray: np.ndarray, where: np.ndarray) -> float:
+    """The grain (grey levels) of the float32 ``gray`` over the uint8 mask ``where``: 1.4826 times the
+    median absolute deviation of ``gray`` minus its :data:`GRAIN_BLUR`-sigma Gaussian blur (every
+    :data:`GRAIN_STRIDE`-th pixel; noise,
+    film grain and compression; lines are too few and stripes or shade too smooth to move it); 0
+    where fewer than 100 pixels are given."""
+    residual = (gray - cv2.GaussianBlur(gray, (0, 0), GRAIN_BLUR))[where > 0][::GRAIN_STRIDE]
+    if len(residual) < 100:
+        return 0.0
+    return 1.4826 * float(np.median(np.abs(residual - np.median(residual))))
 
 
 @dataclass(frozen=True)
