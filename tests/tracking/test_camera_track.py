@@ -134,11 +134,26 @@ def test_tracker_rejects_what_it_cannot_use():
 
 
 def test_a_doubtful_estimate_says_why_in_numbers():
+    from glradial.camera.calibrate import doubt_checks, doubt_reason
+    from glradial.camera.estimate import camera_trust
+
+    t = camera_trust()
+    sure = {"inliers": 400, "elements": 4, "directions": 3, "spread": 0.3, "log_focal_sd": 0.01, "height_m": 20.0,
+            "hfov_deg": 40.0, "support": 0.95, "rms_fit_px": 1.0, "missing": 0, "share": 0.9}
+    assert doubt_checks(sure, t) == [] and doubt_reason(sure, t) == "ok"
+    bad = {**sure, "support": t["min_support"] - 0.1, "rms_fit_px": t["max_rms_px"] + 0.6}
+    failed = doubt_checks(bad, t)
+    assert [reason for reason, _ in failed] == ["poor_fit", "poor_fit"] and doubt_reason(bad, t) == "poor_fit"
+    detail = "; ".join(text for _, text in failed)
+    assert detail == (f"support {bad['support']:.2f} < {t['min_support']}; "
+                      f"rms {bad['rms_fit_px']:.2f} px > {t['max_rms_px']} px")
     cam = Camera.look_at((0.0, -60.0, 16.0), (0.0, 0.0), 45.0, (1280, 720))
-    est = CameraEstimate(cam, 5.0, True, "poor_fit", ("halfway_line", "centre_circle"), 3.1, 400, 0.73, 0.01)
-    assert est.why == "support 0.73 < 0.83; rms 3.10 px > 2.5 px"
+    est = CameraEstimate(cam, 5.0, True, "poor_fit", ("halfway_line", "centre_circle"), 3.1, 400, 0.6, 0.01, detail=detail)
+    assert est.why == detail
     assert CameraEstimate(cam, 5.0, False, "ok", ("a", "b"), 1.0, 400, 0.9, 0.01).why == ""
     assert est.as_dict()["why"] == est.why
+    lost = CameraEstimate(cam, 9.0, True, "track_lost", carried=12, detail=detail)
+    assert lost.why == f"carried 12 frames, bound 9.0 px; {detail}"
 
 
 @pytest.mark.parametrize("focal, position", [(1e-8, (0.0, -60.0, 16.0)), (0.001, (0.0, -60.0, 16.0)),
