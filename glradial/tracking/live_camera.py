@@ -56,7 +56,7 @@ from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..lens.options import LIVE_WORKERS, check_choice
 from ..video.frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of
-from ..video.live_lens import PENDING
+from ..video.live_lens import PENDING, worker_reply
 from .camera_track import Motion, carry
 
 __all__ = ["LiveCamera", "LiveCameraTracker", "camera_tracker", "motion_of_homography", "PENDING", "LOST", "STALE",
@@ -380,13 +380,8 @@ class LiveCameraTracker:
         return None if motion is None else carry(estimate.camera, motion)
 
     def _receive(self) -> None:
-        try:
-            message = self._connection.recv()
-        except (EOFError, OSError):
-            raise RuntimeError("the camera worker ended unexpectedly") from None
-        if message[0] == "error":
-            raise RuntimeError(f"the camera worker failed: {message[1]}")
-        if message[0] == "ready":
+        message = worker_reply(self._connection, "camera")
+        if message is None:
             self._ready = True
             return
         _, index, estimate, rest = message

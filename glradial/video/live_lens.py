@@ -48,7 +48,7 @@ from .shot_evidence import ShotCollector
 from .shot_fit import fit_shot
 from .shot_track import ESTIMATE_EVERY, EVERY, SAMPLES_PER_STRIDE
 
-__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY"]
+__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY", "worker_reply"]
 
 #: seconds :meth:`OnlineShotLens.wait_ready` waits for the worker's estimator by default
 READY_TIMEOUT_S = 120.0
@@ -104,6 +104,19 @@ class BundledEstimator:
 
     def __getstate__(self) -> dict:
         return {"model": self.model, "method": self.method, "_estimate": None}
+
+
+def worker_reply(connection, name: str) -> tuple | None:
+    """The next message of a live worker process on ``connection`` (a :mod:`multiprocessing` pipe end):
+    ``None`` for its ``("ready",)``, else the message tuple. ``RuntimeError`` naming the ``name``
+    worker when it ended (the pipe closed) or sent ``("error", text)``."""
+    try:
+        message = connection.recv()
+    except (EOFError, OSError):
+        raise RuntimeError(f"the {name} worker ended unexpectedly") from None
+    if message[0] == "error":
+        raise RuntimeError(f"the {name} worker failed: {message[1]}")
+    return None if message[0] == "ready" else message
 
 
 def _serve(connection, estimator: Callable, estimate_every: int, doubtful_px: float, duty: float) -> None:
@@ -218,13 +231,8 @@ class OnlineShotLens:
 
     def _receive(self) -> None:
         """Take one message of the worker."""
-        try:
-            message = self._connection.recv()
-        except (EOFError, OSError):
-            raise RuntimeError("the lens worker ended unexpectedly") from None
-        if message[0] == "error":
-            raise RuntimeError(f"the lens worker failed: {message[1]}")
-        if message[0] == "ready":
+        message = worker_reply(self._connection, "lens")
+        if message is None:
             self._ready = True
             return
         _, shot, fit, rest = message

@@ -104,7 +104,11 @@ def test_calibrate_shot_uses_the_shot_lens_on_a_noisy_zoom():
             own.append(_err(mine.lens, cam.lens))
             used.append(_err(est.lens, cam.lens))
     assert len(used) >= 5
-    assert np.median(used) < 0.8 * np.median(own)
+    # what the shot's lens buys is the tail (docs/CAMERA.md, "Video: one lens per shot"): the worst
+    # frame's lens error at least halves; the median does not get worse (with the grass-relative white
+    # lines the frames' own median is already ~0.2 px at 640 wide, so little is left to gain there)
+    assert max(used) < 0.6 * max(own)
+    assert np.median(used) <= np.median(own)
 
 
 def test_cli_video_follows_each_shot(tmp_path, capsys):

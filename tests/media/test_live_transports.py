@@ -20,6 +20,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[2]
 K1, K2 = -0.2, 0.03
 SIZE, RATE, SECONDS = (320, 180), 25, 2
+#: frames a fixed lens may pass through uncorrected at the start (LiveCorrector.warm_up)
+PENDING_AT_MOST = 5
 
 
 def _has_srt() -> bool:
@@ -72,11 +74,11 @@ def _undistorted(image: np.ndarray) -> np.ndarray:
 def _check_corrected(clip: Path, out: Path) -> None:
     source, written = _luma(clip), _luma(out)
     assert len(written) >= 0.9 * len(source), (len(written), len(source))
-    matched = 0
-    for image in list(written.values())[::10]:  # pts may be shifted by the relays: match by picture
-        best = max(_psnr(image, _undistorted(s)) for s in source.values())
-        matched += best >= 30.0
-    assert matched == len(list(written.values())[::10])
+    # the first frames may pass through uncorrected while the lens's maps are built (flagged "pending",
+    # at most 5: tests/video/test_live.py); pts may be shifted by the relays: match by picture
+    sampled = list(written.values())[PENDING_AT_MOST::10]
+    best = [max(_psnr(image, _undistorted(s)) for s in source.values()) for image in sampled]
+    assert sampled and min(best) >= 30.0, (best, len(written), len(source))
 
 
 def _psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -194,8 +196,11 @@ def test_ndi_in_on_loopback(ndi_loopback, tmp_path):
         frames = [f.to_ndarray(format="rgb24") for f in container.decode(video=0)]
     luma = lambda image: cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)  # noqa: E731
     assert len(frames) >= 3, stderr
-    scores = [_psnr(luma(f), luma(_undistorted(picture))) for f in frames]
-    assert min(scores) >= 30.0, (scores, stderr)
+    corrected = luma(_undistorted(picture))
+    # the first frames may pass through uncorrected while the lens's maps are built ("pending")
+    scores = [max(_psnr(luma(f), corrected), _psnr(luma(f), luma(picture)) if i < PENDING_AT_MOST else 0.0)
+              for i, f in enumerate(frames)]
+    assert min(scores) >= 30.0 and _psnr(luma(frames[-1]), corrected) >= 30.0, (scores, stderr)
     assert scores[-1] >= _psnr(luma(frames[-1]), luma(picture)) + 3.0  # corrected, not passed through
 
 
