@@ -56,7 +56,7 @@ from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..lens.options import LIVE_WORKERS, check_choice
 from ..video.frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of
-from ..video.live_lens import PENDING, worker_reply
+from ..video.live_lens import PENDING, serve_jobs, worker_reply
 from .camera_track import Motion, carry
 
 __all__ = ["LiveCamera", "LiveCameraTracker", "camera_tracker", "motion_of_homography", "PENDING", "LOST", "STALE",
@@ -212,30 +212,22 @@ def _rgb(frame) -> np.ndarray:
 def _serve(connection, duty: float, niceness: int = 0, size: tuple[int, int] = (1280, 720)) -> None:
     """The fit worker: warms up on a procedural view (imports, first-call set-up), says ``("ready",)``,
     then answers each job ``(index, rgb, previous)`` with ``("fit", index, CameraEstimate, rest_s)``
-    (``rest_s``: how long it asks to rest, so that it takes at most ``duty`` of a core) until None;
-    an error is sent as ``("error", text)``."""
+    (:func:`glradial.video.live_lens.serve_jobs`: ``rest_s`` keeps it to ``duty`` of a core) until None."""
     from ..camera.calibrate import calibrate
     from ..camera.views import random_camera, render_view
 
     if niceness:
         with contextlib.suppress(OSError):
             os.nice(niceness)  # the frames come first: the fit takes what the correction leaves
-    try:
+    def warm_up() -> None:
         view = render_view(random_camera(np.random.default_rng(0), size), seed=0, players=0)
         calibrate(view.frame, previous=calibrate(view.frame))
-        connection.send(("ready",))
-        while (job := connection.recv()) is not None:
-            index, rgb, previous = job
-            started = time.monotonic()
-            estimate = calibrate(rgb, previous=previous)
-            connection.send(("fit", index, estimate, (time.monotonic() - started) * (1.0 / duty - 1.0)))
-    except (EOFError, OSError, KeyboardInterrupt):
-        return
-    except Exception as err:  # handed to the frame thread
-        try:
-            connection.send(("error", f"{type(err).__name__}: {err}"))
-        except OSError:
-            pass
+
+    def answer(job: tuple) -> tuple:
+        index, rgb, previous = job
+        return index, calibrate(rgb, previous=previous)
+
+    serve_jobs(connection, warm_up, answer, duty)
 
 
 class LiveCameraTracker:

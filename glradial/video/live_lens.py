@@ -48,7 +48,7 @@ from .shot_evidence import ShotCollector
 from .shot_fit import fit_shot
 from .shot_track import ESTIMATE_EVERY, EVERY, SAMPLES_PER_STRIDE
 
-__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY", "worker_reply"]
+__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY", "worker_reply", "serve_jobs"]
 
 #: seconds :meth:`OnlineShotLens.wait_ready` waits for the worker's estimator by default
 READY_TIMEOUT_S = 120.0
@@ -119,24 +119,18 @@ def worker_reply(connection, name: str) -> tuple | None:
     return None if message[0] == "ready" else message
 
 
-def _serve(connection, estimator: Callable, estimate_every: int, doubtful_px: float, duty: float) -> None:
-    """The worker (a process or a thread): loads ``estimator`` on a blank frame, says ``("ready",)``,
-    then answers each job ``(shot, index, frame)`` with ``("fit", shot, _Fit, rest_s)`` (``rest_s``:
-    how long it asks to rest) until it gets None; an error is sent as ``("error", text)``."""
-    collector, collected = None, -1
+def serve_jobs(connection, warm_up: Callable[[], object], answer: Callable[[tuple], tuple], duty: float) -> None:
+    """A live worker's loop (a process or a thread): runs ``warm_up()``, says ``("ready",)``, then
+    answers each job with ``("fit", *answer(job), rest_s)`` (``rest_s``: how long it asks to rest so
+    that it takes at most ``duty`` of a core) until it gets None; an error is sent as ``("error",
+    text)`` (read by :func:`worker_reply`); a closed pipe or Ctrl-C ends it quietly."""
     try:
-        estimator(np.full((SAMPLE_WIDTH * 9 // 16, SAMPLE_WIDTH, 3), 96, np.uint8))
+        warm_up()
         connection.send(("ready",))
         while (job := connection.recv()) is not None:
-            shot, index, frame = job
             started = time.monotonic()
-            if shot != collected:
-                collector, collected = ShotCollector(estimator, estimate_every), shot
-            collector.add(index, frame)
-            result = fit_shot(collector.evidence, doubtful_px=doubtful_px, radius=corner_radius((frame.shape[1], frame.shape[0])))
-            k1, k2 = (float(v) for v in result.lens_at(collector.evidence.zoom[-1]))
-            fit = _Fit(Lens(k1, k2), float(result.uncertainty_px), bool(result.doubtful), result.reason)
-            connection.send(("fit", shot, fit, (time.monotonic() - started) * (1.0 / duty - 1.0)))
+            reply = answer(job)
+            connection.send(("fit", *reply, (time.monotonic() - started) * (1.0 / duty - 1.0)))
     except (EOFError, OSError, KeyboardInterrupt):  # the other end went away, or Ctrl-C reached the process group
         return
     except Exception as err:  # handed to the frame thread
@@ -144,6 +138,25 @@ def _serve(connection, estimator: Callable, estimate_every: int, doubtful_px: fl
             connection.send(("error", f"{type(err).__name__}: {err}"))
         except OSError:
             pass
+
+
+def _serve(connection, estimator: Callable, estimate_every: int, doubtful_px: float, duty: float) -> None:
+    """The lens worker (:func:`serve_jobs`): loads ``estimator`` on a blank frame, then answers each
+    job ``(shot, index, frame)`` with ``("fit", shot, _Fit, rest_s)``."""
+    shots: dict = {}  # the shot being collected: {shot number: ShotCollector}
+
+    def answer(job: tuple) -> tuple:
+        shot, index, frame = job
+        if shot not in shots:
+            shots.clear()
+            shots[shot] = ShotCollector(estimator, estimate_every)
+        collector = shots[shot]
+        collector.add(index, frame)
+        result = fit_shot(collector.evidence, doubtful_px=doubtful_px, radius=corner_radius((frame.shape[1], frame.shape[0])))
+        k1, k2 = (float(v) for v in result.lens_at(collector.evidence.zoom[-1]))
+        return shot, _Fit(Lens(k1, k2), float(result.uncertainty_px), bool(result.doubtful), result.reason)
+
+    serve_jobs(connection, lambda: estimator(np.full((SAMPLE_WIDTH * 9 // 16, SAMPLE_WIDTH, 3), 96, np.uint8)), answer, duty)
 
 
 class OnlineShotLens:
