@@ -137,45 +137,63 @@ def picture_psnr(clip: Path, out: Path, k1: float, k2: float, every: int = 10) -
     return values
 
 
-def run_fixed_udp(clip: Path, work: Path, k1: float, k2: float, frames: int) -> dict:
-    video_port, sample_port = _free_port(), _free_port()
-    out = work / f"fixed_{clip.stem}.ts"
-    received: list[bytes] = []
-    stop = threading.Event()
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-        sock.bind(("127.0.0.1", sample_port))
-        sock.settimeout(0.1)
-
-        def receive() -> None:
+def _receive(port: int, received: list, stop: threading.Event) -> threading.Thread:
+    """A thread that appends every UDP datagram arriving on 127.0.0.1:``port`` to ``received`` until ``stop``."""
+    def loop() -> None:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+            sock.bind(("127.0.0.1", port))
+            sock.settimeout(0.1)
             while not stop.is_set():
                 try:
                     received.append(sock.recv(65536))
                 except socket.timeout:
                     continue
 
-        thread = threading.Thread(target=receive, daemon=True)
-        thread.start()
-        command = [f"udp://127.0.0.1:{video_port}", str(out), "-y", "--k1", str(k1), "--k2", str(k2), "--idle-timeout", "3",
-                   "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10"]
-        print("  glradial live " + " ".join(command), flush=True)
-        process = _live(command)
-        lines: list[str] = []
-        reader = threading.Thread(target=lambda: lines.extend(iter(process.stderr.readline, "")), daemon=True)
-        reader.start()
-        while not any("waiting for" in line for line in lines):
-            time.sleep(0.05)
-        time.sleep(1.0)  # av.open binds the socket just after the line
-        subprocess.run(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts",
-                        f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True)
-        process.wait(timeout=120)
-        reader.join(timeout=5)
-        time.sleep(0.3)
-        stop.set()
-        thread.join()
+    thread = threading.Thread(target=loop, daemon=True)
+    thread.start()
+    return thread
+
+
+def stream_over_udp(clip: Path, arguments) -> tuple[str, list[bytes], float]:
+    """``clip`` sent over UDP in real time (``ffmpeg -re``) to ``glradial live`` run with
+    ``arguments(video_port, sample_port)``, its OpenTrackIO packets received on ``sample_port``:
+    ``(its stderr, the packets, the 1-minute load average as sending starts)``; RuntimeError when
+    glradial fails."""
+    video_port, sample_port = _free_port(), _free_port()
+    received: list[bytes] = []
+    stop = threading.Event()
+    thread = _receive(sample_port, received, stop)
+    command = arguments(video_port, sample_port)
+    print("  glradial live " + " ".join(command), flush=True)
+    process = _live(command)
+    lines: list[str] = []
+    reader = threading.Thread(target=lambda: lines.extend(iter(process.stderr.readline, "")), daemon=True)
+    reader.start()
+    while not any("waiting for" in line for line in lines):
+        if process.poll() is not None:
+            raise RuntimeError("".join(lines))
+        time.sleep(0.05)
+    time.sleep(1.0)  # av.open binds the socket just after the line
+    load = os.getloadavg()[0]
+    subprocess.run(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts",
+                    f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True)
+    process.wait(timeout=120)
+    reader.join(timeout=5)
+    time.sleep(0.3)
+    stop.set()
+    thread.join()
     stderr = "".join(lines)
     if process.returncode != 0:
         raise RuntimeError(stderr)
+    return stderr, received, load
+
+
+def run_fixed_udp(clip: Path, work: Path, k1: float, k2: float, frames: int) -> dict:
+    out = work / f"fixed_{clip.stem}.ts"
+    stderr, received, _ = stream_over_udp(clip, lambda video_port, sample_port: [
+        f"udp://127.0.0.1:{video_port}", str(out), "-y", "--k1", str(k1), "--k2", str(k2), "--idle-timeout", "3",
+        "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10"])
     report = _report(stderr)
     from glradial.export.opentrackio_udp import parse_packet
 

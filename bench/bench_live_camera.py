@@ -28,12 +28,8 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
-import socket
 import subprocess
 import sys
-import threading
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -44,7 +40,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
-from bench_live import _free_port, _live, _report  # noqa: E402
+from bench_live import _report, stream_over_udp  # noqa: E402
 from calibrate_matches import DATA as SHARED_DATA  # noqa: E402
 from calibrate_matches import homography_floor as _floor  # noqa: E402
 from figures import write_figure  # noqa: E402
@@ -159,54 +155,13 @@ def score(samples: list[dict], name: str, size: tuple[int, int], frames: int) ->
             "label_floor_px1280": _floor(pitch, truth)}
 
 
-def _receive(port: int, received: list, stop: threading.Event) -> threading.Thread:
-    def loop() -> None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-            sock.bind(("127.0.0.1", port))
-            sock.settimeout(0.1)
-            while not stop.is_set():
-                try:
-                    received.append(sock.recv(65536))
-                except socket.timeout:
-                    continue
-
-    thread = threading.Thread(target=loop, daemon=True)
-    thread.start()
-    return thread
-
-
 def run(clip: Path, frames: int) -> tuple[dict, list[dict]]:
     """The clip sent over UDP in real time to ``glradial live ... none --camera``: its report and samples."""
     from glradial.export.opentrackio_udp import reassemble
 
-    video_port, sample_port = _free_port(), _free_port()
-    received: list[bytes] = []
-    stop = threading.Event()
-    thread = _receive(sample_port, received, stop)
-    command = [f"udp://127.0.0.1:{video_port}", "none", "--camera", "--sensor", "2/3-inch", "--idle-timeout", "3",
-               "--send", f"127.0.0.1:{sample_port}"]
-    print("  glradial live " + " ".join(command), flush=True)
-    process = _live(command)
-    lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(iter(process.stderr.readline, "")), daemon=True)
-    reader.start()
-    while not any("waiting for" in line for line in lines):
-        if process.poll() is not None:
-            raise RuntimeError("".join(lines))
-        time.sleep(0.05)
-    time.sleep(1.0)  # av.open binds the socket just after the line
-    load = os.getloadavg()[0]
-    subprocess.run(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts",
-                    f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True)
-    process.wait(timeout=120)
-    reader.join(timeout=5)
-    time.sleep(0.3)
-    stop.set()
-    thread.join()
-    stderr = "".join(lines)
-    if process.returncode != 0:
-        raise RuntimeError(stderr)
+    stderr, received, load = stream_over_udp(clip, lambda video_port, sample_port: [
+        f"udp://127.0.0.1:{video_port}", "none", "--camera", "--sensor", "2/3-inch", "--idle-timeout", "3",
+        "--send", f"127.0.0.1:{sample_port}"])
     return {**_report(stderr), "load_1min": load}, [json.loads(p) for p in reassemble(received)]
 
 
