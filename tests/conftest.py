@@ -3,6 +3,7 @@ each test that uses it, and the real photographs of tests/data (copies of ../sha
 
 from __future__ import annotations
 
+import subprocess
 import sys
 from pathlib import Path
 
@@ -51,6 +52,22 @@ def road() -> np.ndarray:
 @pytest.fixture(scope="session")
 def field_panorama() -> np.ndarray:
     return read_rgb("panorama_field_2048x1024.jpg")
+
+
+#: the live streaming tests' clip: (width, height) px, frames per second, seconds
+LIVE_SIZE, LIVE_RATE, LIVE_SECONDS = (320, 180), 25, 2
+
+
+@pytest.fixture(scope="session")
+def live_clip(tmp_path_factory) -> Path:
+    """2 s of testsrc2 at 320x180 25p, H.264 (a key frame every 10 frames) in MPEG-TS: the clip the
+    live tests stream (tests/video/test_live.py, tests/media/test_live_transports.py)."""
+    path = tmp_path_factory.mktemp("live") / "clip.ts"
+    subprocess.run(["ffmpeg", "-v", "error", "-f", "lavfi", "-i",
+                    f"testsrc2=size={LIVE_SIZE[0]}x{LIVE_SIZE[1]}:rate={LIVE_RATE}:duration={LIVE_SECONDS}",
+                    "-c:v", "libx264", "-preset", "ultrafast", "-crf", "12", "-g", "10", "-pix_fmt", "yuv420p",
+                    "-f", "mpegts", str(path)], check=True)
+    return path
 
 
 def check_existing_out_needs_y(argv: list[str], out: Path, expensive: str, monkeypatch, capsys) -> None:

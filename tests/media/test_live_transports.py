@@ -16,10 +16,11 @@ import av
 import cv2
 import numpy as np
 import pytest
+from conftest import LIVE_RATE, LIVE_SECONDS, LIVE_SIZE
 
 ROOT = Path(__file__).resolve().parents[2]
 K1, K2 = -0.2, 0.03
-SIZE, RATE, SECONDS = (320, 180), 25, 2
+SIZE, RATE, SECONDS = LIVE_SIZE, LIVE_RATE, LIVE_SECONDS
 #: frames a fixed lens may pass through uncorrected at the start (LiveCorrector.warm_up)
 PENDING_AT_MOST = 5
 
@@ -35,12 +36,9 @@ needs_srt = pytest.mark.skipif(not _has_srt(), reason="needs ffmpeg with libsrt 
 
 
 @pytest.fixture(scope="module")
-def clip(tmp_path_factory) -> Path:
-    path = tmp_path_factory.mktemp("srt") / "clip.ts"
-    subprocess.run(["ffmpeg", "-v", "error", "-f", "lavfi", "-i", f"testsrc2=size={SIZE[0]}x{SIZE[1]}:rate={RATE}:duration={SECONDS}",
-                    "-c:v", "libx264", "-preset", "ultrafast", "-crf", "12", "-g", "10", "-pix_fmt", "yuv420p",
-                    "-f", "mpegts", str(path)], check=True)
-    return path
+def clip(live_clip) -> Path:
+    """The live tests' clip (tests/conftest.py: SIZE, RATE, SECONDS)."""
+    return live_clip
 
 
 def _port() -> int:

@@ -23,22 +23,19 @@ import av
 import cv2
 import numpy as np
 import pytest
+from conftest import LIVE_RATE, LIVE_SECONDS, LIVE_SIZE
 
 ROOT = Path(__file__).resolve().parents[2]
 K1, K2 = -0.2, 0.03
-SIZE, RATE, SECONDS = (320, 180), 25, 2
+SIZE, RATE, SECONDS = LIVE_SIZE, LIVE_RATE, LIVE_SECONDS
 pytestmark = pytest.mark.skipif(shutil.which("ffmpeg") is None or shutil.which("ffprobe") is None,
                                 reason="needs ffmpeg and ffprobe on PATH")
 
 
 @pytest.fixture(scope="module")
-def clip(tmp_path_factory) -> Path:
-    """2 s of testsrc2 at 320x180 25p, H.264 (a key frame every 10 frames) in MPEG-TS."""
-    path = tmp_path_factory.mktemp("live") / "clip.ts"
-    subprocess.run(["ffmpeg", "-v", "error", "-f", "lavfi", "-i", f"testsrc2=size={SIZE[0]}x{SIZE[1]}:rate={RATE}:duration={SECONDS}",
-                    "-c:v", "libx264", "-preset", "ultrafast", "-crf", "12", "-g", "10", "-pix_fmt", "yuv420p",
-                    "-f", "mpegts", str(path)], check=True)
-    return path
+def clip(live_clip) -> Path:
+    """The live tests' clip (tests/conftest.py: SIZE, RATE, SECONDS)."""
+    return live_clip
 
 
 def _free_port(kind: int = socket.SOCK_DGRAM) -> int:
