@@ -183,7 +183,10 @@ class _Problem:
                  with_lens: bool, free: np.ndarray) -> None:
         self.base, self.xy, self.with_lens = base, xy, with_lens
         self.free, self.full = free, _params(base)
-        self.points = np.column_stack([np.concatenate([samples.points[a], samples.points[b]]), np.zeros(2 * len(a))])
+        # each template sample projected once however many points are assigned to its segments
+        used, index = np.unique(np.concatenate([a, b]), return_inverse=True)
+        self.points = np.column_stack([samples.points[used], np.zeros(len(used))])
+        self.ia, self.ib = index[: len(a)], index[len(a):]
         self.scale = REFERENCE_WIDTH / base.size[0]
 
     def batch(self, free: np.ndarray) -> np.ndarray:
@@ -192,8 +195,8 @@ class _Problem:
         x[:, self.free] = free
         rot = np.matmul(Rotation.from_rotvec(x[:, :3]).as_matrix(), self.base.rotation)
         proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points)
-        n = len(self.xy)
-        p0, ab = proj[:, :n], proj[:, n:] - proj[:, :n]
+        p0 = proj[:, self.ia]
+        ab = proj[:, self.ib] - p0
         length = np.maximum(np.hypot(ab[..., 0], ab[..., 1]), 1e-9)
         ap = self.xy[None] - p0
         r = (ab[..., 0] * ap[..., 1] - ab[..., 1] * ap[..., 0]) / length * self.scale
