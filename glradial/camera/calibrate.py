@@ -31,8 +31,8 @@ from .model import Camera, decompose_homography
 from .refine import Fit, refine
 from .white_lines import LinePoints, line_points
 
-#: Spacing (m) of the template points the first-guess search takes.
-SEARCH_STEP = 0.25
+#: Spacing (m) of the template points the first-guess search takes, and the most first guesses it returns.
+SEARCH_STEP, SEARCH_CANDIDATES = 0.25, 3
 #: Gates (px at 1280) when tracking from the previous frame's camera.
 TRACK_GATES = (15.0, 6.0, 3.0)
 #: The coarse stage (every first guess: pinhole, wide gates) and the fine stage (the best
@@ -77,7 +77,8 @@ def _searched(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, lens: Le
     finds nothing, the dictionary of synthetic views (:func:`first_views`) on the white-line points
     undistorted by the same lens (one path for a given lens reading and the strong-lens retry)."""
     points, labels = pitch.sampled_points(SEARCH_STEP)
-    found = [c.homography for c in search(rgb, points, labels, lens=None if lens is None else (lens.k1, lens.k2))]
+    found = [c.homography for c in search(rgb, points, labels, lens=None if lens is None else (lens.k1, lens.k2),
+                                          max_candidates=SEARCH_CANDIDATES)]
     if found:
         return found
     flat = lines.xy if lens is None else lens.undistort_points(lines.xy, lines.size)

@@ -64,7 +64,7 @@ ICP_STEPS, ICP_CAUCHY = 2, 0.35
 #: along the markings; the band applies to the distance from the marking's tangent line).
 ICP_REACH = 3.0
 #: The most mask pixels the ICP uses, and the spacing (m) of the template points it matches them to.
-ICP_MAX_POINTS, ICP_SPACING_M = 2500, 0.5
+ICP_MAX_POINTS, ICP_SPACING_M = 1200, 0.5
 #: A frame has usable pitch structure when this share of the work copy is grass; a refined candidate
 #: is kept when it is still a plausible main camera, its coverage score reaches MIN_SCORE px (work
 #: copy) and MIN_SHARE of its projected marking on the field lies on the evidence.

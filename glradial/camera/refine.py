@@ -47,6 +47,9 @@ LOSS_SCALE = 1.5
 K2_PRIOR, K1_PRIOR, PRIOR_POINTS = 0.08, 0.6, 20.0
 #: Least-squares evaluations per round.
 MAX_NFEV = 30
+#: Relative tolerances (cost and step) of the last round's least squares (scipy's default) and of the
+#: rounds before it, whose camera only sets the next, narrower gate's assignment.
+FINAL_TOL, ROUND_TOL = 1e-8, 1e-3
 #: A projected marking sample is supported by evidence this close (px at 1280)...
 SUPPORT_PX = 4.0
 #: ...and counts only where a painted line (about this wide, metres) is at least this many px wide on
@@ -238,7 +241,8 @@ def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTempla
     round ``lens_from``; ``None`` when no round finds enough assigned points to fit. ``support_xy``:
     the points :func:`support` is measured on (default ``xy``; all the frame's points when ``xy`` is
     a thinned copy). The camera position is held for the first ``hold_position`` rounds; each round
-    evaluates the residuals at most ``max_nfev`` times."""
+    evaluates the residuals at most ``max_nfev`` times, to the relative tolerance :data:`ROUND_TOL` before
+    the last round and :data:`FINAL_TOL` in it."""
     samples = template_samples(pitch or PitchTemplate())
     result = None
     for round_, gate in enumerate(gates):
@@ -252,8 +256,9 @@ def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTempla
         if round_ < hold_position:
             free = np.array([0, 1, 2, 6])  # rotation and focal length first, from a far start
         problem = _Problem(camera, samples, xy[use], a[use], b[use], with_lens, free)
+        tol = FINAL_TOL if round_ == len(gates) - 1 else ROUND_TOL  # a round before the last only sets its gate's assignment
         result = least_squares(problem.residuals, x0[free], jac=problem.jacobian, loss="soft_l1",
-                               f_scale=LOSS_SCALE, x_scale="jac", max_nfev=max_nfev)
+                               f_scale=LOSS_SCALE, x_scale="jac", max_nfev=max_nfev, ftol=tol, xtol=tol)
         x = x0.copy()
         x[free] = result.x
         try:
