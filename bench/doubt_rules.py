@@ -91,7 +91,7 @@ def choose_bound(rows: list[dict], t: dict) -> dict:
     """``t`` with the bound's ``floor_px`` (of :data:`BOUND_FLOORS`) and ``quantile`` chosen on ``rows``:
     for each floor, the split-conformal 90 % quantile of keypoint RMS / max(fit RMS, floor) over the frames
     ``t`` answers; the floor whose bounds are the narrowest (median) wins."""
-    from glradial.evaluation.calibrate import conformal_quantile
+    from glradial.evaluation.trust_calibration import conformal_quantile
 
     fits = [f for f in (_answered_fit(r, t) for r in rows) if f is not None]
     best = None
