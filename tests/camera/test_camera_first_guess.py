@@ -182,3 +182,20 @@ def test_bad_arguments_are_refused_by_name(template):
         first_guess(frame, points, labels, lens=(0.1,))
     with pytest.raises(ValueError, match="lens"):  # folds over inside the frame: no undistorted frame
         first_guess(frame, points, labels, lens=(-3.0, 0.0))
+
+
+def test_coverage_lookup_path_equals_the_direct_one():
+    """Scoring many hypotheses looks each pixel's gain up from an image computed once; the scores and
+    shares must equal those of the hypotheses scored one at a time (the direct path)."""
+    from glradial.camera.first_guess import coverage
+
+    rng = np.random.default_rng(5)
+    dist = rng.uniform(0, 6, (90, 160)).astype(np.float32)
+    field = (rng.uniform(size=(90, 160)) > 0.2).astype(np.uint8)
+    points = np.stack(np.meshgrid(np.linspace(-50, 50, 30), np.linspace(-30, 30, 20)), -1).reshape(-1, 2)
+    h = np.array([[[1.5 + 0.1 * a, 0.2, 80], [0.05, -1.0 - 0.1 * a, 45], [0.0, 0.001 * a, 1]] for a in range(40)])
+    many = coverage(h, points, 0.5, dist, field, share=True)
+    one = np.column_stack([coverage(h[k:k + 1], points, 0.5, dist, field, share=True) for k in range(len(h))])
+    assert len(h) * len(points) > dist.size > len(points)  # the two paths are the ones compared
+    np.testing.assert_array_equal(many, one)
+    assert np.all(many[1] >= 0) and np.all(many[1] <= 1) and np.ptp(many[0]) > 0

@@ -193,3 +193,18 @@ def test_a_wide_pitch_camera_above_the_manifold_is_read_with_a_rough_hint(seed):
     fit = fit_lines(detect_chains(frame, lens_hint=(-0.59, float(manifold_k2(-0.59)))), prior=(-0.59, 0.27))
     assert fit.ok and fit.chains >= 8
     assert error_px(fit, k1, k2) < 3.0, fit
+
+
+def test_gray_copy_halving_is_the_exact_area_mean():
+    """A 1920 x 1080 frame halved to the 960-px detection copy (OpenCV's float area resize, the fast
+    path) is each 2 x 2 block's mean grey level rounded half to even, as the general matrix-product
+    path gives (oracle: the blocks averaged in numpy, float64)."""
+    from glradial.estimation.lines import _area_resize, gray_copy
+
+    rgb = np.random.default_rng(3).integers(0, 256, (1080, 1920, 3), np.uint8)
+    gray = cv2.cvtColor(rgb, cv2.COLOR_RGB2GRAY)
+    oracle = np.rint(gray.reshape(540, 2, 960, 2).astype(np.float64).mean(axis=(1, 3)))
+    fast = gray_copy(rgb, 960)
+    assert fast.dtype == np.float32 and fast.shape == (540, 960)
+    np.testing.assert_array_equal(fast, oracle)
+    np.testing.assert_array_equal(fast, _area_resize(gray, (960, 540)))
