@@ -49,7 +49,7 @@ K2_PRIOR, K1_PRIOR, PRIOR_POINTS = 0.08, 0.6, 20.0
 MAX_NFEV = 30
 #: Relative tolerances (cost and step) of the last round's least squares (scipy's default) and of the
 #: rounds before it, whose camera only sets the next, narrower gate's assignment.
-FINAL_TOL, ROUND_TOL = 1e-8, 1e-3
+FINAL_TOL, ROUND_TOL = 1e-8, 1e-4
 #: A projected marking sample is supported by evidence this close (px at 1280)...
 SUPPORT_PX = 4.0
 #: ...and counts only where a painted line (about this wide, metres) is at least this many px wide on
