@@ -100,21 +100,34 @@ class ProcessRunner:
         return [s.process.pid for s in self.slots]
 
     @staticmethod
-    def _close_slot(slot: _Slot, kill: bool) -> None:
-        if kill:
-            slot.process.kill()
-        else:
+    def _stop_slot(slot: _Slot, kill: bool) -> None:
+        """Ask the worker to end (the pipe's end-of-work message), or kill it."""
+        if not kill:
             try:
                 slot.connection.send(None)
+                return
             except OSError:
-                slot.process.kill()
+                pass
+        slot.process.kill()
+
+    @staticmethod
+    def _reap_slot(slot: _Slot, kill: bool) -> None:
+        """Wait for the worker to end (killed after 10 s, 5 s once killed) and close its pipe."""
         slot.process.join(timeout=10 if not kill else 5)
         if slot.process.is_alive():
             slot.process.kill()
             slot.process.join()
         slot.connection.close()
 
+    def _close_slot(self, slot: _Slot, kill: bool) -> None:
+        self._stop_slot(slot, kill)
+        self._reap_slot(slot, kill)
+
     def close(self, kill: bool = False) -> None:
-        """Stop the workers (``kill``: at once, e.g. on Ctrl-C)."""
-        for slot in self.slots:
-            self._close_slot(slot, kill or slot.task is not None)
+        """Stop the workers (``kill``: at once, e.g. on Ctrl-C), all asked first and then waited
+        for, so that they wind down together."""
+        kills = [kill or slot.task is not None for slot in self.slots]
+        for slot, killed in zip(self.slots, kills):
+            self._stop_slot(slot, killed)
+        for slot, killed in zip(self.slots, kills):
+            self._reap_slot(slot, killed)
