@@ -21,7 +21,7 @@ NET = ROOT / "net"
 
 #: The layers, lowest first: a unit may import from its own layer and the ones before it. Units are
 #: the top-level modules and the sub-packages; ``__init__`` (the lazy public API) is the top.
-LAYERS = ["errors", "lazy", "schemas", "lens", "gl", "media", "remapping", "export", "pitch", "synthesis", "estimation", "camera", "video",
+LAYERS = ["errors", "lazy", "threads", "schemas", "lens", "gl", "media", "remapping", "export", "pitch", "synthesis", "estimation", "camera", "video",
           "tracking", "evaluation", "commands", "jobs", "cli", "__main__", "__init__"]
 #: Folders under glradial/ that hold data, not code.
 DATA = {"data", "models", "__pycache__"}

@@ -44,6 +44,7 @@ import numpy as np
 from ..lens.lens import Lens
 from ..lens.options import Method
 from ..media.frames import to_rgb8
+from ..threads import thread_budget
 from .lens_estimate import LensEstimate, check_method, frame_evidence, judge
 from .model_check import ModelLoadError, check_checksum, check_model
 from .trust import FrameEvidence, view_features
@@ -116,7 +117,8 @@ class NetLinesEstimator:
     """An onnxruntime session of the distortion model, created once and reused.
 
     ``model_path``: an ``.onnx`` file (default: the bundled :func:`default_model_path`).
-    ``threads``: onnxruntime intra-op threads (default: onnxruntime's choice, all cores).
+    ``threads``: onnxruntime intra-op threads (default: the process's thread budget, :mod:`glradial.threads`,
+    else onnxruntime's choice, all cores).
     ``mirror_average``: average the outputs for each frame and its left-right mirror (default; see
     the module docstring); ``False`` runs the network once per frame.
     Raises ``FileNotFoundError`` for a missing file and :class:`ModelLoadError` for a file that is
@@ -138,6 +140,7 @@ class NetLinesEstimator:
             hint = " (the bundled model is missing: reinstall glradial or pass model_path)" if model_path is None else ""
             raise FileNotFoundError(f"model file not found: {path}{hint}")
         options = ort.SessionOptions()
+        threads = thread_budget() if threads is None else threads  # a job's worker: its share of the cores
         if threads is not None:
             options.intra_op_num_threads = threads
             options.inter_op_num_threads = 1

@@ -17,12 +17,13 @@ import os
 from pathlib import Path
 
 from ..commands import UsageError, non_negative_int, positive_float, positive_int, show_progress
+from ..threads import cores
 from .tasks import JOB_COMMANDS, CommandWork, planned_outputs
 
 __all__ = ["add_job_options", "wants_job", "check_one_file_form", "run_job_command", "JOB_OPTIONS", "runner_factory", "closing", "command_options"]
 
 #: the options a job adds to a command (never handed to the command's own run)
-JOB_OPTIONS = ("out_dir", "workers", "ray", "retries", "gpus_per_worker")
+JOB_OPTIONS = ("out_dir", "workers", "ray", "retries", "gpus_per_worker", "threads_per_worker")
 #: options that name one output file or stream: a job refuses them (each input has its own outputs)
 SINGLE_OUTPUTS = ("sidecar", "opentrackio", "send", "overlay", "topview")
 #: what argparse adds that is not an option of the command
@@ -31,7 +32,7 @@ LOCAL = "local"
 
 
 def add_job_options(parser: argparse.ArgumentParser, command: str) -> None:
-    """``--out-dir --workers --ray --retries --gpus-per-worker`` (``crops``: no ``--out-dir``, it has ``--out``)."""
+    """``--out-dir --workers --ray --retries --threads-per-worker --gpus-per-worker`` (``crops``: no ``--out-dir``, it has ``--out``)."""
     group = parser.add_argument_group("many inputs: a job (docs/CLI.md, 'Jobs over many files')")
     if command != "crops":
         group.add_argument("--out-dir", metavar="DIR",
@@ -46,6 +47,9 @@ def add_job_options(parser: argparse.ArgumentParser, command: str) -> None:
                             "(needs pip install 'glradial[cluster]')")
     group.add_argument("--retries", type=non_negative_int, default=None, metavar="N",
                        help="attempts after a failure (an error or the worker's death) before an input is recorded as failed (default 1)")
+    group.add_argument("--threads-per-worker", type=positive_int, metavar="T",
+                       help="each worker's threads (OpenCV, onnxruntime, FFmpeg codecs and scaling, llvmpipe, BLAS); with --ray "
+                            "also the CPUs Ray reserves for each actor (default: cores // workers, at least 1; docs/CLI.md)")
     group.add_argument("--gpus-per-worker", type=positive_float, metavar="G",
                        help="with --ray: GPUs Ray reserves for each actor (0.5: two actors share one; the GL context then runs on "
                             "the node's GPU where its EGL driver is NVIDIA's)")
@@ -84,10 +88,10 @@ def runner_factory(work, args: argparse.Namespace, tasks: int):
     if args.ray is None:
         if args.gpus_per_worker is not None:
             raise UsageError("--gpus-per-worker is for --ray (Ray reserves GPUs for its actors)")
-        workers = min(args.workers or len(os.sched_getaffinity(0)), tasks)
+        workers = min(args.workers or cores(), tasks)
         from .pool import ProcessRunner
 
-        return lambda: ProcessRunner(work, workers)
+        return lambda: ProcessRunner(work, workers, args.threads_per_worker)
     from .ray_runner import INSTALL_HINT, ray_available
 
     if not ray_available():
@@ -98,7 +102,8 @@ def runner_factory(work, args: argparse.Namespace, tasks: int):
         raise UsageError(f"--ray took the input {args.ray!r} as its ADDRESS: put --ray after the inputs, or write --ray local")
     address = None if args.ray == LOCAL else args.ray
     workers = min(args.workers, tasks) if args.workers else None
-    return lambda: RayRunner(work, address, workers, gpus_per_worker=args.gpus_per_worker or 0.0)
+    return lambda: RayRunner(work, address, workers, threads_per_worker=args.threads_per_worker,
+                             gpus_per_worker=args.gpus_per_worker or 0.0)
 
 
 def run_job_command(args: argparse.Namespace) -> int:

@@ -10,11 +10,11 @@ out of memory, a crash in native code) is seen by its process sentinel; its task
 from __future__ import annotations
 
 import multiprocessing
-import os
 import signal
 from multiprocessing.connection import Connection, wait
 from typing import Callable
 
+from ..threads import share_of_cores
 from .worker import JobWorker, Result, Task
 
 __all__ = ["ProcessRunner"]
@@ -45,7 +45,8 @@ class _Slot:
 
 class ProcessRunner:
     """``workers`` local processes running ``work`` (see :mod:`glradial.jobs.runner` for the
-    interface), each with ``threads`` threads in its native pools (default: its share of the cores)."""
+    interface), each with a thread budget of ``threads`` (:mod:`glradial.threads`; default: its
+    share of the cores, ``cores // workers``, at least 1)."""
 
     label = "processes"
 
@@ -54,7 +55,9 @@ class ProcessRunner:
             raise ValueError(f"workers must be a positive integer, got {workers!r}")
         self._context = multiprocessing.get_context("spawn")
         self._work = work
-        self._threads = threads or max(1, len(os.sched_getaffinity(0)) // workers)
+        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
+            raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
+        self._threads = threads or share_of_cores(workers)
         self.slots = [_Slot(self._context, work, self._threads) for _ in range(workers)]
 
     def free(self) -> int:
@@ -97,21 +100,34 @@ class ProcessRunner:
         return [s.process.pid for s in self.slots]
 
     @staticmethod
-    def _close_slot(slot: _Slot, kill: bool) -> None:
-        if kill:
-            slot.process.kill()
-        else:
+    def _stop_slot(slot: _Slot, kill: bool) -> None:
+        """Ask the worker to end (the pipe's end-of-work message), or kill it."""
+        if not kill:
             try:
                 slot.connection.send(None)
+                return
             except OSError:
-                slot.process.kill()
+                pass
+        slot.process.kill()
+
+    @staticmethod
+    def _reap_slot(slot: _Slot, kill: bool) -> None:
+        """Wait for the worker to end (killed after 10 s, 5 s once killed) and close its pipe."""
         slot.process.join(timeout=10 if not kill else 5)
         if slot.process.is_alive():
             slot.process.kill()
             slot.process.join()
         slot.connection.close()
 
+    def _close_slot(self, slot: _Slot, kill: bool) -> None:
+        self._stop_slot(slot, kill)
+        self._reap_slot(slot, kill)
+
     def close(self, kill: bool = False) -> None:
-        """Stop the workers (``kill``: at once, e.g. on Ctrl-C)."""
-        for slot in self.slots:
-            self._close_slot(slot, kill or slot.task is not None)
+        """Stop the workers (``kill``: at once, e.g. on Ctrl-C), all asked first and then waited
+        for, so that they wind down together."""
+        kills = [kill or slot.task is not None for slot in self.slots]
+        for slot, killed in zip(self.slots, kills):
+            self._stop_slot(slot, killed)
+        for slot, killed in zip(self.slots, kills):
+            self._reap_slot(slot, killed)

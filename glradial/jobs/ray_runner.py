@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib.util
 from typing import Callable
 
+from ..threads import share_of_cores
 from .worker import JobWorker, Result, Task
 
 __all__ = ["RayRunner", "INSTALL_HINT", "ray_available"]
@@ -26,18 +27,29 @@ def ray_available() -> bool:
     return importlib.util.find_spec("ray") is not None
 
 
+def _share(ray, workers: int | None) -> int:
+    """Each actor's thread budget when none is given: the cluster's CPUs // ``workers`` (1 when
+    ``workers`` is None: one actor per CPU), at most the CPUs of its largest node."""
+    if workers is None:
+        return 1
+    largest = max((node["Resources"].get("CPU", 1) for node in ray.nodes() if node.get("Alive")), default=1)
+    return max(1, min(int(largest), share_of_cores(workers, int(ray.cluster_resources().get("CPU", 1)))))
+
+
 class RayRunner:
     """Ray actors running ``work`` (interface of :class:`glradial.jobs.pool.ProcessRunner`).
 
-    ``workers``: actors (default: the cluster's CPUs / ``cpus_per_worker``); ``gpus_per_worker``:
-    GPUs Ray reserves for each actor (fractions share one). ``init``: more ``ray.init`` keywords when
-    Ray is started here.
+    ``workers``: actors (default: one per CPU of the cluster, each of 1 thread); ``threads_per_worker``:
+    each actor's thread budget (:mod:`glradial.threads`) and the CPUs Ray reserves for it
+    (``num_cpus``; default: the cluster's CPUs // ``workers``, at most one node's, at least 1);
+    ``gpus_per_worker``: GPUs Ray reserves for each actor (fractions share one). ``init``: more
+    ``ray.init`` keywords when Ray is started here.
     """
 
     label = "Ray actors"
 
     def __init__(self, work: Callable, address: str | None = None, workers: int | None = None, *,
-                 cpus_per_worker: float = 1.0, gpus_per_worker: float = 0.0, init: dict | None = None) -> None:
+                 threads_per_worker: int | None = None, gpus_per_worker: float = 0.0, init: dict | None = None) -> None:
         if not ray_available():
             raise ModuleNotFoundError(INSTALL_HINT, name="ray")
         import ray
@@ -47,11 +59,12 @@ class RayRunner:
         if self._connected:
             local = {"address": "local", "include_dashboard": False, **(init or {})} if address is None else {"address": address}
             ray.init(log_to_driver=False, configure_logging=False, **local)
+        self._threads = threads_per_worker or _share(ray, workers)
         if workers is None:
-            workers = max(1, int(ray.cluster_resources().get("CPU", 1) // cpus_per_worker))
-        self._actor = ray.remote(JobWorker).options(num_cpus=cpus_per_worker, num_gpus=gpus_per_worker, max_restarts=0)
+            workers = max(1, int(ray.cluster_resources().get("CPU", 1) // self._threads))
+        # num_cpus = the budget: Ray sets the actor's OMP_NUM_THREADS to it, JobWorker sizes the other pools
+        self._actor = ray.remote(JobWorker).options(num_cpus=self._threads, num_gpus=gpus_per_worker, max_restarts=0)
         self._work = work
-        self._threads = max(1, int(cpus_per_worker))
         self.slots: list[list] = [[self._actor.remote(work, self._threads), None, None] for _ in range(workers)]  # actor, task, ref
 
     def free(self) -> int:

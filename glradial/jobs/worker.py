@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["STAGING", "Task", "Result", "JobWorker", "run_task", "limit_threads", "worker_name"]
+__all__ = ["STAGING", "Task", "Result", "JobWorker", "run_task", "worker_name"]
 
 #: the staging folder's name inside the output folder
 STAGING = ".staging"
@@ -76,26 +76,18 @@ def run_task(work: Callable[[str, Path], dict], task: Task) -> Result:
         shutil.rmtree(staging, ignore_errors=True)
 
 
-def limit_threads(threads: int) -> None:
-    """Size this process's native thread pools (OpenMP, BLAS, OpenCV) to ``threads``: a worker is
-    given its share of the cores, as Ray gives an actor of ``num_cpus`` (so N workers do not run
-    N x cores threads)."""
-    for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ[name] = str(threads)
-    import cv2
-
-    cv2.setNumThreads(threads)
-
-
 class JobWorker:
-    """A worker's state across inputs: ``work`` (a picklable callable) run on each task, native
-    thread pools sized to ``threads`` (:func:`limit_threads`; None leaves them)."""
+    """A worker's state across inputs: ``work`` (a picklable callable) run on each task, this
+    process's native thread pools sized to ``threads`` (:func:`glradial.threads.set_thread_budget`;
+    None leaves the libraries' defaults)."""
 
     def __init__(self, work: Callable[[str, Path], dict], threads: int | None = None) -> None:
+        from ..threads import set_thread_budget
+
+        if threads is not None:  # first: before NumPy (BLAS) is imported and any GL context made
+            set_thread_budget(threads)
         from ..commands import keep_estimators
 
-        if threads is not None:
-            limit_threads(threads)
         keep_estimators()
         self.work = work
 
@@ -104,3 +96,13 @@ class JobWorker:
 
     def pid(self) -> int:
         return os.getpid()
+
+    def threads(self) -> dict:
+        """This worker's thread budget as each pool sees it: glradial's, OpenMP's variable (Ray sets
+        it to the actor's ``num_cpus``), llvmpipe's variable and OpenCV's."""
+        import cv2
+
+        from ..threads import thread_budget
+
+        return {"budget": thread_budget(), "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS"),
+                "LP_NUM_THREADS": os.environ.get("LP_NUM_THREADS"), "cv2": cv2.getNumThreads()}

@@ -41,6 +41,7 @@ from typing import Iterator, Literal, Union
 import av
 import numpy as np
 
+from ..threads import thread_budget
 from .atomic import atomic_path, check_output_folder, check_overwrite, temporary_folder
 from .image_io import check_input_file
 from .native_stderr import silenced
@@ -333,6 +334,7 @@ class VideoReader:
             raise ValueError(f"{str(self.path)!r} holds no video stream")
         stream = self._container.streams.video[0]
         stream.thread_type = "AUTO"
+        stream.thread_count = thread_budget() or 0  # 0: FFmpeg's automatic count (about one per core)
         self.stream = stream
         self.info = stream_info(self._container, stream, _first_frame_tags(self.path, options))
         if self.info.size[0] <= 0 or self.info.size[1] <= 0:
@@ -380,7 +382,7 @@ class VideoReader:
         rgb = frame.reformat(
             width=width, height=height, format=self._format, interpolation="AREA",
             src_colorspace=_matrix(frame.colorspace, frame.height), src_color_range=frame.color_range or 1,
-            dst_color_range=2,
+            dst_color_range=2, threads=thread_budget() or 0,
         )
         return rgb.to_ndarray()
 
@@ -757,6 +759,7 @@ class VideoWriter:
             except (AttributeError, TypeError, ValueError):
                 pass
         self._fields = _interlace_encoder(context, info)
+        context.thread_count = thread_budget() or 0  # the process's budget (glradial.threads); 0: FFmpeg's automatic count
         codec_options: dict[str, str] = {}
         if options.crf is not None:
             if codec.name not in CRF_ENCODERS:
@@ -811,7 +814,7 @@ class VideoWriter:
         depth = 8 if image.dtype == np.uint8 else 16
         frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(image), format=_rgb_format(depth, self.order, image.shape[2] == 4))
         frame = frame.reformat(format=self._pix_fmt, dst_colorspace=self._matrix, src_color_range=2,
-                               dst_color_range=self._range, interpolation="BILINEAR")
+                               dst_color_range=self._range, interpolation="BILINEAR", threads=thread_budget() or 0)
         return self._stamp(frame, pts)
 
     def _stamp(self, frame: av.VideoFrame, pts: int | None) -> av.VideoFrame:

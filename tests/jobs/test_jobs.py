@@ -206,6 +206,9 @@ def test_job_usage_errors(tmp_path, media, monkeypatch, capsys):
     assert "got 3 paths" in capsys.readouterr().err
     assert main(["correct", image, "--out-dir", str(tmp_path / "o"), "--auto", "--sidecar", "x.csv"]) == 2
     assert main(["correct", image, "--out-dir", str(tmp_path / "o"), "--gpus-per-worker", "1", *LENS]) == 2
+    assert main(["correct", image, str(tmp_path / "o.png"), "--threads-per-worker", "1", *LENS]) == 2
+    assert "--threads-per-worker run(s) a job" in capsys.readouterr().err
+    assert main(["correct", image, "--out-dir", str(tmp_path / "o"), "--threads-per-worker", "0", *LENS]) == 2
     assert main(["correct", "--ray", image, str(media["i1"]), "--out-dir", str(tmp_path / "o"), *LENS]) == 2
     assert "put --ray after the inputs" in capsys.readouterr().err
     monkeypatch.setattr("glradial.jobs.ray_runner.ray_available", lambda: False)

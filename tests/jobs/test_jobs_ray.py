@@ -126,3 +126,21 @@ def test_ctrl_c_on_ray_leaves_the_manifest_consistent(tmp_path, address, media):
         single = tmp_path / f"single_{name}"
         assert main(["correct", str(next(p for p in inputs if Path(p).name == name)), str(single), "--k1", "-0.2", "--backend", "cpu"]) == 0
         same_output(out / name, single)
+
+
+def test_an_actor_gets_its_share_of_the_cpus_as_its_thread_budget(address):
+    """Two actors on the two-CPU head: each reserves 1 CPU and runs with a budget of 1 thread (Ray's
+    OMP_NUM_THREADS and glradial's own pools agree); one actor given 2 threads reserves both CPUs."""
+    from glradial.jobs.ray_runner import RayRunner
+    from glradial.jobs.tasks import CommandWork
+
+    work = CommandWork("estimate", {})
+    for workers, threads, expected in ((2, None, 1), (1, 2, 2)):
+        runner = RayRunner(work, None, workers, threads_per_worker=threads)
+        try:
+            seen = ray.get([slot[0].threads.remote() for slot in runner.slots])
+            assert seen == [{"budget": expected, "OMP_NUM_THREADS": str(expected), "LP_NUM_THREADS": str(expected),
+                             "cv2": expected}] * workers
+            assert ray.available_resources().get("CPU", 0) == 2 - workers * expected
+        finally:
+            runner.close()
