@@ -138,7 +138,7 @@ class LiveStats:
     """Counts of a live run: frames ``pushed``, ``dropped`` (before correction: the input outran
     it), ``corrected``, ``left`` (taken by the caller) and ``late`` (left more than ``max_delay``
     frame periods after arriving); ``delays`` the delay of every frame that left (frame periods),
-    ``dropped_at`` the numbers of the dropped frames."""
+    ``dropped_at`` the numbers of the dropped frames (:meth:`dropped_ranges`)."""
 
     rate: float
     max_delay: int
@@ -155,6 +155,17 @@ class LiveStats:
         """Count frame ``index`` (its number on the source's clock) as dropped."""
         self.dropped += 1
         self.dropped_at.append(index)
+
+    def dropped_ranges(self, most: int = 8) -> str:
+        """The dropped frames' numbers as runs (``"0-4, 120"``; at most ``most`` runs, then ``"..."``)."""
+        runs: list[list[int]] = []
+        for index in sorted(self.dropped_at):
+            if runs and index == runs[-1][1] + 1:
+                runs[-1][1] = index
+            else:
+                runs.append([index, index])
+        text = [f"{a}" if a == b else f"{a}-{b}" for a, b in runs[:most]]
+        return ", ".join(text + (["..."] if len(runs) > most else []))
 
     def delay_percentile(self, q: float) -> float:
         """The ``q``-th percentile (0-100) of the delays (frame periods; NaN before any frame left)."""
