@@ -162,6 +162,8 @@ def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray
     height, width = dist.shape
     out = np.empty((2, len(h)))
     det = np.abs(np.linalg.det(h))
+    # many hypotheses: each pixel's gain computed once for the image, then looked up (the same values)
+    gain = _gain(dist) if len(h) * len(points) > dist.size else None
     for s in range(0, len(h), BATCH):
         xy, w = _project(h[s: s + BATCH], points)
         with np.errstate(all="ignore"):
@@ -173,10 +175,15 @@ def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray
         on = inside & (field[iy, ix] > 0)
         d = dist[iy, ix]
         length = np.where(on, length, 0.0)
-        out[0, s: s + BATCH] = np.sum(length * (np.exp(-0.5 * (d / SIGMA) ** 2) - MISS_PENALTY), axis=1)
+        out[0, s: s + BATCH] = np.sum(length * (_gain(d) if gain is None else gain[iy, ix]), axis=1)
         if share:
             out[1, s: s + BATCH] = np.sum(length * (d <= HIT_PX), axis=1) / np.maximum(np.sum(length, axis=1), 1e-9)
     return out if share else out[0]
+
+
+def _gain(d: np.ndarray) -> np.ndarray:
+    """What a template point at distance ``d`` (work px) from the line mask counts per px of marking."""
+    return np.exp(-0.5 * (d / SIGMA) ** 2) - MISS_PENALTY
 
 
 def _grid_views(h: np.ndarray, size: tuple[int, int]) -> np.ndarray:
