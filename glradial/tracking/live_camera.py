@@ -324,9 +324,12 @@ class LiveCameraTracker:
             self._receive()
 
     # -- the frame thread ----------------------------------------------------------------------------
-    def push(self, frame: np.ndarray | av.VideoFrame, timestamp: float | None = None) -> LiveCamera:
+    def push(self, frame: np.ndarray | av.VideoFrame, timestamp: float | None = None, wait: float = 0.0) -> LiveCamera:
         """The camera of the next frame (``H x W x 3`` uint8 RGB, or an ``av.VideoFrame``) whose
-        presentation time is ``timestamp`` s (None: one frame period after the previous one)."""
+        presentation time is ``timestamp`` s (None: one frame period after the previous one).
+        ``wait`` (s): where no sure camera reaches this frame and a fit is in flight (the first
+        lock-on, or after a cut), wait that long at most for it (the caller's slack within its
+        ``max_delay``): a fit that lands meanwhile makes this frame sure too."""
         if self.size is None:
             raise ValueError("push before for_stream(size, rate): the tracker does not know the stream yet")
         self._check_size(frame)
@@ -335,6 +338,9 @@ class LiveCameraTracker:
             self._receive()
         self._follow(index, _luma(frame))
         self._latest = self._carried(index)
+        if wait > 0 and self._busy and self._latest is None and self._connection.poll(wait):
+            self._receive()
+            self._latest = self._carried(index)
         if self.worker == "inline":
             if index % self.every == 0 or self._base is None:
                 from ..camera.calibrate import calibrate
@@ -451,6 +457,6 @@ class LiveCameraTracker:
 def camera_tracker(**options: object) -> LiveCameraTracker:
     """The live camera tracker of ``glradial live --camera``, its worker warmed up (the stream is
     given later, :meth:`LiveCameraTracker.for_stream`): the one place that chooses it (a causal tracker
-    with ``for_stream(size, rate)``, ``start_on(first_frame)`` and ``push(frame, timestamp) -> LiveCamera``
+    with ``for_stream(size, rate)``, ``start_on(first_frame)`` and ``push(frame, timestamp, wait=) -> LiveCamera``
     swaps in here)."""
     return LiveCameraTracker.started(**options)

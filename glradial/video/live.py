@@ -43,7 +43,9 @@ Conventions:
 * ``tracker`` (with ``camera``; :func:`glradial.tracking.live_camera.camera_tracker`): each frame's
   whole camera, ``LiveFrame.tracked``, and a sample with its transform, focal length and lens
   (:func:`glradial.export.opentrackio.camera_frame_sample`). ``lens=None``: frames pass through
-  uncorrected (the tracking only).
+  uncorrected (the tracking only). A frame with no sure camera while a fit is in flight waits for
+  it while its delay allows (``max_delay`` - 1 periods less its correction: the lock-on reaches
+  the frames that arrived just before it).
 * :meth:`LiveCorrector.warm_up` starts a given lens's maps on a helper thread: frames before they
   are ready pass through uncorrected, flagged doubtful (``reason`` ``"pending"``).
 """
@@ -479,7 +481,7 @@ class LiveCorrector:
 
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None
-        tracked = self.tracker.push(frame, index / float(self.rate)) if self.tracker is not None else None
+        tracked = self.tracker.push(frame, index / float(self.rate), wait=self._slack(arrived)) if self.tracker is not None else None
         if self.passthrough:  # tracking only: the frame as it came
             sample = self._sample(index, timestamp, self._state(index, None), tracked) if self.camera is not None else None
             return LiveFrame(index, timestamp, pts, frame, self._state(index, None), sample, arrived, tracked)
@@ -502,6 +504,13 @@ class LiveCorrector:
             image = frame if state.applied is None else self._corrector(frame, state.applied)
         sample = self._sample(index, timestamp, state, tracked) if self.camera is not None else None
         return LiveFrame(index, timestamp, pts, image, state, sample, arrived, tracked)
+
+    def _slack(self, arrived: float) -> float:
+        """Seconds a frame that arrived at ``arrived`` may still wait for a camera fit about to land
+        and leave within ``max_delay`` - 1 frame periods (its correction's median time kept for it; one
+        period kept for the frames behind it): 0 with ``max_delay`` 1."""
+        cost = float(np.median(self._costs)) if self._costs else 0.0
+        return max(0.0, arrived + (self.max_delay - 1) / float(self.rate) - cost - time.monotonic())
 
     def _twin(self) -> FrameCorrector:
         """A corrector like the worker's (same options and planes), for :class:`_MapsAhead`."""

@@ -149,11 +149,9 @@ def test_a_wide_frame_is_fitted_on_a_copy_and_its_camera_sees_the_stream():
     assert float(np.sqrt(np.mean(np.sum((seen[inside] - expected[inside]) ** 2, 1)))) <= 2.0
 
 
-def test_the_first_fit_starts_on_the_first_frame_before_it_is_pushed():
-    """``start_on`` sends the first decoded frame to the worker at once; its push then sends nothing
-    again, and the fit, once back, is frame 0's (carried to the frames after it)."""
-    import time
-
+def test_the_first_fit_starts_on_the_first_frame_and_a_push_may_wait_for_it():
+    """``start_on`` sends the first decoded frame to the worker at once; frame 0's push, allowed to
+    wait, gets that fit (sure, ``fit_index`` 0) rather than "pending", and the frames after it carry it."""
     from glradial.tracking.live_camera import LiveCameraTracker
 
     cameras, frames = _shot(3)
@@ -166,14 +164,9 @@ def test_the_first_fit_starts_on_the_first_frame_before_it_is_pushed():
     try:
         tracker.wait_ready()
         tracker.start_on(frames[0])
-        assert tracker._busy
-        end = time.monotonic() + 60
-        while tracker.fits == 0 and time.monotonic() < end:  # the fit of frame 0, back before any push
-            if tracker._connection.poll(0.05):
-                tracker._receive()
-        assert tracker.fits == 1
-        states = [tracker.push(frame, i / RATE) for i, frame in enumerate(frames)]
-        assert [(s.fit_index, s.reason) for s in states][:1] == [(0, "ok")]
+        first = tracker.push(frames[0], 0.0, wait=120.0)
+        assert (first.fit_index, first.reason, first.doubtful, tracker.fits) == (0, "ok", False, 1)
+        states = [tracker.push(frame, i / RATE) for i, frame in enumerate(frames[1:], 1)]
         assert all(s.fit_index >= 0 and not s.doubtful for s in states)
         with pytest.raises(ValueError, match="after the first push"):
             tracker.start_on(frames[0])
