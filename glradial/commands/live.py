@@ -233,7 +233,7 @@ def _start_tracking(warm, source):
     if warm is None:
         return None
     tracker = warm.for_stream(source.info.size, source.info.rate)
-    tracker.start_on(source.first_frame)
+    tracker.start_on(source.first_frame, 0.0)  # frame 0 on the corrector's clock (number / rate)
     return tracker
 
 

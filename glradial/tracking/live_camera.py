@@ -352,16 +352,20 @@ class LiveCameraTracker:
             self._busy = True
         return self._state(index)
 
-    def start_on(self, frame: np.ndarray | av.VideoFrame) -> None:
+    def start_on(self, frame: np.ndarray | av.VideoFrame, timestamp: float = 0.0) -> None:
         """Start the first fit on the stream's first frame now, as soon as it is decoded (before the
-        frame thread pushes it: the lock-on comes that much sooner); its :meth:`push` then follows
-        as usual. After :meth:`for_stream`, before the first push; a no-op for an ``"inline"``
-        tracker or a worker not ready yet."""
+        frame thread pushes it: the lock-on comes that much sooner); ``timestamp``: its presentation
+        time (s) on the clock :meth:`push` is given (:class:`~glradial.video.live.LiveCorrector`'s:
+        0 for the first frame), so that the fit is attributed to that frame even where the frame
+        itself is never pushed (dropped: the fit then reaches no frame, which stay doubtful until
+        the next). After :meth:`for_stream`, before the first push; the fit is skipped (not the
+        clock) for an ``"inline"`` tracker or a worker not ready yet."""
         if self.size is None:
             raise ValueError("start_on before for_stream(size, rate): the tracker does not know the stream yet")
         if self._index >= 0:
             raise ValueError("start_on after the first push: it starts the fit on the first frame")
         self._check_size(frame)
+        self._first = float(timestamp)
         if self.worker != "inline" and self._ready and not self._busy:
             self._connection.send((0, np.ascontiguousarray(_fit_copy(frame)), None))
             self._busy = True

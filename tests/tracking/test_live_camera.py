@@ -152,7 +152,7 @@ def test_a_wide_frame_is_fitted_on_a_copy_and_its_camera_sees_the_stream():
 def test_the_first_fit_starts_on_the_first_frame_and_a_push_may_wait_for_it():
     """``start_on`` sends the first decoded frame to the worker at once; frame 0's push, allowed to
     wait, gets that fit (sure, ``fit_index`` 0) rather than "pending", and the frames after it carry it."""
-    from glradial.tracking.live_camera import LiveCameraTracker
+    from glradial.tracking.live_camera import LOST, LiveCameraTracker
 
     cameras, frames = _shot(3)
     tracker = LiveCameraTracker(worker="thread")
@@ -172,6 +172,13 @@ def test_the_first_fit_starts_on_the_first_frame_and_a_push_may_wait_for_it():
             tracker.start_on(frames[0])
     finally:
         tracker.close()
+    skipped = LiveCameraTracker.started(SIZE, RATE, worker="thread")  # frame 0 fitted, then never pushed (dropped)
+    try:
+        skipped.start_on(frames[0], 0.0)
+        state = skipped.push(frames[1], 1 / RATE, wait=120.0)  # the fit of frame 0 lands: no motion from it to here
+        assert (state.index, state.doubtful, state.reason, state.camera, skipped.fits) == (1, True, LOST, None, 1)
+    finally:
+        skipped.close()
 
 
 def test_camera_samples_validate_and_carry_the_calibrate_json_fields():
