@@ -264,7 +264,7 @@ class LiveCameraTracker:
         self.rate, self.max_carry, self._index = 0.0, 0, -1
         if size is not None or rate is not None:
             self.for_stream(size, rate)
-        self.fits = 0
+        self.fits, self.waited = 0, 0.0  # fits taken; seconds the last push waited for one
         self._flow = _Flow()
         self._chain, self._motion = 0, np.eye(3)
         self._history: OrderedDict[int, tuple[int, np.ndarray]] = OrderedDict()
@@ -329,7 +329,8 @@ class LiveCameraTracker:
         presentation time is ``timestamp`` s (None: one frame period after the previous one).
         ``wait`` (s): where no sure camera reaches this frame and a fit is in flight (the first
         lock-on, or after a cut), wait that long at most for it (the caller's slack within its
-        ``max_delay``): a fit that lands meanwhile makes this frame sure too."""
+        ``max_delay``): a fit that lands meanwhile makes this frame sure too; :attr:`waited` says
+        how long this push waited (s)."""
         if self.size is None:
             raise ValueError("push before for_stream(size, rate): the tracker does not know the stream yet")
         self._check_size(frame)
@@ -338,9 +339,13 @@ class LiveCameraTracker:
             self._receive()
         self._follow(index, _luma(frame))
         self._latest = self._carried(index)
-        if wait > 0 and self._busy and self._latest is None and self._connection.poll(wait):
-            self._receive()
-            self._latest = self._carried(index)
+        self.waited = 0.0
+        if wait > 0 and self._busy and self._latest is None:
+            started = time.monotonic()
+            if self._connection.poll(wait):
+                self._receive()
+                self._latest = self._carried(index)
+            self.waited = time.monotonic() - started
         if self.worker == "inline":
             if index % self.every == 0 or self._base is None:
                 from ..camera.calibrate import calibrate

@@ -317,6 +317,7 @@ class LiveCorrector:
         self._first: float | None = None
         self._last_index = -1
         self._costs: deque = deque(maxlen=COSTS_KEPT)  # the last corrections' times (s)
+        self._waited = 0.0  # s the last frame waited for a camera fit (not its correction's cost)
         self._applied: Lens | None = None  # --auto: the lens applied now
         self._ahead = _MapsAhead(self._twin, self.size)
         if camera is not None and (self.lens is not None or self.passthrough):
@@ -447,7 +448,7 @@ class LiveCorrector:
                 started = time.monotonic()
                 done = self._correct(*item)
                 if self.stats.corrected:  # the first builds maps and opens things: no measure of the rest
-                    self._costs.append(time.monotonic() - started)
+                    self._costs.append(time.monotonic() - started - self._waited)
                 with self._cond:
                     while len(self._ready) >= READY_SLOTS and not self._stopped:
                         self._cond.wait(0.05)
@@ -481,7 +482,7 @@ class LiveCorrector:
 
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None
-        tracked = self.tracker.push(frame, index / float(self.rate), wait=self._slack(arrived)) if self.tracker is not None else None
+        tracked = self._track(frame, index, arrived) if self.tracker is not None else None
         if self.passthrough:  # tracking only: the frame as it came
             sample = self._sample(index, timestamp, self._state(index, None), tracked) if self.camera is not None else None
             return LiveFrame(index, timestamp, pts, frame, self._state(index, None), sample, arrived, tracked)
@@ -505,12 +506,16 @@ class LiveCorrector:
         sample = self._sample(index, timestamp, state, tracked) if self.camera is not None else None
         return LiveFrame(index, timestamp, pts, image, state, sample, arrived, tracked)
 
-    def _slack(self, arrived: float) -> float:
-        """Seconds a frame that arrived at ``arrived`` may still wait for a camera fit about to land
-        and leave within ``max_delay`` - 1 frame periods (its correction's median time kept for it; one
-        period kept for the frames behind it): 0 with ``max_delay`` 1."""
+    def _track(self, frame, index: int, arrived: float):
+        """The frame's camera (the tracker's push), allowed to wait for a fit about to land while no
+        frame waits behind it and it can still leave within ``max_delay`` - 1 frame periods (its
+        correction's median time kept for it; one period kept for the frames behind it; no wait with
+        ``max_delay`` 1); the time waited is kept out of the correction's measured cost."""
         cost = float(np.median(self._costs)) if self._costs else 0.0
-        return max(0.0, arrived + (self.max_delay - 1) / float(self.rate) - cost - time.monotonic())
+        slack = 0.0 if self._waiting else arrived + (self.max_delay - 1) / float(self.rate) - cost - time.monotonic()
+        tracked = self.tracker.push(frame, index / float(self.rate), wait=max(0.0, slack))
+        self._waited = self.tracker.waited
+        return tracked
 
     def _twin(self) -> FrameCorrector:
         """A corrector like the worker's (same options and planes), for :class:`_MapsAhead`."""
