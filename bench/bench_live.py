@@ -286,6 +286,7 @@ def run_auto_stdin(clip: Path, work: Path, k1: float, k2: float, size: tuple[int
         if process.poll() is not None:
             break
         time.sleep(0.05)
+    conditions = load_now()
     sender = subprocess.Popen(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts", "-"],
                               stdout=write_end)
     os.close(write_end)
@@ -302,7 +303,7 @@ def run_auto_stdin(clip: Path, work: Path, k1: float, k2: float, size: tuple[int
     lenses = np.array([[s["custom"]["glradial"]["k1"], s["custom"]["glradial"]["k2"]] for s in samples])
     errors = np.atleast_1d(max_displacement_px(lenses[late], np.array([k1, k2])))
     doubtful = np.array([s["custom"]["glradial"].get("doubtful", True) for s in samples])[late]
-    return {**report, "samples": len(samples), "err_median": float(np.median(errors)), "err_p95": float(np.percentile(errors, 95)),
+    return {**report, **conditions, "samples": len(samples), "err_median": float(np.median(errors)), "err_p95": float(np.percentile(errors, 95)),
             "within_8px": float(np.mean(errors <= 8.0)), "sure": float(np.mean(~doubtful))}
 
 
