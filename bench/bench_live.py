@@ -28,7 +28,8 @@ Runs (each reported with the command it is):
    doubtful).
 
 Run: ``python bench/bench_live.py [--size 1280x720] [--seconds 10] [--rate 50] [--auto-rate 25]
-[--skip fixed,capacity,auto]``.
+[--repeat 4] [--skip fixed,capacity,auto]``; the fixed-lens run alone, four times:
+``python bench/bench_live.py --skip capacity,auto`` (docs/figures/live_start.json).
 """
 
 from __future__ import annotations
@@ -103,9 +104,10 @@ def _report(stderr: str) -> dict:
     line = next(line for line in stderr.splitlines() if "frames read" in line)
     words = line.replace(",", "").replace(";", "").split()
     pick = lambda key, after=1: float(words[words.index(key) + after])  # noqa: E731
+    where = next((line.split(": ")[-1] for line in stderr.splitlines() if "dropped frames (numbers" in line), "")
     return {"read": int(words[words.index("frames") - 1]), "written": int(words[words.index("written") - 1]),
             "dropped": int(pick("dropped")), "late": int(pick("late")), "p50": pick("p50"), "p95": pick("p95"),
-            "max": pick("max", 1)}
+            "max": pick("max", 1), "dropped_at": where}
 
 
 def _live(args: list[str], **kwargs) -> subprocess.Popen:
@@ -155,11 +157,29 @@ def _receive(port: int, received: list, stop: threading.Event) -> threading.Thre
     return thread
 
 
-def stream_over_udp(clip: Path, arguments) -> tuple[str, list[bytes], float]:
+def udp_receive_errors() -> int:
+    """The machine's UDP datagrams lost so far for want of room in a receive buffer (``RcvbufErrors``
+    of /proc/net/snmp; -1 where it cannot be read): packets of the stream lost at the socket."""
+    try:
+        rows = [line.split() for line in Path("/proc/net/snmp").read_text().splitlines() if line.startswith("Udp:")]
+        return int(rows[1][rows[0].index("RcvbufErrors")])
+    except (OSError, ValueError, IndexError):
+        return -1
+
+
+def load_now() -> dict:
+    """The machine's load as a run starts: the 1-, 5- and 15-minute load averages (``uptime``'s)."""
+    one, five, fifteen = os.getloadavg()
+    return {"load_1min": one, "uptime_load": f"{one:.2f}, {five:.2f}, {fifteen:.2f}"}
+
+
+def stream_over_udp(clip: Path, arguments) -> tuple[str, list[bytes], dict]:
     """``clip`` sent over UDP in real time (``ffmpeg -re``) to ``glradial live`` run with
     ``arguments(video_port, sample_port)``, its OpenTrackIO packets received on ``sample_port``:
-    ``(its stderr, the packets, the 1-minute load average as sending starts)``; RuntimeError when
-    glradial fails."""
+    ``(its stderr, the packets, conditions)``, conditions being the load as sending starts
+    (:func:`load_now`) and ``udp_receive_errors``, the datagrams the machine lost at full receive
+    buffers meanwhile (:func:`udp_receive_errors`: the video's, or another program's); RuntimeError
+    when glradial fails."""
     video_port, sample_port = _free_port(), _free_port()
     received: list[bytes] = []
     stop = threading.Event()
@@ -175,7 +195,7 @@ def stream_over_udp(clip: Path, arguments) -> tuple[str, list[bytes], float]:
             raise RuntimeError("".join(lines))
         time.sleep(0.05)
     time.sleep(1.0)  # av.open binds the socket just after the line
-    load = os.getloadavg()[0]
+    conditions, lost = load_now(), udp_receive_errors()
     subprocess.run(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts",
                     f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True)
     process.wait(timeout=120)
@@ -183,15 +203,16 @@ def stream_over_udp(clip: Path, arguments) -> tuple[str, list[bytes], float]:
     time.sleep(0.3)
     stop.set()
     thread.join()
+    conditions["udp_receive_errors"] = udp_receive_errors() - lost if lost >= 0 else -1
     stderr = "".join(lines)
     if process.returncode != 0:
         raise RuntimeError(stderr)
-    return stderr, received, load
+    return stderr, received, conditions
 
 
 def run_fixed_udp(clip: Path, work: Path, k1: float, k2: float, frames: int) -> dict:
     out = work / f"fixed_{clip.stem}.ts"
-    stderr, received, _ = stream_over_udp(clip, lambda video_port, sample_port: [
+    stderr, received, conditions = stream_over_udp(clip, lambda video_port, sample_port: [
         f"udp://127.0.0.1:{video_port}", str(out), "-y", "--k1", str(k1), "--k2", str(k2), "--idle-timeout", "3",
         "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10"])
     report = _report(stderr)
@@ -199,7 +220,9 @@ def run_fixed_udp(clip: Path, work: Path, k1: float, k2: float, frames: int) -> 
 
     samples = [json.loads(parse_packet(p).payload) for p in received]
     psnr = picture_psnr(clip, out, k1, k2)
-    return {**report, "sent": frames, "samples": len(samples), "psnr_min": min(psnr), "psnr_median": float(np.median(psnr))}
+    return {**report, **conditions, "sent": frames, "samples": len(samples), "psnr_min": min(psnr),
+            "psnr_median": float(np.median(psnr)), "psnr_below_30db": int(np.sum(np.array(psnr) < 30.0)),
+            "psnr_checked": len(psnr)}
 
 
 def run_capacity(clip: Path, work: Path, k1: float, k2: float, backend: str = "cpu", frames: int = 150) -> dict:
@@ -263,6 +286,7 @@ def run_auto_stdin(clip: Path, work: Path, k1: float, k2: float, size: tuple[int
         if process.poll() is not None:
             break
         time.sleep(0.05)
+    conditions = load_now()
     sender = subprocess.Popen(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts", "-"],
                               stdout=write_end)
     os.close(write_end)
@@ -279,7 +303,7 @@ def run_auto_stdin(clip: Path, work: Path, k1: float, k2: float, size: tuple[int
     lenses = np.array([[s["custom"]["glradial"]["k1"], s["custom"]["glradial"]["k2"]] for s in samples])
     errors = np.atleast_1d(max_displacement_px(lenses[late], np.array([k1, k2])))
     doubtful = np.array([s["custom"]["glradial"].get("doubtful", True) for s in samples])[late]
-    return {**report, "samples": len(samples), "err_median": float(np.median(errors)), "err_p95": float(np.percentile(errors, 95)),
+    return {**report, **conditions, "samples": len(samples), "err_median": float(np.median(errors)), "err_p95": float(np.percentile(errors, 95)),
             "within_8px": float(np.mean(errors <= 8.0)), "sure": float(np.mean(~doubtful))}
 
 
@@ -292,6 +316,7 @@ def main() -> None:
     parser.add_argument("--k1", type=float, default=-0.2)
     parser.add_argument("--k2", type=float, default=0.03)
     parser.add_argument("--backends", default="cpu", help="capacity runs: cpu (planar YUV), gl (RGB through GLSL; llvmpipe here)")
+    parser.add_argument("--repeat", type=int, default=4, help="fixed-lens runs (each reported with its load)")
     parser.add_argument("--skip", default="", help="comma-separated runs to skip: fixed, capacity, auto")
     parser.add_argument("--work", type=Path, default=Path("/tmp/glradial_bench_live"))
     args = parser.parse_args()
@@ -306,12 +331,15 @@ def main() -> None:
         clip = make_clip(args.work / f"clip_{tag}_{args.rate}p.ts", size, args.rate, args.seconds, k1, k2)
         frames = int(round(args.seconds * args.rate))
         if "fixed" not in skip:
-            r = run_fixed_udp(clip, args.work, k1, k2, frames)
-            figures[f"fixed_udp_{args.rate}p"] = {**r, "written_share_of_sent": r["written"] / r["sent"]}
-            print(f"fixed lens, UDP, {args.rate}p: written {r['written']}/{r['sent']} = {r['written'] / r['sent']:.1%} "
-                  f"(read {r['read']}, dropped {r['dropped']}, late {r['late']}); samples received {r['samples']}/{r['written']} = "
-                  f"{r['samples'] / max(r['written'], 1):.1%}; delay p50 {r['p50']:.2f} p95 {r['p95']:.2f} max {r['max']:.2f} frames; "
-                  f"PSNR vs cv2.undistort min {r['psnr_min']:.1f} median {r['psnr_median']:.1f} dB", flush=True)
+            runs = figures[f"fixed_udp_{args.rate}p"] = [run_fixed_udp(clip, args.work, k1, k2, frames) for _ in range(args.repeat)]
+            for r in runs:
+                r["written_share_of_sent"] = r["written"] / r["sent"]
+                print(f"fixed lens, UDP, {args.rate}p (load {r['uptime_load']}): written {r['written']}/{r['sent']} = "
+                      f"{r['written'] / r['sent']:.1%} (read {r['read']}, dropped {r['dropped']} at [{r['dropped_at']}], late "
+                      f"{r['late']}; UDP receive errors {r['udp_receive_errors']}); samples received {r['samples']}/{r['written']}; "
+                      f"delay p50 {r['p50']:.2f} p95 {r['p95']:.2f} max {r['max']:.2f} frames; PSNR vs cv2.undistort min "
+                      f"{r['psnr_min']:.1f} median {r['psnr_median']:.1f} dB ({r['psnr_below_30db']} of {r['psnr_checked']} "
+                      "below 30 dB)", flush=True)
         for backend in ([] if "capacity" in skip else args.backends.split(",")):
             r = results[f"capacity, fixed lens, {args.rate}p, {backend}"] = run_capacity(clip, args.work, k1, k2, backend)
             print(f"capacity, fixed lens, {args.rate}p, backend {backend}: {r['fps']:.1f} fps flat out = {r['ratio']:.2f} x "

@@ -159,10 +159,10 @@ def run(clip: Path, frames: int) -> tuple[dict, list[dict]]:
     """The clip sent over UDP in real time to ``glradial live ... none --camera``: its report and samples."""
     from glradial.export.opentrackio_udp import reassemble
 
-    stderr, received, load = stream_over_udp(clip, lambda video_port, sample_port: [
+    stderr, received, conditions = stream_over_udp(clip, lambda video_port, sample_port: [
         f"udp://127.0.0.1:{video_port}", "none", "--camera", "--sensor", "2/3-inch", "--idle-timeout", "3",
         "--send", f"127.0.0.1:{sample_port}"])
-    return {**_report(stderr), "load_1min": load}, [json.loads(p) for p in reassemble(received)]
+    return {**_report(stderr), **conditions}, [json.loads(p) for p in reassemble(received)]
 
 
 def summary(report: dict, samples: list[dict], name: str, size: tuple[int, int], frames: int) -> dict:

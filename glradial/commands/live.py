@@ -187,18 +187,26 @@ def _corrector(args: argparse.Namespace, info, writer, camera, online=None, trac
     from ..video.live import LiveCorrector
 
     lens = online if online is not None else None if writer is None else lens_from_args(args, info.size)
+    backend = "cpu" if lens is None else args.backend  # nothing is drawn: no GL context to make for "auto"
     return LiveCorrector(lens, info.size, info.rate, max_delay=args.max_delay, camera=camera,
                          model=MODEL_NAMES[args.distortion_model], fit=args.fit, interpolation=args.interpolation,
-                         backend=args.backend, codec=info.codec, frames=writer, tracker=tracker)
+                         backend=backend, codec=info.codec, frames=writer, tracker=tracker)
 
 
 def _warm_imports(args: argparse.Namespace) -> None:
     """What the set-up after the first frame would otherwise import or build while the stream's
     frames pile up behind it (measured: 0.5 s, 13 frames of a 25p stream lost at the start): the
-    corrector, the stream loop, the encoders' module and, with samples, the OpenTrackIO schema's
+    corrector, the stream loop, the encoders' module, the remapping modules and ``--backend auto``'s
+    choice (an EGL context made and read: 0.2-0.4 s, 10-20 frames of a 50p stream dropped at the
+    start when it was made after the input opened) and, with samples, the OpenTrackIO schema's
     validator."""
     from ..media import video_io  # noqa: F401
+    from ..remapping import planes  # noqa: F401
+    from ..remapping.remap import auto_backend
     from ..video import live, live_stream  # noqa: F401
+
+    if args.backend == "auto" and args.output != NO_OUTPUT:
+        auto_backend()  # cached for this process: the corrector reads it
 
     if opentrackio_wanted(args):
         from ..export.opentrackio import validate_sample
@@ -217,6 +225,16 @@ def _warm_tracker(args: argparse.Namespace):
     from ..tracking.live_camera import camera_tracker
 
     return camera_tracker()
+
+
+def _start_tracking(warm, source):
+    """The warmed tracker given the stream, its first fit started on the first decoded frame at once
+    (before the outputs are set up and the frames flow); None without ``--camera``."""
+    if warm is None:
+        return None
+    tracker = warm.for_stream(source.info.size, source.info.rate)
+    tracker.start_on(source.first_frame, 0.0)  # frame 0 on the corrector's clock (number / rate)
+    return tracker
 
 
 def _sample_camera(args: argparse.Namespace, info):
@@ -253,10 +271,10 @@ def run(args: argparse.Namespace) -> int:
         source = _open_source(args)
         opened.append((source, "close"))
         info = source.info
+        tracker = _start_tracking(warm, source)
         camera = _sample_camera(args, info) if opentrackio_wanted(args) else None
         writer = None if args.output == NO_OUTPUT else _open_output(args, info)
         opened.append((writer, "abort"))
-        tracker = warm.for_stream(info.size, info.rate) if warm is not None else None
         corrector = _corrector(args, info, writer, camera, online, tracker)
         opened.append((corrector, "close"))
         corrector.warm_up(source.first_frame)
@@ -351,6 +369,8 @@ def _report(args, ended: str, stats, written: int, read: int, sender, samples) -
     lines = [f"glradial live: {why}: {read} frames read, {written} written to {target}, dropped {stats.dropped}, "
              f"late {stats.late} (over {stats.max_delay} frames); delay p50 {stats.delay_percentile(50):.2f} "
              f"p95 {stats.delay_percentile(95):.2f} max {max(stats.delays, default=float('nan')):.2f} frames"]
+    if stats.dropped:
+        lines.append(f"glradial live: dropped frames (numbers from the first): {stats.dropped_ranges()}")
     if sender is not None:
         lines.append(f"glradial live: sent {sender.sent} OpenTrackIO sample(s) in {sender.datagrams} UDP packet(s) to {args.send}")
     if samples is not None and written:

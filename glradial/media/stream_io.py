@@ -11,8 +11,9 @@ Sources (:class:`LiveSource`), by the text given:
   (each frame handed out when its timestamp is due, as a live source would).
 
 A network source ends after ``idle_timeout`` seconds without data (FFmpeg's interrupt callback,
-PyAV's ``timeout``); a pipe or a file ends at EOF. Frames are handed out as decoded
-(``av.VideoFrame``, the source's pix_fmt), with their presentation timestamps in the stream's time
+PyAV's ``timeout``); a pipe or a file ends at EOF. Frames are handed out as decoded, each as soon
+as its packet is in (slice threads, no frame threads, which would hold frames back for later
+packets: their periods added to every frame's latency) (``av.VideoFrame``, the source's pix_fmt), with their presentation timestamps in the stream's time
 base; :attr:`LiveSource.info` is the :class:`~glradial.media.video_io.VideoInfo` of the stream, read
 from its header and first decoded frame (colour tags), ``frame_count`` -1 (a live stream has none).
 
@@ -125,7 +126,9 @@ class LiveSource:
         if not self._container.streams.video:
             raise ValueError(f"live input {self.source!r} holds no video stream")
         self.stream = self._container.streams.video[0]
-        self.stream.thread_type = "AUTO"
+        # slice threads only: frame threads would hold each frame back until (threads - 1) later
+        # packets came (2-3 frame periods more latency, and the stream's last frames until it ends)
+        self.stream.thread_type = "SLICE"
         self.frames_read = 0
         self.ended = ""
         self._flushed = False

@@ -43,7 +43,9 @@ Conventions:
 * ``tracker`` (with ``camera``; :func:`glradial.tracking.live_camera.camera_tracker`): each frame's
   whole camera, ``LiveFrame.tracked``, and a sample with its transform, focal length and lens
   (:func:`glradial.export.opentrackio.camera_frame_sample`). ``lens=None``: frames pass through
-  uncorrected (the tracking only).
+  uncorrected (the tracking only). A frame with no sure camera while a fit is in flight waits for
+  it while its delay allows (``max_delay`` - 1 periods less its correction: the lock-on reaches
+  the frames that arrived just before it).
 * :meth:`LiveCorrector.warm_up` starts a given lens's maps on a helper thread: frames before they
   are ready pass through uncorrected, flagged doubtful (``reason`` ``"pending"``).
 """
@@ -138,7 +140,7 @@ class LiveStats:
     """Counts of a live run: frames ``pushed``, ``dropped`` (before correction: the input outran
     it), ``corrected``, ``left`` (taken by the caller) and ``late`` (left more than ``max_delay``
     frame periods after arriving); ``delays`` the delay of every frame that left (frame periods),
-    ``dropped_at`` the numbers of the dropped frames."""
+    ``dropped_at`` the numbers of the dropped frames (:meth:`dropped_ranges`)."""
 
     rate: float
     max_delay: int
@@ -155,6 +157,17 @@ class LiveStats:
         """Count frame ``index`` (its number on the source's clock) as dropped."""
         self.dropped += 1
         self.dropped_at.append(index)
+
+    def dropped_ranges(self, most: int = 8) -> str:
+        """The dropped frames' numbers as runs (``"0-4, 120"``; at most ``most`` runs, then ``"..."``)."""
+        runs: list[list[int]] = []
+        for index in sorted(self.dropped_at):
+            if runs and index == runs[-1][1] + 1:
+                runs[-1][1] = index
+            else:
+                runs.append([index, index])
+        text = [f"{a}" if a == b else f"{a}-{b}" for a, b in runs[:most]]
+        return ", ".join(text + (["..."] if len(runs) > most else []))
 
     def delay_percentile(self, q: float) -> float:
         """The ``q``-th percentile (0-100) of the delays (frame periods; NaN before any frame left)."""
@@ -304,6 +317,7 @@ class LiveCorrector:
         self._first: float | None = None
         self._last_index = -1
         self._costs: deque = deque(maxlen=COSTS_KEPT)  # the last corrections' times (s)
+        self._waited = 0.0  # s the last frame waited for a camera fit (not its correction's cost)
         self._applied: Lens | None = None  # --auto: the lens applied now
         self._ahead = _MapsAhead(self._twin, self.size)
         if camera is not None and (self.lens is not None or self.passthrough):
@@ -434,7 +448,7 @@ class LiveCorrector:
                 started = time.monotonic()
                 done = self._correct(*item)
                 if self.stats.corrected:  # the first builds maps and opens things: no measure of the rest
-                    self._costs.append(time.monotonic() - started)
+                    self._costs.append(time.monotonic() - started - self._waited)
                 with self._cond:
                     while len(self._ready) >= READY_SLOTS and not self._stopped:
                         self._cond.wait(0.05)
@@ -468,7 +482,7 @@ class LiveCorrector:
 
     def _correct(self, frame, timestamp: float, arrived: float, index: int) -> LiveFrame:
         pts = frame.pts if isinstance(frame, av.VideoFrame) else None
-        tracked = self.tracker.push(frame, index / float(self.rate)) if self.tracker is not None else None
+        tracked = self._track(frame, index, arrived) if self.tracker is not None else None
         if self.passthrough:  # tracking only: the frame as it came
             sample = self._sample(index, timestamp, self._state(index, None), tracked) if self.camera is not None else None
             return LiveFrame(index, timestamp, pts, frame, self._state(index, None), sample, arrived, tracked)
@@ -491,6 +505,17 @@ class LiveCorrector:
             image = frame if state.applied is None else self._corrector(frame, state.applied)
         sample = self._sample(index, timestamp, state, tracked) if self.camera is not None else None
         return LiveFrame(index, timestamp, pts, image, state, sample, arrived, tracked)
+
+    def _track(self, frame, index: int, arrived: float):
+        """The frame's camera (the tracker's push), allowed to wait for a fit about to land while no
+        frame waits behind it and it can still leave within ``max_delay`` - 1 frame periods (its
+        correction's median time kept for it; one period kept for the frames behind it; no wait with
+        ``max_delay`` 1); the time waited is kept out of the correction's measured cost."""
+        cost = float(np.median(self._costs)) if self._costs else 0.0
+        slack = 0.0 if self._waiting else arrived + (self.max_delay - 1) / float(self.rate) - cost - time.monotonic()
+        tracked = self.tracker.push(frame, index / float(self.rate), wait=max(0.0, slack))
+        self._waited = self.tracker.waited
+        return tracked
 
     def _twin(self) -> FrameCorrector:
         """A corrector like the worker's (same options and planes), for :class:`_MapsAhead`."""

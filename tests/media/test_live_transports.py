@@ -208,3 +208,30 @@ def test_ndi_without_its_extra_says_what_to_install(monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "cyndilib", None)  # as if not installed
     assert main(["live", "-", "ndi://studio", "--k1", "-0.1"]) == 1
     assert "pip install 'glradial[ndi]'" in capsys.readouterr().err
+
+
+def test_a_live_source_hands_out_every_frame_it_has_received(clip):
+    """A live source's decoder holds no frame back for later packets (frame threading would keep
+    the last two or three until more data or the end): the whole clip as NUT (packets with their
+    sizes) on a pipe left open, every frame is handed out before the input ends."""
+    import threading
+
+    nut = subprocess.run(["ffmpeg", "-v", "error", "-i", str(clip), "-c", "copy", "-f", "nut", "-"], capture_output=True,
+                         check=True).stdout
+    reader = subprocess.Popen([sys.executable, "-c", "from glradial.media.stream_io import LiveSource\n"
+                               "for frame in LiveSource('-').frames(): print(frame.pts, flush=True)"],
+                              cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)}, stdin=subprocess.PIPE, stdout=subprocess.PIPE)
+    handed: list[bytes] = []
+    collector = threading.Thread(target=lambda: handed.extend(iter(reader.stdout.readline, b"")), daemon=True)
+    collector.start()
+    try:
+        reader.stdin.write(nut)
+        reader.stdin.flush()
+        end = time.monotonic() + 60
+        while len(handed) < RATE * SECONDS and time.monotonic() < end and reader.poll() is None:
+            time.sleep(0.05)
+        assert len(handed) == RATE * SECONDS and reader.poll() is None  # every frame out, the input still open
+    finally:
+        reader.stdin.close()
+        reader.wait(timeout=60)
+        collector.join(timeout=5)

@@ -116,6 +116,71 @@ def test_tracker_says_lost_after_a_cut_and_pending_before_any_fit():
         pending.close()
 
 
+def test_a_wide_frame_is_fitted_on_a_copy_and_its_camera_sees_the_stream():
+    """A 1280x720 frame is fitted on its 960-wide copy (what the white lines are found on anyway):
+    the copy is OpenCV's area resize of the frame (a decoded frame converted and shrunk by FFmpeg in
+    one pass: within 2 grey levels on average), and the camera the tracker gives sees 1280x720,
+    within 2 px (at 1280) of the procedural view's exact camera."""
+    import av
+    import cv2
+
+    from glradial.camera.model import Camera
+    from glradial.camera.views import render_view
+    from glradial.pitch.template import PitchTemplate
+    from glradial.tracking.live_camera import LiveCameraTracker, _fit_copy
+
+    size = (1280, 720)
+    truth = Camera.look_at((0.0, -60.0, 20.0), (-20.0, 5.0), 40.0, size)
+    frame = render_view(truth, seed=2, players=6).frame
+    copy = _fit_copy(frame)
+    np.testing.assert_array_equal(copy, cv2.resize(frame, (960, 540), interpolation=cv2.INTER_AREA))
+    decoded = av.VideoFrame.from_ndarray(frame, format="rgb24").reformat(format="yuv420p")
+    shrunk = _fit_copy(decoded)
+    assert shrunk.shape == (540, 960, 3)
+    reference = cv2.resize(decoded.to_ndarray(format="rgb24"), (960, 540), interpolation=cv2.INTER_AREA)
+    assert np.mean(np.abs(shrunk.astype(int) - reference)) < 2.0
+    tracker = LiveCameraTracker(size, RATE, worker="inline")
+    state = tracker.push(frame, 0.0)
+    assert (state.reason, state.fit_index) == ("ok", 0) and state.camera.size == size
+    points = PitchTemplate().keypoints()
+    expected, seen = truth.project(points), state.camera.project(points)
+    inside = np.isfinite(expected).all(1) & (np.abs(expected - np.array(size) / 2) < np.array(size) / 2).all(1)
+    assert inside.sum() >= 4
+    assert float(np.sqrt(np.mean(np.sum((seen[inside] - expected[inside]) ** 2, 1)))) <= 2.0
+
+
+def test_the_first_fit_starts_on_the_first_frame_and_a_push_may_wait_for_it():
+    """``start_on`` sends the first decoded frame to the worker at once; frame 0's push, allowed to
+    wait, gets that fit (sure, ``fit_index`` 0) rather than "pending", and the frames after it carry it."""
+    from glradial.tracking.live_camera import LOST, LiveCameraTracker
+
+    cameras, frames = _shot(3)
+    tracker = LiveCameraTracker(worker="thread")
+    with pytest.raises(ValueError, match="for_stream"):
+        tracker.start_on(frames[0])
+    tracker.for_stream(SIZE, RATE)
+    with pytest.raises(ValueError, match="640x360"):
+        tracker.start_on(frames[0][:100])
+    try:
+        tracker.wait_ready()
+        tracker.start_on(frames[0])
+        first = tracker.push(frames[0], 0.0, wait=120.0)
+        assert (first.fit_index, first.reason, first.doubtful, tracker.fits) == (0, "ok", False, 1)
+        states = [tracker.push(frame, i / RATE) for i, frame in enumerate(frames[1:], 1)]
+        assert all(s.fit_index >= 0 and not s.doubtful for s in states)
+        with pytest.raises(ValueError, match="after the first push"):
+            tracker.start_on(frames[0])
+    finally:
+        tracker.close()
+    skipped = LiveCameraTracker.started(SIZE, RATE, worker="thread")  # frame 0 fitted, then never pushed (dropped)
+    try:
+        skipped.start_on(frames[0], 0.0)
+        state = skipped.push(frames[1], 1 / RATE, wait=120.0)  # the fit of frame 0 lands: no motion from it to here
+        assert (state.index, state.doubtful, state.reason, state.camera, skipped.fits) == (1, True, LOST, None, 1)
+    finally:
+        skipped.close()
+
+
 def test_camera_samples_validate_and_carry_the_calibrate_json_fields():
     from glradial.camera.calibrate import calibrate
     from glradial.export.opentrackio import TrackingCamera, camera_frame_sample

@@ -212,6 +212,22 @@ def test_an_input_faster_than_the_correction_drops_frames_counted(tmp_path):
     counts = _report(stderr)
     assert counts["read"] == 50 and counts["written"] + counts["dropped"] == counts["read"]
     assert counts["dropped"] > 0, stderr
+    where = next(line for line in stderr.splitlines() if "dropped frames (numbers from the first)" in line).split(": ")[-1]
+    if "..." not in where:  # every dropped frame named, once
+        runs = [[int(v) for v in run.split("-")] for run in where.split(", ")]
+        named = [i for run in runs for i in range(run[0], run[-1] + 1)]
+        assert len(named) == len(set(named)) == counts["dropped"] and all(0 <= i < 50 for i in named)
+
+
+def test_dropped_frames_read_as_runs():
+    from glradial.video.live import LiveStats
+
+    stats = LiveStats(25.0, 2)
+    for index in (5, 3, 4, 9, 20, 21, 40):
+        stats.drop(index)
+    assert stats.dropped_ranges() == "3-5, 9, 20-21, 40"
+    assert stats.dropped_ranges(most=2) == "3-5, 9, ..."
+    assert LiveStats(25.0, 2).dropped_ranges() == ""
 
 
 def _image(seed: int) -> np.ndarray:
