@@ -95,3 +95,23 @@ def test_element_support_counts_markings_drawn_where_the_frame_has_none():
     moved = Camera.look_at((9.0, -64.0, 18.0), (-19.0, 2.0), 48.0, (1280, 720), truth.lens)
     support, drawn_moved, missing = element_support(moved, samples, xy)
     assert support < 0.5 and missing >= drawn_moved // 2
+
+
+def test_label_verdict_tells_a_camera_from_mirrored_and_misplaced_labels():
+    cam = Camera.look_at((0.0, -45.0, 18.0), (0.0, 5.0), 60.0, (1280, 720))
+    labels = cam.project(KP)
+    inside = (labels[:, 0] > 0) & (labels[:, 0] < 1280) & (labels[:, 1] > 0) & (labels[:, 1] < 720)
+    labels[~inside] = np.nan
+    assert bench.label_verdict(KP, labels) == "consistent"
+    # near and far swapped: each label clicked on the keypoint mirrored across the halfway line's axis (y -> -y)
+    mirrored = KP.copy()
+    mirrored[:, 1] *= -1.0
+    swapped = cam.project(mirrored)
+    swapped[~inside] = np.nan
+    assert bench.homography_floor(KP, swapped) < 1e-3  # a homography still fits them exactly (with a reflection)
+    assert bench.label_verdict(KP, swapped) == "mirrored"
+    # the half turn is a camera on the far touchline, not a mirror
+    assert bench.label_verdict(KP, cam.turned().project(KP)) in ("consistent", "too_few")
+    labels[np.flatnonzero(inside)[0]] += 60.0  # one click far off
+    assert bench.label_verdict(KP, labels) == "inconsistent"
+    assert bench.label_verdict(KP, np.full_like(labels, np.nan)) == "too_few"
