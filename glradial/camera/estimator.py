@@ -48,6 +48,7 @@ the CNN-plus-lines estimator and this module composes the two.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
@@ -56,7 +57,7 @@ from ..estimation.lens_estimate import LensEstimate, check_method
 from ..estimation.net_lines import NetLinesEstimator, default_net_lines_estimator, square_pixels
 from ..estimation.trust import NO_EVIDENCE_REASONS, shift_px
 from ..lens.lens import Lens
-from ..lens.metrics import manifold_k2, max_displacement
+from ..lens.metrics import manifold_k2, max_displacement, max_displacement_px
 from ..lens.options import Method
 from ..media.frames import to_rgb8
 from .calibrate import calibrate
@@ -74,20 +75,47 @@ def manifold_lens(lens: Lens) -> Lens:
     return Lens(k1, float(manifold_k2(k1)))
 
 
+def pulled_lens(fit: Lens, pull: float) -> Lens:
+    """``fit`` pulled toward the manifold lens nearest it (:func:`manifold_lens`) by the share ``pull``:
+    ``p m + (1 - p) k``."""
+    nearest = manifold_lens(fit)
+    return Lens(pull * nearest.k1 + (1 - pull) * fit.k1, pull * nearest.k2 + (1 - pull) * fit.k2)
+
+
 def camera_lens(camera: CameraEstimate) -> Lens:
     """The lens ``camera``'s fit contributes (see the module docstring, "The camera's lens"): the fit's
-    ``(k1, k2)`` pulled toward the manifold lens nearest it (:func:`manifold_lens`) by the share
-    ``lens_manifold_pull`` (``camera_trust.json``): ``p m + (1 - p) k``."""
-    p = float(camera_trust()["lens_manifold_pull"])
-    fit, nearest = camera.lens, manifold_lens(camera.lens)
-    return Lens(p * nearest.k1 + (1 - p) * fit.k1, p * nearest.k2 + (1 - p) * fit.k2)
+    ``(k1, k2)`` pulled toward the manifold lens nearest it by the share ``lens_manifold_pull``
+    (``camera_trust.json``; :func:`pulled_lens`)."""
+    return pulled_lens(camera.lens, float(camera_trust()["lens_manifold_pull"]))
+
+
+def pitch_bound_px(rms_px: float, t: dict) -> float:
+    """90 % bound (px at 1920) on the max-displacement error of the camera lens of a fit whose marking
+    RMS is ``rms_px`` (px at 1280): ``lens_quantile`` times it (at least ``lens_floor_px``), thresholds ``t``."""
+    return float(t["lens_quantile"] * max(rms_px, t["lens_floor_px"]))
 
 
 def lens_bound_px(camera: CameraEstimate) -> float:
-    """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`: ``lens_quantile``
-    times ``camera``'s marking RMS (px at 1280, at least ``lens_floor_px``; ``glradial/data/camera_trust.json``)."""
-    t = camera_trust()
-    return float(t["lens_quantile"] * max(camera.rms_px, t["lens_floor_px"]))
+    """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`
+    (:func:`pitch_bound_px` of ``camera``'s marking RMS under ``glradial/data/camera_trust.json``)."""
+    return pitch_bound_px(camera.rms_px, camera_trust())
+
+
+def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float, float], reading_bound: float,
+            t: dict) -> tuple[tuple[float, float], float, bool]:
+    """The lens fed back from the camera lens ``pitch`` (bound ``pitch_bound``) and the estimation
+    layer's ``reading`` (bound ``reading_bound``): ``(k, stated bound, from the pitch)``; bounds px at
+    1920, ``t`` the thresholds (``camera_trust.json``). Where the two agree (their max-displacement
+    distance ``D`` within ``lens_agreement`` times the sum of their bounds) ``k = w k_p + (1 - w) k_a``,
+    ``w`` = ``lens_weight``, stating ``w b_p + (1 - w) b_a``. Where they do not, one of the bounds
+    fails and the frame cannot tell which: the reading is kept, stating ``max(b_a, D + b_p)`` (its
+    error when either bound holds), so a lens the pitch contradicts is never stated as sure as either."""
+    w = float(t["lens_weight"])
+    apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
+    if apart > float(t["lens_agreement"]) * (pitch_bound + reading_bound):
+        return tuple(reading), max(reading_bound, apart + pitch_bound), False  # type: ignore[return-value]
+    k = (w * pitch[0] + (1 - w) * reading[0], w * pitch[1] + (1 - w) * reading[1])
+    return k, w * pitch_bound + (1 - w) * reading_bound, True
 
 
 def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
@@ -102,10 +130,15 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
         raise TypeError(f"fallback must be a glradial.LensEstimate, got {type(fallback).__name__}")
     if camera.doubtful or camera.camera is None or not _may_be_a_pitch(fallback):
         return fallback
-    lens, bound = camera_lens(camera), lens_bound_px(camera)
-    w = float(camera_trust()["lens_weight"])
-    k = (w * lens.k1 + (1 - w) * fallback.k1, w * lens.k2 + (1 - w) * fallback.k2)
-    stated = w * bound + (1 - w) * fallback.uncertainty_px
+    lens = camera_lens(camera)
+    k, stated, from_pitch = combine((lens.k1, lens.k2), lens_bound_px(camera), (fallback.k1, fallback.k2),
+                                    fallback.uncertainty_px, camera_trust())
+    if not from_pitch:  # the two readings contradict each other's bounds: the reading, its bound widened
+        if stated <= fallback.uncertainty_px:
+            return fallback
+        sure = not fallback.doubtful and stated < shift_px(k)
+        return replace(fallback, uncertainty_px=stated, doubtful=not sure,
+                       reason=fallback.reason if sure or fallback.doubtful else "weak_geometry")
     sure = stated < shift_px(k)  # doubt by benefit, as the estimation layer's: the identity lens within the bound
     return LensEstimate(*k, pixel_aspect=fallback.pixel_aspect, uncertainty_px=stated, method="pitch",
                         chains=len(camera.markings), doubtful=not sure, reason="ok" if sure else "weak_geometry")
