@@ -53,15 +53,19 @@ from typing import Sequence
 
 import numpy as np
 
+from ..estimation import decentring
 from ..estimation.lens_estimate import LensEstimate, check_method
 from ..estimation.net_lines import NetLinesEstimator, default_net_lines_estimator, square_pixels
 from ..estimation.trust import NO_EVIDENCE_REASONS, shift_px
-from ..lens.lens import Lens
+from ..lens.lens import Lens, pixels_to_lens
 from ..lens.metrics import manifold_k2, max_displacement, max_displacement_px
 from ..lens.options import Method
 from ..media.frames import to_rgb8
+from ..pitch.template import PitchTemplate
 from .calibrate import calibrate
 from .estimate import CameraEstimate, camera_trust
+from .refine import K2_PRIOR, MIN_ELEMENT_POINTS, assign, template_samples
+from .white_lines import line_points
 
 
 def manifold_lens(lens: Lens) -> Lens:
@@ -89,16 +93,53 @@ def camera_lens(camera: CameraEstimate) -> Lens:
     return pulled_lens(camera.lens, float(camera_trust()["lens_manifold_pull"]))
 
 
-def pitch_bound_px(rms_px: float, t: dict) -> float:
+def pitch_bound_px(rms_px: float, centre_px: float, t: dict) -> float:
     """90 % bound (px at 1920) on the max-displacement error of the camera lens of a fit whose marking
-    RMS is ``rms_px`` (px at 1280): ``lens_quantile`` times it (at least ``lens_floor_px``), thresholds ``t``."""
-    return float(t["lens_quantile"] * max(rms_px, t["lens_floor_px"]))
+    RMS is ``rms_px`` (px at 1280) and whose lens moves by ``centre_px`` (px at 1920, :func:`centre_shift_px`;
+    NaN: not measured, no term) when a principal point off centre is fitted with it: ``lens_quantile``
+    times the RMS (at least ``lens_floor_px``) in quadrature with ``lens_shift_weight`` times the shift
+    (thresholds ``t``: ``camera_trust.json``)."""
+    base = t["lens_quantile"] * max(rms_px, t["lens_floor_px"])
+    return float(np.hypot(base, t["lens_shift_weight"] * centre_px) if np.isfinite(centre_px) else base)
 
 
-def lens_bound_px(camera: CameraEstimate) -> float:
+def lens_bound_px(camera: CameraEstimate, centre_px: float = float("nan")) -> float:
     """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`
-    (:func:`pitch_bound_px` of ``camera``'s marking RMS under ``glradial/data/camera_trust.json``)."""
-    return pitch_bound_px(camera.rms_px, camera_trust())
+    (:func:`pitch_bound_px` of ``camera``'s marking RMS and the lens's ``centre_px``, :func:`centre_shift_px`
+    of the frame, under ``glradial/data/camera_trust.json``)."""
+    return pitch_bound_px(camera.rms_px, centre_px, camera_trust())
+
+
+#: Gate (px at 1280) within which a white-line point counts as on its marking for :func:`centre_shift_px`.
+SHIFT_GATE_PX = 3.0
+
+
+def centre_shift_px(rgb: np.ndarray, camera: CameraEstimate) -> float:
+    """How far ``camera``'s fitted lens moves when decentring terms (a principal point off centre) are
+    fitted with it on the straight markings it explains: the white-line points of ``rgb`` within
+    :data:`SHIFT_GATE_PX` of each straight marking with at least ``MIN_ELEMENT_POINTS`` of them form
+    one chain, read by :func:`glradial.estimation.decentring.centre_shift_px` (px at 1920; NaN with
+    fewer than its ``MIN_CHAINS`` chains or no camera). Large where the markings seen cannot tell the
+    fitted centred lens from a decentred one: the lens is not pinned down by the pitch."""
+    cam = camera.camera
+    if cam is None:
+        return float("nan")
+    pitch = PitchTemplate()
+    lines = line_points(rgb)
+    samples = template_samples(pitch)
+    got = assign(cam.with_size(lines.size), samples, lines.xy, lines.angle, SHIFT_GATE_PX)
+    if got is None:
+        return float("nan")
+    element, on = samples.element[got[0]], got[3]
+    straight = [i for i, e in enumerate(pitch.elements()) if e.kind != "arc"]
+    chains = [i for i in straight if np.sum(on & (element == i)) >= MIN_ELEMENT_POINTS]
+    if not chains:
+        return float("nan")
+    masks = [on & (element == i) for i in chains]
+    points = np.concatenate([pixels_to_lens(lines.xy[m], lines.size) for m in masks])
+    chain = np.concatenate([np.full(m.sum(), j) for j, m in enumerate(masks)])
+    weight = np.array([1.0 / m.sum() for m in masks])  # each chain weighs alike (1 / px^2 over its points)
+    return decentring.centre_shift_px(points, chain, weight, float(lines.size[0]), cam.lens.k1, cam.lens.k2, K2_PRIOR)
 
 
 def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float, float], reading_bound: float,
@@ -118,7 +159,7 @@ def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float
     return k, w * pitch_bound + (1 - w) * reading_bound, True
 
 
-def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
+def pitch_lens(camera: CameraEstimate, fallback: LensEstimate, centre_px: float = float("nan")) -> LensEstimate:
     """The camera fit's lens (:func:`camera_lens`) combined with ``fallback`` (the estimation layer's
     reading of the same frame), as a :class:`LensEstimate` with ``method="pitch"`` and ``fallback``'s pixel
     aspect, when ``camera`` is not doubtful (see the module docstring); else ``fallback`` unchanged.
@@ -131,7 +172,7 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
     if camera.doubtful or camera.camera is None or not _may_be_a_pitch(fallback):
         return fallback
     lens = camera_lens(camera)
-    k, stated, from_pitch = combine((lens.k1, lens.k2), lens_bound_px(camera), (fallback.k1, fallback.k2),
+    k, stated, from_pitch = combine((lens.k1, lens.k2), lens_bound_px(camera, centre_px), (fallback.k1, fallback.k2),
                                     fallback.uncertainty_px, camera_trust())
     if not from_pitch:  # the two readings contradict each other's bounds: the reading, its bound widened
         if stated <= fallback.uncertainty_px:
@@ -170,7 +211,8 @@ def with_pitch(frame: np.ndarray, reading: LensEstimate) -> tuple[LensEstimate, 
     if reading.pixel_aspect != 1.0:
         rgb = square_pixels(rgb, reading.pixel_aspect)
     camera = fit_camera(rgb, reading)
-    return pitch_lens(camera, reading), camera
+    measure = camera_trust()["lens_shift_weight"] > 0 and not camera.doubtful  # the term costs a white-line pass
+    return pitch_lens(camera, reading, centre_shift_px(rgb, camera) if measure else float("nan")), camera
 
 
 def _with_pitch(frames: list, found: list[LensEstimate]) -> list[LensEstimate]:

@@ -205,3 +205,41 @@ def test_calibrate_started_from_a_lens_reading():
     assert not est.doubtful and _error_px(est.lens, truth.lens) <= LENS_TOLERANCE_PX
     with pytest.raises(TypeError, match="lens"):
         calibrate(frame, lens=(-0.6, 0.3))
+
+
+def test_a_camera_lens_the_reading_contradicts_is_not_mixed_in(monkeypatch):
+    """combine(): where the camera lens and the reading lie further apart than ``lens_agreement`` times
+    the sum of their bounds, one of the bounds fails; the reading is kept with a bound that holds when
+    either does (max displacement is a metric: the triangle inequality is the oracle)."""
+    t = dict(camera_trust(), lens_weight=0.5, lens_agreement=1.0)
+    pitch, reading = (-0.30, 0.05), (-0.10, 0.01)
+    apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
+    assert apart > 5.0
+    k, bound, mixed = pl.combine(pitch, 2.0, reading, 3.0, t)
+    assert not mixed and k == reading and bound == pytest.approx(max(3.0, apart + 2.0))
+    for truth in (pitch, reading):  # whichever reading is right (within its bound), the stated bound covers the answer
+        assert float(max_displacement_px(np.array(k), np.array(truth))) <= bound
+    # readings that agree within their bounds are mixed as before: w k_p + (1 - w) k_a, stating w b_p + (1 - w) b_a
+    k, bound, mixed = pl.combine(pitch, apart, reading, apart, t)
+    assert mixed and k == pytest.approx((-0.2, 0.03)) and bound == pytest.approx(apart)
+    # through pitch_lens: a sure camera whose lens the reading contradicts gives the reading back, its bound widened
+    fallback = LensEstimate(-0.1, 0.01, uncertainty_px=3.0, method="lines", chains=3)
+    cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.6, 0.3))
+    sure = CameraEstimate(cam, 2.0, False, "ok", ("halfway",), 0.5, 300, 0.95, 0.01)
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1.0))
+    lens = pl.camera_lens(sure)
+    apart = float(max_displacement_px(np.array([lens.k1, lens.k2]), np.array([-0.1, 0.01])))
+    assert apart > pl.lens_bound_px(sure) + 3.0
+    got = pl.pitch_lens(sure, fallback)
+    assert (got.k1, got.k2, got.method) == (-0.1, 0.01, "lines")
+    assert got.uncertainty_px == pytest.approx(apart + pl.lens_bound_px(sure))
+    # the widened bound reaches the identity lens here: doubtful by benefit, never a confident wrong lens
+    assert got.doubtful == (got.uncertainty_px >= float(max_displacement_px(np.array([-0.1, 0.01]), np.zeros(2))))
+
+
+def test_the_camera_lens_bound_adds_the_centre_shift_in_quadrature():
+    t = dict(camera_trust(), lens_quantile=10.0, lens_floor_px=0.3, lens_shift_weight=0.5)
+    assert pl.pitch_bound_px(0.1, float("nan"), t) == pytest.approx(3.0)  # not measured: the RMS term alone
+    assert pl.pitch_bound_px(0.4, 6.0, t) == pytest.approx(5.0)  # hypot(10 * 0.4, 0.5 * 6)
+    assert pl.pitch_bound_px(0.4, 6.0, dict(t, lens_shift_weight=0.0)) == pytest.approx(4.0)
