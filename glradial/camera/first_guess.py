@@ -162,6 +162,8 @@ def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray
     height, width = dist.shape
     out = np.empty((2, len(h)))
     det = np.abs(np.linalg.det(h))
+    # many hypotheses: each pixel's gain computed once for the image, then looked up (the same values)
+    gain = _gain(dist) if len(h) * len(points) > dist.size else None
     for s in range(0, len(h), BATCH):
         xy, w = _project(h[s: s + BATCH], points)
         with np.errstate(all="ignore"):
@@ -173,10 +175,15 @@ def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray
         on = inside & (field[iy, ix] > 0)
         d = dist[iy, ix]
         length = np.where(on, length, 0.0)
-        out[0, s: s + BATCH] = np.sum(length * (np.exp(-0.5 * (d / SIGMA) ** 2) - MISS_PENALTY), axis=1)
+        out[0, s: s + BATCH] = np.sum(length * (_gain(d) if gain is None else gain[iy, ix]), axis=1)
         if share:
             out[1, s: s + BATCH] = np.sum(length * (d <= HIT_PX), axis=1) / np.maximum(np.sum(length, axis=1), 1e-9)
     return out if share else out[0]
+
+
+def _gain(d: np.ndarray) -> np.ndarray:
+    """What a template point at distance ``d`` (work px) from the line mask counts per px of marking."""
+    return np.exp(-0.5 * (d / SIGMA) ** 2) - MISS_PENALTY
 
 
 def _grid_views(h: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -219,32 +226,32 @@ def _line_fit(pm: np.ndarray, normal: np.ndarray, e: np.ndarray, depth: np.ndarr
 
 def _normals(g: np.ndarray, pm: np.ndarray, tm: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(projected points, depths, unit image normals)`` of template points ``pm`` with tangents
-    ``tm`` through the homography ``g``."""
-    q, depth = _project(g[None], pm)
-    ahead, _ = _project(g[None], pm + 1e-3 * tm)
-    t = ahead[0] - q[0]
-    with np.errstate(invalid="ignore"):  # NaN where a point projects to infinity; caught by _line_fit
+    ``tm`` through the homography ``g`` (the normal from the projection's derivative along ``tm``)."""
+    p = g[:, :2] @ pm.T + g[:, 2:]
+    depth = p[2]
+    with np.errstate(all="ignore"):  # NaN where a point projects to infinity; caught by _line_fit
+        q = (p[:2] / depth).T
+        t = ((g[:2, :2] @ tm.T).T - q * (tm @ g[2, :2])[:, None]) / depth[:, None]
         normal = np.stack([-t[:, 1], t[:, 0]], axis=1) / np.maximum(np.linalg.norm(t, axis=1, keepdims=True), 1e-12)
-    return q[0], depth[0], normal
+    return q, depth, normal
 
 
 def _matches(g: np.ndarray, pts: np.ndarray, tangents: np.ndarray, e_all: np.ndarray, band: float):
-    """``(pixels, template points, tangents)`` of the evidence ``e_all`` whose nearest projected
-    template point (within :data:`ICP_REACH` bands) has its marking's tangent line within ``band``
+    """``(pixels, template indices)`` of the evidence ``e_all`` whose nearest projected template
+    point of ``pts`` (within :data:`ICP_REACH` bands) has its marking's tangent line within ``band``
     (all in the refinement's normalised units); ``None`` when too few."""
-    xy, w = _project(g[None], pts)
-    front = (w[0] > 0) & (np.abs(xy[0, :, 0]) < 2) & (np.abs(xy[0, :, 1]) < 2)
+    q, depth, normal = _normals(g, pts, tangents)
+    front = (depth > 0) & (np.abs(q[:, 0]) < 2) & (np.abs(q[:, 1]) < 2)
     if front.sum() < 8:
         return None
     idx = np.flatnonzero(front)
-    dist, nn = cKDTree(xy[0, idx]).query(e_all, distance_upper_bound=ICP_REACH * band)
+    dist, nn = cKDTree(q[idx]).query(e_all, distance_upper_bound=ICP_REACH * band)
     ok = np.isfinite(dist)
     e, m = e_all[ok], idx[nn[ok]]
-    q, _, normal = _normals(g, pts[m], tangents[m])
-    near = np.abs(np.sum((q - e) * normal, axis=1)) <= band
+    near = np.abs(np.sum((q[m] - e) * normal[m], axis=1)) <= band
     if near.sum() < 12:
         return None
-    return e[near], pts[m[near]], tangents[m[near]]
+    return e[near], m[near]
 
 
 def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np.ndarray,
@@ -260,21 +267,25 @@ def refine(h: np.ndarray, evidence: np.ndarray, points: np.ndarray, tangents: np
     pitch_norm = np.diag([1 / 50, 1 / 50, 1.0])
     e_all = evidence @ norm[:2, :2].T + norm[:2, 2]
     g = norm @ h @ np.linalg.inv(pitch_norm)
-    rms, matched = np.inf, 0
+    pts = points / 50
+    last = None
     for band in bands:
-        found = _matches(g, points / 50, tangents, e_all, band * 2 / width)
+        found = _matches(g, pts, tangents, e_all, band * 2 / width)
         if found is None:
             break
-        e, pm, tm = found
+        last = e, m = found
         for _ in range(ICP_STEPS):
-            q, depth, normal = _normals(g, pm, tm)
+            q, depth, normal = (a[m] for a in _normals(g, pts, tangents))  # each template point once
             r = np.sum((q - e) * normal, axis=1) * width / 2
             weight = 1 / (1 + (r / (ICP_CAUCHY * band)) ** 2)
-            g_new = _line_fit(pm, normal, e, depth, weight)
+            g_new = _line_fit(pts[m], normal, e, depth, weight)
             if g_new is None:
                 break
             g = g_new * np.sign(np.sum(g_new * g))
-        q, _, normal = _normals(g, pm, tm)
+    rms, matched = np.inf, 0
+    if last is not None:  # the last band's pixels against the final homography
+        e, m = last
+        q, _, normal = _normals(g, pts[m], tangents[m])
         r = np.sum((q - e) * normal, axis=1) * width / 2
         rms, matched = float(np.sqrt(np.mean(r**2))), int(len(r))
     return np.linalg.inv(norm) @ g @ pitch_norm, rms, matched

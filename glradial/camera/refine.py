@@ -182,8 +182,12 @@ class _Problem:
     def __init__(self, base: Camera, samples: Samples, xy: np.ndarray, a: np.ndarray, b: np.ndarray,
                  with_lens: bool, free: np.ndarray) -> None:
         self.base, self.xy, self.with_lens = base, xy, with_lens
+        self.last: tuple[np.ndarray, np.ndarray] | None = None  # the last residuals asked for, and where
         self.free, self.full = free, _params(base)
-        self.points = np.column_stack([np.concatenate([samples.points[a], samples.points[b]]), np.zeros(2 * len(a))])
+        # each template sample projected once however many points are assigned to its segments
+        used, index = np.unique(np.concatenate([a, b]), return_inverse=True)
+        self.points = np.column_stack([samples.points[used], np.zeros(len(used))])
+        self.ia, self.ib = index[: len(a)], index[len(a):]
         self.scale = REFERENCE_WIDTH / base.size[0]
 
     def batch(self, free: np.ndarray) -> np.ndarray:
@@ -192,8 +196,8 @@ class _Problem:
         x[:, self.free] = free
         rot = np.matmul(Rotation.from_rotvec(x[:, :3]).as_matrix(), self.base.rotation)
         proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points)
-        n = len(self.xy)
-        p0, ab = proj[:, :n], proj[:, n:] - proj[:, :n]
+        p0 = proj[:, self.ia]
+        ab = proj[:, self.ib] - p0
         length = np.maximum(np.hypot(ab[..., 0], ab[..., 1]), 1e-9)
         ap = self.xy[None] - p0
         r = (ab[..., 0] * ap[..., 1] - ab[..., 1] * ap[..., 0]) / length * self.scale
@@ -205,13 +209,17 @@ class _Problem:
         return r
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
-        return self.batch(x[None])[0]
+        self.last = (x.copy(), self.batch(x[None])[0])
+        return self.last[1]
 
     def jacobian(self, x: np.ndarray) -> np.ndarray:
         steps = FD_STEP * np.maximum(1.0, np.abs(x))
-        rows = np.vstack([x, x + np.diag(steps)])
-        r = self.batch(rows)
-        return ((r[1:] - r[0]) / steps[:, None]).T
+        if self.last is not None and np.array_equal(self.last[0], x):  # least_squares asks where it just evaluated
+            r0, r = self.last[1], self.batch(x + np.diag(steps))
+        else:
+            r = self.batch(np.vstack([x, x + np.diag(steps)]))
+            r0, r = r[0], r[1:]
+        return ((r - r0) / steps[:, None]).T
 
 
 #: Relative forward-difference step of the Jacobian.

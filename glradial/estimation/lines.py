@@ -108,6 +108,11 @@ def gray_copy(frame: np.ndarray, max_width: int = DETECT_WIDTH) -> np.ndarray:
     height, width = gray.shape[:2]
     if width > max_width:
         size = (max_width, max(2, int(round(height * max_width / width))))
+        if size == (width // 2, height // 2) and width % 2 == height % 2 == 0:
+            # halving (1920 -> 960): OpenCV's float area mean of each 2 x 2 block is exact (quarters of
+            # integers), the same values as the matrix products below, in a third of the time
+            half = cv2.resize(gray.astype(np.float32), size, interpolation=cv2.INTER_AREA)
+            return np.rint(half, out=half)
         fast = _area_resize(gray, size)
         if fast is not None:
             return fast
