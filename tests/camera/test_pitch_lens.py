@@ -243,3 +243,19 @@ def test_the_camera_lens_bound_adds_the_centre_shift_in_quadrature():
     assert pl.pitch_bound_px(0.1, float("nan"), t) == pytest.approx(3.0)  # not measured: the RMS term alone
     assert pl.pitch_bound_px(0.4, 6.0, t) == pytest.approx(5.0)  # hypot(10 * 0.4, 0.5 * 6)
     assert pl.pitch_bound_px(0.4, 6.0, dict(t, lens_shift_weight=0.0)) == pytest.approx(4.0)
+
+
+def test_centre_shift_is_small_for_the_right_lens_and_large_for_a_wrong_one(view):
+    """On a rendered view (exact centred lens) the fitted lens hardly moves when decentring terms are
+    freed on its own markings; a camera carrying a lens 0.1 in k1 off leaves the lines bent in a way the
+    decentring terms take up, and the lens moves far (px of max displacement at 1920)."""
+    from dataclasses import replace
+
+    camera = calibrate(view.frame)
+    assert not camera.doubtful
+    assert pl.centre_shift_px(view.frame, camera) < 2.0
+    k1 = view.camera.lens.k1 + 0.1
+    off = replace(camera, camera=Camera(camera.camera.rotation, camera.camera.position, camera.camera.focal,
+                                        camera.camera.size, Lens(k1, manifold_k2(k1))))
+    assert pl.centre_shift_px(view.frame, off) > 10.0
+    assert np.isnan(pl.centre_shift_px(view.frame, CameraEstimate(None, 1280.0, True, "no_markings")))
