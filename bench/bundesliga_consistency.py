@@ -105,15 +105,23 @@ def exact_error_px(k: tuple[float, float], applied: tuple[float, float], own: tu
     corner radius; the same over the ideal radii whose image lies inside the frame)``. The two differ
     where the lens moves the corner: under a pincushion lens the first also scores radii beyond the
     picture, under a barrel lens it stops short of the corners."""
-    from glradial.evaluation.real_eval import self_consistent_map
     from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, radial_map
 
-    s = _crop_scale(tuple(applied), tuple(size))
-    r = np.linspace(0.0, 2.0 * CORNER_RADIUS_16_9, 2049)  # a barrel lens at k1 = -1 shows ideal radii to 1.6 R
-    q = self_consistent_map(r, applied, own, s)
+    r, q, inside = _true_map(tuple(applied), tuple(own), tuple(size))
     d = REPORT_WIDTH * np.abs(radial_map(r, np.array(k)) - q)
-    inside = np.cumprod(q <= CORNER_RADIUS_16_9).astype(bool)  # up to the radius that reaches the corner
     return float(d[r <= CORNER_RADIUS_16_9].max()), float(d[inside].max())
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _true_map(applied: tuple[float, float], own: tuple[float, float], size: tuple[int, int]):
+    """``(ideal radii, the frame's true distorted radii, the radii whose image lies in the frame)`` of
+    :func:`exact_error_px` (one per sample and reading of its unmodified frame: cached)."""
+    from glradial.evaluation.real_eval import self_consistent_map
+    from glradial.lens.metrics import CORNER_RADIUS_16_9
+
+    r = np.linspace(0.0, 2.0 * CORNER_RADIUS_16_9, 2049)  # a barrel lens at k1 = -1 shows ideal radii to 1.6 R
+    q = self_consistent_map(r, applied, own, _crop_scale(applied, size))
+    return r, q, np.cumprod(q <= CORNER_RADIUS_16_9).astype(bool)  # up to the radius that reaches the corner
 
 
 def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:

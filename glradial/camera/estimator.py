@@ -148,10 +148,14 @@ def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float
     layer's ``reading`` (bound ``reading_bound``): ``(k, stated bound, from the pitch)``; bounds px at
     1920, ``t`` the thresholds (``camera_trust.json``). Where the two agree (their max-displacement
     distance ``D`` within ``lens_agreement`` times the sum of their bounds) ``k = w k_p + (1 - w) k_a``,
-    ``w`` = ``lens_weight``, stating ``w b_p + (1 - w) b_a``. Where they do not, one of the bounds
+    ``w`` = ``lens_weight`` (with ``lens_weight_floor_by_bounds``, at least ``b_a² / (b_a² + b_p²)``:
+    a reading whose own bound says it is far less sure than the camera weighs less), stating
+    ``w b_p + (1 - w) b_a`` (the radial map is linear in ``(k1, k2)`` and the error a norm). Where they do not, one of the bounds
     fails and the frame cannot tell which: the reading is kept, stating ``max(b_a, D + b_p)`` (its
     error when either bound holds), so a lens the pitch contradicts is never stated as sure as either."""
     w = float(t["lens_weight"])
+    if t["lens_weight_floor_by_bounds"]:  # at least the camera's inverse-variance share: a reading far less sure weighs less
+        w = max(w, reading_bound**2 / (reading_bound**2 + pitch_bound**2))
     apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
     if apart > float(t["lens_agreement"]) * (pitch_bound + reading_bound):
         return tuple(reading), max(reading_bound, apart + pitch_bound), False  # type: ignore[return-value]
