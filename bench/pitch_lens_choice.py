@@ -17,8 +17,10 @@ Settings (``glradial/data/camera_trust.json``): ``lens_weight`` (the camera lens
 ``max(fit RMS, lens_floor_px)``, computed on the chosen-on matches for each pull) and
 ``lens_agreement`` (the camera lens is mixed in only where it lies within this many times the sum
 of the two bounds of the reading) and ``lens_weight_floor_by_bounds`` (1: the camera weighs at least
-its inverse-variance share). On a set of matches the choice minimises the largest per-match
-self-consistent median (the issue's goal is per match), ties broken by their mean. Each match is
+its inverse-variance share). ``lens_max_hfov_deg`` is the widest sure camera of the chosen-on matches
+(beyond it the bound would be extrapolated: the camera lens is not fed back). On a set of matches the
+choice minimises the largest per-match self-consistent median (the issue's goal is per match), ties
+broken by their mean, then by the share of samples whose stated bound covers the error. Each match is
 reported with the settings chosen on the four others; ``--ship`` writes those chosen on all five.
 Figure: ``docs/figures/lens_consistency_lomo.json``.
 """
@@ -56,7 +58,8 @@ def samples(paths: list[Path]) -> list[dict]:
             out[key] = {"clip": r["clip"], "frame": r["frame"], "truth": key[1], "auto": (tuple(r["k"]), r["bound_px"]),
                         "camera": None if cam is None or cam.get("k") is None else
                         {"k": tuple(cam["k"]), "ok": cam["reason"] == "ok", "rms": r["camera_rms_px"],
-                         "shift": float("nan") if cam.get("centre_shift_px") is None else cam["centre_shift_px"]}}
+                         "shift": float("nan") if cam.get("centre_shift_px") is None else cam["centre_shift_px"],
+                         "hfov": cam["hfov_deg"]}}
     return list(out.values())
 
 
@@ -83,7 +86,7 @@ class Replay:
         if cam is None or not cam["ok"] or cam["rms"] > t["max_rms_px"]:  # the rule's RMS check, replayed
             return ka, ba, False
         bound = pitch_bound_px(cam["rms"], cam["shift"], t)
-        return combine(self.pulled(cam["k"], t["lens_manifold_pull"]), bound, ka, ba, t)
+        return combine(self.pulled(cam["k"], t["lens_manifold_pull"]), bound, ka, ba, t, cam["hfov"])
 
     def errors(self, t: dict, pitch_alone: bool = False) -> list[tuple[str, float, float, bool, float]]:
         """``(clip, self-consistent error, stated bound, from the pitch, fit RMS)`` of every distorted
@@ -111,21 +114,29 @@ def lens_quantile(replay: Replay, t: dict, clips: set[str]) -> float:
     return round(conformal_quantile([e / max(rms, t["lens_floor_px"]) for e, rms in errs]), 3)
 
 
+def widest(replay: Replay, t: dict, clips: set[str]) -> float:
+    """``lens_max_hfov_deg`` on ``clips``: the widest field of view (degrees, to the next degree up) among
+    the sure cameras the bound is calibrated on: beyond it the bound would be extrapolated."""
+    return float(np.ceil(max(r["camera"]["hfov"] for r in replay.rows if r["clip"] in clips and r["camera"]
+                             and r["camera"]["ok"] and r["camera"]["rms"] <= t["max_rms_px"])))
+
+
 def medians(errors: list, clips: set[str]) -> dict[str, float]:
     return {c: float(np.median([e for clip, e, *_ in errors if clip == c])) for c in sorted(clips)}
 
 
 def choose(replay: Replay, base: dict, clips: set[str]) -> dict:
     """The settings of :data:`GRID` (and ``lens_quantile``) chosen on ``clips`` (module docstring)."""
+    base = dict(base, lens_max_hfov_deg=widest(replay, base, clips))
     quantiles = {p: lens_quantile(replay, dict(base, lens_manifold_pull=p), clips) for p in GRID["lens_manifold_pull"]}
     best = None
     for values in itertools.product(*GRID.values()):
         t = dict(base, **dict(zip(GRID, values)))
-        if t["lens_agreement"] >= 1e6 and t["lens_shift_weight"] > 0:  # the bound only matters to the agreement
-            continue
         t["lens_quantile"] = quantiles[t["lens_manifold_pull"]]
-        m = list(medians(replay.errors(t), clips).values())
-        score = (max(m), float(np.mean(m)))
+        errors = replay.errors(t)
+        m = list(medians(errors, clips).values())
+        covers = float(np.mean([e <= bound for clip, e, bound, *_ in errors if clip in clips]))
+        score = (max(m), float(np.mean(m)), -covers)  # equal errors: the bound that covers more
         if best is None or score < best[0]:
             best = (score, t)
     return best[1]
@@ -154,7 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     replay = Replay(samples(args.dumps))
     base = dict(camera_trust())
     clips = sorted({r["clip"] for r in replay.rows})
-    keys = (*GRID, "lens_quantile")
+    keys = (*GRID, "lens_quantile", "lens_max_hfov_deg")
     held, chosen = [], {}
     for c in clips:
         t = choose(replay, base, set(clips) - {c})

@@ -143,7 +143,7 @@ def centre_shift_px(rgb: np.ndarray, camera: CameraEstimate) -> float:
 
 
 def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float, float], reading_bound: float,
-            t: dict) -> tuple[tuple[float, float], float, bool]:
+            t: dict, hfov_deg: float = 0.0) -> tuple[tuple[float, float], float, bool]:
     """The lens fed back from the camera lens ``pitch`` (bound ``pitch_bound``) and the estimation
     layer's ``reading`` (bound ``reading_bound``): ``(k, stated bound, from the pitch)``; bounds px at
     1920, ``t`` the thresholds (``camera_trust.json``). Where the two agree (their max-displacement
@@ -152,7 +152,11 @@ def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float
     a reading whose own bound says it is far less sure than the camera weighs less), stating
     ``w b_p + (1 - w) b_a`` (the radial map is linear in ``(k1, k2)`` and the error a norm). Where they do not, one of the bounds
     fails and the frame cannot tell which: the reading is kept, stating ``max(b_a, D + b_p)`` (its
-    error when either bound holds), so a lens the pitch contradicts is never stated as sure as either."""
+    error when either bound holds), so a lens the pitch contradicts is never stated as sure as either.
+    A camera wider than ``lens_max_hfov_deg`` (``hfov_deg``, the undistorted frame's field of view) lies
+    outside the views the camera lens's bound was calibrated on: the reading is kept as it is."""
+    if hfov_deg > t["lens_max_hfov_deg"]:
+        return tuple(reading), reading_bound, False  # type: ignore[return-value]
     w = float(t["lens_weight"])
     if t["lens_weight_floor_by_bounds"]:  # at least the camera's inverse-variance share: a reading far less sure weighs less
         w = max(w, reading_bound**2 / (reading_bound**2 + pitch_bound**2))
@@ -177,7 +181,7 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate, centre_px: float 
         return fallback
     lens = camera_lens(camera)
     k, stated, from_pitch = combine((lens.k1, lens.k2), lens_bound_px(camera, centre_px), (fallback.k1, fallback.k2),
-                                    fallback.uncertainty_px, camera_trust())
+                                    fallback.uncertainty_px, camera_trust(), camera.hfov_deg)
     if not from_pitch:  # the two readings contradict each other's bounds: the reading, its bound widened
         if stated <= fallback.uncertainty_px:
             return fallback

@@ -54,7 +54,7 @@ def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     again, fitted = pl.with_pitch(view.frame, old)  # the one path estimate() takes, camera fit included
     assert again == est and fitted.markings == camera.markings and fitted.rms_px == camera.rms_px
     bound, w = pl.lens_bound_px(camera), camera_trust()["lens_weight"]
-    assert 0 < w < 1
+    assert 0 < w <= 1
     assert est.k1 == pytest.approx(w * lens.k1 + (1 - w) * old.k1, abs=1e-12)
     assert est.k2 == pytest.approx(w * lens.k2 + (1 - w) * old.k2, abs=1e-12)
     assert est.uncertainty_px == pytest.approx(w * bound + (1 - w) * old.uncertainty_px)
@@ -118,7 +118,7 @@ def test_net_and_lines_never_fit_the_camera(view, monkeypatch):
         assert glradial.Estimator(threads=1).estimate(view.frame, method=method, pitch=True) == lines_layer.estimate_net_lines(view.frame, method=method)
 
 
-def test_pitch_lens_policy():
+def test_pitch_lens_policy(monkeypatch):
     fallback = LensEstimate(-0.1, 0.01, pixel_aspect=16 / 9, uncertainty_px=9.0, method="lines", chains=3)
     doubtful = CameraEstimate(None, 1280.0, True, "no_markings")
     assert pl.pitch_lens(doubtful, fallback) is fallback
@@ -135,7 +135,10 @@ def test_pitch_lens_policy():
     assert pl.camera_lens(sure) == lens and 0 <= pull <= 1
     assert (got.k1, got.k2) == pytest.approx((w * lens.k1 + (1 - w) * -0.1, w * lens.k2 + (1 - w) * 0.01), abs=1e-12)
     # a reading doubtful by benefit keeps its weight (its bound is calibrated); a combined bound that reaches
-    # the identity lens makes the answer doubtful by benefit too
+    # the identity lens makes the answer doubtful by benefit too (a weight below 1: the reading's bound counts)
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_weight=0.5))
+    w = 0.5
     unsure = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="lines", doubtful=True, reason="evidence_disagrees")
     got = pl.pitch_lens(sure, unsure)
     assert got.k1 == pytest.approx(w * lens.k1 + (1 - w) * 0.2, abs=1e-12)
@@ -222,6 +225,10 @@ def test_a_camera_lens_the_reading_contradicts_is_not_mixed_in(monkeypatch):
     # readings that agree within their bounds are mixed as before: w k_p + (1 - w) k_a, stating w b_p + (1 - w) b_a
     k, bound, mixed = pl.combine(pitch, apart, reading, apart, t)
     assert mixed and k == pytest.approx((-0.2, 0.03)) and bound == pytest.approx(apart)
+    # a camera wider than the views the bound was calibrated on is not fed back: the reading as it was
+    wide = dict(t, lens_max_hfov_deg=70.0)
+    assert pl.combine(pitch, apart, reading, apart, wide, 72.4) == (reading, apart, False)
+    assert pl.combine(pitch, apart, reading, apart, wide, 69.0)[2]
     # through pitch_lens: a sure camera whose lens the reading contradicts gives the reading back, its bound widened
     fallback = LensEstimate(-0.1, 0.01, uncertainty_px=3.0, method="lines", chains=3)
     cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.6, 0.3))
