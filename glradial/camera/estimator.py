@@ -31,15 +31,18 @@ Lopez-Antequera manifold lens nearest it over the radii to the 16:9 corner (:fun
 :func:`camera_lens`): the markings a broadcast frame shows rarely reach its corners, so the fit's ``k2``
 trades against ``k1`` along a ridge, which the manifold steadies; the whole way to the manifold throws
 away what the fit read off it. Its bound is split-conformal:
-``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), both in
-``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_bound.py``).
+``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), in quadrature
+with ``lens_shift_weight`` times :func:`centre_shift_px` (how far the lens moves when a principal point
+off centre is fitted with it: large where the markings do not pin the lens down), all in
+``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_choice.py``).
 
 **Why a fixed weight and not the bounds' inverse variance**: per-frame weights make the answer jump
 between two readings that disagree by a frame-wide offset (the line fit reads a larger ``k2`` on the
 Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
-self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight`` and ``lens_manifold_pull``
-minimise the self-consistent median of Bundesliga clip 2e57b9 (a 0.1 grid by a 0.25 grid) among the
-weights that leave the procedural stadium crops as they were; clip 42ba34 is held out.
+self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight``, ``lens_manifold_pull``,
+``lens_quantile``, ``lens_shift_weight`` (the bound's :func:`centre_shift_px` term), ``lens_agreement``
+(:func:`combine`) and ``lens_max_hfov_deg`` are chosen on the five shared matches, leave one match
+out (``bench/pitch_lens_choice.py``; docs/CAMERA.md, "The lens fed back across matches").
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.net_lines.NetLinesEstimator` stays
