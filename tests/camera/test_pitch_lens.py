@@ -53,7 +53,7 @@ def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     assert est.chains == len(camera.markings)
     again, fitted = pl.with_pitch(view.frame, old)  # the one path estimate() takes, camera fit included
     assert again == est and fitted.markings == camera.markings and fitted.rms_px == camera.rms_px
-    bound, w = pl.lens_bound_px(camera), camera_trust()["lens_weight"]
+    bound, w = pl.lens_bound_px(camera, pl.centre_shift_px(view.frame, camera)), camera_trust()["lens_weight"]
     assert 0 < w <= 1
     assert est.k1 == pytest.approx(w * lens.k1 + (1 - w) * old.k1, abs=1e-12)
     assert est.k2 == pytest.approx(w * lens.k2 + (1 - w) * old.k2, abs=1e-12)
@@ -170,7 +170,9 @@ def test_squashed_view_and_the_command_line(view, tmp_path, capsys):
     squashed = cv2.resize(view.frame, (640, 640), interpolation=cv2.INTER_AREA)
     est = glradial.estimate(squashed, pixel_aspect=16 / 9, pitch=True)
     old = lines_layer.estimate_net_lines(squashed, pixel_aspect=16 / 9)
-    expected = pl.pitch_lens(pl.fit_camera(lines_layer.square_pixels(squashed, 16 / 9), old), old)
+    square = lines_layer.square_pixels(squashed, 16 / 9)
+    fitted = pl.fit_camera(square, old)
+    expected = pl.pitch_lens(fitted, old, pl.centre_shift_px(square, fitted))
     assert est == expected and est.method == "pitch" and est.pixel_aspect == pytest.approx(16 / 9)
     path = tmp_path / "view.png"
     write_image(path, view.frame[..., ::-1].copy())
