@@ -36,6 +36,7 @@ unmodified frame's readings too, with ``truth`` null). Figures: ``docs/figures/l
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import pickle
 import sys
@@ -86,6 +87,15 @@ def _frames(folders: list[Path], matches: list[str], limit: int) -> list[tuple[P
     return out
 
 
+@functools.lru_cache(maxsize=4096)
+def _crop_scale(applied: tuple[float, float], size: tuple[int, int]) -> float:
+    """The zoom of ``distort(..., fit="crop")`` with the applied lens (one per sample: cached)."""
+    from glradial.lens.lens import Lens
+
+    return Lens(*applied).fit_scale(size, "crop", "distort")
+
+
+@functools.lru_cache(maxsize=1 << 20)  # bench/pitch_lens_choice.py scores the same readings under many settings
 def exact_error_px(k: tuple[float, float], applied: tuple[float, float], own: tuple[float, float],
                    size=(1280, 720)) -> tuple[float, float]:
     """Error (px at 1920) of the reading ``k`` of a distorted frame against the frame's true radial map,
@@ -95,16 +105,23 @@ def exact_error_px(k: tuple[float, float], applied: tuple[float, float], own: tu
     corner radius; the same over the ideal radii whose image lies inside the frame)``. The two differ
     where the lens moves the corner: under a pincushion lens the first also scores radii beyond the
     picture, under a barrel lens it stops short of the corners."""
-    from glradial.evaluation.real_eval import self_consistent_map
-    from glradial.lens.lens import Lens
     from glradial.lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, radial_map
 
-    s = Lens(*applied).fit_scale(size, "crop", "distort")
-    r = np.linspace(0.0, 2.0 * CORNER_RADIUS_16_9, 2049)  # a barrel lens at k1 = -1 shows ideal radii to 1.6 R
-    q = self_consistent_map(r, applied, own, s)
+    r, q, inside = _true_map(tuple(applied), tuple(own), tuple(size))
     d = REPORT_WIDTH * np.abs(radial_map(r, np.array(k)) - q)
-    inside = np.cumprod(q <= CORNER_RADIUS_16_9).astype(bool)  # up to the radius that reaches the corner
     return float(d[r <= CORNER_RADIUS_16_9].max()), float(d[inside].max())
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _true_map(applied: tuple[float, float], own: tuple[float, float], size: tuple[int, int]):
+    """``(ideal radii, the frame's true distorted radii, the radii whose image lies in the frame)`` of
+    :func:`exact_error_px` (one per sample and reading of its unmodified frame: cached)."""
+    from glradial.evaluation.real_eval import self_consistent_map
+    from glradial.lens.metrics import CORNER_RADIUS_16_9
+
+    r = np.linspace(0.0, 2.0 * CORNER_RADIUS_16_9, 2049)  # a barrel lens at k1 = -1 shows ideal radii to 1.6 R
+    q = self_consistent_map(r, applied, own, _crop_scale(applied, size))
+    return r, q, np.cumprod(q <= CORNER_RADIUS_16_9).astype(bool)  # up to the radius that reaches the corner
 
 
 def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
@@ -128,6 +145,7 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
             lens.k1, lens.k2, uncertainty_px=pl.lens_bound_px(camera), method="pitch")
         out["rms"] = camera.rms_px
         out["camera"] = {"reason": camera.reason, "markings": len(camera.markings), "support": camera.support,
+                         "centre_shift_px": pl.centre_shift_px(frame, camera),
                          "hfov_deg": camera.hfov_deg, "k": None if camera.lens is None else [camera.lens.k1, camera.lens.k2]}
     return out
 

@@ -85,6 +85,30 @@ def homography_floor(kp_m: np.ndarray, labels: np.ndarray) -> float:
     return float(np.sqrt(np.mean(np.sum((p[:, :2] / p[:, 2:] - labels[ok]) ** 2, 1))))
 
 
+def label_verdict(kp_m: np.ndarray, labels: np.ndarray) -> str:
+    """Whether a frame's own labels (N x 2, NaN where unlabelled) can be a camera's view of the template
+    keypoints ``kp_m`` (N x 2+ metres): ``"consistent"``; ``"mirrored"`` when the homography fitted to
+    them turns the pitch over (its Jacobian's determinant, ``det H / w^3``, positive at every label: near
+    and far, or left and right, swapped; a camera above the pitch on either touchline sees it with a
+    negative one in these coordinates, x right and y toward the far touchline, image y down: the half
+    turn keeps the sign); ``"inconsistent"`` when no homography fits them within :data:`CONSISTENT_PX`
+    (:func:`homography_floor`) or the one fitted folds some labels through the horizon (mixed signs);
+    ``"too_few"`` under 4 labels."""
+    import cv2
+
+    ok = np.isfinite(labels).all(1)
+    if ok.sum() < 4:
+        return "too_few"
+    h, _ = cv2.findHomography(kp_m[ok, :2], labels[ok], 0)
+    w = np.column_stack([kp_m[ok, :2], np.ones(ok.sum())]) @ h[2]
+    sign = np.sign(np.linalg.det(h) * w ** 3)
+    if np.all(sign > 0):
+        return "mirrored"
+    if np.any(sign > 0) or not homography_floor(kp_m, labels) <= CONSISTENT_PX:
+        return "inconsistent"
+    return "consistent"
+
+
 def keypoint_rms(camera, kp_m: np.ndarray, labels: np.ndarray, scale: float = 1.0) -> float:
     """RMS (px of the labels' frame) of ``camera``'s projection of ``kp_m`` divided by ``scale`` (the
     camera's frame over the labels') against ``labels`` (NaN rows unlabelled); NaN without a camera."""
@@ -152,7 +176,8 @@ def score_frame(name: str, path: Path, labels: np.ndarray, kp: np.ndarray, hd: b
             for fit, features, e in rec.fits]
     row = {"frame": name, "match": match_of(name), "answered": not est.doubtful, "reason": est.reason,
            "rms_px": keypoint_rms(est.camera, kp, labels), "bound_px": est.uncertainty_px, "rms_fit_px": est.rms_px,
-           "floor_px": homography_floor(kp, labels), "seconds_720p": seconds, "fits": fits}
+           "floor_px": homography_floor(kp, labels), "labels": label_verdict(kp, labels), "seconds_720p": seconds,
+           "fits": fits}
     if hd:
         big = np.ascontiguousarray(cv2.resize(read_rgb(path), (1920, 1080), interpolation=cv2.INTER_CUBIC))
         t, cpu = time.perf_counter(), time.process_time()
@@ -187,11 +212,15 @@ def _figures(sel: list[dict]) -> dict:
     wrong = int(np.sum(rms > WRONG_PX))
     # beyond 10 px on a frame whose own labels no homography fits: the labels may be what is wrong
     doubtful_labels = sum(r["rms_px"] > WRONG_PX and not r["floor_px"] <= CONSISTENT_PX for r in ans)
+    # the labels' own verdict (label_verdict): what is left beyond 10 px on consistent labels is a wrong camera
+    mirrored = sum(r["rms_px"] > WRONG_PX and r.get("labels") == "mirrored" for r in ans)
+    real = sum(r["rms_px"] > WRONG_PX and r.get("labels") == "consistent" for r in ans)
     ms = 1000 * np.array([r["seconds"] for r in sel])
     out = {"frames": len(sel), "answered": len(ans) / len(sel),
            **{f"acc_{lim:g}px": sum(r["answered"] and r["rms_px"] <= lim for r in sel) / len(sel) for lim in WITHIN_PX},
            "median_rms_px": float(np.median(rms)) if len(rms) else float("nan"),
            "wrong_answered": wrong, "wrong_with_inconsistent_labels": doubtful_labels,
+           "wrong_with_mirrored_labels": mirrored, "wrong_on_consistent_labels": real,
            "wrong_share_of_answered": wrong / len(ans) if ans else 0.0,
            "bound_covers": float(np.mean([r["bound_px"] >= r["rms_px"] for r in ans])) if ans else float("nan"),
            "ms_median": float(np.median(ms)), "ms_p90": float(np.percentile(ms, 90)),
@@ -206,16 +235,28 @@ def _figures(sel: list[dict]) -> dict:
 
 def report(summary: dict) -> None:
     """Print ``summary`` (:func:`summarise`) as a markdown table."""
-    print("| match | frames | answered | Acc@5 | Acc@10 | median RMS (answered) | answered > 10 px | bound covers | "
-          "ms median / p90 (x blur) | CPU ms median / p90 | floor (median) |")
+    print("| match | frames | answered | Acc@5 | Acc@10 | median RMS (answered) | answered > 10 px (labels: floor > 10 / "
+          "mirrored / consistent) | bound covers | ms median / p90 (x blur) | CPU ms median / p90 | floor (median) |")
     print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, f in summary.items():
         ratio = f" (x{f['ratio_to_blur_median']:.0f})" if "ratio_to_blur_median" in f else ""
         cpu = f"{f['cpu_ms_median']:.0f} / {f['cpu_ms_p90']:.0f}" if "cpu_ms_median" in f else "-"
         print(f"| {name} | {f['frames']} | {f['answered']:.0%} | {f['acc_5px']:.0%} | {f['acc_10px']:.0%} | "
               f"{f['median_rms_px']:.2f} | {f['wrong_answered']} ({f['wrong_share_of_answered']:.0%}; "
-              f"{f['wrong_with_inconsistent_labels']} floor > {CONSISTENT_PX:g}) | "
+              f"{f['wrong_with_inconsistent_labels']} / {f['wrong_with_mirrored_labels']} / "
+              f"{f['wrong_on_consistent_labels']}) | "
               f"{f['bound_covers']:.0%} | {f['ms_median']:.0f} / {f['ms_p90']:.0f}{ratio} | {cpu} | {f['floor_median_px']:.2f} |")
+
+
+def report_wrong(rows: list[dict]) -> None:
+    """Print each answered frame beyond 10 px with its labels' homography floor and verdict
+    (:func:`label_verdict`): a label error (floor > 10 px, mirrored) or a wrong camera (consistent labels)."""
+    wrong = [r for r in rows if r["answered"] and r["rms_px"] > WRONG_PX]
+    if not wrong:
+        return
+    print(f"\nAnswered beyond {WRONG_PX:g} px (keypoint RMS; the labels' own homography floor; the labels' verdict):")
+    for r in wrong:
+        print(f"  {r['frame']}: {r['rms_px']:.1f} px, floor {r['floor_px']:.1f} px, labels {r.get('labels', '?')}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -253,8 +294,10 @@ def main(argv: list[str] | None = None) -> int:
     for i, (name, path, labels) in enumerate([] if args.rows else frames):
         print(f"[{i + 1}/{len(frames)}]", end=" ", file=sys.stderr)
         rows.append(score_frame(name, path, labels, kp, not args.no_1080p))
+    add_label_verdicts(rows, matches)
     summary = summarise(rows)
     report(summary)
+    report_wrong(rows)
     if args.json:
         from glradial.media.atomic import atomic_write_text
 
@@ -264,6 +307,17 @@ def main(argv: list[str] | None = None) -> int:
 
         write_figure(args.figure, summary)
     return 0
+
+
+def add_label_verdicts(rows: list[dict], matches: list[str]) -> None:
+    """Rows of earlier runs (``--rows``) get their frame's :func:`label_verdict` where they lack one."""
+    from glradial.pitch import PitchTemplate
+
+    kp = PitchTemplate().keypoints()
+    labels = {name: lab for name, _, lab in load_frames(matches, 0)}
+    for r in rows:
+        if "labels" not in r and r["frame"] in labels:
+            r["labels"] = label_verdict(kp, labels[r["frame"]])
 
 
 def _shot_rows(frames: list, kp: np.ndarray) -> tuple[list[dict], list[dict]]:

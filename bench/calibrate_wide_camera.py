@@ -7,7 +7,8 @@ Frames: the ``wide_camera`` source of ``bench/pitch_views.py`` (N = 30 frames sp
 checkerboard lens (k1 -0.6615, k2 +0.4098, centred; the camera's real principal point is off centre,
 so a centred model keeps a misfit of a few px). Per frame: the camera's verdict, its lens's error
 (max displacement at 1920 wide, :func:`glradial.lens.metrics.max_displacement_px`) against the
-checkerboard lens and the camera lens's own bound (:func:`glradial.camera.estimator.lens_bound_px`),
+checkerboard lens and the camera lens's own bound (:func:`glradial.camera.estimator.lens_bound_px`, with the
+lens's :func:`~glradial.camera.estimator.centre_shift_px`),
 the focal length and field of view (a static camera: they should agree across frames), and what
 ``glradial.estimate(frame)`` (the default ``method="auto"``) reads: its error, bound and verdict.
 Nothing is fitted here.
@@ -36,7 +37,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 
 def _row(name: str, frame: np.ndarray, truth: tuple) -> dict:
     import glradial
-    from glradial.camera.estimator import lens_bound_px
+    from glradial.camera.estimator import centre_shift_px, lens_bound_px
     from glradial.lens.metrics import max_displacement_px
 
     k_true = np.array(truth, float)
@@ -45,7 +46,8 @@ def _row(name: str, frame: np.ndarray, truth: tuple) -> dict:
            "support": cam.support, "markings": list(cam.markings)}
     if cam.camera is not None:
         err = float(max_displacement_px(np.array([cam.lens.k1, cam.lens.k2]), k_true))
-        row.update(k1=cam.lens.k1, k2=cam.lens.k2, lens_err_px=err, lens_bound_px=lens_bound_px(cam),
+        shift = centre_shift_px(frame, cam)
+        row.update(k1=cam.lens.k1, k2=cam.lens.k2, lens_err_px=err, lens_bound_px=lens_bound_px(cam, shift), centre_shift_px=shift,
                    focal=cam.focal, hfov_deg=cam.hfov_deg, position_m=cam.position.tolist())
     est = glradial.estimate(frame)
     row.update(est_method=est.method, est_err_px=float(max_displacement_px(np.array([est.k1, est.k2]), k_true)),

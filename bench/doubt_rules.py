@@ -12,12 +12,13 @@ shipped rule declined the search's fit, so a rule stricter than the one the rows
 no retry where it would have run one (it can only under-count its answers).
 
 Thresholds searched (:data:`GRID`): ``min_support``, ``max_missing`` (markings drawn where the frame
-shows none), ``min_share`` (share of the frame's line evidence the fit explains), ``min_directions``. Choice on a set of matches: the most answered within
+shows none), ``min_share`` (share of the frame's line evidence the fit explains), ``min_directions``; then
+``max_rms_px`` (:data:`RMS_GRID`) with those held. Choice on a set of matches: the most answered within
 10 px (pooled Acc@10) among the rules whose answered frames beyond 10 px stay within ``--max-wrong``
 of the answered (pooled); of the rules within :data:`SLACK` of that best Acc@10, the strictest
 (a margin against wrong fits the chosen-on matches do not show). The choice reads only frames whose labels are
-consistent (homography floor <= ``CONSISTENT_PX``: a frame with a wrong click cannot say whether a
-camera is right); every frame is reported. Leave one match out: each match is scored with
+consistent (homography floor <= ``CONSISTENT_PX``, not mirrored: ``calibrate_matches.label_verdict``; a
+frame with a wrong click cannot say whether a camera is right); every frame is reported. Leave one match out: each match is scored with
 the rule chosen on the four others; the table (same figures as calibrate_matches.py, one scoring path)
 is written to ``docs/figures/calibrate_matches_lomo.json``. ``--ship``: the rule chosen on all five
 is written to ``glradial/data/camera_trust.json`` with how it was chosen. The bound (``floor_px``,
@@ -46,6 +47,9 @@ SLACK = 0.01
 BOUND_FLOORS = (0.3, 0.4, 0.5, 0.6, 0.8, 1.0)
 GRID = {"min_support": [round(x, 3) for x in np.arange(0.30, 0.851, 0.025)], "max_missing": [0, 1, 2, 3, 99],
         "min_share": [0.0] + [round(x, 3) for x in np.arange(0.2, 0.501, 0.025)], "min_directions": [1, 2]}
+#: Chosen after :data:`GRID`, the others held at that choice: the fit's own RMS (px at 1280; a wrong camera
+#: fitted to the few lines of a narrow view leaves more than a right one).
+RMS_GRID = {"max_rms_px": [1.1, 1.2, 1.3, 1.4, 1.5, 1.75, 2.0, 2.5]}
 
 
 def replay(row: dict, t: dict) -> dict:
@@ -66,19 +70,26 @@ def _acc10(rows: list[dict], t: dict, max_wrong: float) -> float:
     return sum(g["answered"] and g["rms_px"] <= 10.0 for g in got) / len(got)
 
 
-def _strictness(values: tuple) -> float:
-    """How strict a rule of :data:`GRID` values is: the mean position of each in its grid (0 to 1; a
+def _strictness(values: tuple, grid: dict = GRID) -> float:
+    """How strict a rule of ``grid`` values is: the mean position of each in its grid (0 to 1; a
     "max" threshold counts from its end)."""
-    pos = [GRID[k].index(v) / (len(GRID[k]) - 1) for k, v in zip(GRID, values)]
-    return float(np.mean([1 - p if k.startswith("max") else p for k, p in zip(GRID, pos)]))
+    pos = [grid[k].index(v) / (len(grid[k]) - 1) for k, v in zip(grid, values)]
+    return float(np.mean([1 - p if k.startswith("max") else p for k, p in zip(grid, pos)]))
 
 
-def choose(rows: list[dict], base: dict, max_wrong: float, slack: float = SLACK) -> dict:
-    """The thresholds of :data:`GRID` (others from ``base``) chosen on ``rows`` (module docstring)."""
-    scored = [(_acc10(rows, dict(base, **dict(zip(GRID, v))), max_wrong), v) for v in itertools.product(*GRID.values())]
+def choose(rows: list[dict], base: dict, max_wrong: float, slack: float = SLACK, grid: dict = GRID) -> dict:
+    """The thresholds of ``grid`` (others from ``base``) chosen on ``rows`` (module docstring)."""
+    scored = [(_acc10(rows, dict(base, **dict(zip(grid, v))), max_wrong), v) for v in itertools.product(*grid.values())]
     best = max(a for a, _ in scored)
-    values = max((v for a, v in scored if a >= best - slack), key=_strictness)
-    return dict(base, **dict(zip(GRID, values)))
+    values = max((v for a, v in scored if a >= best - slack), key=lambda v: _strictness(v, grid))
+    return dict(base, **dict(zip(grid, values)))
+
+
+def choose_rule(rows: list[dict], base: dict, max_wrong: float) -> dict:
+    """The rule and its bound chosen on ``rows``: :data:`GRID`, then :data:`RMS_GRID` with those held,
+    then the bound (:func:`choose_bound`)."""
+    rule = choose(rows, base, max_wrong)
+    return choose_bound(rows, choose(rows, rule, max_wrong, grid=RMS_GRID))
 
 
 def _commit() -> str:
@@ -110,7 +121,7 @@ def _answered_fit(row: dict, t: dict) -> dict | None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from calibrate_matches import CONSISTENT_PX, MATCHES, report, summarise
+    from calibrate_matches import CONSISTENT_PX, MATCHES, add_label_verdicts, report, report_wrong, summarise
 
     from glradial.camera.estimate import CAMERA_TRUST_FILE, camera_trust
 
@@ -122,21 +133,25 @@ def main(argv: list[str] | None = None) -> int:
     rows = json.loads(args.rows.read_text())
     base = dict(camera_trust())
     matches = [m for m in MATCHES if any(r["match"] == m for r in rows)]
+    add_label_verdicts(rows, matches)
     print("As recorded (the rule the rows were made with):")
     report(summarise([replay(r, base) for r in rows]))
     held, chosen = [], {}
-    scored = [r for r in rows if r["floor_px"] <= CONSISTENT_PX]
+    # a frame with a wrong click or mirrored labels cannot say whether a camera is right
+    scored = [r for r in rows if r["floor_px"] <= CONSISTENT_PX and r.get("labels") != "mirrored"]
+    keys = (*GRID, *RMS_GRID, "floor_px", "quantile")
     for m in matches:
         others = [r for r in scored if r["match"] != m]
-        t = choose_bound(others, choose(others, base, args.max_wrong))
-        chosen[m] = {k: float(t[k]) for k in (*GRID, "floor_px", "quantile")}
+        t = choose_rule(others, base, args.max_wrong)
+        chosen[m] = {k: float(t[k]) for k in keys}
         held += [replay(r, t) for r in rows if r["match"] == m]
         print(f"held out {m}: chosen on the others {chosen[m]}", file=sys.stderr)
     print(f"\nLeave one match out (each match scored with the rule chosen on the others, wrong <= {args.max_wrong:.0%}):")
     summary = summarise(held)
     report(summary)
-    final = choose_bound(scored, choose(scored, base, args.max_wrong))
-    final = {k: float(final[k]) for k in (*GRID, "floor_px", "quantile")}
+    report_wrong(held)
+    final = choose_rule(scored, base, args.max_wrong)
+    final = {k: float(final[k]) for k in keys}
     print(f"\nChosen on all {len(matches)} matches: {final}")
     from figures import write_figure
 
@@ -149,7 +164,8 @@ def main(argv: list[str] | None = None) -> int:
                               for k, v in final.items()})
         how = (f"bench/doubt_rules.py ROWS --ship, ROWS from bench/calibrate_matches.py --json on the five shared "
                f"matches (rows made with the rule then shipped; commit {_commit()})")
-        trust["doubt_source"] = (f"{how}: {', '.join(GRID)} chosen on the five matches (frames with consistent labels) "
+        trust["doubt_source"] = (f"{how}: {', '.join(GRID)} chosen on the five matches (frames with consistent labels, "
+                                 f"not mirrored), then {', '.join(RMS_GRID)} with those held, "
                                  f"as the strictest rule within {SLACK:.0%} of the most frames within 10 px among those "
                                  f"answering at most {args.max_wrong:.0%} beyond 10 px; nothing fitted. Each match's figures "
                                  f"in docs/figures/calibrate_matches_lomo.json are of the rule chosen without it (leave one "

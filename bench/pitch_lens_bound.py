@@ -21,6 +21,8 @@ Two calibration sets, the larger quantile shipped (as for the camera's bound, do
   the other clip (held out). Validation data: calibrated on one clip, checked on the other.
 
 ``--write`` stores ``lens_quantile``, ``lens_floor_px`` and ``lens_source`` in ``glradial/data/camera_trust.json``.
+The shipped ``lens_quantile`` now comes from ``bench/pitch_lens_choice.py`` (chosen with the weight across
+the five matches, leave one match out); this bench remains the procedural check.
 """
 
 from __future__ import annotations

@@ -31,15 +31,18 @@ Lopez-Antequera manifold lens nearest it over the radii to the 16:9 corner (:fun
 :func:`camera_lens`): the markings a broadcast frame shows rarely reach its corners, so the fit's ``k2``
 trades against ``k1`` along a ridge, which the manifold steadies; the whole way to the manifold throws
 away what the fit read off it. Its bound is split-conformal:
-``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), both in
-``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_bound.py``).
+``lens_quantile`` times the fit's marking RMS (px at 1280, at least ``lens_floor_px``), in quadrature
+with ``lens_shift_weight`` times :func:`centre_shift_px` (how far the lens moves when a principal point
+off centre is fitted with it: large where the markings do not pin the lens down), all in
+``camera_trust.json`` with the calibration they come from (``bench/pitch_lens_choice.py``).
 
 **Why a fixed weight and not the bounds' inverse variance**: per-frame weights make the answer jump
 between two readings that disagree by a frame-wide offset (the line fit reads a larger ``k2`` on the
 Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
-self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight`` and ``lens_manifold_pull``
-minimise the self-consistent median of Bundesliga clip 2e57b9 (a 0.1 grid by a 0.25 grid) among the
-weights that leave the procedural stadium crops as they were; clip 42ba34 is held out.
+self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight``, ``lens_manifold_pull``,
+``lens_quantile``, ``lens_shift_weight`` (the bound's :func:`centre_shift_px` term), ``lens_agreement``
+(:func:`combine`) and ``lens_max_hfov_deg`` are chosen on the five shared matches, leave one match
+out (``bench/pitch_lens_choice.py``; docs/CAMERA.md, "The lens fed back across matches").
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.net_lines.NetLinesEstimator` stays
@@ -48,19 +51,24 @@ the CNN-plus-lines estimator and this module composes the two.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
 
+from ..estimation import decentring
 from ..estimation.lens_estimate import LensEstimate, check_method
 from ..estimation.net_lines import NetLinesEstimator, default_net_lines_estimator, square_pixels
 from ..estimation.trust import NO_EVIDENCE_REASONS, shift_px
-from ..lens.lens import Lens
-from ..lens.metrics import manifold_k2, max_displacement
+from ..lens.lens import Lens, pixels_to_lens
+from ..lens.metrics import manifold_k2, max_displacement, max_displacement_px
 from ..lens.options import Method
 from ..media.frames import to_rgb8
+from ..pitch.template import PitchTemplate
 from .calibrate import calibrate
 from .estimate import CameraEstimate, camera_trust
+from .refine import K2_PRIOR, MIN_ELEMENT_POINTS, assign, template_samples
+from .white_lines import line_points
 
 
 def manifold_lens(lens: Lens) -> Lens:
@@ -74,23 +82,95 @@ def manifold_lens(lens: Lens) -> Lens:
     return Lens(k1, float(manifold_k2(k1)))
 
 
+def pulled_lens(fit: Lens, pull: float) -> Lens:
+    """``fit`` pulled toward the manifold lens nearest it (:func:`manifold_lens`) by the share ``pull``:
+    ``p m + (1 - p) k``."""
+    nearest = manifold_lens(fit)
+    return Lens(pull * nearest.k1 + (1 - pull) * fit.k1, pull * nearest.k2 + (1 - pull) * fit.k2)
+
+
 def camera_lens(camera: CameraEstimate) -> Lens:
     """The lens ``camera``'s fit contributes (see the module docstring, "The camera's lens"): the fit's
-    ``(k1, k2)`` pulled toward the manifold lens nearest it (:func:`manifold_lens`) by the share
-    ``lens_manifold_pull`` (``camera_trust.json``): ``p m + (1 - p) k``."""
-    p = float(camera_trust()["lens_manifold_pull"])
-    fit, nearest = camera.lens, manifold_lens(camera.lens)
-    return Lens(p * nearest.k1 + (1 - p) * fit.k1, p * nearest.k2 + (1 - p) * fit.k2)
+    ``(k1, k2)`` pulled toward the manifold lens nearest it by the share ``lens_manifold_pull``
+    (``camera_trust.json``; :func:`pulled_lens`)."""
+    return pulled_lens(camera.lens, float(camera_trust()["lens_manifold_pull"]))
 
 
-def lens_bound_px(camera: CameraEstimate) -> float:
-    """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`: ``lens_quantile``
-    times ``camera``'s marking RMS (px at 1280, at least ``lens_floor_px``; ``glradial/data/camera_trust.json``)."""
-    t = camera_trust()
-    return float(t["lens_quantile"] * max(camera.rms_px, t["lens_floor_px"]))
+def pitch_bound_px(rms_px: float, centre_px: float, t: dict) -> float:
+    """90 % bound (px at 1920) on the max-displacement error of the camera lens of a fit whose marking
+    RMS is ``rms_px`` (px at 1280) and whose lens moves by ``centre_px`` (px at 1920, :func:`centre_shift_px`;
+    NaN: not measured, no term) when a principal point off centre is fitted with it: ``lens_quantile``
+    times the RMS (at least ``lens_floor_px``) in quadrature with ``lens_shift_weight`` times the shift
+    (thresholds ``t``: ``camera_trust.json``)."""
+    base = t["lens_quantile"] * max(rms_px, t["lens_floor_px"])
+    return float(np.hypot(base, t["lens_shift_weight"] * centre_px) if np.isfinite(centre_px) else base)
 
 
-def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
+def lens_bound_px(camera: CameraEstimate, centre_px: float = float("nan")) -> float:
+    """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`
+    (:func:`pitch_bound_px` of ``camera``'s marking RMS and the lens's ``centre_px``, :func:`centre_shift_px`
+    of the frame, under ``glradial/data/camera_trust.json``)."""
+    return pitch_bound_px(camera.rms_px, centre_px, camera_trust())
+
+
+#: Gate (px at 1280) within which a white-line point counts as on its marking for :func:`centre_shift_px`.
+SHIFT_GATE_PX = 3.0
+
+
+def centre_shift_px(rgb: np.ndarray, camera: CameraEstimate) -> float:
+    """How far ``camera``'s fitted lens moves when decentring terms (a principal point off centre) are
+    fitted with it on the straight markings it explains: the white-line points of ``rgb`` within
+    :data:`SHIFT_GATE_PX` of each straight marking with at least ``MIN_ELEMENT_POINTS`` of them form
+    one chain, read by :func:`glradial.estimation.decentring.centre_shift_px` (px at 1920; NaN with
+    fewer than its ``MIN_CHAINS`` chains or no camera). Large where the markings seen cannot tell the
+    fitted centred lens from a decentred one: the lens is not pinned down by the pitch."""
+    cam = camera.camera
+    if cam is None:
+        return float("nan")
+    pitch = PitchTemplate()
+    lines = line_points(rgb)
+    samples = template_samples(pitch)
+    got = assign(cam.with_size(lines.size), samples, lines.xy, lines.angle, SHIFT_GATE_PX)
+    if got is None:
+        return float("nan")
+    element, on = samples.element[got[0]], got[3]
+    straight = [i for i, e in enumerate(pitch.elements()) if e.kind != "arc"]
+    chains = [i for i in straight if np.sum(on & (element == i)) >= MIN_ELEMENT_POINTS]
+    if not chains:
+        return float("nan")
+    masks = [on & (element == i) for i in chains]
+    points = np.concatenate([pixels_to_lens(lines.xy[m], lines.size) for m in masks])
+    chain = np.concatenate([np.full(m.sum(), j) for j, m in enumerate(masks)])
+    weight = np.array([1.0 / m.sum() for m in masks])  # each chain weighs alike (1 / px^2 over its points)
+    return decentring.centre_shift_px(points, chain, weight, float(lines.size[0]), cam.lens.k1, cam.lens.k2, K2_PRIOR)
+
+
+def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float, float], reading_bound: float,
+            t: dict, hfov_deg: float = 0.0) -> tuple[tuple[float, float], float, bool]:
+    """The lens fed back from the camera lens ``pitch`` (bound ``pitch_bound``) and the estimation
+    layer's ``reading`` (bound ``reading_bound``): ``(k, stated bound, from the pitch)``; bounds px at
+    1920, ``t`` the thresholds (``camera_trust.json``). Where the two agree (their max-displacement
+    distance ``D`` within ``lens_agreement`` times the sum of their bounds) ``k = w k_p + (1 - w) k_a``,
+    ``w`` = ``lens_weight`` (with ``lens_weight_floor_by_bounds``, at least ``b_a² / (b_a² + b_p²)``:
+    a reading whose own bound says it is far less sure than the camera weighs less), stating
+    ``w b_p + (1 - w) b_a`` (the radial map is linear in ``(k1, k2)`` and the error a norm). Where they do not, one of the bounds
+    fails and the frame cannot tell which: the reading is kept, stating ``max(b_a, D + b_p)`` (its
+    error when either bound holds), so a lens the pitch contradicts is never stated as sure as either.
+    A camera wider than ``lens_max_hfov_deg`` (``hfov_deg``, the undistorted frame's field of view) lies
+    outside the views the camera lens's bound was calibrated on: the reading is kept as it is."""
+    if hfov_deg > t["lens_max_hfov_deg"]:
+        return tuple(reading), reading_bound, False  # type: ignore[return-value]
+    w = float(t["lens_weight"])
+    if t["lens_weight_floor_by_bounds"]:  # at least the camera's inverse-variance share: a reading far less sure weighs less
+        w = max(w, reading_bound**2 / (reading_bound**2 + pitch_bound**2))
+    apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
+    if apart > float(t["lens_agreement"]) * (pitch_bound + reading_bound):
+        return tuple(reading), max(reading_bound, apart + pitch_bound), False  # type: ignore[return-value]
+    k = (w * pitch[0] + (1 - w) * reading[0], w * pitch[1] + (1 - w) * reading[1])
+    return k, w * pitch_bound + (1 - w) * reading_bound, True
+
+
+def pitch_lens(camera: CameraEstimate, fallback: LensEstimate, centre_px: float = float("nan")) -> LensEstimate:
     """The camera fit's lens (:func:`camera_lens`) combined with ``fallback`` (the estimation layer's
     reading of the same frame), as a :class:`LensEstimate` with ``method="pitch"`` and ``fallback``'s pixel
     aspect, when ``camera`` is not doubtful (see the module docstring); else ``fallback`` unchanged.
@@ -102,10 +182,15 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate) -> LensEstimate:
         raise TypeError(f"fallback must be a glradial.LensEstimate, got {type(fallback).__name__}")
     if camera.doubtful or camera.camera is None or not _may_be_a_pitch(fallback):
         return fallback
-    lens, bound = camera_lens(camera), lens_bound_px(camera)
-    w = float(camera_trust()["lens_weight"])
-    k = (w * lens.k1 + (1 - w) * fallback.k1, w * lens.k2 + (1 - w) * fallback.k2)
-    stated = w * bound + (1 - w) * fallback.uncertainty_px
+    lens = camera_lens(camera)
+    k, stated, from_pitch = combine((lens.k1, lens.k2), lens_bound_px(camera, centre_px), (fallback.k1, fallback.k2),
+                                    fallback.uncertainty_px, camera_trust(), camera.hfov_deg)
+    if not from_pitch:  # the two readings contradict each other's bounds: the reading, its bound widened
+        if stated <= fallback.uncertainty_px:
+            return fallback
+        sure = not fallback.doubtful and stated < shift_px(k)
+        return replace(fallback, uncertainty_px=stated, doubtful=not sure,
+                       reason=fallback.reason if sure or fallback.doubtful else "weak_geometry")
     sure = stated < shift_px(k)  # doubt by benefit, as the estimation layer's: the identity lens within the bound
     return LensEstimate(*k, pixel_aspect=fallback.pixel_aspect, uncertainty_px=stated, method="pitch",
                         chains=len(camera.markings), doubtful=not sure, reason="ok" if sure else "weak_geometry")
@@ -137,7 +222,8 @@ def with_pitch(frame: np.ndarray, reading: LensEstimate) -> tuple[LensEstimate, 
     if reading.pixel_aspect != 1.0:
         rgb = square_pixels(rgb, reading.pixel_aspect)
     camera = fit_camera(rgb, reading)
-    return pitch_lens(camera, reading), camera
+    measure = camera_trust()["lens_shift_weight"] > 0 and not camera.doubtful  # the term costs a white-line pass
+    return pitch_lens(camera, reading, centre_shift_px(rgb, camera) if measure else float("nan")), camera
 
 
 def _with_pitch(frames: list, found: list[LensEstimate]) -> list[LensEstimate]:

@@ -53,8 +53,8 @@ def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     assert est.chains == len(camera.markings)
     again, fitted = pl.with_pitch(view.frame, old)  # the one path estimate() takes, camera fit included
     assert again == est and fitted.markings == camera.markings and fitted.rms_px == camera.rms_px
-    bound, w = pl.lens_bound_px(camera), camera_trust()["lens_weight"]
-    assert 0 < w < 1
+    bound, w = pl.lens_bound_px(camera, pl.centre_shift_px(view.frame, camera)), camera_trust()["lens_weight"]
+    assert 0 < w <= 1
     assert est.k1 == pytest.approx(w * lens.k1 + (1 - w) * old.k1, abs=1e-12)
     assert est.k2 == pytest.approx(w * lens.k2 + (1 - w) * old.k2, abs=1e-12)
     assert est.uncertainty_px == pytest.approx(w * bound + (1 - w) * old.uncertainty_px)
@@ -118,7 +118,7 @@ def test_net_and_lines_never_fit_the_camera(view, monkeypatch):
         assert glradial.Estimator(threads=1).estimate(view.frame, method=method, pitch=True) == lines_layer.estimate_net_lines(view.frame, method=method)
 
 
-def test_pitch_lens_policy():
+def test_pitch_lens_policy(monkeypatch):
     fallback = LensEstimate(-0.1, 0.01, pixel_aspect=16 / 9, uncertainty_px=9.0, method="lines", chains=3)
     doubtful = CameraEstimate(None, 1280.0, True, "no_markings")
     assert pl.pitch_lens(doubtful, fallback) is fallback
@@ -135,7 +135,10 @@ def test_pitch_lens_policy():
     assert pl.camera_lens(sure) == lens and 0 <= pull <= 1
     assert (got.k1, got.k2) == pytest.approx((w * lens.k1 + (1 - w) * -0.1, w * lens.k2 + (1 - w) * 0.01), abs=1e-12)
     # a reading doubtful by benefit keeps its weight (its bound is calibrated); a combined bound that reaches
-    # the identity lens makes the answer doubtful by benefit too
+    # the identity lens makes the answer doubtful by benefit too (a weight below 1: the reading's bound counts)
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_weight=0.5))
+    w = 0.5
     unsure = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="lines", doubtful=True, reason="evidence_disagrees")
     got = pl.pitch_lens(sure, unsure)
     assert got.k1 == pytest.approx(w * lens.k1 + (1 - w) * 0.2, abs=1e-12)
@@ -167,7 +170,9 @@ def test_squashed_view_and_the_command_line(view, tmp_path, capsys):
     squashed = cv2.resize(view.frame, (640, 640), interpolation=cv2.INTER_AREA)
     est = glradial.estimate(squashed, pixel_aspect=16 / 9, pitch=True)
     old = lines_layer.estimate_net_lines(squashed, pixel_aspect=16 / 9)
-    expected = pl.pitch_lens(pl.fit_camera(lines_layer.square_pixels(squashed, 16 / 9), old), old)
+    square = lines_layer.square_pixels(squashed, 16 / 9)
+    fitted = pl.fit_camera(square, old)
+    expected = pl.pitch_lens(fitted, old, pl.centre_shift_px(square, fitted))
     assert est == expected and est.method == "pitch" and est.pixel_aspect == pytest.approx(16 / 9)
     path = tmp_path / "view.png"
     write_image(path, view.frame[..., ::-1].copy())
@@ -205,3 +210,61 @@ def test_calibrate_started_from_a_lens_reading():
     assert not est.doubtful and _error_px(est.lens, truth.lens) <= LENS_TOLERANCE_PX
     with pytest.raises(TypeError, match="lens"):
         calibrate(frame, lens=(-0.6, 0.3))
+
+
+def test_a_camera_lens_the_reading_contradicts_is_not_mixed_in(monkeypatch):
+    """combine(): where the camera lens and the reading lie further apart than ``lens_agreement`` times
+    the sum of their bounds, one of the bounds fails; the reading is kept with a bound that holds when
+    either does (max displacement is a metric: the triangle inequality is the oracle)."""
+    t = dict(camera_trust(), lens_weight=0.5, lens_agreement=1.0)
+    pitch, reading = (-0.30, 0.05), (-0.10, 0.01)
+    apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
+    assert apart > 5.0
+    k, bound, mixed = pl.combine(pitch, 2.0, reading, 3.0, t)
+    assert not mixed and k == reading and bound == pytest.approx(max(3.0, apart + 2.0))
+    for truth in (pitch, reading):  # whichever reading is right (within its bound), the stated bound covers the answer
+        assert float(max_displacement_px(np.array(k), np.array(truth))) <= bound
+    # readings that agree within their bounds are mixed as before: w k_p + (1 - w) k_a, stating w b_p + (1 - w) b_a
+    k, bound, mixed = pl.combine(pitch, apart, reading, apart, t)
+    assert mixed and k == pytest.approx((-0.2, 0.03)) and bound == pytest.approx(apart)
+    # a camera wider than the views the bound was calibrated on is not fed back: the reading as it was
+    wide = dict(t, lens_max_hfov_deg=70.0)
+    assert pl.combine(pitch, apart, reading, apart, wide, 72.4) == (reading, apart, False)
+    assert pl.combine(pitch, apart, reading, apart, wide, 69.0)[2]
+    # through pitch_lens: a sure camera whose lens the reading contradicts gives the reading back, its bound widened
+    fallback = LensEstimate(-0.1, 0.01, uncertainty_px=3.0, method="lines", chains=3)
+    cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.6, 0.3))
+    sure = CameraEstimate(cam, 2.0, False, "ok", ("halfway",), 0.5, 300, 0.95, 0.01)
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1.0))
+    lens = pl.camera_lens(sure)
+    apart = float(max_displacement_px(np.array([lens.k1, lens.k2]), np.array([-0.1, 0.01])))
+    assert apart > pl.lens_bound_px(sure) + 3.0
+    got = pl.pitch_lens(sure, fallback)
+    assert (got.k1, got.k2, got.method) == (-0.1, 0.01, "lines")
+    assert got.uncertainty_px == pytest.approx(apart + pl.lens_bound_px(sure))
+    # the widened bound reaches the identity lens here: doubtful by benefit, never a confident wrong lens
+    assert got.doubtful == (got.uncertainty_px >= float(max_displacement_px(np.array([-0.1, 0.01]), np.zeros(2))))
+
+
+def test_the_camera_lens_bound_adds_the_centre_shift_in_quadrature():
+    t = dict(camera_trust(), lens_quantile=10.0, lens_floor_px=0.3, lens_shift_weight=0.5)
+    assert pl.pitch_bound_px(0.1, float("nan"), t) == pytest.approx(3.0)  # not measured: the RMS term alone
+    assert pl.pitch_bound_px(0.4, 6.0, t) == pytest.approx(5.0)  # hypot(10 * 0.4, 0.5 * 6)
+    assert pl.pitch_bound_px(0.4, 6.0, dict(t, lens_shift_weight=0.0)) == pytest.approx(4.0)
+
+
+def test_centre_shift_is_small_for_the_right_lens_and_large_for_a_wrong_one(view):
+    """On a rendered view (exact centred lens) the fitted lens hardly moves when decentring terms are
+    freed on its own markings; a camera carrying a lens 0.1 in k1 off leaves the lines bent in a way the
+    decentring terms take up, and the lens moves far (px of max displacement at 1920)."""
+    from dataclasses import replace
+
+    camera = calibrate(view.frame)
+    assert not camera.doubtful
+    assert pl.centre_shift_px(view.frame, camera) < 2.0
+    k1 = view.camera.lens.k1 + 0.1
+    off = replace(camera, camera=Camera(camera.camera.rotation, camera.camera.position, camera.camera.focal,
+                                        camera.camera.size, Lens(k1, manifold_k2(k1))))
+    assert pl.centre_shift_px(view.frame, off) > 10.0
+    assert np.isnan(pl.centre_shift_px(view.frame, CameraEstimate(None, 1280.0, True, "no_markings")))
