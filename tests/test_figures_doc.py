@@ -43,5 +43,17 @@ def test_a_section_renders_tables_and_reports(tmp_path):
         "name": "x", "date": "2026-11-28T00:00:00Z", "commit": "abc", "dirty": False, "command": "python bench/x.py",
         "machine": {"cpu": "cpu", "logical_cpus": 2}, "results": {"fps": {"a": 1.23456}, "report": ["| t |"]}}))
     text = render.render(tmp_path)
-    assert "| | a |\n| --- | --- |\n| fps | 1.235 |" in text and "```text\n| t |\n```" in text
-    assert "commit abc: `python bench/x.py`" in text
+    assert "| [x](figures/x.json) | measured 2026-11-28T00:00Z on cpu (2 logical CPUs), commit abc: `python bench/x.py` |" in text
+    assert "| --- | --- |\n| fps | a **1.235** |\n\n| t |\n" in text
+
+
+def test_a_large_record_folds_into_few_rows_and_a_report_head(tmp_path):
+    render = load_script("scripts/render_figures.py")
+    results = {"m": {f"c{i}": {"auto": {"n": i, "median": 0.5}} for i in range(20)},
+               "report": [f"line {i}" for i in range(10)]}
+    lines = render.render_one({"name": "y", "date": "2026-11-28T00:00:00Z", "command": "python bench/y.py",
+                               "machine": "here", "results": results})
+    rows = [line for line in lines if line.startswith("| ") and "---" not in line][1:]
+    assert len(rows) == 1 and rows[0].startswith("| m | c0 / auto: n **0**, median **0.5** · c1 / auto: n **1**")
+    assert rows[0].endswith("c19 / auto: n **19**, median **0.5** |")
+    assert f"(… {10 - render.REPORT_LINES} more lines in the JSON)" in lines
