@@ -4,12 +4,12 @@
 Usage: ``python scripts/render_figures.py`` (rewrites docs/FIGURES.md) or ``--check`` (exit 1 when
 docs/FIGURES.md is not what the JSON files render to; tests/test_figures_doc.py runs it).
 
-Each figure becomes one table, an index of its JSON file (the full record): the header names it and
-says how it was measured (UTC date, machine, commit, command; or, for a record transcribed from a
-document's prose before the benches wrote JSON, where from and when it was measured); its rows are
-the results folded to at most ``MAX_ROWS`` (a row per key path, its leaves as ``key **value**``
-pairs, floats to 4 significant digits); a printed report (``"report"``: a list of lines) follows,
-its first ``REPORT_LINES`` lines.
+The document is one table, an index of the JSON files (each the full record). Each figure opens
+with a bold row naming it (a link to its JSON) and saying how it was measured (UTC date, machine,
+commit, command; or, for a record transcribed from a document's prose before the benches wrote JSON,
+where from and when it was measured); its results follow, folded to at most ``MAX_ROWS`` rows (a row
+per key path, its leaves as ``key **value**`` pairs, floats to 4 significant digits), then the first
+``REPORT_LINES`` lines of a printed report (``"report"``: a list of lines).
 """
 
 from __future__ import annotations
@@ -32,13 +32,13 @@ Every measured figure the documents quote, one section per file of `docs/figures
 name, plus a variant). Speeds are ratios against peers run in the same process wherever the bench
 measures one; absolute rates move with the load of the shared 2-core machine. Records marked
 *transcribed* were copied from the documents' prose (where the figure was first quoted) and keep
-the original measurement's date; re-running the bench replaces them. Each table is an index of its
-JSON file, the full record (the name links to it); long reports show their first lines only.
+the original measurement's date; re-running the bench replaces them. The table is an index: each
+figure's name links to its JSON file, the full record; long reports show their first lines only.
 """
 #: Lines of a printed report shown in the document (the JSON keeps them all).
 REPORT_LINES = 3
 #: Rows of a figure's table; deeper results fold into the cells.
-MAX_ROWS = 5
+MAX_ROWS = 6
 
 
 def _value(value: Any) -> str:
@@ -100,29 +100,37 @@ def _provenance(record: dict) -> str:
     return f"measured {record['date'][:16]}Z on {where}, commit {record.get('commit') or '?'}{dirty}: `{record['command']}`"
 
 
+def _safe(text: str) -> str:
+    """``text`` safe inside a Markdown table cell."""
+    return text.replace("|", "/")
+
+
+def _report_rows(report: list[str]) -> list[str]:
+    """The head of a printed report as table rows: its first :data:`REPORT_LINES` lines that are
+    not a Markdown table's separator, each in a code span, then how many more the JSON holds."""
+    lines = [line for line in report if not set(line.replace(" ", "")) <= set("|-:")]
+    rows = ["| report | `" + line.replace("`", "'").replace("|", "\\|") + "` |" for line in lines[:REPORT_LINES]]
+    if len(lines) > REPORT_LINES:
+        rows.append(f"| | … {len(lines) - REPORT_LINES} more lines in the JSON |")
+    return rows
+
+
 def render_one(record: dict) -> list[str]:
-    """One figure record as a table: its name (a link to the JSON, the full record) and provenance
-    as the header, its results folded into rows (a line instead when it has none); then the head
-    of a printed report (``"report"``: a list of lines; the rest stays in the JSON)."""
-    name, link = record["name"], f"[{record['name']}](figures/{record['name']}.json)"
+    """One figure record as rows of the document's table: its name (a link to the JSON, the full
+    record) in bold with its provenance, its results folded into rows, then the head of a printed
+    report (``"report"``: a list of lines; the rest stays in the JSON)."""
     results = record.get("results")
     report = results.pop("report", None) if isinstance(results, dict) else None
-    if results in ({}, None):
-        lines = [f"**{link}**: {_provenance(record)}", ""]
-    else:
-        lines = [f"| {link} | " + _provenance(record).replace("|", "/") + " |", "| --- | --- |",
-                 *(f"| {head.replace('|', '/')} | {cell.replace('|', '/')} |" for head, cell in _rows(results).items()), ""]
-    if report:
-        lines += report[:REPORT_LINES]
-        if len(report) > REPORT_LINES:
-            lines.append(f"(… {len(report) - REPORT_LINES} more lines in the JSON)")
-        lines.append("")
-    return lines
+    lines = [f"| **[{record['name']}](figures/{record['name']}.json)** | {_safe(_provenance(record))} |"]
+    if results not in ({}, None):
+        lines += [f"| {_safe(head)} | {_safe(cell)} |" for head, cell in _rows(results).items()]
+    return lines + (_report_rows(report) if report else [])
 
 
 def render(directory: Path = FIGURES_DIR) -> str:
-    """The whole document for the JSON records in ``directory`` (sorted by file name)."""
-    lines = [HEADER]
+    """The whole document for the JSON records in ``directory`` (sorted by file name): one table,
+    a bold row opening each figure."""
+    lines = [HEADER, "| figure | how measured; results |", "| --- | --- |"]
     for path in sorted(directory.glob("*.json")):
         record = json.loads(path.read_text(encoding="utf-8"))
         if record.get("name") != path.stem:
