@@ -102,6 +102,7 @@ def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
         vout.time_base = vin.time_base
         vout.codec_context.time_base = vin.time_base
         vout.codec_context.options = {"crf": f"{crf:g}", "preset": preset}
+        vout.codec_context.thread_type = "AUTO"  # frame threads, as the ffmpeg command and glradial's file outputs
         aout = out.add_stream_from_template(ain)
         for packet in inp.demux(vin, ain):
             if packet.stream is ain:
