@@ -36,7 +36,7 @@ the original measurement's date; re-running the bench replaces them. The table i
 figure's name links to its JSON file, the full record; long reports show their first lines only.
 """
 #: Lines of a printed report shown in the document (the JSON keeps them all).
-REPORT_LINES = 3
+REPORT_LINES = 2
 #: Rows of a figure's table; deeper results fold into the cells.
 MAX_ROWS = 6
 
