@@ -30,12 +30,14 @@ size: ``Lens.maps`` (float32, OpenCV) against the float64 NumPy reference, and t
 YUV path's) of the frame and of a 4:2:0 chroma plane, each a new lens every call.
 
 Run: ``python3 bench/bench_video.py [--size 1920x1080] [--frames 150] [--preset medium] [--crf 23]
-[--backend auto] [--repeats 2]``.
+[--backend auto] [--repeats 2] [--paths 'ffmpeg,fixed lens,--auto,pass 2']`` (``--paths``: only those, taking
+turns faster, for a machine whose load changes; ``pass 2`` then checks it: the same work as the fixed lens).
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import shutil
 import subprocess
@@ -102,6 +104,7 @@ def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
         vout.time_base = vin.time_base
         vout.codec_context.time_base = vin.time_base
         vout.codec_context.options = {"crf": f"{crf:g}", "preset": preset}
+        vout.codec_context.thread_type = "AUTO"  # frame threads, as the ffmpeg command and glradial's file outputs
         aout = out.add_stream_from_template(ain)
         for packet in inp.demux(vin, ain):
             if packet.stream is ain:
@@ -214,6 +217,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser.add_argument("--crf", type=float, default=23.0)
     parser.add_argument("--backend", default="auto", choices=("auto", "cpu", "gl"))
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument("--paths", default=None,
+                        help="comma-separated paths to time (default all), e.g. 'ffmpeg,fixed lens,--auto,pass 2': "
+                             "fewer paths take turns faster, so a changing load falls on them more alike")
     args = parser.parse_args(argv)
     if args.frame is None:
         args.frame = bundled_frame_path()
@@ -268,6 +274,12 @@ def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip
              "pass 2": lambda: correct_video(clip, tmp / "pass2.mp4", track.lens_for, backend=args.backend, progress=False,
                                              options=options, overwrite=True, frames_expected=track.n_frames),
              "fixed, 1/32-px maps": fixed_32}
+    if args.paths:
+        wanted = [name.strip() for name in args.paths.split(",")]
+        unknown = sorted(set(wanted) - set(paths))
+        if unknown:
+            raise SystemExit(f"--paths: unknown {unknown}; choose from {sorted(paths)}")
+        paths = {name: run for name, run in paths.items() if name in wanted}
     best = {name: float("inf") for name in paths}
     for _ in range(args.repeats):
         for name, run in paths.items():
@@ -281,18 +293,21 @@ def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict) -> 
     """Print the figures and return them (frames/s, ms/frame and the ratios the targets name)."""
     fps = {name: args.frames / seconds for name, seconds in best.items()}
     ms = {name: 1e3 * seconds / args.frames for name, seconds in {**best, **passes}.items()}
-    ratios = {"fixed / ffmpeg": fps["fixed lens"] / fps["ffmpeg"], "fixed / pyav": fps["fixed lens"] / fps["pyav"],
-              "--auto / fixed": fps["--auto"] / fps["fixed lens"], "fixed RGB / ffmpeg": fps["fixed, RGB"] / fps["ffmpeg"],
-              "fixed YUV / fixed RGB": fps["fixed lens"] / fps["fixed, RGB"],
-              "fixed / fixed 1/32-px maps (time)": best["fixed lens"] / best["fixed, 1/32-px maps"],
-              "pass 1 sparse / all (time)": passes["pass 1"] / best["pass 1, all"],
-              "pass 2 / fixed (time)": best["pass 2"] / best["fixed lens"]}
+    pairs = {"fixed / ffmpeg": ("fixed lens", "ffmpeg"), "fixed / pyav": ("fixed lens", "pyav"),
+             "--auto / fixed": ("--auto", "fixed lens"), "fixed RGB / ffmpeg": ("fixed, RGB", "ffmpeg"),
+             "fixed YUV / fixed RGB": ("fixed lens", "fixed, RGB")}
+    times = {"fixed / fixed 1/32-px maps (time)": ("fixed lens", "fixed, 1/32-px maps"),
+             "pass 2 / fixed (time)": ("pass 2", "fixed lens")}
+    ratios = {name: fps[a] / fps[b] for name, (a, b) in pairs.items() if a in fps and b in fps}
+    ratios.update({name: best[a] / best[b] for name, (a, b) in times.items() if a in best and b in best})
+    if "pass 1, all" in best:
+        ratios["pass 1 sparse / all (time)"] = passes["pass 1"] / best["pass 1, all"]
     print(f"clip: {args.clip} over {args.frame.name}, {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
           f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}; load average {os.getloadavg()[0]:.1f}")
     for name, value in fps.items():
         print(f"  {name:19s} {value:6.1f} frames/s")
     print(f"  --auto pass 1 (decode, cuts, shot evidence and fit) {ms['pass 1']:.1f} ms/frame, pass 2 (correct + encode) "
-          f"{ms['pass 2']:.1f} ms/frame; fixed lens {ms['fixed lens']:.1f} ms/frame")
+          f"{ms['pass 2']:.1f} ms/frame; fixed lens {ms.get('fixed lens', math.nan):.1f} ms/frame")
     print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
           f"YUV {stages['YUV']:.1f} ms/frame, YUV from 1/32-px maps {stages['YUV 1/32']:.1f} ms/frame")
     for name, value in ratios.items():
@@ -300,7 +315,8 @@ def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict) -> 
         print(f"{name:34s}: {value:.2f}{target}")
     return {"fps": fps, "ms_per_frame": ms, "correction_stage_ms_per_frame": stages, "ratios": ratios,
             "clip": args.clip, "size": args.size, "frames": args.frames, "preset": args.preset, "crf": args.crf,
-            "backend": args.backend, "repeats": args.repeats}
+            "backend": args.backend, "repeats": args.repeats, "paths": list(best),
+            "load_average_1_5_15": [round(v, 1) for v in os.getloadavg()]}
 
 
 def main() -> int:

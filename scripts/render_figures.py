@@ -4,10 +4,12 @@
 Usage: ``python scripts/render_figures.py`` (rewrites docs/FIGURES.md) or ``--check`` (exit 1 when
 docs/FIGURES.md is not what the JSON files render to; tests/test_figures_doc.py runs it).
 
-Each figure becomes a section: how it was measured (UTC date, machine, commit, command; or, for a
-record transcribed from a document's prose before the benches wrote JSON, where from and when it was
-measured), then its results: a printed report (``"report"``: a list of lines) verbatim, every other
-value as one table row per leaf (nested keys joined with `` / ``, floats to 4 significant digits).
+The document is one table, an index of the JSON files (each the full record). Each figure opens
+with a bold row naming it (a link to its JSON) and saying how it was measured (UTC date, machine,
+commit, command; or, for a record transcribed from a document's prose before the benches wrote JSON,
+where from and when it was measured); its results follow, folded to at most ``MAX_ROWS`` rows (a row
+per key path, its leaves as ``key **value**`` pairs, floats to 4 significant digits), then the first
+``REPORT_LINES`` lines of a printed report (``"report"``: a list of lines).
 """
 
 from __future__ import annotations
@@ -30,8 +32,13 @@ Every measured figure the documents quote, one section per file of `docs/figures
 name, plus a variant). Speeds are ratios against peers run in the same process wherever the bench
 measures one; absolute rates move with the load of the shared 2-core machine. Records marked
 *transcribed* were copied from the documents' prose (where the figure was first quoted) and keep
-the original measurement's date; re-running the bench replaces them.
+the original measurement's date; re-running the bench replaces them. The table is an index: each
+figure's name links to its JSON file, the full record; long reports show their first lines only.
 """
+#: Lines of a printed report shown in the document (the JSON keeps them all).
+REPORT_LINES = 2
+#: Rows of a figure's table; deeper results fold into the cells.
+MAX_ROWS = 6
 
 
 def _value(value: Any) -> str:
@@ -59,51 +66,71 @@ def _leaves(value: Any, path: tuple[str, ...] = ()) -> Iterator[tuple[tuple[str,
         yield path or ("value",), value
 
 
-def _tables(results: Any) -> list[str]:
-    """The leaves as Markdown tables: one row per parent path, one column per last key; rows with
-    the same columns (in a run) share a table, so a dict of dicts of numbers reads as a matrix."""
-    rows: dict[str, dict[str, Any]] = {}
-    for path, value in _leaves(results):
-        parent = " / ".join(path[:-1]) if len(path) > 1 else ""
-        rows.setdefault(parent, {})[path[-1]] = value
-    lines: list[str] = []
-    previous: tuple[str, ...] | None = None
-    for parent, cells in rows.items():
-        columns = tuple(cells)
-        if columns != previous:
-            lines += ["", "| | " + " | ".join(c.replace("|", "/") for c in columns) + " |",
-                      "| --- |" + " --- |" * len(columns)]
-            previous = columns
-        lines.append(f"| {parent.replace('|', '/')} | " + " | ".join(_value(v) for v in cells.values()) + " |")
-    return lines[1:] + [""] if lines else []
+def _cell(pairs: list[tuple[tuple[str, ...], Any]]) -> str:
+    """One cell: ``key **value**`` pairs, grouped under their common sub-path (``sub: k **v**, …``)."""
+    groups: dict[str, list[str]] = {}
+    for rest, value in pairs:
+        groups.setdefault(" / ".join(rest[:-1]), []).append(f"{rest[-1]} **{_value(value)}**")
+    return " · ".join((f"{sub}: " if sub else "") + ", ".join(items) for sub, items in groups.items())
+
+
+def _rows(results: Any) -> dict[str, str]:
+    """The leaves folded into at most :data:`MAX_ROWS` rows: one row per key path, its cell the
+    leaves under it; the deepest level of the row paths folds into the cells until they fit."""
+    leaves = list(_leaves(results))
+    depth = max(len(path) for path, _ in leaves) - 1
+    while True:
+        rows: dict[str, list[tuple[tuple[str, ...], Any]]] = {}
+        for path, value in leaves:
+            head = path[:min(depth, len(path) - 1)]
+            rows.setdefault(" / ".join(head), []).append((path[len(head):], value))
+        if len(rows) <= MAX_ROWS or depth == 0:
+            return {head: _cell(pairs) for head, pairs in rows.items()}
+        depth -= 1
 
 
 def _provenance(record: dict) -> str:
-    """The line saying how (or where from) the figure was measured."""
+    """How (or where from) the figure was measured."""
     machine = record.get("machine") or {}
     where = machine if isinstance(machine, str) else f"{machine.get('cpu', '?')} ({machine.get('logical_cpus', '?')} logical CPUs)"
     if record.get("transcribed_from"):
-        return (f"*Transcribed* from {record['transcribed_from']}; measured {record.get('date', '?')} on {where} "
-                f"with `{record.get('command', '?')}`.")
+        return (f"*transcribed* from {record['transcribed_from']}; measured {record.get('date', '?')[:10]} on {where} "
+                f"with `{record.get('command', '?')}`")
     dirty = " (uncommitted changes)" if record.get("dirty") else ""
-    return f"Measured {record['date']} on {where}, commit {record.get('commit') or '?'}{dirty}: `{record['command']}`."
+    return f"measured {record['date'][:16]}Z on {where}, commit {record.get('commit') or '?'}{dirty}: `{record['command']}`"
+
+
+def _safe(text: str) -> str:
+    """``text`` safe inside a Markdown table cell."""
+    return text.replace("|", "/")
+
+
+def _report_rows(report: list[str]) -> list[str]:
+    """The head of a printed report as table rows: its first :data:`REPORT_LINES` lines that are
+    not a Markdown table's separator, each in a code span, then how many more the JSON holds."""
+    lines = [line for line in report if not set(line.replace(" ", "")) <= set("|-:")]
+    rows = ["| report | `" + line.replace("`", "'").replace("|", "\\|") + "` |" for line in lines[:REPORT_LINES]]
+    if len(lines) > REPORT_LINES:
+        rows.append(f"| | … {len(lines) - REPORT_LINES} more lines in the JSON |")
+    return rows
 
 
 def render_one(record: dict) -> list[str]:
-    """The Markdown section of one figure record."""
-    lines = [f"## {record['name']}", "", _provenance(record), ""]
+    """One figure record as rows of the document's table: its name (a link to the JSON, the full
+    record) in bold with its provenance, its results folded into rows, then the head of a printed
+    report (``"report"``: a list of lines; the rest stays in the JSON)."""
     results = record.get("results")
     report = results.pop("report", None) if isinstance(results, dict) else None
+    lines = [f"| **[{record['name']}](figures/{record['name']}.json)** | {_safe(_provenance(record))} |"]
     if results not in ({}, None):
-        lines += _tables(results)
-    if report:
-        lines += ["```text", *report, "```", ""]
-    return lines
+        lines += [f"| {_safe(head)} | {_safe(cell)} |" for head, cell in _rows(results).items()]
+    return lines + (_report_rows(report) if report else [])
 
 
 def render(directory: Path = FIGURES_DIR) -> str:
-    """The whole document for the JSON records in ``directory`` (sorted by file name)."""
-    lines = [HEADER]
+    """The whole document for the JSON records in ``directory`` (sorted by file name): one table,
+    a bold row opening each figure."""
+    lines = [HEADER, "| figure | how measured; results |", "| --- | --- |"]
     for path in sorted(directory.glob("*.json")):
         record = json.loads(path.read_text(encoding="utf-8"))
         if record.get("name") != path.stem:

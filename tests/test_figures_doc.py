@@ -37,11 +37,25 @@ def test_every_bench_writes_its_figures():
     assert not silent, f"benches that write no figure (bench/figures.py write_figure): {silent}"
 
 
-def test_a_section_renders_tables_and_reports(tmp_path):
+def test_a_figure_renders_as_rows_of_the_one_table(tmp_path):
     render = load_script("scripts/render_figures.py")
     (tmp_path / "x.json").write_text(json.dumps({
         "name": "x", "date": "2026-11-28T00:00:00Z", "commit": "abc", "dirty": False, "command": "python bench/x.py",
-        "machine": {"cpu": "cpu", "logical_cpus": 2}, "results": {"fps": {"a": 1.23456}, "report": ["| t |"]}}))
+        "machine": {"cpu": "cpu", "logical_cpus": 2}, "results": {"fps": {"a": 1.23456}, "report": ["| t | u |", "| --- | --- |"]}}))
     text = render.render(tmp_path)
-    assert "| | a |\n| --- | --- |\n| fps | 1.235 |" in text and "```text\n| t |\n```" in text
-    assert "commit abc: `python bench/x.py`" in text
+    assert ("| figure | how measured; results |\n| --- | --- |\n| **[x](figures/x.json)** | measured 2026-11-28T00:00Z "
+            "on cpu (2 logical CPUs), commit abc: `python bench/x.py` |\n| fps | a **1.235** |\n| report | `\\| t \\| u \\|` |\n") in text
+    assert "| --- | --- |" not in text.split("| fps |")[1]  # the report's separator is left out
+
+
+def test_a_large_record_folds_into_few_rows_and_a_report_head(tmp_path):
+    render = load_script("scripts/render_figures.py")
+    results = {"m": {f"c{i}": {"auto": {"n": i, "median": 0.5}} for i in range(20)},
+               "report": [f"line {i}" for i in range(10)]}
+    lines = render.render_one({"name": "y", "date": "2026-11-28T00:00:00Z", "command": "python bench/y.py",
+                               "machine": "here", "results": results})
+    rows = [line for line in lines[1:] if not line.startswith("| report |") and not line.startswith("| | …")]
+    assert len(rows) == 1 and rows[0].startswith("| m | c0 / auto: n **0**, median **0.5** · c1 / auto: n **1**")
+    assert rows[0].endswith("c19 / auto: n **19**, median **0.5** |")
+    assert sum(line.startswith("| report |") for line in lines) == render.REPORT_LINES
+    assert lines[-1] == f"| | … {10 - render.REPORT_LINES} more lines in the JSON |"

@@ -159,10 +159,11 @@ def _estimate_image(args: argparse.Namespace, image):
     stated = f" ({method}, uncertainty {uncertainty:.1f} px at 1920, {reason})" if method and uncertainty is not None else ""
     print(f"{args.input}: estimated k1={found.k1:.6f} k2={found.k2:.6f}{stated}")
     note(args, k1=found.k1, k2=found.k2, method=method, uncertainty_px=uncertainty, reason=reason, doubtful=doubtful)
+    applied = doubt.applies(doubtful, reason or "", bool(args.apply_doubtful))  # the one doubt policy decides
     if doubtful:
-        action = "applied anyway (--apply-doubtful)" if args.apply_doubtful else "left uncorrected (--apply-doubtful applies it)"
+        action = "applied anyway (--apply-doubtful)" if applied else "left uncorrected (--apply-doubtful applies it)"
         print(f"glradial: warning: the estimate of {args.input} is doubtful ({reason}): {action}", file=sys.stderr)
-    if not doubt.applies(doubtful, reason or "", bool(args.apply_doubtful)):
+    if not applied:
         return Lens(0.0, 0.0)
     return Lens(found.k1, found.k2, found.cx, found.cy, found.pixel_aspect)
 

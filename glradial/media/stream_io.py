@@ -219,6 +219,7 @@ class StreamWriter(VideoWriter):
     stream, :meth:`abort` stops it where it is."""
 
     container_format = STREAM_OUTPUT_FORMAT
+    thread_type = "SLICE"  # live: no frame-threaded encoder delay
 
     def __init__(self, target: str, info: VideoInfo, *, options: EncodeOptions = EncodeOptions(), order: str = "rgb") -> None:
         if order not in ("rgb", "bgr"):
@@ -283,7 +284,7 @@ def open_live_output(target: str, info: VideoInfo, *, options: EncodeOptions = E
     """The writer of OUTPUT ``target`` (module docstring) for frames like ``info``."""
     kind = check_live_output(target)
     if kind == "file":
-        return VideoWriter(target, info, options=options, overwrite=overwrite)
+        return VideoWriter(target, info, options=options, overwrite=overwrite, low_delay=True)
     if kind == "ndi":
         from .ndi_io import NdiWriter
 

@@ -648,13 +648,18 @@ class VideoWriter:
     :meth:`mux`. :meth:`write` takes an image (module conventions, the ``info`` size; uint8 or uint16)
     and the frame's ``pts`` in ``info.time_base`` (None: numbered from 0 at the frame rate). The file
     appears at ``path`` only on :meth:`close`; :meth:`abort` (or an exception inside ``with``)
-    removes everything. Errors: ``ValueError`` for options the encoder or container refuses,
-    ``FileExistsError`` for an existing output without ``overwrite``, ``OSError`` naming the path
-    for anything FFmpeg fails to write (full disk ...).
+    removes everything. ``low_delay``: every frame's packets leave as it is encoded (slice threads
+    only; a live output), not a few frames later (:attr:`thread_type`). Errors: ``ValueError`` for
+    options the encoder or container refuses, ``FileExistsError`` for an existing output without
+    ``overwrite``, ``OSError`` naming the path for anything FFmpeg fails to write (full disk ...).
     """
 
     #: the container format to write (None: FFmpeg's choice by the name's extension)
     container_format: str | None = None
+    #: the encoder's threads: "AUTO" (frame and slice threads, what the ffmpeg command uses: x264
+    #: then encodes some frames ahead, about 20 % less time at 960x540 than PyAV's default of slice
+    #: threads) for files; "SLICE" for a live output (``low_delay``), where a frame must leave at once
+    thread_type = "AUTO"
 
     def __init__(
         self,
@@ -665,9 +670,12 @@ class VideoWriter:
         streams: list = (),  # type: ignore[assignment]
         order: ChannelOrder = "rgb",
         overwrite: bool = False,
+        low_delay: bool = False,
     ) -> None:
         if order not in ("rgb", "bgr"):
             raise ValueError(f"order must be 'rgb' or 'bgr', got {order!r}")
+        if low_delay:
+            self.thread_type = "SLICE"
         self.path = check_output_folder(path)
         self.info, self.order, self.options = info, order, options
         self.sequence = is_sequence(self.path)
@@ -759,6 +767,7 @@ class VideoWriter:
             except (AttributeError, TypeError, ValueError):
                 pass
         self._fields = _interlace_encoder(context, info)
+        context.thread_type = self.thread_type
         context.thread_count = thread_budget() or 0  # the process's budget (glradial.threads); 0: FFmpeg's automatic count
         codec_options: dict[str, str] = {}
         if options.crf is not None:

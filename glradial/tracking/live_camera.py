@@ -57,7 +57,7 @@ from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..lens.options import LIVE_WORKERS, check_choice
 from ..video.frame_motion import FB_MAX_PX, MIN_MATCHES, RANSAC_PX, RANSAC_SEED, homography_of
-from ..video.live_lens import PENDING, serve_jobs, worker_reply
+from ..video.live_lens import PENDING, WarmWorker, serve_jobs
 from .camera_track import Motion, carry
 
 __all__ = ["LiveCamera", "LiveCameraTracker", "camera_tracker", "motion_of_homography", "PENDING", "LOST", "STALE",
@@ -83,8 +83,6 @@ FLOW_POINTS, REFILL = 200, 120
 FLOW_WINDOW, FLOW_LEVELS = (15, 15), 2
 #: the fit worker process's niceness (added): the frames' motion and samples come first
 WORKER_NICENESS = 5
-#: seconds :meth:`LiveCameraTracker.wait_ready` waits for the worker by default
-READY_TIMEOUT_S = 120.0
 
 
 @dataclass(frozen=True)
@@ -240,7 +238,7 @@ def _serve(connection, duty: float, niceness: int = 0, size: tuple[int, int] = (
     serve_jobs(connection, warm_up, answer, duty)
 
 
-class LiveCameraTracker:
+class LiveCameraTracker(WarmWorker):
     """The camera of every frame of a live stream (module docstring). ``size`` (W, H) and ``rate``
     (frames per second) of the stream, or given later to :meth:`for_stream` (a tracker warmed up
     before the stream is opened); ``worker``: ``"process"`` (default), ``"thread"``, or
@@ -249,6 +247,8 @@ class LiveCameraTracker:
     ``duty``: the worker's share of one core at most (it rests between fits; default 1: it fits
     again at once, a process at :data:`WORKER_NICENESS`, so that the frames come first).
     Call :meth:`push` for every frame in order from one thread; :meth:`close` stops the worker."""
+
+    worker_name = "camera"
 
     def __init__(self, size: tuple[int, int] | None = None, rate: float | Fraction | None = None, *,
                  worker: str = "process", every: int = 1, max_carry: int | None = None, duty: float = 1.0) -> None:
@@ -301,27 +301,6 @@ class LiveCameraTracker:
         self.size, self.rate = frame_size(size), float(rate)
         self.max_carry = self._max_carry or max(1, round(MAX_CARRY_S * self.rate))
         return self
-
-    @classmethod
-    def started(cls, size: tuple[int, int] | None = None, rate: float | Fraction | None = None,
-                **options: object) -> "LiveCameraTracker":
-        """A tracker whose worker has warmed up (:meth:`wait_ready`); closed again if that fails."""
-        tracker = cls(size, rate, **options)  # type: ignore[arg-type]
-        try:
-            tracker.wait_ready()
-        except BaseException:
-            tracker.close()
-            raise
-        return tracker
-
-    def wait_ready(self, timeout: float = READY_TIMEOUT_S) -> None:
-        """Wait until the worker has warmed up (``TimeoutError`` after ``timeout`` s; its error as
-        ``RuntimeError``)."""
-        end = time.monotonic() + timeout
-        while not self._ready:
-            if not self._connection.poll(max(0.0, end - time.monotonic())):
-                raise TimeoutError(f"the camera worker was not ready within {timeout:g} s")
-            self._receive()
 
     # -- the frame thread ----------------------------------------------------------------------------
     def push(self, frame: np.ndarray | av.VideoFrame, timestamp: float | None = None, wait: float = 0.0) -> LiveCamera:
@@ -414,9 +393,8 @@ class LiveCameraTracker:
         return None if motion is None else carry(estimate.camera, motion)
 
     def _receive(self) -> None:
-        message = worker_reply(self._connection, "camera")
+        message = self._reply()
         if message is None:
-            self._ready = True
             return
         _, index, estimate, rest = message
         sure = not estimate.doubtful  # resting after a doubtful fit would only delay the lock-on

@@ -48,9 +48,10 @@ from .shot_evidence import ShotCollector
 from .shot_fit import fit_shot
 from .shot_track import ESTIMATE_EVERY, EVERY, SAMPLES_PER_STRIDE
 
-__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY", "worker_reply", "serve_jobs"]
+__all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY", "worker_reply", "serve_jobs",
+           "WarmWorker", "READY_TIMEOUT_S"]
 
-#: seconds :meth:`OnlineShotLens.wait_ready` waits for the worker's estimator by default
+#: seconds :meth:`WarmWorker.wait_ready` waits for a live worker to warm up by default
 READY_TIMEOUT_S = 120.0
 #: sampled frames are handed to the shot evidence at most this wide (px): the per-frame estimator
 #: reads 384 px and the line detector up to 960 px; 640 px halves the cost of 960 px for a live
@@ -159,12 +160,51 @@ def _serve(connection, estimator: Callable, estimate_every: int, doubtful_px: fl
     serve_jobs(connection, lambda: estimator(np.full((SAMPLE_WIDTH * 9 // 16, SAMPLE_WIDTH, 3), 96, np.uint8)), answer, duty)
 
 
-class OnlineShotLens:
+class WarmWorker:
+    """What a live worker's owner shares (:class:`OnlineShotLens`, and the live camera tracker):
+    made and waited for until its worker has warmed up. A subclass holds ``_ready``, ``_connection``
+    (its end of the worker's pipe), ``_receive()`` (one message in) and ``close()``, and names its
+    worker in :attr:`worker_name` (for the errors)."""
+
+    worker_name = "live"
+
+    @classmethod
+    def started(cls, *args: object, **options: object):
+        """A new one (the constructor's arguments) whose worker has warmed up (:meth:`wait_ready`);
+        closed again if that fails."""
+        made = cls(*args, **options)
+        try:
+            made.wait_ready()
+        except BaseException:
+            made.close()
+            raise
+        return made
+
+    def _reply(self) -> tuple | None:
+        """The worker's next message (:func:`worker_reply`); ``None`` for its "ready", noted."""
+        message = worker_reply(self._connection, self.worker_name)
+        if message is None:
+            self._ready = True
+        return message
+
+    def wait_ready(self, timeout: float = READY_TIMEOUT_S) -> None:
+        """Wait until the worker has warmed up (``TimeoutError`` after ``timeout`` s; its error, as
+        ``RuntimeError``, if it failed)."""
+        end = time.monotonic() + timeout
+        while not self._ready:
+            if not self._connection.poll(max(0.0, end - time.monotonic())):
+                raise TimeoutError(f"the {self.worker_name} worker was not ready within {timeout:g} s")
+            self._receive()
+
+
+class OnlineShotLens(WarmWorker):
     """Per-frame lens of a live stream (module docstring). Call :meth:`observe` for every frame in
     order, from one thread; :meth:`close` stops the worker. ``estimator``: uint8 RGB frame -> lens
     (:class:`BundledEstimator`; picklable for ``worker="process"``); ``every``, ``estimate_every``,
     ``doubtful_px``, ``apply_doubtful`` as for files (:func:`glradial.video.shot_track.track_shots`);
     ``until_sure`` and ``duty`` as the module docstring says."""
+
+    worker_name = "lens"
 
     def __init__(self, estimator: Callable[[np.ndarray], Lens], *, every: int = EVERY,
                  estimate_every: int = ESTIMATE_EVERY, doubtful_px: float = DOUBTFUL_PX, apply_doubtful: bool = False,
@@ -199,27 +239,6 @@ class OnlineShotLens:
         self._worker.start()
         atexit.register(self.close)  # not closed by the script: stopped before the interpreter finalizes
 
-    @classmethod
-    def started(cls, estimator: Callable[[np.ndarray], object], **options: object) -> "OnlineShotLens":
-        """A new online lens (``options`` as the constructor's) whose worker has loaded its estimator
-        (:meth:`wait_ready`); closed again if that fails."""
-        online = cls(estimator, **options)  # type: ignore[arg-type]
-        try:
-            online.wait_ready()
-        except BaseException:
-            online.close()
-            raise
-        return online
-
-    def wait_ready(self, timeout: float = READY_TIMEOUT_S) -> None:
-        """Wait until the worker has loaded its estimator (``TimeoutError`` after ``timeout`` s; its
-        error, as ``RuntimeError``, if it failed)."""
-        end = time.monotonic() + timeout
-        while not self._ready:
-            if not self._connection.poll(max(0.0, end - time.monotonic())):
-                raise TimeoutError(f"the lens worker was not ready within {timeout:g} s")
-            self._receive()
-
     # -- the frame thread ----------------------------------------------------------------------------
     def observe(self, index: int, thumbnail: np.ndarray, sample: Callable[[], np.ndarray]) -> LensState:
         """The lens of frame ``index`` (increasing; gaps allowed: dropped frames): ``thumbnail`` its
@@ -244,9 +263,8 @@ class OnlineShotLens:
 
     def _receive(self) -> None:
         """Take one message of the worker."""
-        message = worker_reply(self._connection, "lens")
+        message = self._reply()
         if message is None:
-            self._ready = True
             return
         _, shot, fit, rest = message
         self._fits = {s: f for s, f in self._fits.items() if s >= shot - 1}

@@ -21,3 +21,14 @@ def test_default_frame_is_the_packaged_one() -> None:
     assert frame.is_relative_to(Path(glradial.__file__).resolve().parent / "data"), frame
     assert frame.name == FRAME_NAME and read_image(frame).shape == (720, 1280, 3)
     assert _bench_video().parse_args(["--frame", "x.png"]).frame == Path("x.png")
+
+
+def test_a_subset_of_paths_reports_only_the_ratios_it_has(capsys) -> None:
+    bench = _bench_video()
+    args = bench.parse_args(["--paths", "ffmpeg,fixed lens", "--frames", "100"])
+    inf = float("inf")
+    results = bench.report(args, {"ffmpeg": 2.0, "fixed lens": 2.5}, {"pass 1": inf, "pass 2": inf},
+                           {"RGB": 1.0, "YUV": 0.5, "YUV 1/32": 0.7})
+    assert results["ratios"] == {"fixed / ffmpeg": 0.8}  # frames per second: 40 against 50
+    assert results["fps"] == {"ffmpeg": 50.0, "fixed lens": 40.0} and results["paths"] == ["ffmpeg", "fixed lens"]
+    assert "fixed / ffmpeg                    : 0.80  (target >= 0.8)" in capsys.readouterr().out

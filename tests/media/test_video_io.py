@@ -348,3 +348,17 @@ def test_gl_corrector_lives_and_dies_on_its_worker_thread(tmp_path, ctx, monkeyp
     for a, b in zip(_frames(source), _frames(tmp_path / "gl.mkv")):
         # the GL path in memory on this thread's context: same shaders, same result (lossless FFV1)
         np.testing.assert_array_equal(b, glradial.correct(a, K1, K2, backend="gl"))
+
+
+def test_files_encode_with_frame_threads_and_live_outputs_without(tmp_path):
+    """A file is encoded as the ffmpeg command does (frame and slice threads: throughput); a live
+    output with slice threads only, so that no frame waits in the encoder for the frames after it."""
+    from glradial.media.stream_io import open_live_output
+
+    info = VideoInfo.of((64, 36), 25, codec="libx264")
+    frame, slice_ = 1, 2  # FFmpeg's FF_THREAD_FRAME, FF_THREAD_SLICE
+    for writer, expected in ((VideoWriter(tmp_path / "file.mp4", info), frame | slice_),
+                             (open_live_output(str(tmp_path / "live.ts"), info), slice_)):
+        kinds = writer._stream.codec_context.thread_type.value
+        writer.abort()
+        assert kinds == expected, (writer.path, kinds)
