@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import argparse
+import contextlib
 import signal
 import sys
+import threading
 from pathlib import Path
 
 from ..lens.options import METHODS, UNTIL_SURE
@@ -257,10 +259,30 @@ def _status_printer(quiet: bool):
     return lambda line: sys.stderr.write(("\r" + line + "\033[K") if tty else f"glradial live: {line}\n")
 
 
+@contextlib.contextmanager
+def _sigint_stops():
+    """SIGINT raises KeyboardInterrupt while the run lasts, also where the process was started with
+    it ignored (Python then leaves it ignored: a background job of a script, ``nohup``, some CI
+    runners), so that SIGINT always ends a live run as documented, its outputs closed playable."""
+    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) != signal.SIG_IGN:
+        yield
+        return
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def run(args: argparse.Namespace) -> int:
+    _check_options(args)
+    with _sigint_stops():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     from ..video.live_stream import run_live
 
-    _check_options(args)
     opened: list = []  # what to close if the set-up fails: (object, how)
     try:
         online = _online_lens(args) if args.auto else None

@@ -167,12 +167,19 @@ def test_stdin_pipe_in_real_time(clip, tmp_path):
     assert int(probed.stdout.strip()) == counts["written"]
 
 
-@pytest.mark.parametrize("stop", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_a_signal_mid_stream_leaves_a_playable_output(clip, tmp_path, stop):
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize("stop, start", [(signal.SIGINT, None), (signal.SIGTERM, None), (signal.SIGINT, _ignore_sigint)],
+                         ids=["SIGINT", "SIGTERM", "SIGINT-ignored-at-start"])
+def test_a_signal_mid_stream_leaves_a_playable_output(clip, tmp_path, stop, start):
+    """SIGINT also stops a run started with it ignored (a background job of a script, nohup, a CI
+    runner): Python leaves an inherited SIG_IGN in place, and the run would go on to the input's end."""
     long_clip = tmp_path / "long.ts"
     subprocess.run(["ffmpeg", "-v", "error", "-stream_loop", "3", "-i", str(clip), "-c", "copy", str(long_clip)], check=True)
     out = tmp_path / "out.mp4"
-    process = _live(str(long_clip), str(out), "--k1", str(K1), "--realtime")
+    process = _live(str(long_clip), str(out), "--k1", str(K1), "--realtime", preexec_fn=start)
     lines = _Lines(process)
     lines.wait_for("frames out")  # the status line: frames are flowing
     process.send_signal(stop)
