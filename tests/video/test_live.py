@@ -124,7 +124,8 @@ def test_udp_in_real_time_fixed_lens(clip, tmp_path):
         receiver = threading.Thread(target=_receive, args=(sock, packets, stop), daemon=True)
         receiver.start()
         process = _live(f"udp://127.0.0.1:{video_port}", str(out), "--k1", str(K1), "--k2", str(K2), "--crf", "8",
-                        "--idle-timeout", "3", "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10")
+                        "--idle-timeout", "3", "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10",
+                        "--max-delay", "8")  # the plumbing under test, not the capacity (bench_live measures that)
         lines = _Lines(process)
         lines.wait_for("waiting for")
         time.sleep(1.0)  # the socket is bound inside av.open, just after the line
