@@ -37,6 +37,7 @@ The doubt thresholds and the bound are chosen from the ``--json`` rows by ``benc
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import os
 import sys
@@ -54,6 +55,9 @@ sys.path.insert(0, str(ROOT / "bench"))
 #: Frames whose own labels leave more than this (px) under a plain homography have inconsistent labels
 #: (a few clicks on the wrong marking): reported apart, left out of the calibration.
 CONSISTENT_PX = 10.0
+#: :func:`repair_labels` drops at most this many clicks and keeps at least this many labels (a homography
+#: fits any 4 exactly: 6 leave 4 coordinates over to test it)
+REPAIR_DROPS, REPAIR_KEEP = 2, 6
 DATA = ROOT.parent / "shared" / "data"
 #: Each match (file-name prefix) and the shared folder that holds it.
 MATCHES = {"2e57b9": "broadcast_bundesliga", "42ba34": "broadcast_bundesliga", "08fd33": "broadcast_more",
@@ -81,8 +85,11 @@ def homography_floor(kp_m: np.ndarray, labels: np.ndarray) -> float:
     if ok.sum() < 4:
         return float("nan")
     h, _ = cv2.findHomography(kp_m[ok, :2], labels[ok], 0)
+    if h is None:  # degenerate (e.g. collinear) labels: no homography
+        return float("inf")
     p = np.column_stack([kp_m[ok, :2], np.ones(ok.sum())]) @ h.T
-    return float(np.sqrt(np.mean(np.sum((p[:, :2] / p[:, 2:] - labels[ok]) ** 2, 1))))
+    with np.errstate(divide="ignore", invalid="ignore"):  # a label on the fitted horizon: infinitely far
+        return float(np.sqrt(np.mean(np.sum((p[:, :2] / p[:, 2:] - labels[ok]) ** 2, 1))))
 
 
 def label_verdict(kp_m: np.ndarray, labels: np.ndarray) -> str:
@@ -100,6 +107,8 @@ def label_verdict(kp_m: np.ndarray, labels: np.ndarray) -> str:
     if ok.sum() < 4:
         return "too_few"
     h, _ = cv2.findHomography(kp_m[ok, :2], labels[ok], 0)
+    if h is None:  # degenerate labels
+        return "inconsistent"
     w = np.column_stack([kp_m[ok, :2], np.ones(ok.sum())]) @ h[2]
     sign = np.sign(np.linalg.det(h) * w ** 3)
     if np.all(sign > 0):
@@ -107,6 +116,36 @@ def label_verdict(kp_m: np.ndarray, labels: np.ndarray) -> str:
     if np.any(sign > 0) or not homography_floor(kp_m, labels) <= CONSISTENT_PX:
         return "inconsistent"
     return "consistent"
+
+
+def repair_labels(kp_m: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray | None, tuple[int, ...]]:
+    """The frame's labels with its wrong clicks left out, judged by the labels alone (never by a fit):
+    labels a homography fits within :data:`CONSISTENT_PX` as they are (as the raw score reads them);
+    mirrored ones (:func:`label_verdict`) ``None``; the others without the fewest (at most
+    :data:`REPAIR_DROPS`) labels whose removal leaves >= :data:`REPAIR_KEEP` consistent ones (of those
+    removals, the one with the smallest :func:`homography_floor`), and the dropped keypoint indices;
+    ``None`` where no such removal exists (the frame cannot be scored)."""
+    verdict = label_verdict(kp_m, labels)
+    if verdict == "mirrored":
+        return None, ()
+    if homography_floor(kp_m, labels) <= CONSISTENT_PX:
+        return labels, ()
+    labelled = np.flatnonzero(np.isfinite(labels).all(1))
+    if len(labelled) - 1 < REPAIR_KEEP:
+        return None, ()
+    for drops in range(1, REPAIR_DROPS + 1):
+        if len(labelled) - drops < REPAIR_KEEP:
+            break
+        best = None
+        for dropped in itertools.combinations(labelled.tolist(), drops):
+            kept = labels.copy()
+            kept[list(dropped)] = np.nan
+            if label_verdict(kp_m, kept) == "consistent":
+                floor = homography_floor(kp_m, kept)
+                best = min(best or (floor, dropped, kept), (floor, dropped, kept), key=lambda b: b[0])
+        if best is not None:
+            return best[2], best[1]
+    return None, ()
 
 
 def keypoint_rms(camera, kp_m: np.ndarray, labels: np.ndarray, scale: float = 1.0) -> float:
@@ -172,12 +211,17 @@ def score_frame(name: str, path: Path, labels: np.ndarray, kp: np.ndarray, hd: b
         t, cpu = time.perf_counter(), time.process_time()
         est = calibrate(img)
         seconds, cpu = time.perf_counter() - t, time.process_time() - cpu
-    fits = [dict(features or {}, reason=e.reason, rms_px=keypoint_rms(None if fit is None else fit.camera, kp, labels))
-            for fit, features, e in rec.fits]
+    repaired, dropped = repair_labels(kp, labels)
+
+    def both(camera) -> dict:  # keypoint RMS against the labels, and against the repaired labels (NaN: unscorable)
+        return {"rms_px": keypoint_rms(camera, kp, labels),
+                "rms_repaired_px": float("nan") if repaired is None else keypoint_rms(camera, kp, repaired)}
+
+    fits = [dict(features or {}, reason=e.reason, **both(None if fit is None else fit.camera)) for fit, features, e in rec.fits]
     row = {"frame": name, "match": match_of(name), "answered": not est.doubtful, "reason": est.reason,
-           "rms_px": keypoint_rms(est.camera, kp, labels), "bound_px": est.uncertainty_px, "rms_fit_px": est.rms_px,
+           **both(est.camera), "bound_px": est.uncertainty_px, "rms_fit_px": est.rms_px,
            "floor_px": homography_floor(kp, labels), "labels": label_verdict(kp, labels), "seconds_720p": seconds,
-           "fits": fits}
+           "scorable": repaired is not None, "labels_dropped": list(dropped), "fits": fits}
     if hd:
         big = np.ascontiguousarray(cv2.resize(read_rgb(path), (1920, 1080), interpolation=cv2.INTER_CUBIC))
         t, cpu = time.perf_counter(), time.process_time()
@@ -225,6 +269,13 @@ def _figures(sel: list[dict]) -> dict:
            "bound_covers": float(np.mean([r["bound_px"] >= r["rms_px"] for r in ans])) if ans else float("nan"),
            "ms_median": float(np.median(ms)), "ms_p90": float(np.percentile(ms, 90)),
            "floor_median_px": float(np.nanmedian([r["floor_px"] for r in sel]))}
+    if all("scorable" in r for r in sel):  # scored against the repaired labels (repair_labels), scorable frames only
+        ok = [r for r in sel if r["scorable"]]
+        ok_ans = [r for r in ok if r["answered"]]
+        wrong_repaired = sum(r["rms_repaired_px"] > WRONG_PX for r in ok_ans)
+        out.update(unscorable=len(sel) - len(ok), labels_repaired=sum(bool(r["labels_dropped"]) for r in ok),
+                   acc_10px_repaired=sum(r["rms_repaired_px"] <= WRONG_PX for r in ok_ans) / max(len(ok), 1),
+                   wrong_answered_repaired=wrong_repaired, wrong_share_repaired=wrong_repaired / max(len(ok_ans), 1))
     if all("cpu_seconds" in r for r in sel):  # CPU time of the process: what survives a shared machine's load
         cpu = 1000 * np.array([r["cpu_seconds"] for r in sel])
         out.update(cpu_ms_median=float(np.median(cpu)), cpu_ms_p90=float(np.percentile(cpu, 90)))
@@ -236,15 +287,18 @@ def _figures(sel: list[dict]) -> dict:
 def report(summary: dict) -> None:
     """Print ``summary`` (:func:`summarise`) as a markdown table."""
     print("| match | frames | answered | Acc@5 | Acc@10 | median RMS (answered) | answered > 10 px (labels: floor > 10 / "
-          "mirrored / consistent) | bound covers | ms median / p90 (x blur) | CPU ms median / p90 | floor (median) |")
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+          "mirrored / consistent) | repaired labels: Acc@10, answered > 10 px (unscorable) | bound covers | "
+          "ms median / p90 (x blur) | CPU ms median / p90 | floor (median) |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for name, f in summary.items():
         ratio = f" (x{f['ratio_to_blur_median']:.0f})" if "ratio_to_blur_median" in f else ""
         cpu = f"{f['cpu_ms_median']:.0f} / {f['cpu_ms_p90']:.0f}" if "cpu_ms_median" in f else "-"
+        repaired = (f"{f['acc_10px_repaired']:.0%}, {f['wrong_answered_repaired']} = {f['wrong_share_repaired']:.0%} "
+                    f"({f['unscorable']})" if "unscorable" in f else "-")
         print(f"| {name} | {f['frames']} | {f['answered']:.0%} | {f['acc_5px']:.0%} | {f['acc_10px']:.0%} | "
               f"{f['median_rms_px']:.2f} | {f['wrong_answered']} ({f['wrong_share_of_answered']:.0%}; "
               f"{f['wrong_with_inconsistent_labels']} / {f['wrong_with_mirrored_labels']} / "
-              f"{f['wrong_on_consistent_labels']}) | "
+              f"{f['wrong_on_consistent_labels']}) | {repaired} | "
               f"{f['bound_covers']:.0%} | {f['ms_median']:.0f} / {f['ms_p90']:.0f}{ratio} | {cpu} | {f['floor_median_px']:.2f} |")
 
 
@@ -256,7 +310,9 @@ def report_wrong(rows: list[dict]) -> None:
         return
     print(f"\nAnswered beyond {WRONG_PX:g} px (keypoint RMS; the labels' own homography floor; the labels' verdict):")
     for r in wrong:
-        print(f"  {r['frame']}: {r['rms_px']:.1f} px, floor {r['floor_px']:.1f} px, labels {r.get('labels', '?')}")
+        repaired = ("" if "scorable" not in r else f"; repaired labels (without keypoints {r['labels_dropped']}): "
+                    f"{r['rms_repaired_px']:.1f} px" if r["scorable"] else "; labels unscorable")
+        print(f"  {r['frame']}: {r['rms_px']:.1f} px, floor {r['floor_px']:.1f} px, labels {r.get('labels', '?')}{repaired}")
 
 
 def main(argv: list[str] | None = None) -> int:

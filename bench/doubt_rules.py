@@ -56,8 +56,10 @@ def replay(row: dict, t: dict) -> dict:
     """``row`` (a calibrate_matches.py row) as calibrate would have answered under the thresholds ``t``."""
     fit = _answered_fit(row, t)
     if fit is None:
-        return dict(row, answered=False, rms_px=float("nan"), bound_px=1280.0, reason="declined")
-    return dict(row, answered=True, rms_px=fit["rms_px"], reason="ok",
+        return dict(row, answered=False, rms_px=float("nan"), rms_repaired_px=float("nan"), bound_px=1280.0,
+                    reason="declined")
+    return dict(row, answered=True, rms_px=fit["rms_px"], rms_repaired_px=fit.get("rms_repaired_px", float("nan")),
+                reason="ok",
                 bound_px=t["quantile"] * max(fit["rms_fit_px"], t["floor_px"]))
 
 

@@ -130,3 +130,31 @@ def test_the_rms_threshold_is_the_strictest_that_keeps_the_right_fits():
     # losing one right frame of 41 (2.4 %) is beyond the 1 % slack; one of 151 (0.7 %) is not: the stricter 1.1 px
     many = [dict(rows[0], frame=f"08fd33_1_{i}") for i in range(150)] + [rows[40]]
     assert rules.choose(many, t, max_wrong=0.0, grid=rules.RMS_GRID)["max_rms_px"] == 1.1
+
+
+def test_repair_labels_drops_the_wrong_clicks_found_by_the_labels_alone():
+    cam = Camera.look_at((-20.0, -55.0, 22.0), (-30.0, 0.0), 60.0, (1280, 720))  # 15 keypoints in view
+    truth = cam.project(KP)
+    inside = np.flatnonzero((truth[:, 0] > 0) & (truth[:, 0] < 1280) & (truth[:, 1] > 0) & (truth[:, 1] < 720))
+    truth[np.setdiff1d(np.arange(len(KP)), inside)] = np.nan
+    assert len(inside) >= 9
+    same, dropped = bench.repair_labels(KP, truth)
+    assert dropped == () and np.array_equal(same, truth, equal_nan=True)
+    one = truth.copy()
+    one[inside[2]] += (90.0, -40.0)  # a click on the wrong marking
+    fixed, dropped = bench.repair_labels(KP, one)
+    assert dropped == (inside[2],) and np.isnan(fixed[inside[2]]).all()
+    assert bench.label_verdict(KP, fixed) == "consistent" and bench.homography_floor(KP, fixed) < 1e-3
+    two = one.copy()
+    two[[inside[0], inside[5]]] = two[[inside[5], inside[0]]]  # ... and two keypoints' names swapped, minus one
+    two[inside[2]] = truth[inside[2]]
+    assert sorted(bench.repair_labels(KP, two)[1]) == sorted((inside[0], inside[5]))
+    three = two.copy()
+    three[inside[2]] += (90.0, -40.0)  # three wrong clicks: more than the labels alone can tell apart
+    assert bench.repair_labels(KP, three)[0] is None
+    few = np.full_like(truth, np.nan)
+    few[inside[:6]] = one[inside[:6]]  # six labels, one wrong: dropping it would leave a homography untested
+    assert bench.label_verdict(KP, few) == "inconsistent" and bench.repair_labels(KP, few)[0] is None
+    mirrored = KP.copy()
+    mirrored[:, 1] *= -1.0  # near and far swapped: a whole frame's labels no removal can repair
+    assert bench.repair_labels(KP, np.where(np.isnan(truth), np.nan, cam.project(mirrored)))[0] is None
