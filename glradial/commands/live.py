@@ -3,10 +3,8 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import signal
 import sys
-import threading
 from pathlib import Path
 
 from ..lens.options import METHODS, UNTIL_SURE
@@ -259,25 +257,10 @@ def _status_printer(quiet: bool):
     return lambda line: sys.stderr.write(("\r" + line + "\033[K") if tty else f"glradial live: {line}\n")
 
 
-@contextlib.contextmanager
-def _sigint_stops():
-    """SIGINT raises KeyboardInterrupt while the run lasts, also where the process was started with
-    it ignored (Python then leaves it ignored: a background job of a script, ``nohup``, some CI
-    runners), so that SIGINT always ends a live run as documented, its outputs closed playable."""
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) != signal.SIG_IGN:
-        yield
-        return
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def run(args: argparse.Namespace) -> int:
+    """SIGINT/SIGTERM/SIGHUP end the stream (the CLI makes SIGINT stop it even when inherited ignored), its outputs closed playable."""
     _check_options(args)
-    with _sigint_stops():
-        return _run(args)
+    return _run(args)
 
 
 def _run(args: argparse.Namespace) -> int:
