@@ -4,6 +4,7 @@ shifted by a known offset, and hand-made rows whose answer follows from the rule
 
 from __future__ import annotations
 
+import json
 import math
 
 import cv2
@@ -130,3 +131,17 @@ def test_the_rms_threshold_is_the_strictest_that_keeps_the_right_fits():
     # losing one right frame of 41 (2.4 %) is beyond the 1 % slack; one of 151 (0.7 %) is not: the stricter 1.1 px
     many = [dict(rows[0], frame=f"08fd33_1_{i}") for i in range(150)] + [rows[40]]
     assert rules.choose(many, t, max_wrong=0.0, grid=rules.RMS_GRID)["max_rms_px"] == 1.1
+
+
+def test_ship_camera_trust_keeps_the_other_settings_and_refuses_an_unknown_one(tmp_path):
+    from glradial.camera.estimate import ship_camera_trust
+
+    shipped = dict(camera_trust())
+    target = tmp_path / "camera_trust.json"
+    assert ship_camera_trust({"min_support": 0.5, "doubt_source": "a test"}, target) == target
+    written = json.loads(target.read_text(encoding="utf-8"))
+    assert written == {**shipped, "min_support": 0.5, "doubt_source": "a test"}
+    assert camera_trust() == shipped  # the shipped file itself is untouched
+    with pytest.raises(ValueError, match="min_suport"):
+        ship_camera_trust({"min_suport": 0.5}, tmp_path / "other.json")
+    assert not (tmp_path / "other.json").exists()
