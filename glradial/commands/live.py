@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from ..lens.options import METHODS, UNTIL_SURE
-from . import UsageError, lens_from_args, lens_given, positive_float, positive_int
+from . import MODEL_HELP, UsageError, lens_from_args, lens_given, positive_float, positive_int
 from .engine_options import add_opentrackio_options, camera_from_args, check_opentrackio_output, opentrackio_wanted
 from .remapping import (
     add_encode_options,
@@ -70,7 +70,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --auto)")
     add_lens_options(lens)
     lens.add_argument("--auto", action="store_true", help="estimate each shot's lens from its frames so far")
-    lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
+    lens.add_argument("--model", metavar="ONNX", help=f"with --auto: {MODEL_HELP}")
     lens.add_argument("--method", choices=METHODS, help="with --auto: the per-frame estimator's method (default auto)")
     live = parser.add_argument_group("live")
     live.add_argument("--max-delay", type=positive_int, default=2, metavar="FRAMES",
