@@ -304,7 +304,7 @@ def _ignore_sigint() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT])
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=["SIGTERM", "SIGHUP", "SIGINT-ignored-at-start"])
 def test_a_signal_mid_video_leaves_nothing(tmp_path, signum):
     """SIGINT is sent to a run started with it ignored (a script's background job: Python keeps an
     inherited SIG_IGN), which must stop all the same, as ffmpeg does."""
