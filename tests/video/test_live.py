@@ -220,6 +220,9 @@ def test_dropped_frames_read_as_runs():
     assert stats.dropped_ranges() == "3-5, 9, 20-21, 40"
     assert stats.dropped_ranges(most=2) == "3-5, 9, ..."
     assert LiveStats(25.0, 2).dropped_ranges() == ""
+    assert stats.dropped == 7
+    stats.delays.extend([0.5, 2.0, 2.01, 7.0])  # frame periods; late = more than max_delay (2)
+    assert (stats.left, stats.late) == (4, 2)
 
 
 def _image(seed: int) -> np.ndarray:
