@@ -345,7 +345,7 @@ def test_nut_on_stdin_to_mpeg_ts_over_udp(clip, tmp_path):
     received by ffmpeg on loopback: every frame arrives, at the input's size."""
     port = _free_port()
     received = tmp_path / "received.ts"
-    receiver = subprocess.Popen(["ffmpeg", "-v", "error", "-y", "-i", f"udp://127.0.0.1:{port}?timeout=3000000", "-c", "copy",
+    receiver = subprocess.Popen(["ffmpeg", "-v", "error", "-y", "-i", f"udp://127.0.0.1:{port}?timeout=10000000", "-c", "copy",
                                  str(received)])
     nut = subprocess.Popen(["ffmpeg", "-v", "error", "-i", str(clip), "-c", "copy", "-f", "nut", "-"], stdout=subprocess.PIPE)
     time.sleep(0.5)  # the receiver's socket
