@@ -139,24 +139,6 @@ def picture_psnr(clip: Path, out: Path, k1: float, k2: float, every: int = 10) -
     return values
 
 
-def _receive(port: int, received: list, stop: threading.Event) -> threading.Thread:
-    """A thread that appends every UDP datagram arriving on 127.0.0.1:``port`` to ``received`` until ``stop``."""
-    def loop() -> None:
-        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
-            sock.bind(("127.0.0.1", port))
-            sock.settimeout(0.1)
-            while not stop.is_set():
-                try:
-                    received.append(sock.recv(65536))
-                except socket.timeout:
-                    continue
-
-    thread = threading.Thread(target=loop, daemon=True)
-    thread.start()
-    return thread
-
-
 def udp_receive_errors() -> int:
     """The machine's UDP datagrams lost so far for want of room in a receive buffer (``RcvbufErrors``
     of /proc/net/snmp; -1 where it cannot be read): packets of the stream lost at the socket."""
@@ -180,34 +162,32 @@ def stream_over_udp(clip: Path, arguments) -> tuple[str, list[bytes], dict]:
     (:func:`load_now`) and ``udp_receive_errors``, the datagrams the machine lost at full receive
     buffers meanwhile (:func:`udp_receive_errors`: the video's, or another program's); RuntimeError
     when glradial fails."""
-    video_port, sample_port = _free_port(), _free_port()
-    received: list[bytes] = []
-    stop = threading.Event()
-    thread = _receive(sample_port, received, stop)
-    command = arguments(video_port, sample_port)
-    print("  glradial live " + " ".join(command), flush=True)
-    process = _live(command)
-    lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(iter(process.stderr.readline, "")), daemon=True)
-    reader.start()
-    while not any("waiting for" in line for line in lines):
-        if process.poll() is not None:
-            raise RuntimeError("".join(lines))
-        time.sleep(0.05)
-    time.sleep(1.0)  # av.open binds the socket just after the line
-    conditions, lost = load_now(), udp_receive_errors()
-    subprocess.run(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts",
-                    f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True)
-    process.wait(timeout=120)
-    reader.join(timeout=5)
-    time.sleep(0.3)
-    stop.set()
-    thread.join()
+    from glradial.export.opentrackio_udp import SampleReceiver
+
+    video_port = _free_port()
+    with SampleReceiver() as receiver:
+        command = arguments(video_port, receiver.address[1])
+        print("  glradial live " + " ".join(command), flush=True)
+        process = _live(command)
+        lines: list[str] = []
+        reader = threading.Thread(target=lambda: lines.extend(iter(process.stderr.readline, "")), daemon=True)
+        reader.start()
+        while not any("waiting for" in line for line in lines):
+            if process.poll() is not None:
+                raise RuntimeError("".join(lines))
+            time.sleep(0.05)
+        time.sleep(1.0)  # av.open binds the socket just after the line
+        conditions, lost = load_now(), udp_receive_errors()
+        subprocess.run(["ffmpeg", "-v", "error", "-re", "-i", str(clip), "-c", "copy", "-f", "mpegts",
+                        f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True)
+        process.wait(timeout=120)
+        reader.join(timeout=5)
+        time.sleep(0.3)
     conditions["udp_receive_errors"] = udp_receive_errors() - lost if lost >= 0 else -1
     stderr = "".join(lines)
     if process.returncode != 0:
         raise RuntimeError(stderr)
-    return stderr, received, conditions
+    return stderr, receiver.datagrams, conditions
 
 
 def run_fixed_udp(clip: Path, work: Path, k1: float, k2: float, frames: int) -> dict:

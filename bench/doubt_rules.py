@@ -125,7 +125,7 @@ def _answered_fit(row: dict, t: dict) -> dict | None:
 def main(argv: list[str] | None = None) -> int:
     from calibrate_matches import CONSISTENT_PX, MATCHES, add_label_verdicts, report, report_wrong, summarise
 
-    from glradial.camera.estimate import CAMERA_TRUST_FILE, camera_trust
+    from glradial.camera.estimate import camera_trust
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("rows", type=Path)
@@ -160,26 +160,30 @@ def main(argv: list[str] | None = None) -> int:
     write_figure("calibrate_matches_lomo", {"max_wrong": args.max_wrong, "chosen_without": chosen, "table": summary,
                                             "chosen_on_all": final})
     if args.ship:
-        from glradial.media.atomic import atomic_write_text
-
-        trust = dict(base, **{k: int(v) if v == int(v) and k in ("max_missing", "min_directions") else v
-                              for k, v in final.items()})
-        how = (f"bench/doubt_rules.py ROWS --ship, ROWS from bench/calibrate_matches.py --json on the five shared "
-               f"matches (rows made with the rule then shipped; commit {_commit()})")
-        trust["doubt_source"] = (f"{how}: {', '.join(GRID)} chosen on the five matches (frames with consistent labels, "
-                                 f"not mirrored), then {', '.join(RMS_GRID)} with those held, "
-                                 f"as the strictest rule within {SLACK:.0%} of the most frames within 10 px among those "
-                                 f"answering at most {args.max_wrong:.0%} beyond 10 px; nothing fitted. Each match's figures "
-                                 f"in docs/figures/calibrate_matches_lomo.json are of the rule chosen without it (leave one "
-                                 f"match out): {chosen}")
-        trust["source"] = (f"quantile and floor_px: {how}: for each floor in {list(BOUND_FLOORS)} px, the split-conformal 90 % "
-                           f"quantile of keypoint RMS (hand labels) / max(fit RMS, floor) over the frames the shipped rule "
-                           f"answers; the floor with the narrowest median bound. min_spread, min_height_m, max_hfov_deg, "
-                           f"max_log_focal_sd, min_points, min_elements, max_rms_px: as before (procedural views and "
-                           f"non-pitch line drawings, tests/test_pitch_doubt.py)")
-        atomic_write_text(CAMERA_TRUST_FILE, json.dumps(trust, indent=2) + "\n")
-        print(f"written to {CAMERA_TRUST_FILE}")
+        print(f"written to {_ship(final, chosen, args.max_wrong)}")
     return 0
+
+
+def _ship(final: dict, chosen: dict, max_wrong: float) -> Path:
+    """camera_trust.json with the rule ``final`` chosen on all matches, and notes of how (``chosen``: each
+    match's rule chosen without it)."""
+    from glradial.camera.estimate import ship_camera_trust
+
+    trust = {k: int(v) if v == int(v) and k in ("max_missing", "min_directions") else v for k, v in final.items()}
+    how = (f"bench/doubt_rules.py ROWS --ship, ROWS from bench/calibrate_matches.py --json on the five shared "
+           f"matches (rows made with the rule then shipped; commit {_commit()})")
+    trust["doubt_source"] = (f"{how}: {', '.join(GRID)} chosen on the five matches (frames with consistent labels, "
+                             f"not mirrored), then {', '.join(RMS_GRID)} with those held, "
+                             f"as the strictest rule within {SLACK:.0%} of the most frames within 10 px among those "
+                             f"answering at most {max_wrong:.0%} beyond 10 px; nothing fitted. Each match's figures "
+                             f"in docs/figures/calibrate_matches_lomo.json are of the rule chosen without it (leave one "
+                             f"match out): {chosen}")
+    trust["source"] = (f"quantile and floor_px: {how}: for each floor in {list(BOUND_FLOORS)} px, the split-conformal 90 % "
+                       f"quantile of keypoint RMS (hand labels) / max(fit RMS, floor) over the frames the shipped rule "
+                       f"answers; the floor with the narrowest median bound. min_spread, min_height_m, max_hfov_deg, "
+                       f"max_log_focal_sd, min_points, min_elements, max_rms_px: as before (procedural views and "
+                       f"non-pitch line drawings, tests/test_pitch_doubt.py)")
+    return ship_camera_trust(trust)
 
 
 if __name__ == "__main__":

@@ -156,7 +156,7 @@ def summary(errors: list, clips: list[str]) -> dict:
 def main(argv: list[str] | None = None) -> int:
     from figures import printed_report, write_figure
 
-    from glradial.camera.estimate import CAMERA_TRUST_FILE, camera_trust
+    from glradial.camera.estimate import camera_trust
 
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("dumps", type=Path, nargs="+")
@@ -190,17 +190,16 @@ def main(argv: list[str] | None = None) -> int:
                                            "held_out": lomo, "chosen_without": chosen, "on_all": on_all,
                                            "chosen_on_all": {k: final[k] for k in keys}, "report": lines})
     if args.ship:
-        from glradial.media.atomic import atomic_write_text
+        from glradial.camera.estimate import ship_camera_trust
 
-        trust = dict(base, **{k: final[k] for k in keys})
+        trust = {k: final[k] for k in keys}
         trust["lens_choice_source"] = (
             f"bench/pitch_lens_choice.py on bench/bundesliga_consistency.py --limit 15 --dump (five shared matches, "
             f"{len(replay.rows)} samples): {', '.join(keys)} chosen on all five as the grid point with the smallest "
             f"largest per-match self-consistent median (lens_quantile: split-conformal 90 % of the camera lens's "
             f"error / max(RMS, lens_floor_px) for that pull); each match's figure in docs/figures/"
             f"lens_consistency_lomo.json is of the settings chosen without it: {chosen}")
-        atomic_write_text(CAMERA_TRUST_FILE, json.dumps(trust, indent=2) + "\n")
-        print(f"written to {CAMERA_TRUST_FILE}")
+        print(f"written to {ship_camera_trust(trust)}")
     return 0
 
 

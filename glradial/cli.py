@@ -7,7 +7,8 @@ its subcommand is still listed and says why it cannot run.
 Exit status: 0 success, 1 bad input or failed work (one line ``glradial: error: ...`` on stderr),
 2 wrong usage (argparse errors and conflicting options), 130 interrupted (Ctrl-C), 143 terminated
 (SIGTERM), 129 hung up (SIGHUP): the two signals unwind like Ctrl-C, so outputs (written
-atomically) and temporary files are removed and nothing half-written is left. ``-q/--quiet`` may
+atomically) and temporary files are removed and nothing half-written is left. SIGINT stops a run
+also when the process inherited it ignored (as it stops ffmpeg). ``-q/--quiet`` may
 stand anywhere on the command line. Set ``GLRADIAL_DEBUG=1`` to get tracebacks.
 """
 
@@ -152,12 +153,17 @@ def _terminate(signum: int, _frame: object) -> None:
 
 @contextlib.contextmanager
 def _signals_unwind():
-    """SIGTERM and SIGHUP raise :class:`Terminated` while the command runs (main thread only)."""
+    """SIGTERM and SIGHUP raise :class:`Terminated` and SIGINT ``KeyboardInterrupt`` while the command
+    runs (main thread only), SIGINT also where the process was started with it ignored (Python then
+    leaves it ignored: a background job of a script, some CI runners), so that it always stops a run
+    and leaves nothing half-written, as it stops ffmpeg."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    wanted = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
-    previous = {signum: signal.signal(signum, _terminate) for signum in wanted}
+    wanted = {signal.SIGTERM: _terminate, **({signal.SIGHUP: _terminate} if hasattr(signal, "SIGHUP") else {})}
+    if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        wanted[signal.SIGINT] = signal.default_int_handler
+    previous = {signum: signal.signal(signum, handler) for signum, handler in wanted.items()}
     try:
         yield
     finally:

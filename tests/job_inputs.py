@@ -76,7 +76,7 @@ def wait_for_a_done_input(out: Path, job, seconds: float) -> None:
         time.sleep(0.05)
 
 
-def default_sigint() -> None:
-    """``preexec_fn`` of a job started to be interrupted: SIGINT back to its default, since a test run
-    started in the background (``cmd &``) passes it on ignored, and Python then installs no Ctrl-C handler."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
+def ignore_sigint() -> None:
+    """``preexec_fn`` of a job started to be interrupted: with SIGINT ignored, as a script's background
+    job (``cmd &``) starts; glradial must stop on it all the same (``cli._signals_unwind``)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)

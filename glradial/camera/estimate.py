@@ -27,6 +27,7 @@ import math
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from typing import Mapping
 
 import numpy as np
 
@@ -42,6 +43,22 @@ CAMERA_TRUST_FILE = Path(__file__).resolve().parents[1] / "data" / "camera_trust
 def camera_trust() -> dict:
     """The bound's calibration and the doubt thresholds (``glradial/data/camera_trust.json``)."""
     return json.loads(CAMERA_TRUST_FILE.read_text(encoding="utf-8"))
+
+
+def ship_camera_trust(changes: Mapping[str, object], path: Path = CAMERA_TRUST_FILE) -> Path:
+    """Write the shipped calibration with ``changes`` (settings chosen by a bench and the notes that say
+    how, keys ending in ``source``) to ``path``, atomically, and drop the cached :func:`camera_trust`;
+    returns ``path``. A setting the file does not have is a ``ValueError`` naming it (a misspelt key
+    would otherwise be shipped and never read)."""
+    from ..media.atomic import atomic_write_text
+
+    trust = camera_trust()
+    unknown = sorted(k for k in changes if k not in trust and not k.endswith("source"))
+    if unknown:
+        raise ValueError(f"changes name settings that {CAMERA_TRUST_FILE.name} does not have: {unknown}")
+    atomic_write_text(Path(path), json.dumps({**trust, **changes}, indent=2) + "\n")
+    camera_trust.cache_clear()
+    return Path(path)
 
 
 #: A fitted camera outside these is degenerate and never reported (the estimate keeps no camera):

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -97,20 +98,35 @@ def template_samples(pitch: PitchTemplate, step: float = SAMPLE_STEP) -> Samples
     return Samples(*arrays, tuple(labels))
 
 
+class Coverage(NamedTuple):
+    """How well the frame shows the markings a camera draws in it (:func:`element_support`): ``support``
+    (:func:`support`), ``drawn`` (markings drawn: :data:`MIN_DRAWN_SAMPLES`) and ``missing`` (those of
+    them the frame barely shows: :data:`MISSING_SHARE`)."""
+
+    support: float
+    drawn: int
+    missing: int
+
+
+def _of_coverage(name: str) -> property:
+    """A read-only attribute of the fit's :class:`Coverage`."""
+    return property(lambda self: getattr(self.coverage, name), doc=f"``coverage.{name}``")
+
+
 @dataclass(frozen=True)
 class Fit:
     """The refined camera and how well it fits: ``rms_px`` (RMS of the inliers' distances, px at
     1280), ``inliers`` (evidence points within the last gate), ``share`` (inliers / evidence points),
     ``elements`` (labels of the markings with at least :data:`MIN_ELEMENT_POINTS` inliers),
     ``log_focal_sd`` (standard deviation of log focal from the last round's Jacobian; infinite where
-    the markings seen do not fix it), ``cost`` (the robust cost per evidence point), ``support`` (the
-    share of the markings projected inside the frame that have an evidence point within
-    :data:`SUPPORT_PX`: low when the camera draws markings where the frame has none), ``spread`` (how
+    the markings seen do not fix it), ``cost`` (the robust cost per evidence point), ``coverage``
+    (:class:`Coverage`: ``support``, the share of the markings projected inside the frame that have an
+    evidence point within :data:`SUPPORT_PX`, low when the camera draws markings where the frame has
+    none; the markings ``drawn`` and ``missing``; each also an attribute of the fit), ``spread`` (how
     far the inliers' line directions are from one direction: ``1 - |mean(exp(2i angle))|``, 0 when every
     inlier runs the same way, e.g. parallel lines only; about 1 for two perpendicular families or a
-    circle), ``drawn`` (markings drawn in the frame: :data:`MIN_DRAWN_SAMPLES`) and ``missing`` (those of
-    them the frame barely shows: :data:`MISSING_SHARE`), ``pitch_share`` (inliers among the evidence
-    points the camera puts on the pitch: :data:`PITCH_MARGIN_M`; 0 when none)."""
+    circle), ``pitch_share`` (inliers among the evidence points the camera puts on the pitch:
+    :data:`PITCH_MARGIN_M`; 0 when none)."""
 
     camera: Camera
     rms_px: float
@@ -119,11 +135,13 @@ class Fit:
     elements: tuple[str, ...]
     log_focal_sd: float
     cost: float
-    support: float = 0.0
+    coverage: Coverage = Coverage(0.0, 0, 0)
     spread: float = 1.0
-    drawn: int = 0
-    missing: int = 0
     pitch_share: float = 0.0
+
+    support = _of_coverage("support")
+    drawn = _of_coverage("drawn")
+    missing = _of_coverage("missing")
 
 
 def _camera(x: np.ndarray, base: Camera) -> Camera:
@@ -285,10 +303,9 @@ def _summary(camera: Camera, samples: Samples, xy, angle, gate: float, result, s
         sd = math.inf
     rms = float(np.sqrt(np.mean(inl ** 2))) if len(inl) else math.inf
     spread = 1.0 - float(abs(np.mean(np.exp(2j * angle[use])))) if use.any() else 0.0
-    share, drawn, missing = element_support(camera, samples, support_xy)
     on = _on_pitch(camera, xy, samples)
     return Fit(camera, rms, int(use.sum()), float(use.mean()), elements, sd, float(result.cost) / max(len(xy), 1),
-               share, spread, drawn, missing, float(use[on].mean()) if on.any() else 0.0)
+               element_support(camera, samples, support_xy), spread, float(use[on].mean()) if on.any() else 0.0)
 
 
 def _on_pitch(camera: Camera, xy: np.ndarray, samples: Samples) -> np.ndarray:
@@ -305,12 +322,12 @@ def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
     enough to detect (:data:`LINE_WIDTH_M` seen at least :data:`MIN_VISIBLE_PX` wide on the detection
     copy, the lens's squeeze included: :func:`lens_width_scale`), with an evidence point within
     :data:`SUPPORT_PX` (0 when none is inside)."""
-    return element_support(camera, samples, xy)[0]
+    return element_support(camera, samples, xy).support
 
 
-def element_support(camera: Camera, samples: Samples, xy: np.ndarray) -> tuple[float, int, int]:
-    """``(support, drawn, missing)``: :func:`support`, the number of markings drawn in the frame (at
-    least :data:`MIN_DRAWN_SAMPLES` detectable samples) and how many of those have evidence at less
+def element_support(camera: Camera, samples: Samples, xy: np.ndarray) -> Coverage:
+    """``Coverage(support, drawn, missing)``: :func:`support`, the number of markings drawn in the frame
+    (at least :data:`MIN_DRAWN_SAMPLES` detectable samples) and how many of those have evidence at less
     than :data:`MISSING_SHARE` of their samples."""
     proj, ok = _segments(camera, samples)
     width, height = camera.size
@@ -322,13 +339,13 @@ def element_support(camera: Camera, samples: Samples, xy: np.ndarray) -> tuple[f
     ok &= (proj[:, 0] >= 0) & (proj[:, 0] <= width - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= height - 1)
     ok &= seen_px >= MIN_VISIBLE_PX
     if not ok.any() or len(xy) == 0:
-        return 0.0, 0, 0
+        return Coverage(0.0, 0, 0)
     d, _ = cKDTree(xy).query(proj[ok])
     near = d * REFERENCE_WIDTH / width < SUPPORT_PX
     n = np.bincount(samples.element[ok], minlength=len(samples.labels))
     hit = np.bincount(samples.element[ok], weights=near, minlength=len(samples.labels))
     drawn = n >= MIN_DRAWN_SAMPLES
-    return float(np.mean(near)), int(drawn.sum()), int(np.sum(drawn & (hit < MISSING_SHARE * n)))
+    return Coverage(float(np.mean(near)), int(drawn.sum()), int(np.sum(drawn & (hit < MISSING_SHARE * n))))
 
 
 def lens_width_scale(lens: Lens, uv: np.ndarray, tangent: np.ndarray) -> np.ndarray:

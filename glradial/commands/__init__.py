@@ -30,6 +30,7 @@ from ..errors import Error
 __all__ = [
     "CliError", "UsageError", "parse_size", "positive_int", "positive_float", "show_progress",
     "add_lens_options", "lens_from_args", "read_lens_file", "OPENCV_API_HINT", "InputPaths", "note", "cached_estimator", "keep_estimators", "estimators_kept",
+    "MODEL_HELP", "PITCH_HELP",
 ]
 
 _SIZE = re.compile(r"^\s*(\d+)\s*[xX×,]\s*(\d+)\s*$")
@@ -158,6 +159,13 @@ LENS_FILE_HELP = (
     "calibration {\"camera_matrix\": 3x3, \"dist_coeffs\": [k1, k2, 0, 0(, 0)], \"size\": [W, H]} "
     "(size: the calibration's frame size in pixels; default the frame's own); any other key is refused"
 )
+
+#: ``--model`` of the commands that run the bundled estimator (estimate; correct and live with --auto)
+MODEL_HELP = "use this ONNX model instead of the bundled one"
+#: ``--pitch`` (estimate; correct --auto on images), each command saying first when it applies
+PITCH_HELP = ("also fit the whole camera to the pitch template and combine its lens with the line fit/CNN answer where the "
+              "template fits (docs/CAMERA.md: 3.75 -> 3.0 px on the Bundesliga clips; about 0.2-0.3 s more per frame); "
+              "--no-pitch: the line fit/CNN answer alone")
 
 #: the number keys of glradial's own lens format (the rest of ``schemas/lens_file`` ``numbers``
 #: describes a line of 'glradial estimate --json', ignored here)

@@ -7,7 +7,7 @@ import sys
 from pathlib import Path
 
 from ..lens.options import METHODS
-from . import UsageError, cached_estimator, estimators_kept, lens_given, note, show_progress
+from . import MODEL_HELP, PITCH_HELP, UsageError, cached_estimator, estimators_kept, lens_given, note, show_progress
 from .engine_options import add_opentrackio_options, opentrackio_hook, opentrackio_wanted, write_track_opentrackio
 from .remapping import (
     VIDEO_OPTIONS,
@@ -57,11 +57,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "videos: per-frame lens file (a sidecar of --auto, edited or not; .csv or .json)",
     )
     lens.add_argument("--auto", action="store_true", help="estimate the lens with the bundled estimator")
-    lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
+    lens.add_argument("--model", metavar="ONNX", help=f"with --auto: {MODEL_HELP}")
     lens.add_argument("--pitch", action=argparse.BooleanOptionalAction, default=None,
-                      help="with --auto on images (the default there): also fit the whole camera to the pitch template and combine its "
-                           "lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 3.0 px on the "
-                           "Bundesliga clips; about 0.2-0.3 s more per frame); --no-pitch: the line fit/CNN answer alone")
+                      help=f"with --auto on images (the default there): {PITCH_HELP}")
     lens.add_argument("--method", choices=METHODS,
                       help="with --auto: auto (default: the pitch-line fit when it is surer than the CNN), net or lines")
     add_render_options(

@@ -8,7 +8,7 @@ import argparse
 from ..lens.options import INVERSES
 from . import UsageError, lens_from_args, lens_given, parse_size
 from . import remapping as shared
-from .engine_options import overscan_value
+from .engine_options import add_overscan_option, overscan_value
 
 DESCRIPTION = """\
 Apply a lens to INPUT (undistorted: graphics, a virtual set, a clean plate) and write OUTPUT as the
@@ -43,8 +43,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     render.add_argument("--inverse", choices=INVERSES, default="exact",
                         help="inverse of the lens: exact (bounded Newton, to float precision) or drap (the Drap-Lefevre "
                         "polynomial, up to ~0.002 lens units off at the extremes of its k1 range) (default: exact)")
-    render.add_argument("--overscan", nargs="?", const="auto", metavar="FACTOR",
-                        help="images: INPUT is an overscanned undistorted render whose field is FACTOR (>= 1) times the "
+    add_overscan_option(render, "images: INPUT is an overscanned undistorted render whose field is FACTOR (>= 1) times the "
                         "frame's; without FACTOR the lens's own overscan (OpenLensIO), the smallest that leaves no "
                         "empty pixel. Rendered with cv2.remap (replaces --fit)")
     render.add_argument("--size", type=parse_size, metavar="WxH",

@@ -17,7 +17,12 @@ from .remapping import RemapHook, refuse_same_file
 
 __all__ = ["add_camera_options", "add_opentrackio_options", "camera_from_args", "opentrackio_wanted",
            "check_opentrackio_output", "write_opentrackio", "write_image_opentrackio", "write_track_opentrackio",
-           "OpenTrackIOHook", "opentrackio_hook", "overscan_value", "sensor_mm"]
+           "OpenTrackIOHook", "opentrackio_hook", "add_overscan_option", "overscan_value", "sensor_mm"]
+
+
+def add_overscan_option(group: argparse.ArgumentParser | argparse._ArgumentGroup, help_text: str) -> None:
+    """``--overscan [FACTOR]`` (``distort``, ``stmap``), read by :func:`overscan_value`."""
+    group.add_argument("--overscan", nargs="?", const="auto", metavar="FACTOR", help=help_text)
 
 
 def overscan_value(text: str | None) -> float | None:

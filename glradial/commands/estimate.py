@@ -7,7 +7,7 @@ import json
 
 from ..lens.options import METHODS
 from ..media.image_io import media_kind, read_image
-from . import UsageError, cached_estimator, positive_float, positive_int, show_progress
+from . import MODEL_HELP, PITCH_HELP, UsageError, cached_estimator, positive_float, positive_int, show_progress
 from .engine_options import add_opentrackio_options, check_opentrackio_output, opentrackio_wanted, write_image_opentrackio, write_track_opentrackio
 
 DESCRIPTION = """\
@@ -41,7 +41,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("inputs", metavar="INPUT", nargs="+", help="image (PNG, JPEG, TIFF) or video files")
     parser.add_argument("--json", action="store_true", help="one JSON object per line instead of text")
-    parser.add_argument("--model", metavar="ONNX", help="use this ONNX model instead of the bundled one")
+    parser.add_argument("--model", metavar="ONNX", help=MODEL_HELP)
     parser.add_argument("--threads", type=positive_int, help="onnxruntime threads (default: all cores)")
     parser.add_argument("--every", type=positive_int, default=None, metavar="N",
                         help="videos: read the evidence of every N-th frame of each shot (frames; default 10, as correct --auto)")
@@ -50,9 +50,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="auto (default: the line fit when it is surer than the CNN), net (the CNN alone) or "
                              "lines (the pitch-line fit; the CNN when a frame has no usable lines); videos too")
     parser.add_argument("--pitch", action=argparse.BooleanOptionalAction, default=True,
-                        help="images, with --method auto (default on): also fit the whole camera to the pitch template and combine "
-                             "its lens with the line fit/CNN answer where the template fits (docs/CAMERA.md: 3.75 -> 3.0 px on the "
-                             "Bundesliga clips; about 0.2-0.3 s more per frame); --no-pitch: the line fit/CNN answer alone (videos always)")
+                        help=f"images, with --method auto (default on): {PITCH_HELP} (videos always)")
     parser.add_argument("--pixel-aspect", type=positive_float, metavar="FY/FX",
                         help="images: the pixel aspect fy / fx of a frame stored squashed (e.g. 16/9 for a 16:9 "
                              "picture stored 640x640; default 1: square pixels); the lens printed applies to the "

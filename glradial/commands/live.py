@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import signal
 import sys
-import threading
 from pathlib import Path
 
 from ..lens.options import METHODS, UNTIL_SURE
-from . import UsageError, lens_from_args, lens_given, positive_float, positive_int
+from . import MODEL_HELP, UsageError, lens_from_args, lens_given, positive_float, positive_int
 from .engine_options import add_opentrackio_options, camera_from_args, check_opentrackio_output, opentrackio_wanted
 from .remapping import (
     add_encode_options,
@@ -72,7 +70,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     lens = parser.add_argument_group("lens (give --k1 [--k2 --cx --cy --pixel-aspect], --lens FILE or --auto)")
     add_lens_options(lens)
     lens.add_argument("--auto", action="store_true", help="estimate each shot's lens from its frames so far")
-    lens.add_argument("--model", metavar="ONNX", help="with --auto: use this ONNX model instead of the bundled one")
+    lens.add_argument("--model", metavar="ONNX", help=f"with --auto: {MODEL_HELP}")
     lens.add_argument("--method", choices=METHODS, help="with --auto: the per-frame estimator's method (default auto)")
     live = parser.add_argument_group("live")
     live.add_argument("--max-delay", type=positive_int, default=2, metavar="FRAMES",
@@ -259,25 +257,10 @@ def _status_printer(quiet: bool):
     return lambda line: sys.stderr.write(("\r" + line + "\033[K") if tty else f"glradial live: {line}\n")
 
 
-@contextlib.contextmanager
-def _sigint_stops():
-    """SIGINT raises KeyboardInterrupt while the run lasts, also where the process was started with
-    it ignored (Python then leaves it ignored: a background job of a script, ``nohup``, some CI
-    runners), so that SIGINT always ends a live run as documented, its outputs closed playable."""
-    if threading.current_thread() is not threading.main_thread() or signal.getsignal(signal.SIGINT) != signal.SIG_IGN:
-        yield
-        return
-    signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 def run(args: argparse.Namespace) -> int:
+    """SIGINT/SIGTERM/SIGHUP end the stream (the CLI makes SIGINT stop it even when inherited ignored), its outputs closed playable."""
     _check_options(args)
-    with _sigint_stops():
-        return _run(args)
+    return _run(args)
 
 
 def _run(args: argparse.Namespace) -> int:

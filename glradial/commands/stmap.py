@@ -6,7 +6,7 @@ import argparse
 
 from ..lens.options import DIRECTIONS, FITS, INVERSES, LAYOUTS, ORIGINS
 from . import UsageError, add_lens_options, lens_from_args, lens_given, parse_size
-from .engine_options import overscan_value
+from .engine_options import add_overscan_option, overscan_value
 
 DESCRIPTION = """\
 Write the STMap of the lens (--k1 --k2 [--cx --cy --pixel-aspect], or --lens FILE) on a WxH frame: a
@@ -47,9 +47,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="nuke = RGB, S T in R G (default); unreal = RGBA, undistortion in RG and distortion in BA")
     parser.add_argument("--origin", choices=ORIGINS,
                         help="--layout unreal: pixel origin of T (default top-left; Nuke's layout is always bottom-left)")
-    parser.add_argument("--overscan", nargs="?", const="auto", metavar="FACTOR",
-                        help="maps for an overscanned undistorted render: FACTOR >= 1, or the lens's own overscan when "
-                             "given without a value (replaces --fit)")
+    add_overscan_option(parser, "maps for an overscanned undistorted render: FACTOR >= 1, or the lens's own overscan when "
+                        "given without a value (replaces --fit)")
     parser.add_argument("--lens-track", metavar="CSV", help="write one map per shot of this lens track (.csv or .json)")
     parser.add_argument("--out", required=True, metavar="FILE", help="output .exr (recommended), .tif/.tiff or .npy")
     parser.add_argument("-y", "--overwrite", action="store_true", help="replace --out if it exists")

@@ -25,13 +25,14 @@ from __future__ import annotations
 
 import socket
 import struct
+import threading
 import time
 from contextlib import closing
 from dataclasses import dataclass
 from typing import Iterable
 
 __all__ = ["IDENTIFIER", "ENCODING_JSON", "ENCODING_CBOR", "MAX_SEGMENT", "fletcher16", "packets", "Packet", "parse_packet",
-           "send_payloads", "parse_address", "SampleSender"]
+           "send_payloads", "parse_address", "SampleSender", "SampleReceiver", "reassemble"]
 
 IDENTIFIER = b"OTrk"
 ENCODING_JSON = 0x01
@@ -149,6 +150,68 @@ class SampleSender:
     def close(self) -> None:
         """Close the socket (``contextlib.closing`` makes a sender a context manager)."""
         self._socket.close()
+
+
+class SampleReceiver:
+    """The receiving end of :class:`SampleSender` (``glradial live --send HOST:PORT``): binds ``address``
+    ``(host, port)`` at once (port 0: a free port, read back from :attr:`address`) and keeps every
+    datagram that arrives, on a daemon thread, until :meth:`close` (``with`` closes it too).
+    ``buffer_bytes``: the socket's receive buffer (``SO_RCVBUF``; the kernel may cap it), room for a
+    burst while the thread is not scheduled.
+
+    Example:
+        >>> with SampleReceiver() as receiver:
+        ...     sent = send_payloads([b'{"a": 1}', b"x" * 2000], receiver.address)
+        ...     receiver.wait_for(sent)  # one datagram, then a payload in two segments
+        3
+        >>> receiver.payloads() == [b'{"a": 1}', b"x" * 2000]
+        True
+    """
+
+    def __init__(self, address: tuple[str, int] = ("127.0.0.1", 0), buffer_bytes: int = 8 << 20) -> None:
+        self._socket = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            self._socket.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, buffer_bytes)
+            self._socket.bind(address)
+        except OSError as err:
+            self._socket.close()
+            raise OSError(f"cannot receive OpenTrackIO packets on {address[0]}:{address[1]}: {err.strerror or err}") from None
+        self._socket.settimeout(0.1)  # how often the thread looks whether it should stop
+        self.address: tuple[str, int] = self._socket.getsockname()
+        self.datagrams: list[bytes] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._receive, name="opentrackio-receiver", daemon=True)
+        self._thread.start()
+
+    def _receive(self) -> None:
+        while not self._stop.is_set():
+            try:
+                self.datagrams.append(self._socket.recv(65536))
+            except socket.timeout:
+                continue
+
+    def wait_for(self, count: int, timeout: float = 5.0) -> int:
+        """Wait until ``count`` datagrams have arrived or ``timeout`` seconds have passed; how many arrived."""
+        deadline = time.monotonic() + timeout
+        while len(self.datagrams) < count and time.monotonic() < deadline:
+            time.sleep(0.01)
+        return len(self.datagrams)
+
+    def payloads(self) -> list[bytes]:
+        """The whole payloads received so far (:func:`reassemble`)."""
+        return reassemble(list(self.datagrams))
+
+    def close(self) -> None:
+        """Stop receiving (what arrived stays in :attr:`datagrams`) and close the socket."""
+        self._stop.set()
+        self._thread.join()
+        self._socket.close()
+
+    def __enter__(self) -> "SampleReceiver":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def send_payloads(payloads: Iterable[bytes], address: tuple[str, int], *, encoding: int = ENCODING_JSON,

@@ -746,8 +746,15 @@ def _as_float32(frame: np.ndarray) -> np.ndarray:
         ) from None
 
 
-def _run(frame, lens_or_k1, k2, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
+def _remap_frames(frame, lens_or_k1, k2, direction, fit, interpolation, fill, inverse, backend, alpha) -> np.ndarray:
+    """What :func:`correct` and :func:`distort` share once the doubt policy is applied: the lens read,
+    the alpha convention, then :func:`_run`."""
     lens = _lens(lens_or_k1, k2)
+    return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
+        work, lens, direction, fit, interpolation, fill_values, inverse, backend))
+
+
+def _run(frame, lens, direction, fit, interpolation, fill, inverse, backend) -> np.ndarray:
     backend = check_choice("backend", backend, BACKENDS)
     if not isinstance(frame, np.ndarray):
         return _run_one(frame, lens, direction, fit, interpolation, fill, inverse, backend)  # its TypeError
@@ -835,8 +842,7 @@ def correct(
     """
     if not doubt.applies(getattr(lens, "doubtful", False) is True, getattr(lens, "reason", ""), apply_doubtful):
         lens, fit = Lens(0.0, 0.0), "same"
-    return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
-        work, lens, k2, "undistort", fit, interpolation, fill_values, "exact", backend))
+    return _remap_frames(frame, lens, k2, "undistort", fit, interpolation, fill, "exact", backend, alpha)
 
 
 def distort(
@@ -879,5 +885,4 @@ def distort(
         >>> int(rows[48]), bool(rows[12] > rows[48])  # barrel: pulled towards the centre, more far out
         (10, True)
     """
-    return remap_with_alpha(frame, fill, alpha, lambda work, fill_values: _run(
-        work, lens, k2, "distort", fit, interpolation, fill_values, inverse, backend))
+    return _remap_frames(frame, lens, k2, "distort", fit, interpolation, fill, inverse, backend, alpha)

@@ -137,25 +137,27 @@ class LiveFrame:
 
 @dataclass
 class LiveStats:
-    """Counts of a live run: frames ``pushed``, ``dropped`` (before correction: the input outran
-    it), ``corrected``, ``left`` (taken by the caller) and ``late`` (left more than ``max_delay``
-    frame periods after arriving); ``delays`` the delay of every frame that left (frame periods),
-    ``dropped_at`` the numbers of the dropped frames (:meth:`dropped_ranges`)."""
+    """Counts of a live run: frames ``pushed`` and ``corrected``; ``delays`` the delay of every frame
+    that left (taken by the caller; frame periods), ``dropped_at`` the numbers of the frames dropped
+    before correction (the input outran it; :meth:`dropped_ranges`). The counts ``left``, ``late``
+    (left more than ``max_delay`` frame periods after arriving) and ``dropped`` are read from those
+    two lists, so that they can never disagree with them."""
 
     rate: float
     max_delay: int
     pushed: int = 0
-    dropped: int = 0
     corrected: int = 0
-    left: int = 0
-    late: int = 0
     delays: list[float] = field(default_factory=list)
     dropped_at: list[int] = field(default_factory=list)
     started: float = field(default_factory=time.monotonic)
 
+    dropped = property(lambda self: len(self.dropped_at), doc="Frames dropped before correction (int).")
+    left = property(lambda self: len(self.delays), doc="Frames that left, taken by the caller (int).")
+    late = property(lambda self: sum(delay > self.max_delay for delay in self.delays),
+                    doc="Frames that left more than ``max_delay`` frame periods after arriving (int).")
+
     def drop(self, index: int) -> None:
         """Count frame ``index`` (its number on the source's clock) as dropped."""
-        self.dropped += 1
         self.dropped_at.append(index)
 
     def dropped_ranges(self, most: int = 8) -> str:
@@ -387,9 +389,7 @@ class LiveCorrector:
         """Record that ``item`` has left now (its delay, late or not)."""
         delay = (time.monotonic() - item.arrived) * float(self.rate)
         with self._cond:
-            self.stats.left += 1
             self.stats.delays.append(delay)
-            self.stats.late += delay > self.max_delay
 
     @property
     def done(self) -> bool:

@@ -4,6 +4,7 @@ shifted by a known offset, and hand-made rows whose answer follows from the rule
 
 from __future__ import annotations
 
+import json
 import math
 
 import cv2
@@ -158,3 +159,17 @@ def test_repair_labels_drops_the_wrong_clicks_found_by_the_labels_alone():
     mirrored = KP.copy()
     mirrored[:, 1] *= -1.0  # near and far swapped: a whole frame's labels no removal can repair
     assert bench.repair_labels(KP, np.where(np.isnan(truth), np.nan, cam.project(mirrored)))[0] is None
+
+
+def test_ship_camera_trust_keeps_the_other_settings_and_refuses_an_unknown_one(tmp_path):
+    from glradial.camera.estimate import ship_camera_trust
+
+    shipped = dict(camera_trust())
+    target = tmp_path / "camera_trust.json"
+    assert ship_camera_trust({"min_support": 0.5, "doubt_source": "a test"}, target) == target
+    written = json.loads(target.read_text(encoding="utf-8"))
+    assert written == {**shipped, "min_support": 0.5, "doubt_source": "a test"}
+    assert camera_trust() == shipped  # the shipped file itself is untouched
+    with pytest.raises(ValueError, match="min_suport"):
+        ship_camera_trust({"min_suport": 0.5}, tmp_path / "other.json")
+    assert not (tmp_path / "other.json").exists()

@@ -163,6 +163,22 @@ def test_udp_packet_over_localhost_parses_back():
     assert b"".join(opentrackio_udp.parse_packet(b).payload for b in big) == b"x" * 4000
 
 
+def test_sample_receiver_joins_segments_and_drops_an_incomplete_payload():
+    """Datagrams sent from a plain socket (a payload in two segments, one missing its first segment):
+    the receiver keeps each datagram and gives back the whole payloads only."""
+    whole, broken = opentrackio_udp.packets(b"a" * 2000, 1), opentrackio_udp.packets(b"b" * 2000, 2)
+    with opentrackio_udp.SampleReceiver() as receiver:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sender:
+            for data in [*whole, broken[1], *opentrackio_udp.packets(b'{"c": 3}', 3)]:
+                sender.sendto(data, receiver.address)
+        assert receiver.wait_for(4) == 4
+    assert receiver.payloads() == [b"a" * 2000, b'{"c": 3}']
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as taken:
+        taken.bind(("127.0.0.1", 0))
+        with pytest.raises(OSError, match=f"127.0.0.1:{taken.getsockname()[1]}"):
+            opentrackio_udp.SampleReceiver(taken.getsockname())
+
+
 def test_cbor_payload_round_trips(tmp_path):
     cbor2 = pytest.importorskip("cbor2")
     camera = opentrackio.TrackingCamera((640, 360), 9.59, 8.0)

@@ -18,7 +18,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
-from job_inputs import ROOT, corrupt, default_sigint, image, pan_video, panorama, read_frames, rows_of, wait_for_a_done_input
+from job_inputs import ROOT, corrupt, ignore_sigint, image, pan_video, panorama, read_frames, rows_of, wait_for_a_done_input
 
 from glradial.cli import build_parser, main
 from glradial.jobs.command_line import command_options
@@ -146,7 +146,7 @@ def test_ctrl_c_leaves_the_manifest_consistent(tmp_path, media):
     long = pan_video(tmp_path / "long.mkv", panorama(), n=60)  # last, so that work remains when the signal comes
     command = [sys.executable, "-m", "glradial", "correct", str(media["v0"]), str(media["v1"]), str(media["i0"]), str(long),
                "--out-dir", str(out), "--workers", "1", *LENS]
-    job = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
+    job = subprocess.Popen(command, cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, preexec_fn=ignore_sigint)
     wait_for_a_done_input(out, job, 120)
     job.send_signal(signal.SIGINT)
     _, err = job.communicate(timeout=60)

@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
-from job_inputs import ROOT, corrupt, default_sigint, image, pan_video, panorama, pitch_view, rows_of, wait_for_a_done_input
+from job_inputs import ROOT, corrupt, ignore_sigint, image, pan_video, panorama, pitch_view, rows_of, wait_for_a_done_input
 from test_jobs import same_output
 
 from glradial.cli import main
@@ -45,7 +45,7 @@ def media(tmp_path_factory) -> dict[str, Path]:
 
 def glradial(*args: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-m", "glradial", *args], cwd=ROOT, stdout=subprocess.PIPE,
-                            stderr=subprocess.PIPE, text=True, preexec_fn=default_sigint)
+                            stderr=subprocess.PIPE, text=True, preexec_fn=ignore_sigint)
 
 
 def busy_actor_pid(deadline: float) -> int | None:

@@ -300,13 +300,20 @@ def test_full_disk_fails_cleanly(tmp_path, capsys):
         subprocess.run(["umount", str(disk)], check=False)
 
 
-@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
-def test_sigterm_and_sighup_mid_video_leave_nothing(tmp_path, signum):
+def _ignore_sigint() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP, signal.SIGINT], ids=["SIGTERM", "SIGHUP", "SIGINT-ignored-at-start"])
+def test_a_signal_mid_video_leaves_nothing(tmp_path, signum):
+    """SIGINT is sent to a run started with it ignored (a script's background job: Python keeps an
+    inherited SIG_IGN), which must stop all the same, as ffmpeg does."""
     source = _clip(tmp_path / "in.mkv", ["-c:v", "ffv1", "-pix_fmt", "gbrp"], size="640x360", rate="25", frames=150, timecode=None)
     out = tmp_path / "out.mkv"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
     process = subprocess.Popen([sys.executable, "-m", "glradial", "correct", str(source), str(out), "--k1", "-0.2",
-                                "--backend", "cpu", "--interpolation", "cubic", "-q"], env=env, stderr=subprocess.PIPE, text=True)
+                                "--backend", "cpu", "--interpolation", "cubic", "-q"], env=env, stderr=subprocess.PIPE, text=True,
+                               preexec_fn=_ignore_sigint)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and process.poll() is None:  # wait until the output is being written
         temporary = [p for p in tmp_path.iterdir() if p.name.startswith(".out.")]
@@ -315,9 +322,11 @@ def test_sigterm_and_sighup_mid_video_leave_nothing(tmp_path, signum):
         time.sleep(0.01)
     assert process.poll() is None, "the video was done before the signal: make it longer"
     process.send_signal(signum)
+    sent = time.monotonic()
     _, err = process.communicate(timeout=60)
+    assert time.monotonic() - sent < 15, "the run went on after the signal"
     assert process.returncode == 128 + signum, err
-    assert f"stopped by {signal.Signals(signum).name}" in err
+    assert ("interrupted" if signum == signal.SIGINT else f"stopped by {signal.Signals(signum).name}") in err
     assert _names(tmp_path) == ["in.mkv"]
 
 

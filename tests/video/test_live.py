@@ -103,29 +103,15 @@ def _report(stderr: str) -> dict[str, int]:
             "dropped": int(words[words.index("dropped") + 1]), "late": int(words[words.index("late") + 1])}
 
 
-def _receive(sock: socket.socket, packets: list[bytes], stop: threading.Event) -> None:
-    sock.settimeout(0.1)
-    while not stop.is_set():
-        try:
-            packets.append(sock.recv(65536))
-        except socket.timeout:
-            continue
-
-
 def test_udp_in_real_time_fixed_lens(clip, tmp_path):
-    from glradial.export.opentrackio_udp import parse_packet
+    from glradial.export.opentrackio_udp import SampleReceiver
 
-    video_port, sample_port = _free_port(), _free_port()
+    video_port = _free_port()
     out = tmp_path / "out.ts"
-    packets: list[bytes] = []
-    stop = threading.Event()
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
-        sock.bind(("127.0.0.1", sample_port))
-        receiver = threading.Thread(target=_receive, args=(sock, packets, stop), daemon=True)
-        receiver.start()
+    with SampleReceiver() as receiver:
         process = _live(f"udp://127.0.0.1:{video_port}", str(out), "--k1", str(K1), "--k2", str(K2), "--crf", "8",
-                        "--idle-timeout", "3", "--send", f"127.0.0.1:{sample_port}", "--sensor", "2/3-inch", "--focal-mm", "10",
-                        "--max-delay", "8")  # the plumbing under test, not the capacity (bench_live measures that)
+                        "--idle-timeout", "3", "--send", f"127.0.0.1:{receiver.address[1]}", "--sensor", "2/3-inch",
+                        "--focal-mm", "10", "--max-delay", "8")  # the plumbing under test, not the capacity (bench_live measures that)
         lines = _Lines(process)
         lines.wait_for("waiting for")
         time.sleep(1.0)  # the socket is bound inside av.open, just after the line
@@ -133,13 +119,11 @@ def test_udp_in_real_time_fixed_lens(clip, tmp_path):
                         f"udp://127.0.0.1:{video_port}?pkt_size=1316"], check=True, timeout=30)
         assert process.wait(timeout=30) == 0, lines.text()
         time.sleep(0.2)
-        stop.set()
-        receiver.join()
     counts = _report(lines.text())
     source, written = _frames(clip), _frames(out)
     assert counts["written"] == len(written) and counts["read"] == counts["written"] + counts["dropped"]
     assert len(written) >= 0.9 * len(source), lines.text()  # the bench measures the 98 % of the target at 720p50
-    samples = [json.loads(parse_packet(p).payload) for p in packets]
+    samples = [json.loads(payload) for payload in receiver.payloads()]
     assert len(samples) >= 0.95 * len(written)
     numbers = [s["timing"]["sequenceNumber"] for s in samples]
     assert numbers == sorted(set(numbers))
@@ -236,6 +220,9 @@ def test_dropped_frames_read_as_runs():
     assert stats.dropped_ranges() == "3-5, 9, 20-21, 40"
     assert stats.dropped_ranges(most=2) == "3-5, 9, ..."
     assert LiveStats(25.0, 2).dropped_ranges() == ""
+    assert stats.dropped == 7
+    stats.delays.extend([0.5, 2.0, 2.01, 7.0])  # frame periods; late = more than max_delay (2)
+    assert (stats.left, stats.late) == (4, 2)
 
 
 def _image(seed: int) -> np.ndarray:
@@ -358,7 +345,7 @@ def test_nut_on_stdin_to_mpeg_ts_over_udp(clip, tmp_path):
     received by ffmpeg on loopback: every frame arrives, at the input's size."""
     port = _free_port()
     received = tmp_path / "received.ts"
-    receiver = subprocess.Popen(["ffmpeg", "-v", "error", "-y", "-i", f"udp://127.0.0.1:{port}?timeout=3000000", "-c", "copy",
+    receiver = subprocess.Popen(["ffmpeg", "-v", "error", "-y", "-i", f"udp://127.0.0.1:{port}?timeout=10000000", "-c", "copy",
                                  str(received)])
     nut = subprocess.Popen(["ffmpeg", "-v", "error", "-i", str(clip), "-c", "copy", "-f", "nut", "-"], stdout=subprocess.PIPE)
     time.sleep(0.5)  # the receiver's socket
