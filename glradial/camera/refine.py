@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from ..lens.lens import Lens
+from ..lens.lensfuncs import fold_radii
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
 from .model import Camera, lens_points_to_pitch, project_many
@@ -192,13 +193,16 @@ class _Problem:
         self.points = np.column_stack([samples.points[used], np.zeros(len(used))])
         self.ia, self.ib = index[: len(a)], index[len(a):]
         self.scale = REFERENCE_WIDTH / base.size[0]
+        # a held lens folds at one radius for every row (computed once, not per evaluation)
+        self.fold = None if with_lens else fold_radii(np.array([base.lens.k1]), np.array([base.lens.k2]))
 
     def batch(self, free: np.ndarray) -> np.ndarray:
         """Residuals (B x R) of rows of the free parameters (``self.free`` of the 9)."""
         x = np.tile(self.full, (len(free), 1))
         x[:, self.free] = free
         rot = np.matmul(Rotation.from_rotvec(x[:, :3]).as_matrix(), self.base.rotation)
-        proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points)
+        fold = None if self.fold is None else np.broadcast_to(self.fold, len(x))
+        proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points, fold)
         p0 = proj[:, self.ia]
         ab = proj[:, self.ib] - p0
         length = np.maximum(np.hypot(ab[..., 0], ab[..., 1]), 1e-9)
