@@ -227,6 +227,12 @@ def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndar
     the focal length in image widths (NaN where none fits), the camera centre (N x 3, metres, z up)
     and whether the two pitch axes map to orthogonal rays of equal length (:data:`MAX_AXIS_COSINE`)."""
     focal, metric, m = _pinhole(h, size)
+    return focal, _centres(m), metric
+
+
+def _centres(m: np.ndarray) -> np.ndarray:
+    """Camera centres (N x 3, metres, z up) of the scaled ``[r1 r2 t]`` (up to sign) ``m`` of
+    :func:`_pinhole`."""
     with np.errstate(all="ignore"):
         r1, r2, t = m[:, :, 0], m[:, :, 1], m[:, :, 2]
         # sign: the pitch point seen at the image centre, m⁻¹ e3 ∝ row0 × row1, lies in front
@@ -234,18 +240,17 @@ def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndar
         scale = np.sign(np.sum(m[:, 2] * seen, axis=1) * seen[:, 2])
         r1, r2, t = r1 * scale[:, None], r2 * scale[:, None], t * scale[:, None]
         r3 = np.cross(r1, r2)
-        centre = -np.stack([np.sum(r1 * t, axis=1), np.sum(r2 * t, axis=1), np.sum(r3 * t, axis=1)], axis=1)
-    return focal, centre, metric
+        return -np.stack([np.sum(r1 * t, axis=1), np.sum(r2 * t, axis=1), np.sum(r3 * t, axis=1)], axis=1)
 
 
 def plausible(h: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """Whether each homography (N x 3 x 3) is a view a main camera could take (module constants)."""
-    focal, metric, _ = _pinhole(h, size)
+    focal, metric, m = _pinhole(h, size)
     with np.errstate(all="ignore"):
         hfov = np.degrees(2 * np.arctan(0.5 / focal))
     ok = metric & (hfov >= HFOV_RANGE[0]) & (hfov <= HFOV_RANGE[1])
     idx = np.flatnonzero(ok)
-    _, centre, _ = camera_of(h[idx], size)
+    centre = _centres(m[idx])  # each homography's reading is its own: the same as camera_of(h[idx])
     with np.errstate(all="ignore"):
         ok[idx] = (centre[:, 2] >= HEIGHT_RANGE[0]) & (centre[:, 2] <= HEIGHT_RANGE[1])
         ok[idx] &= (centre[:, 1] >= Y_RANGE[0]) & (centre[:, 1] <= Y_RANGE[1]) & (np.abs(centre[:, 0]) <= MAX_ABS_X)
