@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..lens.lens import Lens, focal_from_hfov, frame_size, hfov_deg, lens_to_pixels
-from ..lens.lensfuncs import LENS_RADIUS_UNBOUNDED, fold_radii, radial_factor
+from ..lens.lensfuncs import LENS_RADIUS_UNBOUNDED, fold_radii, fold_radius, radial_factor
 
 #: The half turn of the pitch about its centre spot.
 HALF_TURN = np.diag([-1.0, -1.0, 1.0])
@@ -194,7 +194,8 @@ def project_many(rotation: np.ndarray, position: np.ndarray, focal: np.ndarray, 
         scale = focal[:, None] / z
         u, v = cam[:, 0] * scale, cam[:, 1] * scale
         r2 = u * u + v * v
-        fold = fold_radii(k1, k2) if fold is None else fold
+        if fold is None:  # a few lenses: each one's scalar root costs less than the vectorised one's arrays
+            fold = np.array([fold_radius(a, b) for a, b in zip(k1.tolist(), k2.tolist())]) if len(k1) <= 16 else fold_radii(k1, k2)
         limit = np.where(fold >= LENS_RADIUS_UNBOUNDED, np.inf, fold)[:, None]
         factor = radial_factor(r2, k1[:, None], k2[:, None])
         factor[~((z > 0) & (r2 < limit * limit))] = np.nan
