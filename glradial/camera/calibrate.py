@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -77,13 +78,22 @@ def _searched(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, lens: Le
     (:func:`glradial.camera.first_guess.first_guess`) on the frame undistorted by ``lens``, or, where it
     finds nothing, the dictionary of synthetic views (:func:`first_views`) on the white-line points
     undistorted by the same lens (one path for a given lens reading and the strong-lens retry)."""
-    points, labels = pitch.sampled_points(SEARCH_STEP)
+    points, labels = _search_points(pitch)
     found = [c.homography for c in search(rgb, points, labels, lens=None if lens is None else (lens.k1, lens.k2),
                                           max_candidates=SEARCH_CANDIDATES)]
     if found:
         return found
     flat = lines.xy if lens is None else lens.undistort_points(lines.xy, lines.size)
     return first_views(flat[np.isfinite(flat).all(1)], lines.size, pitch)
+
+
+@lru_cache(maxsize=8)
+def _search_points(pitch: PitchTemplate) -> tuple[np.ndarray, np.ndarray]:
+    """``pitch``'s markings sampled every :data:`SEARCH_STEP` m with their labels (read-only; sampled
+    once per template, not per frame)."""
+    points, labels = pitch.sampled_points(SEARCH_STEP)
+    points.flags.writeable = labels.flags.writeable = False
+    return points, labels
 
 
 def _cameras(homographies: list[np.ndarray], size: tuple[int, int], lens: Lens | None) -> list[Camera]:
