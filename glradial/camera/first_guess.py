@@ -164,7 +164,8 @@ def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray
         p = (hb.reshape(-1, 3) @ x).reshape(len(hb), 3, -1)  # x, y, w planes (N x M each)
         w = p[:, 2]
         with np.errstate(all="ignore"):
-            length = np.minimum(np.sqrt(det[s: s + BATCH, None] / np.abs(w) ** 3) * spacing, MAX_POINT_WEIGHT)
+            aw = np.abs(w)
+            length = np.minimum(np.sqrt(det[s: s + BATCH, None] / (aw * aw * aw)) * spacing, MAX_POINT_WEIGHT)  # not pow: 3x slower
             ix, iy = np.rint(p[:, 0] / w), np.rint(p[:, 1] / w)
             inside = (w > 0) & (ix >= 0) & (ix < width) & (iy >= 0) & (iy < height)
         flat = np.where(inside, iy * width + ix, 0).astype(np.intp)  # one index into the flat images
