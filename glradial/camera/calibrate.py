@@ -16,8 +16,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from functools import lru_cache
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..lens.lens import Lens
 from ..media.frames import to_rgb8
@@ -76,13 +78,22 @@ def _searched(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, lens: Le
     (:func:`glradial.camera.first_guess.first_guess`) on the frame undistorted by ``lens``, or, where it
     finds nothing, the dictionary of synthetic views (:func:`first_views`) on the white-line points
     undistorted by the same lens (one path for a given lens reading and the strong-lens retry)."""
-    points, labels = pitch.sampled_points(SEARCH_STEP)
+    points, labels = _search_points(pitch)
     found = [c.homography for c in search(rgb, points, labels, lens=None if lens is None else (lens.k1, lens.k2),
                                           max_candidates=SEARCH_CANDIDATES)]
     if found:
         return found
     flat = lines.xy if lens is None else lens.undistort_points(lines.xy, lines.size)
     return first_views(flat[np.isfinite(flat).all(1)], lines.size, pitch)
+
+
+@lru_cache(maxsize=8)
+def _search_points(pitch: PitchTemplate) -> tuple[np.ndarray, np.ndarray]:
+    """``pitch``'s markings sampled every :data:`SEARCH_STEP` m with their labels (read-only; sampled
+    once per template, not per frame)."""
+    points, labels = pitch.sampled_points(SEARCH_STEP)
+    points.flags.writeable = labels.flags.writeable = False
+    return points, labels
 
 
 def _cameras(homographies: list[np.ndarray], size: tuple[int, int], lens: Lens | None) -> list[Camera]:
@@ -253,7 +264,7 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
     if previous is not None:
         fine_lines = lines.thinned(FINE_POINTS)
         tracked = judge_fit(refine(_starts(lines, pitch, previous=previous)[0], fine_lines.xy, fine_lines.angle, pitch,
-                               gates=TRACK_GATES, lens_from=1, support_xy=lines.xy), len(lines.xy))
+                               gates=TRACK_GATES, lens_from=1, support_xy=_support(lines)), len(lines.xy))
         if not tracked.doubtful:
             return tracked
     judged = judge_fit(_search_fit(_starts(lines, pitch, first_guess=first_guess, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
@@ -267,10 +278,11 @@ def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -
     the :data:`FINE_STARTS` best of them refined with the lens free, best first, stopping at the first
     fine fit the doubt rule passes (the others are only refined while none does)."""
     fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
+    support = _support(lines)
     coarse = []
     for cam in starts:
         fit = refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
-                     support_xy=lines.xy, hold_position=1, max_nfev=COARSE_NFEV)
+                     support_xy=support, hold_position=1, max_nfev=COARSE_NFEV)
         if fit is not None:
             coarse.append(fit)
             if fit.support >= EARLY_SUPPORT and fit.share >= EARLY_SHARE:
@@ -279,12 +291,17 @@ def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -
     fits = []
     for start in sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]:
         fit = refine(start.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
-                     support_xy=lines.xy)
+                     support_xy=support)
         if fit is not None:
             if doubt_reason(doubt_features(fit), camera_trust()) == "ok":
                 return fit
             fits.append(fit)
     return max(fits, key=_score) if fits else None
+
+
+def _support(lines: LinePoints) -> cKDTree:
+    """A k-d tree of all of ``lines``' points, built once for every refinement's support measure."""
+    return cKDTree(lines.xy)
 
 
 def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, judged: CameraEstimate) -> CameraEstimate:

@@ -143,39 +143,35 @@ def _tangents(points: np.ndarray, labels: np.ndarray) -> np.ndarray:
     return out
 
 
-def _project(h: np.ndarray, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(xy, w)``: template points (M x 2) through homographies (N x 3 x 3) -> N x M x 2 and depths."""
-    x = np.vstack([points.T, np.ones(len(points))])
-    p = (h.reshape(-1, 3) @ x).reshape(len(h), 3, -1)
-    w = p[:, 2]
-    with np.errstate(all="ignore"):
-        return np.stack([p[:, 0] / w, p[:, 1] / w], axis=-1), w
-
-
 def coverage(h: np.ndarray, points: np.ndarray, spacing: float, dist: np.ndarray, field: np.ndarray,
-             share: bool = False) -> np.ndarray:
+             share: bool = False, gain: np.ndarray | None = None) -> np.ndarray:
     """Coverage score (work px) of homographies ``h`` (N x 3 x 3): over the template ``points``
     (M x 2, ``spacing`` metres apart along the markings) that land on the field, the length of marking
     each stands for times ``exp(-d² / 2 SIGMA²) - MISS_PENALTY``, ``d`` from the distance transform
     ``dist`` of the line mask. With ``share``: also the share of that length within :data:`HIT_PX`
-    of the mask (``2 x N``: scores, shares)."""
+    of the mask (``2 x N``: scores, shares). ``gain``: :func:`_gain` of ``dist`` when the caller has it
+    (the same values, looked up)."""
     height, width = dist.shape
     out = np.empty((2, len(h)))
     det = np.abs(np.linalg.det(h))
     # many hypotheses: each pixel's gain computed once for the image, then looked up (the same values)
-    gain = _gain(dist) if len(h) * len(points) > dist.size else None
+    if gain is None and len(h) * len(points) > dist.size:
+        gain = _gain(dist)
+    x = np.vstack([points.T, np.ones(len(points))])
+    on_field, flat_dist = field.ravel() > 0, dist.ravel()
     for s in range(0, len(h), BATCH):
-        xy, w = _project(h[s: s + BATCH], points)
+        hb = h[s: s + BATCH]
+        p = (hb.reshape(-1, 3) @ x).reshape(len(hb), 3, -1)  # x, y, w planes (N x M each)
+        w = p[:, 2]
         with np.errstate(all="ignore"):
-            length = np.minimum(np.sqrt(det[s: s + BATCH, None] / np.abs(w) ** 3) * spacing, MAX_POINT_WEIGHT)
-            ix, iy = np.round(xy[..., 0]), np.round(xy[..., 1])
+            aw = np.abs(w)
+            length = np.minimum(np.sqrt(det[s: s + BATCH, None] / (aw * aw * aw)) * spacing, MAX_POINT_WEIGHT)  # not pow: 3x slower
+            ix, iy = np.rint(p[:, 0] / w), np.rint(p[:, 1] / w)
             inside = (w > 0) & (ix >= 0) & (ix < width) & (iy >= 0) & (iy < height)
-        ix = np.where(inside, ix, 0).astype(np.intp)
-        iy = np.where(inside, iy, 0).astype(np.intp)
-        on = inside & (field[iy, ix] > 0)
-        d = dist[iy, ix]
-        length = np.where(on, length, 0.0)
-        out[0, s: s + BATCH] = np.sum(length * (_gain(d) if gain is None else gain[iy, ix]), axis=1)
+        flat = np.where(inside, iy * width + ix, 0).astype(np.intp)  # one index into the flat images
+        length[~(inside & on_field[flat])] = 0.0
+        d = flat_dist[flat]
+        out[0, s: s + BATCH] = np.sum(length * (_gain(d) if gain is None else gain.ravel()[flat]), axis=1)
         if share:
             out[1, s: s + BATCH] = np.sum(length * (d <= HIT_PX), axis=1) / np.maximum(np.sum(length, axis=1), 1e-9)
     return out if share else out[0]
@@ -345,19 +341,19 @@ def _prepared(points_bytes: bytes, labels_bytes: bytes, labels_dtype: str) -> _T
     return _Template(points, spacing, xs, ys, radius, points[::quick], points[::coarse], points[::icp], tangents[::icp])
 
 
-def _search(wl: WhiteLines, tpl: _Template, dist: np.ndarray, n: int) -> list[np.ndarray]:
+def _search(wl: WhiteLines, tpl: _Template, dist: np.ndarray, n: int, gain: np.ndarray) -> list[np.ndarray]:
     """The ``n`` best distinct hypotheses (pitch m -> work px) by coverage score times covered
-    share (:func:`coverage`): all of them on the quick subsample, the best :data:`QUICK_KEPT` on the
-    coarse one."""
+    share (:func:`coverage`, ``gain`` the :func:`_gain` of ``dist``): all of them on the quick
+    subsample, the best :data:`QUICK_KEPT` on the coarse one."""
     size = (wl.mask.shape[1], wl.mask.shape[0])
     h = _hypotheses(wl, tpl, size)
     if len(h) == 0:
         return []
     step = len(tpl.points) / len(tpl.quick)
-    quick = np.prod(coverage(h, tpl.quick, tpl.spacing * step, dist, wl.field, share=True), axis=0)
+    quick = np.prod(coverage(h, tpl.quick, tpl.spacing * step, dist, wl.field, share=True, gain=gain), axis=0)
     h = h[np.argsort(-quick)[:QUICK_KEPT]]
     step = len(tpl.points) / len(tpl.coarse)
-    coarse = np.prod(coverage(h, tpl.coarse, tpl.spacing * step, dist, wl.field, share=True), axis=0)
+    coarse = np.prod(coverage(h, tpl.coarse, tpl.spacing * step, dist, wl.field, share=True, gain=gain), axis=0)
     return [h[k] for k in _distinct_best(h, coarse, size, n)]
 
 
@@ -374,16 +370,17 @@ def first_guess(frame_rgb: np.ndarray, template_points: np.ndarray, template_lab
         return []
     size = (wl.mask.shape[1], wl.mask.shape[0])
     dist = cv2.distanceTransform(1 - wl.mask, cv2.DIST_L2, 3)
+    gain = _gain(dist)  # once for every coverage score of this frame
     evidence = wl.points[:: max(1, len(wl.points) // ICP_MAX_POINTS)]
     found: list[tuple[float, np.ndarray, float, int, float]] = []
     rough: list[np.ndarray] = []
-    for h0 in _search(wl, tpl, dist, max_candidates):  # the wide bands first: many hypotheses meet there
+    for h0 in _search(wl, tpl, dist, max_candidates, gain):  # the wide bands first: many hypotheses meet there
         h = refine(h0, evidence, tpl.icp, tpl.icp_tangents, size, ICP_BANDS[:ICP_ROUGH_BANDS])[0]
         if not any(_same_view(h, other, size) for other in rough):
             rough.append(h)
     for h0 in rough:
         h, rms, matched = refine(h0, evidence, tpl.icp, tpl.icp_tangents, size, ICP_BANDS[ICP_ROUGH_BANDS:])
-        score, share = coverage(h[None], tpl.points, tpl.spacing, dist, wl.field, share=True)[:, 0]
+        score, share = coverage(h[None], tpl.points, tpl.spacing, dist, wl.field, share=True, gain=gain)[:, 0]
         if (score >= MIN_SCORE and share >= MIN_SHARE and plausible(h[None], size)[0]
                 and not any(_same_view(h, other[1], size) for other in found)):
             found.append((float(score), h, rms, matched, float(share)))

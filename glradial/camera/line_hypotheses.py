@@ -16,6 +16,7 @@ symmetry.
 from __future__ import annotations
 
 import itertools
+from functools import lru_cache
 
 import numpy as np
 
@@ -186,11 +187,20 @@ def line_homographies(lines: list[Line], valid_vp: np.ndarray, hull: np.ndarray,
     corners = np.stack([np.cross(a[:, 0], b[:, 0]), np.cross(a[:, 0], b[:, 1]),
                         np.cross(a[:, 1], b[:, 1]), np.cross(a[:, 1], b[:, 0])], axis=1)
     img = projective_basis(corners)
-    pitch = projective_basis(_pitch_quads(xs, ys))
+    inv = _pitch_bases(xs.tobytes(), ys.tobytes())
     with np.errstate(all="ignore"):
-        inv = np.linalg.inv(pitch)
-        h = np.einsum("qij,rjk->qrik", img, inv).reshape(-1, 3, 3)
+        h = np.matmul(img[:, None], inv[None]).reshape(-1, 3, 3)
     return front_facing(h, centre)
+
+
+@lru_cache(maxsize=8)
+def _pitch_bases(xs_bytes: bytes, ys_bytes: bytes) -> np.ndarray:
+    """The inverse projective bases (R x 3 x 3) of the template's line rectangles
+    (:func:`_pitch_quads` of the float64 ``xs``, ``ys`` given as bytes): the same for every frame."""
+    with np.errstate(all="ignore"):
+        inv = np.linalg.inv(projective_basis(_pitch_quads(np.frombuffer(xs_bytes), np.frombuffer(ys_bytes))))
+    inv.flags.writeable = False
+    return inv
 
 
 def front_facing(h: np.ndarray, centre: np.ndarray) -> np.ndarray:
@@ -198,9 +208,12 @@ def front_facing(h: np.ndarray, centre: np.ndarray) -> np.ndarray:
     ``centre`` a positive depth ``(h X)_3``, scaled to unit norm."""
     h = h[np.isfinite(h).all(axis=(1, 2))]
     with np.errstate(all="ignore"):
-        # h⁻¹ c = adj(h) c / det h, adj(h)'s columns the cross products of h's rows
-        c01, c12, c20 = np.cross(h[:, 0], h[:, 1]), np.cross(h[:, 1], h[:, 2]), np.cross(h[:, 2], h[:, 0])
-        seen_w = centre[0] * c12[:, 2] + centre[1] * c20[:, 2] + c01[:, 2]
+        # h⁻¹ c = adj(h) c / det h, adj(h)'s columns the cross products of h's rows (of rows 1, 2 and
+        # 2, 0 only the third component is read)
+        c01 = np.cross(h[:, 0], h[:, 1])
+        c12 = h[:, 1, 0] * h[:, 2, 1] - h[:, 1, 1] * h[:, 2, 0]
+        c20 = h[:, 2, 0] * h[:, 0, 1] - h[:, 2, 1] * h[:, 0, 0]
+        seen_w = centre[0] * c12 + centre[1] * c20 + c01[:, 2]
         det = np.sum(h[:, 2] * c01, axis=1)
         h = h * np.sign(seen_w * det)[:, None, None]
         h = h / np.sqrt(np.sum(h**2, axis=(1, 2)))[:, None, None]
@@ -227,6 +240,12 @@ def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndar
     the focal length in image widths (NaN where none fits), the camera centre (N x 3, metres, z up)
     and whether the two pitch axes map to orthogonal rays of equal length (:data:`MAX_AXIS_COSINE`)."""
     focal, metric, m = _pinhole(h, size)
+    return focal, _centres(m), metric
+
+
+def _centres(m: np.ndarray) -> np.ndarray:
+    """Camera centres (N x 3, metres, z up) of the scaled ``[r1 r2 t]`` (up to sign) ``m`` of
+    :func:`_pinhole`."""
     with np.errstate(all="ignore"):
         r1, r2, t = m[:, :, 0], m[:, :, 1], m[:, :, 2]
         # sign: the pitch point seen at the image centre, m⁻¹ e3 ∝ row0 × row1, lies in front
@@ -234,18 +253,17 @@ def camera_of(h: np.ndarray, size: tuple[int, int]) -> tuple[np.ndarray, np.ndar
         scale = np.sign(np.sum(m[:, 2] * seen, axis=1) * seen[:, 2])
         r1, r2, t = r1 * scale[:, None], r2 * scale[:, None], t * scale[:, None]
         r3 = np.cross(r1, r2)
-        centre = -np.stack([np.sum(r1 * t, axis=1), np.sum(r2 * t, axis=1), np.sum(r3 * t, axis=1)], axis=1)
-    return focal, centre, metric
+        return -np.stack([np.sum(r1 * t, axis=1), np.sum(r2 * t, axis=1), np.sum(r3 * t, axis=1)], axis=1)
 
 
 def plausible(h: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     """Whether each homography (N x 3 x 3) is a view a main camera could take (module constants)."""
-    focal, metric, _ = _pinhole(h, size)
+    focal, metric, m = _pinhole(h, size)
     with np.errstate(all="ignore"):
         hfov = np.degrees(2 * np.arctan(0.5 / focal))
     ok = metric & (hfov >= HFOV_RANGE[0]) & (hfov <= HFOV_RANGE[1])
     idx = np.flatnonzero(ok)
-    _, centre, _ = camera_of(h[idx], size)
+    centre = _centres(m[idx])  # each homography's reading is its own: the same as camera_of(h[idx])
     with np.errstate(all="ignore"):
         ok[idx] = (centre[:, 2] >= HEIGHT_RANGE[0]) & (centre[:, 2] <= HEIGHT_RANGE[1])
         ok[idx] &= (centre[:, 1] >= Y_RANGE[0]) & (centre[:, 1] <= Y_RANGE[1]) & (np.abs(centre[:, 0]) <= MAX_ABS_X)

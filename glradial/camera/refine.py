@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 from scipy.spatial.transform import Rotation
 
 from ..lens.lens import Lens
+from ..lens.lensfuncs import fold_radii
 from ..lens.metrics import manifold_k2
 from ..pitch.template import PitchTemplate
 from .model import Camera, lens_points_to_pitch, project_many
@@ -210,13 +211,16 @@ class _Problem:
         self.points = np.column_stack([samples.points[used], np.zeros(len(used))])
         self.ia, self.ib = index[: len(a)], index[len(a):]
         self.scale = REFERENCE_WIDTH / base.size[0]
+        # a held lens folds at one radius for every row (computed once, not per evaluation)
+        self.fold = None if with_lens else fold_radii(np.array([base.lens.k1]), np.array([base.lens.k2]))
 
     def batch(self, free: np.ndarray) -> np.ndarray:
         """Residuals (B x R) of rows of the free parameters (``self.free`` of the 9)."""
         x = np.tile(self.full, (len(free), 1))
         x[:, self.free] = free
         rot = np.matmul(Rotation.from_rotvec(x[:, :3]).as_matrix(), self.base.rotation)
-        proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points)
+        fold = None if self.fold is None else np.broadcast_to(self.fold, len(x))
+        proj = project_many(rot, x[:, 3:6], np.exp(x[:, 6]), x[:, 7], x[:, 8], self.base.size, self.points, fold)
         p0 = proj[:, self.ia]
         ab = proj[:, self.ib] - p0
         length = np.maximum(np.hypot(ab[..., 0], ab[..., 1]), 1e-9)
@@ -253,12 +257,12 @@ def _params(camera: Camera) -> np.ndarray:
 
 def refine(camera: Camera, xy: np.ndarray, angle: np.ndarray, pitch: PitchTemplate | None = None,
            *, fit_lens: bool = True, gates: tuple[float, ...] = GATES, lens_from: int = LENS_FROM,
-           support_xy: np.ndarray | None = None, hold_position: int = 0, max_nfev: int = MAX_NFEV) -> Fit | None:
+           support_xy: np.ndarray | cKDTree | None = None, hold_position: int = 0, max_nfev: int = MAX_NFEV) -> Fit | None:
     """The camera that best fits the white-line points ``xy`` (N x 2 px of ``camera``'s frame, line
     directions ``angle``) from the start ``camera`` (see the module docstring), the lens free from
     round ``lens_from``; ``None`` when no round finds enough assigned points to fit. ``support_xy``:
     the points :func:`support` is measured on (default ``xy``; all the frame's points when ``xy`` is
-    a thinned copy). The camera position is held for the first ``hold_position`` rounds; each round
+    a thinned copy), or a ``cKDTree`` of them (built once for the several refinements of one frame). The camera position is held for the first ``hold_position`` rounds; each round
     evaluates the residuals at most ``max_nfev`` times, to the relative tolerance :data:`ROUND_TOL` before
     the last round and :data:`FINAL_TOL` in it."""
     samples = template_samples(pitch or PitchTemplate())
@@ -325,10 +329,10 @@ def support(camera: Camera, samples: Samples, xy: np.ndarray) -> float:
     return element_support(camera, samples, xy).support
 
 
-def element_support(camera: Camera, samples: Samples, xy: np.ndarray) -> Coverage:
+def element_support(camera: Camera, samples: Samples, xy: np.ndarray | cKDTree) -> Coverage:
     """``Coverage(support, drawn, missing)``: :func:`support`, the number of markings drawn in the frame
     (at least :data:`MIN_DRAWN_SAMPLES` detectable samples) and how many of those have evidence at less
-    than :data:`MISSING_SHARE` of their samples."""
+    than :data:`MISSING_SHARE` of their samples; ``xy``: the evidence points or a ``cKDTree`` of them."""
     proj, ok = _segments(camera, samples)
     width, height = camera.size
     uv, depth = camera.undistorted_lens_points(samples.points)
@@ -338,9 +342,10 @@ def element_support(camera: Camera, samples: Samples, xy: np.ndarray) -> Coverag
         seen_px = camera.focal * DETECT_WIDTH * LINE_WIDTH_M / depth * lens_width_scale(camera.lens, uv, tangent)
     ok &= (proj[:, 0] >= 0) & (proj[:, 0] <= width - 1) & (proj[:, 1] >= 0) & (proj[:, 1] <= height - 1)
     ok &= seen_px >= MIN_VISIBLE_PX
-    if not ok.any() or len(xy) == 0:
+    tree = xy if isinstance(xy, cKDTree) else cKDTree(xy)
+    if not ok.any() or tree.n == 0:
         return Coverage(0.0, 0, 0)
-    d, _ = cKDTree(xy).query(proj[ok])
+    d, _ = tree.query(proj[ok])
     near = d * REFERENCE_WIDTH / width < SUPPORT_PX
     n = np.bincount(samples.element[ok], minlength=len(samples.labels))
     hit = np.bincount(samples.element[ok], weights=near, minlength=len(samples.labels))

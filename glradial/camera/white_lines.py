@@ -175,10 +175,11 @@ def line_points(frame: np.ndarray) -> LinePoints:
     valid = np.zeros((height, width), np.uint8)
     m = BORDER_MARGIN
     valid[y0 + m: y1 - m, x0 + m: x1 - m] = 1
-    x, y, angle = bright_ridges(gray, valid & grass)
+    where = valid & grass
+    x, y, angle = bright_ridges(gray, where)
     background = grass_background(gray, green)
     r, c = np.clip(np.rint(y).astype(np.intp), 0, height - 1), np.clip(np.rint(x).astype(np.intp), 0, width - 1)
-    white = gray[r, c] - background[r, c] > max(WHITE_CONTRAST, GRAIN_SIGMAS * grain(gray, valid & grass))
+    white = gray[r, c] - background[r, c] > max(WHITE_CONTRAST, GRAIN_SIGMAS * grain(gray, where))
     x, y, angle = x[white], y[white], angle[white]
     s = width_full / width
     xy = np.stack([(x + 0.5) * s - 0.5, (y + 0.5) * s - 0.5], axis=1)
@@ -191,7 +192,8 @@ def grain(gray: np.ndarray, where: np.ndarray) -> float:
     :data:`GRAIN_STRIDE`-th pixel; noise,
     film grain and compression; lines are too few and stripes or shade too smooth to move it); 0
     where fewer than 100 pixels are given."""
-    residual = (gray - cv2.GaussianBlur(gray, (0, 0), GRAIN_BLUR))[where > 0][::GRAIN_STRIDE]
+    idx = np.flatnonzero(where)[::GRAIN_STRIDE]  # the sampled pixels only: the residual of no other is read
+    residual = gray.ravel()[idx] - cv2.GaussianBlur(gray, (0, 0), GRAIN_BLUR).ravel()[idx]
     if len(residual) < 100:
         return 0.0
     return 1.4826 * float(np.median(np.abs(residual - np.median(residual))))

@@ -45,6 +45,25 @@ def test_points_behind_the_camera_or_past_the_fold_are_nan():
     assert np.isnan(strong.project(far)).all()
 
 
+def test_a_batch_of_cameras_projects_as_each_alone():
+    # project_many takes each lens's fold radius from the scalar root for a few lenses and the vectorised
+    # one for many: 20 cameras (some folding in view) in one batch give each camera's own projection
+    from glradial.camera.model import project_many
+
+    rng = np.random.default_rng(3)
+    cams = [Camera(c.rotation, c.position, c.focal, c.size, Lens(k1, 0.1 * k1 * k1))
+            for c in CAMERAS[:1] for k1 in rng.uniform(-0.7, 0.3, 20)]
+    pts = np.column_stack([rng.uniform(-150, 150, (300, 2)), np.zeros(300)])
+    many = project_many(np.stack([c.rotation for c in cams]), np.stack([c.position for c in cams]),
+                        np.array([c.focal for c in cams]), np.array([c.lens.k1 for c in cams]),
+                        np.array([c.lens.k2 for c in cams]), cams[0].size, pts)
+    alone = np.stack([c.project(pts) for c in cams])
+    ahead = np.stack([c.undistorted_lens_points(pts)[1] > 0 for c in cams])
+    assert (np.isnan(alone).any(-1) & ahead).any() and np.isfinite(alone).any()  # some folded, some seen
+    np.testing.assert_allclose(many, alone, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(np.isnan(many), np.isnan(alone))
+
+
 @pytest.mark.parametrize("cam", CAMERAS)
 def test_homography_is_the_pinhole_projection_of_the_plane(cam):
     pts = np.random.default_rng(1).uniform([-50, -30], [50, 30], (50, 2))
