@@ -79,19 +79,36 @@ def make_clip(path: Path, size: tuple[int, int], frames: int, kind: str, source:
     video = path.with_name("video_only.mp4")
     with VideoWriter(video, VideoInfo.of(size, 25, codec="libx264"), options=EncodeOptions(crf=18), overwrite=True) as writer:
         for i in range(frames):
-            t = i / max(frames - 1, 1)
-            if kind == "pan":
-                crop_w, k1 = int(width * 0.8), -0.2
-                x0 = int(t * (width - crop_w))
-            else:
-                crop_w, k1 = int(width * (0.9 - 0.25 * t)), -0.30 + 0.12 * t
-                x0 = (width - crop_w) // 2
+            crop_w, x0, k1 = _view(kind, i, frames, width)
             crop_h = crop_w * size[1] // size[0]
             y0 = (height - crop_h) // 2
             frame = cv2.resize(picture[y0 : y0 + crop_h, x0 : x0 + crop_w], size, interpolation=cv2.INTER_CUBIC)
             writer.write(glradial.distort(frame, k1, 0.019 * k1 + 0.805 * k1 * k1, backend="cpu"))
     subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(video), "-f", "lavfi", "-i", "sine=frequency=440:sample_rate=48000",
                     "-c:v", "copy", "-c:a", "aac", "-shortest", str(path)], check=True)
+
+
+#: ``--clip cuts``: frames per shot (6 s at 25 fps) and each shot's (kind, lens k1): a pan, a
+#: zoom, a static shot, a pan back, a tighter static shot, then again
+CUT_SHOT_FRAMES = 150
+CUT_SHOTS = (("pan", -0.2), ("zoom", 0.0), ("static", -0.12), ("pan back", -0.28), ("static tight", -0.06))
+
+
+def _view(kind: str, i: int, frames: int, width: int) -> tuple[int, int, float]:
+    """Frame ``i``'s crop of the picture (width, left edge, px) and lens k1 for clip ``kind``."""
+    k1 = -0.2  # the pan's lens
+    if kind == "cuts":
+        kind, k1 = CUT_SHOTS[(i // CUT_SHOT_FRAMES) % len(CUT_SHOTS)]
+        frames, i = CUT_SHOT_FRAMES, i % CUT_SHOT_FRAMES
+    t = i / max(frames - 1, 1)
+    if kind in ("pan", "pan back"):
+        crop_w = int(width * 0.8)
+        return crop_w, int((t if kind == "pan" else 1.0 - t) * (width - crop_w)), k1
+    if kind == "zoom":
+        crop_w = int(width * (0.9 - 0.25 * t))
+        return crop_w, (width - crop_w) // 2, -0.30 + 0.12 * t
+    crop_w = int(width * (0.55 if kind == "static tight" else 0.85))
+    return crop_w, (width - crop_w) // 3, k1
 
 
 def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
@@ -209,7 +226,7 @@ def stage_times(clip: Path, folder: Path, frames: int = 24) -> dict[str, float]:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", default="1920x1080")
-    parser.add_argument("--clip", choices=("pan", "zoom"), default="pan")
+    parser.add_argument("--clip", choices=("pan", "zoom", "cuts"), default="pan")
     parser.add_argument("--frame", type=Path, default=None,
                         help="picture the clip is made from (default: the frame shipped in glradial/data)")
     parser.add_argument("--frames", type=int, default=150)
