@@ -47,7 +47,7 @@ from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .pipelined import Pipelined
 from .shot_evidence import ShotCollector
-from .shot_fit import FittedShotLens, fit_shot
+from .shot_fit import FittedShotLens, fit_shot, load_solver
 
 __all__ = ["track_shots", "CutCheck", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO",
            "ESTIMATE_WIDTH"]
@@ -93,6 +93,8 @@ class _Shots:
         self.doubtful_px, self.radius = doubtful_px, radius
         self._workers = tuple(ThreadPoolExecutor(1, thread_name_prefix=f"glradial-{job}")
                               for job in ("estimate", "fit", "motion")) if ahead else None
+        if ahead:
+            self._workers[1].submit(load_solver)  # while the first frames decode
         self._run = estimator
         self.estimator = estimator if not ahead else lambda frame: self._workers[0].submit(estimator, frame).result()
         self.starts: list[int] = []
