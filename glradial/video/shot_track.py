@@ -43,6 +43,7 @@ from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
 from ..media.video_io import VideoReader, frame_timestamps
+from ..threads import thread_budget
 from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .pipelined import Pipelined
@@ -173,14 +174,17 @@ def track_shots(
     rate of an image-sequence input (default 25); ``sparse=False`` decodes every frame even where
     the stream allows the sparse decode; ``ahead=False`` calls ``estimator`` on this thread, one
     sample after the other (``True``: on a worker thread, ahead of the samples' other evidence,
-    and the shots' fits on another: :class:`_Shots`; the same track)."""
+    and the shots' fits on another: :class:`_Shots`; the same track; not where the process's
+    thread budget is one core, :func:`glradial.threads.thread_budget`: a job's worker)."""
     for name, value in (("every", every), ("estimate_every", estimate_every)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     if not doubtful_px > 0:
         raise ValueError(f"doubtful_px must be > 0 (px at 1920), got {doubtful_px!r}")
-    if not isinstance(sparse, (bool, np.bool_)):
-        raise TypeError(f"sparse must be a bool, got {sparse!r}")
+    for name, value in (("sparse", sparse), ("ahead", ahead)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool, got {value!r}")
+    ahead = bool(ahead) and thread_budget() != 1  # one core: the workers would only take turns
     detector = detector or ShotDetector()
     fresh = copy.deepcopy(detector)
     with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:

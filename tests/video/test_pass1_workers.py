@@ -100,3 +100,14 @@ def test_an_estimator_error_reaches_the_caller_and_ends_the_workers(clip):
     with pytest.raises(RuntimeError, match="estimator failed"):
         shot_track.track_shots(clip, Estimator(fail_at=3), every=4, progress=False, ahead=True)
     assert not [t for t in threading.enumerate() if t.name.startswith(("glradial-estimate", "glradial-fit", "glradial-motion"))]
+
+
+def test_one_core_runs_in_turn_and_ahead_must_be_a_bool(clip, monkeypatch):
+    from glradial import threads
+
+    monkeypatch.setitem(threads._BUDGET, "threads", 1)  # a job's worker with one core
+    estimator = Estimator()
+    shot_track.track_shots(clip, estimator, every=8, progress=False, ahead=True)
+    assert estimator.threads == {threading.get_ident()}
+    with pytest.raises(TypeError, match="ahead must be a bool, got 'yes'"):
+        shot_track.track_shots(clip, estimator, ahead="yes")
