@@ -4,7 +4,8 @@ Makes one clip in a temporary folder (``--size``, ``--frames`` at 25 fps, H.264 
 ``--clip pan`` (default) a broadcast camera panning across a real USL match frame
 (the one shipped in the package, glradial/data/usl_broadcast_0195.jpg, or ``--frame``) through a constant lens (k1 -0.2, k2 0.03), the
 common case; ``--clip zoom`` the same frame zooming in (hfov -25 %) while the lens goes from
-k1 -0.30 to -0.18, so the shot's lens, and the maps, change on every frame. Then it times, each ``--repeats`` times taking turns (so that load
+k1 -0.30 to -0.18, so the shot's lens, and the maps, change on every frame; ``--clip cuts`` what users
+bring, several shots cut together (:data:`CUT_SHOTS`, 6 s each; ``--frames 750``: 30 s, five shots). Then it times, each ``--repeats`` times taking turns (so that load
 from other processes on a shared machine falls on all alike), keeping the best run of each:
 
 * ``ffmpeg``       the ffmpeg command transcoding the clip with the same codec settings and no
@@ -24,7 +25,9 @@ from other processes on a shared machine falls on all alike), keeping the best r
                    (``cpu_maps(..., float_maps=False)``, as before 2026-11-25's float maps)
 
 and prints frames per second and the ratios the issue sets targets for: fixed lens / ffmpeg
-(>= 0.8) and --auto / fixed lens (>= 0.8). First it times the maps of a new lens at the clip's
+(>= 0.8) and --auto / fixed lens (>= 0.8), in wall-clock time and in CPU time (every thread of
+this process, and ffmpeg's: :func:`cpu_seconds`; on a shared machine the wall clock measures the
+load, and where the cores are few pass 1's threads and pass 2's encoder share them). First it times the maps of a new lens at the clip's
 size: ``Lens.maps`` (float32, OpenCV) against the float64 NumPy reference, and the CPU path's whole
 ``cpu_maps`` (maps + fixed-point conversion + source-less pixels; or float maps, the planar
 YUV path's) of the frame and of a 4:2:0 chroma plane, each a new lens every call.
@@ -39,6 +42,7 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -79,19 +83,36 @@ def make_clip(path: Path, size: tuple[int, int], frames: int, kind: str, source:
     video = path.with_name("video_only.mp4")
     with VideoWriter(video, VideoInfo.of(size, 25, codec="libx264"), options=EncodeOptions(crf=18), overwrite=True) as writer:
         for i in range(frames):
-            t = i / max(frames - 1, 1)
-            if kind == "pan":
-                crop_w, k1 = int(width * 0.8), -0.2
-                x0 = int(t * (width - crop_w))
-            else:
-                crop_w, k1 = int(width * (0.9 - 0.25 * t)), -0.30 + 0.12 * t
-                x0 = (width - crop_w) // 2
+            crop_w, x0, k1 = _view(kind, i, frames, width)
             crop_h = crop_w * size[1] // size[0]
             y0 = (height - crop_h) // 2
             frame = cv2.resize(picture[y0 : y0 + crop_h, x0 : x0 + crop_w], size, interpolation=cv2.INTER_CUBIC)
             writer.write(glradial.distort(frame, k1, 0.019 * k1 + 0.805 * k1 * k1, backend="cpu"))
     subprocess.run(["ffmpeg", "-v", "error", "-y", "-i", str(video), "-f", "lavfi", "-i", "sine=frequency=440:sample_rate=48000",
                     "-c:v", "copy", "-c:a", "aac", "-shortest", str(path)], check=True)
+
+
+#: ``--clip cuts``: frames per shot (6 s at 25 fps) and each shot's (kind, lens k1): a pan, a
+#: zoom, a static shot, a pan back, a tighter static shot, then again
+CUT_SHOT_FRAMES = 150
+CUT_SHOTS = (("pan", -0.2), ("zoom", 0.0), ("static", -0.12), ("pan back", -0.28), ("static tight", -0.06))
+
+
+def _view(kind: str, i: int, frames: int, width: int) -> tuple[int, int, float]:
+    """Frame ``i``'s crop of the picture (width, left edge, px) and lens k1 for clip ``kind``."""
+    k1 = -0.2  # the pan's lens
+    if kind == "cuts":
+        kind, k1 = CUT_SHOTS[(i // CUT_SHOT_FRAMES) % len(CUT_SHOTS)]
+        frames, i = CUT_SHOT_FRAMES, i % CUT_SHOT_FRAMES
+    t = i / max(frames - 1, 1)
+    if kind in ("pan", "pan back"):
+        crop_w = int(width * 0.8)
+        return crop_w, int((t if kind == "pan" else 1.0 - t) * (width - crop_w)), k1
+    if kind == "zoom":
+        crop_w = int(width * (0.9 - 0.25 * t))
+        return crop_w, (width - crop_w) // 2, -0.30 + 0.12 * t
+    crop_w = int(width * (0.55 if kind == "static tight" else 0.85))
+    return crop_w, (width - crop_w) // 3, k1
 
 
 def pyav_transcode(source: Path, target: Path, crf: float, preset: str) -> None:
@@ -209,7 +230,7 @@ def stage_times(clip: Path, folder: Path, frames: int = 24) -> dict[str, float]:
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--size", default="1920x1080")
-    parser.add_argument("--clip", choices=("pan", "zoom"), default="pan")
+    parser.add_argument("--clip", choices=("pan", "zoom", "cuts"), default="pan")
     parser.add_argument("--frame", type=Path, default=None,
                         help="picture the clip is made from (default: the frame shipped in glradial/data)")
     parser.add_argument("--frames", type=int, default=150)
@@ -226,9 +247,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip: Path) -> tuple[dict, dict, dict]:
-    """``(best, passes, stages)``: the best time (s) of each path over ``args.repeats`` turns, the
-    best times of ``--auto``'s two passes (s) and the correction stage alone (ms/frame)."""
+def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip: Path) -> tuple[dict, dict, dict, dict]:
+    """``(best, passes, stages, cpu)``: the best time (s) of each path over ``args.repeats`` turns,
+    the best times of ``--auto``'s two passes (s), the correction stage alone (ms/frame) and the
+    least CPU time (s, :func:`cpu_seconds`) of each path and pass."""
     options = EncodeOptions(codec="libx264", crf=args.crf, preset=args.preset)
     estimator = default_estimator()
 
@@ -249,16 +271,19 @@ def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip
             video_pipeline.correction_space = space
 
     passes: dict[str, float] = {"pass 1": float("inf"), "pass 2": float("inf")}
+    passes_cpu: dict[str, float] = dict(passes)
 
     def auto() -> None:
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), cpu_seconds()
         # doubtful shots applied too: the correction pass does the same work as the fixed lens
         track = track_video(clip, estimator, progress=False, apply_doubtful=True)
-        middle = time.perf_counter()
+        middle, middle_cpu = time.perf_counter(), cpu_seconds()
         correct_video(clip, tmp / "auto.mp4", track.lens_for, backend=args.backend, progress=False,
                       options=options, overwrite=True, frames_expected=track.n_frames)
         passes["pass 1"] = min(passes["pass 1"], middle - start)
         passes["pass 2"] = min(passes["pass 2"], time.perf_counter() - middle)
+        passes_cpu["pass 1"] = min(passes_cpu["pass 1"], middle_cpu - start_cpu)
+        passes_cpu["pass 2"] = min(passes_cpu["pass 2"], cpu_seconds() - middle_cpu)
 
     def fixed_32() -> None:  # the planes from fixed-point maps (as before the float maps)
         with fixed_point_maps():
@@ -281,16 +306,26 @@ def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip
             raise SystemExit(f"--paths: unknown {unknown}; choose from {sorted(paths)}")
         paths = {name: run for name, run in paths.items() if name in wanted}
     best = {name: float("inf") for name in paths}
+    cpu = dict(best)
     for _ in range(args.repeats):
         for name, run in paths.items():
-            start = time.perf_counter()
+            start, start_cpu = time.perf_counter(), cpu_seconds()
             run()
             best[name] = min(best[name], time.perf_counter() - start)
-    return best, passes, stages
+            cpu[name] = min(cpu[name], cpu_seconds() - start_cpu)
+    return best, passes, stages, {**cpu, **passes_cpu}
 
 
-def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict) -> dict:
-    """Print the figures and return them (frames/s, ms/frame and the ratios the targets name)."""
+def cpu_seconds() -> float:
+    """CPU time (s, user + system, every thread) of this process and of its waited-for children
+    (the ffmpeg command): the measure of work that a shared machine's load does not inflate much."""
+    children = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + children.ru_utime + children.ru_stime
+
+
+def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict, cpu: dict) -> dict:
+    """Print the figures and return them (frames/s, ms/frame and the ratios the targets name, in
+    wall-clock time and in CPU time: ``cpu`` (s) per path and pass, :func:`cpu_seconds`)."""
     fps = {name: args.frames / seconds for name, seconds in best.items()}
     ms = {name: 1e3 * seconds / args.frames for name, seconds in {**best, **passes}.items()}
     pairs = {"fixed / ffmpeg": ("fixed lens", "ffmpeg"), "fixed / pyav": ("fixed lens", "pyav"),
@@ -302,18 +337,22 @@ def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict) -> 
     ratios.update({name: best[a] / best[b] for name, (a, b) in times.items() if a in best and b in best})
     if "pass 1, all" in best:
         ratios["pass 1 sparse / all (time)"] = passes["pass 1"] / best["pass 1, all"]
+    cpu_ms = {name: 1e3 * seconds / args.frames for name, seconds in cpu.items()}
+    ratios.update({f"{name} (CPU)": cpu[b] / cpu[a] for name, (a, b) in pairs.items() if a in cpu and b in cpu})
     print(f"clip: {args.clip} over {args.frame.name}, {args.size}, {args.frames} frames, H.264 + AAC; encoder libx264 crf {args.crf:g} preset {args.preset}; "
           f"backend {args.backend}; {os.cpu_count()} CPU cores; best of {args.repeats}; load average {os.getloadavg()[0]:.1f}")
     for name, value in fps.items():
         print(f"  {name:19s} {value:6.1f} frames/s")
     print(f"  --auto pass 1 (decode, cuts, shot evidence and fit) {ms['pass 1']:.1f} ms/frame, pass 2 (correct + encode) "
           f"{ms['pass 2']:.1f} ms/frame; fixed lens {ms.get('fixed lens', math.nan):.1f} ms/frame")
+    print("  CPU ms/frame (every thread, ffmpeg's process too): "
+          + ", ".join(f"{name} {value:.1f}" for name, value in cpu_ms.items()))
     print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
           f"YUV {stages['YUV']:.1f} ms/frame, YUV from 1/32-px maps {stages['YUV 1/32']:.1f} ms/frame")
     for name, value in ratios.items():
-        target = "  (target >= 0.8)" if name in ("fixed / ffmpeg", "--auto / fixed") else ""
+        target = "  (target >= 0.8)" if name.split(" (")[0] in ("fixed / ffmpeg", "--auto / fixed") else ""
         print(f"{name:34s}: {value:.2f}{target}")
-    return {"fps": fps, "ms_per_frame": ms, "correction_stage_ms_per_frame": stages, "ratios": ratios,
+    return {"fps": fps, "ms_per_frame": ms, "cpu_ms_per_frame": cpu_ms, "correction_stage_ms_per_frame": stages, "ratios": ratios,
             "clip": args.clip, "size": args.size, "frames": args.frames, "preset": args.preset, "crf": args.crf,
             "backend": args.backend, "repeats": args.repeats, "paths": list(best),
             "load_average_1_5_15": [round(v, 1) for v in os.getloadavg()]}
@@ -330,8 +369,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as folder:
         clip = Path(folder) / "clip.mp4"
         make_clip(clip, size, args.frames, args.clip, args.frame)
-        best, passes, stages = timed_paths(args, size, Path(folder), clip)
-    results = report(args, best, passes, stages)
+        best, passes, stages, cpu = timed_paths(args, size, Path(folder), clip)
+    results = report(args, best, passes, stages, cpu)
     write_figure(f"bench_video_{args.clip}_{args.size}", {**results, "new_lens_maps_ms": maps})
     return 0
 

@@ -45,7 +45,7 @@ from ..lens.options import LIVE_WORKERS, UNTIL_SURE, check_choice
 from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX
 from .shot_evidence import ShotCollector
-from .shot_fit import fit_shot
+from .shot_fit import fit_shot, load_solver
 from .shot_track import ESTIMATE_EVERY, EVERY, SAMPLES_PER_STRIDE
 
 __all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY", "worker_reply", "serve_jobs",
@@ -157,7 +157,11 @@ def _serve(connection, estimator: Callable, estimate_every: int, doubtful_px: fl
         k1, k2 = (float(v) for v in result.lens_at(collector.evidence.zoom[-1]))
         return shot, _Fit(Lens(k1, k2), float(result.uncertainty_px), bool(result.doubtful), result.reason)
 
-    serve_jobs(connection, lambda: estimator(np.full((SAMPLE_WIDTH * 9 // 16, SAMPLE_WIDTH, 3), 96, np.uint8)), answer, duty)
+    def warm_up():  # the solver's import and the estimator's first run, before the worker says it is ready
+        load_solver()
+        return estimator(np.full((SAMPLE_WIDTH * 9 // 16, SAMPLE_WIDTH, 3), 96, np.uint8))
+
+    serve_jobs(connection, warm_up, answer, duty)
 
 
 class WarmWorker:

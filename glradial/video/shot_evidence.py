@@ -9,6 +9,7 @@ previous sample's small gray copy is kept.
 from __future__ import annotations
 
 import math
+from concurrent.futures import Executor, Future
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -69,40 +70,67 @@ class ShotCollector:
         self._hint: tuple[float, float] = (0.0, 0.0)
         self._hint_px = math.inf
         self._anchors: list[_Anchor] = []
+        self._moving: list[Future] = []
 
-    def add(self, index: int, frame: np.ndarray) -> None:
-        """Add the sampled frame ``index`` (uint8 RGB, any size up to the estimate width)."""
+    def due(self, n: int) -> bool:
+        """Whether the ``n``-th sample of the shot (0 = its first) gets the per-frame estimate
+        whatever its chains (every ``estimate_every``-th)."""
+        return n % self.estimate_every == 0
+
+    def add(self, index: int, frame: np.ndarray, estimated: Callable[[], Lens] | None = None,
+            motion: Executor | None = None) -> None:
+        """Add the sampled frame ``index`` (uint8 RGB, any size up to the estimate width).
+        ``estimated``: where the sample is :meth:`due`, a call that returns ``estimator(frame)``
+        computed ahead (e.g. a future's ``result`` from a worker thread), used in its place.
+        ``motion``: a one-thread executor that finds the sample's matches and zoom (with the hint
+        of this moment) while the caller goes on; :meth:`finish` waits for them."""
         if not isinstance(frame, np.ndarray) or frame.dtype != np.uint8 or frame.ndim != 3 or frame.shape[2] != 3:
             raise ValueError(f"frame must be a uint8 H x W x 3 RGB array, got {getattr(frame, 'dtype', type(frame).__name__)} "
                              f"{getattr(frame, 'shape', '')}")
         n = len(self.evidence.samples)
-        estimate = self._estimate(index, frame) if n % self.estimate_every == 0 else None
+        estimate = self._estimate(index, frame, estimated) if self.due(n) else None
         chains = detect_chains(frame, lens_hint=self._hint)
         if estimate is None and (chains is None or len(chains.chains) < FEW_CHAINS):
             estimate = self._estimate(index, frame)  # little to read but the estimate itself
         self.evidence.samples.append(ShotSample(index, chains, estimate))
+        if motion is None:
+            self._motion(n, frame, self._hint)
+        else:
+            self._moving.append(motion.submit(self._motion, n, frame, self._hint))
+
+    def finish(self) -> ShotEvidence:
+        """The shot's evidence, once the matches handed to a ``motion`` executor are found."""
+        moving, self._moving = self._moving, []
+        for job in moving:
+            job.result()
+        return self.evidence
+
+    def _motion(self, n: int, frame: np.ndarray, hint: tuple[float, float]) -> None:
+        """Sample ``n``'s matches with the earlier samples (lens ``hint``) and its zoom."""
         gray = motion_gray(frame)
         zoom = self.evidence.zoom[-1] if self.evidence.zoom else 0.0
         if self._previous is not None and self._previous.shape == gray.shape:
-            zoom += self._step(n, gray)
+            zoom += self._step(n, gray, hint)
         self.evidence.zoom.append(zoom)
         self._previous = gray
         if not self._anchors or self._anchors[-1].travel >= ANCHOR_TRAVEL:
             self._anchors = (self._anchors + [_Anchor(n, gray)])[-MAX_ANCHORS:]
 
-    def _estimate(self, index: int, frame: np.ndarray) -> Lens:
-        """The per-frame estimate of sample ``index``, kept; the surest so far becomes the hint."""
-        estimate = as_lens(self.estimator(frame))  # a plain (k1, k2) as the centred lens
+    def _estimate(self, index: int, frame: np.ndarray, estimated: Callable[[], Lens] | None = None) -> Lens:
+        """The per-frame estimate of sample ``index`` (``estimated()`` where given), kept; the
+        surest so far becomes the hint."""
+        found = estimated() if estimated is not None else self.estimator(frame)
+        estimate = as_lens(found)  # a plain (k1, k2) as the centred lens
         self.estimates.append((index, estimate))
         sure = float(getattr(estimate, "uncertainty_px", math.inf))
         if sure <= self._hint_px:  # the surest estimate so far guides the detector and matcher
             self._hint, self._hint_px = (estimate.k1, estimate.k2), sure
         return estimate
 
-    def _step(self, n: int, gray: np.ndarray) -> float:
+    def _step(self, n: int, gray: np.ndarray, hint: tuple[float, float]) -> float:
         """Match sample ``n`` with the previous sample and with its anchors; the log zoom since the
         previous sample (0 when they do not match: the anchors are then dropped, their motion lost)."""
-        step = self._pair(n - 1, self._previous, n, gray, None)
+        step = self._pair(n - 1, self._previous, n, gray, None, hint)
         if step is None:
             self._anchors = []
             return 0.0
@@ -113,14 +141,15 @@ class ShotCollector:
         for anchor in self._anchors:
             anchor.moved, anchor.travel = step @ anchor.moved, anchor.travel + shift
             if anchor.sample != n - 1 and ANCHOR_TRAVEL <= anchor.travel <= ANCHOR_REACH:
-                self._pair(anchor.sample, anchor.gray, n, gray, anchor.moved)
+                self._pair(anchor.sample, anchor.gray, n, gray, anchor.moved, hint)
         self._anchors = [a for a in self._anchors if a.travel <= ANCHOR_REACH]
         return log_zoom
 
-    def _pair(self, i: int, a: np.ndarray, j: int, b: np.ndarray, guess: np.ndarray | None) -> np.ndarray | None:
+    def _pair(self, i: int, a: np.ndarray, j: int, b: np.ndarray, guess: np.ndarray | None,
+              hint: tuple[float, float]) -> np.ndarray | None:
         """Match samples ``i`` and ``j``, keep the pair as evidence and return its homography
-        (hint-undistorted lens units), or ``None`` (no match or no usable homography)."""
-        matches = match_frames(a, b, self._hint, guess)
+        (``hint``-undistorted lens units), or ``None`` (no match or no usable homography)."""
+        matches = match_frames(a, b, hint, guess)
         if matches is None:
             return None
         h = matches.homography

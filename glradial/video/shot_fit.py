@@ -76,8 +76,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.optimize import least_squares, minimize_scalar
-from scipy.stats import norm
+from scipy.special import ndtri
 
 from ..estimation.line_fit import (
     K1_PRIOR_SIGMA,
@@ -96,7 +95,7 @@ from ..lens.metrics import CORNER_RADIUS_16_9, REPORT_WIDTH, manifold_k2, max_di
 from .frame_motion import Matches, homography_of
 from .lens_track import DOUBTFUL_PX
 
-__all__ = ["ShotSample", "ShotEvidence", "FittedShotLens", "fit_shot", "joint_fit", "ZOOM_MIN", "BOUND_SCALE",
+__all__ = ["ShotSample", "ShotEvidence", "FittedShotLens", "fit_shot", "joint_fit", "load_solver", "ZOOM_MIN", "BOUND_SCALE",
            "STATIC_BOUND_SCALE", "BOUND_FLOOR_PX"]
 
 #: a shot whose sampled log zoom spans more than this (about 6 % in focal length) gets the zoom model
@@ -146,7 +145,7 @@ ZOOM_FRAMES_MIN = (2, 3)
 SLOPE_RANGE, SLOPE_GRID = (-2.0, 2.0), 41
 LEVEL_STEP = 0.01
 #: a stated ~90 % bound over this is its 1-sigma (the two-sided 90 % point of a normal)
-Z90 = float(norm.ppf(0.95))
+Z90 = float(ndtri(0.95))
 #: a shot has geometric evidence of its lens when at least this many chains pass screening...
 MIN_CHAINS = 2
 #: ...or the camera panned at least this far (frame widths). A static camera's frame pairs say
@@ -224,6 +223,12 @@ class FittedShotLens:
     def lens_at(self, log_zoom: float | np.ndarray) -> np.ndarray:
         """``(k1, k2)`` at the log zoom(s) given (``(..., 2)``)."""
         return _lens(np.asarray(self.theta, np.float64), np.asarray(log_zoom, np.float64) - self.centre)
+
+
+def load_solver() -> None:
+    """Import the fit's solver (``scipy.optimize``: about half a second of CPU the first time) now,
+    e.g. on a worker thread while the first frames decode, rather than at the first shot's fit."""
+    import scipy.optimize  # noqa: F401
 
 
 def _lens(theta: np.ndarray, z: np.ndarray) -> np.ndarray:
@@ -392,6 +397,8 @@ class _Problem:
 
     def solve(self, theta: np.ndarray):
         scale = PARAMETER_SCALE[: len(theta) - 1] + PARAMETER_SCALE[-1:]
+        from scipy.optimize import least_squares  # the solver's import (~0.5 s): load_solver
+
         return least_squares(self.residuals, theta, x_scale=np.asarray(scale), diff_step=1e-4, max_nfev=100)
 
 
@@ -575,6 +582,8 @@ def _slope_of_pairs(evidence: ShotEvidence, centre: float, zbar: float, level: f
         def cost(a1: float) -> float:
             r = matches.residuals(_lens(np.array([at_level - a1 * zbar, a1, 0.0, b0]), z))
             return float(r @ r)
+
+        from scipy.optimize import minimize_scalar
 
         return float(minimize_scalar(cost, bounds=bounds, method="bounded", options={"xatol": 1e-4}).x)
 

@@ -30,6 +30,8 @@ from __future__ import annotations
 
 import copy
 import os
+from collections import deque
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import replace
 from fractions import Fraction
 from typing import Callable
@@ -41,11 +43,12 @@ from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
 from ..media.progress import Progress
 from ..media.video_io import VideoReader, frame_timestamps
+from ..threads import thread_budget
 from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX, LensTrack
 from .pipelined import Pipelined
 from .shot_evidence import ShotCollector
-from .shot_fit import FittedShotLens, fit_shot
+from .shot_fit import FittedShotLens, fit_shot, load_solver
 
 __all__ = ["track_shots", "CutCheck", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO",
            "ESTIMATE_WIDTH"]
@@ -67,33 +70,87 @@ DETECT_WIDTH = 64
 #: 1-3 apart, so a camera's own motion scores higher than from frame to frame: 1.3x on a panning
 #: held-out clip, proc_5 of scripts/make_clips.py --set check), then :class:`CutCheck` decides
 CANDIDATE_RATIO = 0.5
+#: samples whose estimate runs ahead on a worker thread before their chains and matches are found
+#: (:class:`_Shots`): the estimator of one sample overlaps the line detection and matching of the
+#: ones before it
+LOOKAHEAD = 2
 
 
 class _Shots:
-    """The shots closed so far: their first frame, lens, and the frames and zooms sampled."""
+    """The shots closed so far: their first frame, lens, and the frames and zooms sampled.
 
-    def __init__(self, estimator: Callable, estimate_every: int, doubtful_px: float, radius: float) -> None:
-        self.estimator, self.estimate_every = estimator, estimate_every
+    With ``ahead``, pass 1's work runs on three worker threads beside the caller's (which decodes,
+    detects cuts and finds each sample's line chains): the estimator (every call of it, so one
+    thread uses it), started on a sample due for an estimate (:meth:`ShotCollector.due`) as soon
+    as it is sampled and read :data:`LOOKAHEAD` samples later; each sample's matches and zoom,
+    found with the hint of the moment its chains were found; each closed shot's joint fit, while
+    the next shot is scanned. Every step gets the inputs it gets in turn (the estimator and the
+    fit are functions of their input), so the track is the same; only the estimator's calls may
+    come in another order (a sample's own estimate, when it has few chains, after the next due one)."""
+
+    def __init__(self, estimator: Callable, estimate_every: int, doubtful_px: float, radius: float,
+                 ahead: bool = True) -> None:
+        self.estimate_every = estimate_every
         self.doubtful_px, self.radius = doubtful_px, radius
+        self._workers = tuple(ThreadPoolExecutor(1, thread_name_prefix=f"glradial-{job}")
+                              for job in ("estimate", "fit", "motion")) if ahead else None
+        if ahead:
+            self._workers[1].submit(load_solver)  # while the first frames decode
+        self._run = estimator
+        self.estimator = estimator if not ahead else lambda frame: self._workers[0].submit(estimator, frame).result()
         self.starts: list[int] = []
-        self.fits: list[FittedShotLens] = []
+        self._fits: list[Future | FittedShotLens] = []
         self.sampled: list[tuple[np.ndarray, np.ndarray]] = []
         self.estimates: list[tuple[int, Lens]] = []
         self.collector: ShotCollector | None = None
+        self._pending: deque = deque()
+        self._queued = 0
 
     def open(self, index: int) -> None:
         self.close()
         self.starts.append(index)
         self.collector = ShotCollector(self.estimator, self.estimate_every)
+        self._queued = 0
+
+    def add(self, index: int, frame: np.ndarray) -> None:
+        """Sample frame ``index`` of the open shot (its evidence found now, or :data:`LOOKAHEAD` samples on)."""
+        self._queued += 1
+        if self._workers is None:
+            self.collector.add(index, frame)
+            return
+        due = self.collector.due(self._queued - 1)
+        self._pending.append((index, frame, self._workers[0].submit(self._run, frame).result if due else None))
+        while len(self._pending) > LOOKAHEAD:
+            self.collector.add(*self._pending.popleft(), motion=self._workers[2])
 
     def close(self) -> None:
         if self.collector is None:
             return
-        evidence = self.collector.evidence
-        self.fits.append(fit_shot(evidence, doubtful_px=self.doubtful_px, radius=self.radius))
+        while self._pending:
+            self.collector.add(*self._pending.popleft(), motion=self._workers[2])
+        evidence = self.collector.finish()
+        fit = dict(doubtful_px=self.doubtful_px, radius=self.radius)
+        self._fits.append(fit_shot(evidence, **fit) if self._workers is None else self._workers[1].submit(fit_shot, evidence, **fit))
         self.sampled.append((np.array([s.frame for s in evidence.samples]), np.asarray(evidence.zoom, np.float64)))
         self.estimates.extend(self.collector.estimates)
         self.collector = None
+
+    @property
+    def sampled_in_shot(self) -> int:
+        """Samples taken of the open shot so far (their evidence found or pending)."""
+        return self._queued
+
+    @property
+    def fits(self) -> list[FittedShotLens]:
+        """The shots' fits (waiting for those still running)."""
+        self._fits = [fit.result() if isinstance(fit, Future) else fit for fit in self._fits]
+        return self._fits
+
+    def stop(self) -> None:
+        """End the workers (what is queued and not started is dropped)."""
+        if self._workers is not None:
+            for worker in self._workers:
+                worker.shutdown(wait=True, cancel_futures=True)
 
 
 def track_shots(
@@ -108,34 +165,42 @@ def track_shots(
     apply_doubtful: bool = False,
     rate: Fraction | None = None,
     sparse: bool = True,
+    ahead: bool = True,
 ) -> LensTrack:
     """Pass 1 (module docstring): the :class:`LensTrack` of the video at ``path``. ``estimator``
     maps a uint8 RGB frame to a lens; ``every`` (frames) is the sampling stride, ``estimate_every``
     (samples) how often the estimator runs; ``doubtful_px`` (px at 1920) the bound above which a
     shot is doubtful; ``apply_doubtful`` applies doubtful shots' lenses anyway; ``rate`` the frame
     rate of an image-sequence input (default 25); ``sparse=False`` decodes every frame even where
-    the stream allows the sparse decode."""
+    the stream allows the sparse decode; ``ahead=False`` calls ``estimator`` on this thread, one
+    sample after the other (``True``: on a worker thread, ahead of the samples' other evidence,
+    and the shots' fits on another: :class:`_Shots`; the same track; not where the process's
+    thread budget is one core, :func:`glradial.threads.thread_budget`: a job's worker)."""
     for name, value in (("every", every), ("estimate_every", estimate_every)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
     if not doubtful_px > 0:
         raise ValueError(f"doubtful_px must be > 0 (px at 1920), got {doubtful_px!r}")
-    if not isinstance(sparse, (bool, np.bool_)):
-        raise TypeError(f"sparse must be a bool, got {sparse!r}")
+    for name, value in (("sparse", sparse), ("ahead", ahead)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise TypeError(f"{name} must be a bool, got {value!r}")
+    ahead = bool(ahead) and thread_budget() != 1  # one core: the workers would only take turns
     detector = detector or ShotDetector()
     fresh = copy.deepcopy(detector)
     with VideoReader(path, order="rgb", max_width=DETECT_WIDTH, keep_decoded=True, rate=rate) as reader:
         info = reader.info
         order = frame_timestamps(path) if sparse and info.fields == "progressive" else None
-        shots = _Shots(estimator, estimate_every, doubtful_px, corner_radius(info.size))
+        shots = _Shots(estimator, estimate_every, doubtful_px, corner_radius(info.size), ahead)
         check = CutCheck(path, order, detector, rate=rate) if order is not None else None
         try:
             stamps = _scan(reader, order, detector, shots, every, progress, check)
+            shots.fits  # noqa: B018 -- waits for the last fits before the workers end
         except _Unnumbered:  # the decoder's timestamps do not match the packets': decode every frame
             return track_shots(path, estimator, every=every, estimate_every=estimate_every, detector=fresh,
                                progress=progress, doubtful_px=doubtful_px, apply_doubtful=apply_doubtful, rate=rate,
-                               sparse=False)
+                               sparse=False, ahead=ahead)
         finally:
+            shots.stop()
             if check is not None:
                 check.close()
     return _track(info, stamps, shots, apply_doubtful, doubtful_px)
@@ -168,9 +233,9 @@ def _scan(reader: VideoReader, order: np.ndarray | None, detector: ShotDetector,
                 if start is not None:
                     shots.open(start)
                     sampled = -1
-            stride = every * 2 ** (len(shots.collector.evidence.samples) // SAMPLES_PER_STRIDE)
+            stride = every * 2 ** (shots.sampled_in_shot // SAMPLES_PER_STRIDE)
             if sampled < 0 or index - sampled >= stride:
-                shots.collector.add(index, to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
+                shots.add(index, to_rgb8(reader.convert(item.decoded, ESTIMATE_WIDTH)))
                 sampled = index
             bar.update(index - previous)
             previous = index

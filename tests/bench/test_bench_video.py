@@ -28,7 +28,9 @@ def test_a_subset_of_paths_reports_only_the_ratios_it_has(capsys) -> None:
     args = bench.parse_args(["--paths", "ffmpeg,fixed lens", "--frames", "100"])
     inf = float("inf")
     results = bench.report(args, {"ffmpeg": 2.0, "fixed lens": 2.5}, {"pass 1": inf, "pass 2": inf},
-                           {"RGB": 1.0, "YUV": 0.5, "YUV 1/32": 0.7})
-    assert results["ratios"] == {"fixed / ffmpeg": 0.8}  # frames per second: 40 against 50
+                           {"RGB": 1.0, "YUV": 0.5, "YUV 1/32": 0.7}, {"ffmpeg": 3.0, "fixed lens": 4.0})
+    # frames per second: 40 against 50; CPU: 4 s against 3 s for the same frames
+    assert results["ratios"] == {"fixed / ffmpeg": 0.8, "fixed / ffmpeg (CPU)": 0.75}
+    assert results["cpu_ms_per_frame"] == {"ffmpeg": 30.0, "fixed lens": 40.0}
     assert results["fps"] == {"ffmpeg": 50.0, "fixed lens": 40.0} and results["paths"] == ["ffmpeg", "fixed lens"]
     assert "fixed / ffmpeg                    : 0.80  (target >= 0.8)" in capsys.readouterr().out

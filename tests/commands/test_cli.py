@@ -182,7 +182,9 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
         calls.clear()
         assert main(["correct", str(source), str(out), "--auto", "--every", "2", "--backend", "cpu", *extra]) == 0
         sampled = set(range(0, cut, 2)) | set(range(cut, n, 2))
-        assert calls == sorted(set(calls)) and {0, 6, 12, 14, 20} <= set(calls) <= sampled, calls
+        # once each; not in frame order: a due sample's estimate runs ahead of an earlier sample's own
+        # (few chains), on pass 1's estimator thread (glradial.video.shot_track._Shots)
+        assert len(calls) == len(set(calls)) and {0, 6, 12, 14, 20} <= set(calls) <= sampled, calls
         rows = np.genfromtxt(f"{out}.lens.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
         assert len(rows) == n
         assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)
