@@ -41,8 +41,9 @@ between two readings that disagree by a frame-wide offset (the line fit reads a 
 Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
 self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight``, ``lens_manifold_pull``,
 ``lens_quantile``, ``lens_shift_weight`` (the bound's :func:`centre_shift_px` term), ``lens_agreement``
-(:func:`combine`) and ``lens_max_hfov_deg`` are chosen on the five shared matches, leave one match
-out (``bench/pitch_lens_choice.py``; docs/CAMERA.md, "The lens fed back across matches").
+and ``lens_on_disagreement`` (:func:`combine`) and ``lens_max_hfov_deg`` are chosen on the five shared
+matches, leave one match out, under the constraint that the procedural test crops (exact truth) get no
+worse (``bench/pitch_lens_choice.py``; docs/CAMERA.md, "The lens fed back across matches").
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.net_lines.NetLinesEstimator` stays
@@ -154,8 +155,11 @@ def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float
     ``w`` = ``lens_weight`` (with ``lens_weight_floor_by_bounds``, at least ``b_a² / (b_a² + b_p²)``:
     a reading whose own bound says it is far less sure than the camera weighs less), stating
     ``w b_p + (1 - w) b_a`` (the radial map is linear in ``(k1, k2)`` and the error a norm). Where they do not, one of the bounds
-    fails and the frame cannot tell which: the reading is kept, stating ``max(b_a, D + b_p)`` (its
-    error when either bound holds), so a lens the pitch contradicts is never stated as sure as either.
+    fails and the frame cannot tell which: ``lens_on_disagreement`` says which is kept, ``"pitch"`` the
+    sure camera's lens (stating ``max(b_p, D + b_a)``; ``from the pitch`` true) or ``"reading"`` the
+    reading (stating ``max(b_a, D + b_p)``): the error when either bound holds, so an answer the other
+    reading contradicts is never stated as sure as either. The line fit misreads curved stands and roof
+    fascias as straight lines where the pitch's markings hold the camera (docs/CAMERA.md).
     A camera wider than ``lens_max_hfov_deg`` (``hfov_deg``, the undistorted frame's field of view) lies
     outside the views the camera lens's bound was calibrated on: the reading is kept as it is."""
     if hfov_deg > t["lens_max_hfov_deg"]:
@@ -165,6 +169,8 @@ def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float
         w = max(w, reading_bound**2 / (reading_bound**2 + pitch_bound**2))
     apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
     if apart > float(t["lens_agreement"]) * (pitch_bound + reading_bound):
+        if t.get("lens_on_disagreement", "reading") == "pitch":  # the sure camera's lens, the reading dropped
+            return tuple(pitch), max(pitch_bound, apart + reading_bound), True  # type: ignore[return-value]
         return tuple(reading), max(reading_bound, apart + pitch_bound), False  # type: ignore[return-value]
     k = (w * pitch[0] + (1 - w) * reading[0], w * pitch[1] + (1 - w) * reading[1])
     return k, w * pitch_bound + (1 - w) * reading_bound, True

@@ -216,7 +216,7 @@ def test_a_camera_lens_the_reading_contradicts_is_not_mixed_in(monkeypatch):
     """combine(): where the camera lens and the reading lie further apart than ``lens_agreement`` times
     the sum of their bounds, one of the bounds fails; the reading is kept with a bound that holds when
     either does (max displacement is a metric: the triangle inequality is the oracle)."""
-    t = dict(camera_trust(), lens_weight=0.5, lens_agreement=1.0)
+    t = dict(camera_trust(), lens_weight=0.5, lens_agreement=1.0, lens_on_disagreement="reading")
     pitch, reading = (-0.30, 0.05), (-0.10, 0.01)
     apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
     assert apart > 5.0
@@ -236,7 +236,7 @@ def test_a_camera_lens_the_reading_contradicts_is_not_mixed_in(monkeypatch):
     cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.6, 0.3))
     sure = CameraEstimate(cam, 2.0, False, "ok", ("halfway",), 0.5, 300, 0.95, 0.01)
     shipped = dict(camera_trust())
-    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1.0))
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1.0, lens_on_disagreement="reading"))
     lens = pl.camera_lens(sure)
     apart = float(max_displacement_px(np.array([lens.k1, lens.k2]), np.array([-0.1, 0.01])))
     assert apart > pl.lens_bound_px(sure) + 3.0
@@ -245,6 +245,38 @@ def test_a_camera_lens_the_reading_contradicts_is_not_mixed_in(monkeypatch):
     assert got.uncertainty_px == pytest.approx(apart + pl.lens_bound_px(sure))
     # the widened bound reaches the identity lens here: doubtful by benefit, never a confident wrong lens
     assert got.doubtful == (got.uncertainty_px >= float(max_displacement_px(np.array([-0.1, 0.01]), np.zeros(2))))
+
+
+def test_a_reading_that_contradicts_a_sure_camera_lens_is_dropped(monkeypatch):
+    """combine() with ``lens_on_disagreement="pitch"``: where the two lie further apart than
+    ``lens_agreement`` times the sum of their bounds, the sure camera's lens is answered alone (the
+    estimation layer's reading misread curved stands as straight lines on 121364), stating a bound that
+    holds when either bound does (the triangle inequality of max displacement is the oracle); through
+    pitch_lens the answer is the camera's lens, doubtful by benefit."""
+    t = dict(camera_trust(), lens_weight=0.5, lens_agreement=1.0, lens_on_disagreement="pitch")
+    pitch, reading = (-0.30, 0.05), (-0.10, 0.01)
+    apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
+    k, bound, from_pitch = pl.combine(pitch, 2.0, reading, 3.0, t)
+    assert from_pitch and k == pitch and bound == pytest.approx(apart + 3.0)
+    rng = np.random.default_rng(0)  # lenses within either bound of its reading: the stated bound covers the answer
+    for centre, own in ((pitch, 2.0), (reading, 3.0)):
+        near = np.array(centre) + rng.normal(0.0, [0.004, 0.004], (400, 2))
+        near = near[max_displacement_px(near, np.array(centre)) <= own]
+        assert len(near) > 20 and np.all(max_displacement_px(near, np.array(k)) <= bound)
+    # within the agreement they are mixed exactly as in the reading mode
+    assert pl.combine(pitch, apart, reading, apart, t) == pl.combine(pitch, apart, reading, apart,
+                                                                     dict(t, lens_on_disagreement="reading"))
+    fallback = LensEstimate(-0.1, 0.01, uncertainty_px=3.0, method="lines", chains=3)
+    cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.6, 0.3))
+    sure = CameraEstimate(cam, 2.0, False, "ok", ("halfway",), 0.5, 300, 0.95, 0.01)
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1.0, lens_on_disagreement="pitch"))
+    lens = pl.camera_lens(sure)
+    got = pl.pitch_lens(sure, fallback)
+    assert (got.k1, got.k2) == pytest.approx((lens.k1, lens.k2)) and got.method == "pitch"
+    apart = float(max_displacement_px(np.array([lens.k1, lens.k2]), np.array([-0.1, 0.01])))
+    assert got.uncertainty_px == pytest.approx(max(pl.lens_bound_px(sure), apart + 3.0))
+    assert got.doubtful == (got.uncertainty_px >= float(max_displacement_px(np.array([lens.k1, lens.k2]), np.zeros(2))))
 
 
 def test_the_camera_lens_bound_adds_the_centre_shift_in_quadrature():
