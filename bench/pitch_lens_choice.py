@@ -1,6 +1,6 @@
 """Choose the lens fed back (weight, manifold pull, bound, agreement) leave one match out, offline.
 
-Usage: ``python bench/pitch_lens_choice.py DUMP.jsonl [DUMP.jsonl ...] [--ship]``
+Usage: ``python bench/pitch_lens_choice.py DUMP.jsonl [DUMP.jsonl ...] [PROCEDURAL.jsonl] [--ship]``
 
 ``DUMP``: ``bench/bundesliga_consistency.py --dump`` rows (the five shared matches' frames, each with a
 known lens applied; validation data, nothing is fitted on it: four numbers are chosen from grids).
@@ -16,12 +16,16 @@ Settings (``glradial/data/camera_trust.json``): ``lens_weight`` (the camera lens
 ``lens_quantile`` (the camera lens's bound: split-conformal 90 % of its self-consistent error over
 ``max(fit RMS, lens_floor_px)``, computed on the chosen-on matches for each pull) and
 ``lens_agreement`` (the camera lens is mixed in only where it lies within this many times the sum
-of the two bounds of the reading) and ``lens_weight_floor_by_bounds`` (1: the camera weighs at least
-its inverse-variance share). ``lens_max_hfov_deg`` is the widest sure camera of the chosen-on matches
+of the two bounds of the reading; beyond, ``lens_on_disagreement`` keeps the reading or the camera's
+lens) and ``lens_weight_floor_by_bounds`` (1: the camera weighs at least its inverse-variance share). ``lens_max_hfov_deg`` is the widest sure camera of the chosen-on matches
 (beyond it the bound would be extrapolated: the camera lens is not fed back). On a set of matches the
 choice minimises the largest per-match self-consistent median (the issue's goal is per match), ties
 broken by their mean, then by the share of samples whose stated bound covers the error. Each match is
 reported with the settings chosen on the four others; ``--ship`` writes those chosen on all five.
+``PROCEDURAL``: ``bench/lines_accuracy.py --pitch --sources procedural/ --dump`` rows (rendered crops
+with exact lenses): a constraint on every choice, never a held-out match: median and p90 of their
+error within :data:`PROCEDURAL_TOLERANCE` of the estimation layer's reading alone (before the lens
+was fed back; settings that exceed it lose to any that do not).
 Figure: ``docs/figures/lens_consistency_lomo.json``.
 """
 

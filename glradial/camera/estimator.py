@@ -110,8 +110,14 @@ def pitch_bound_px(rms_px: float, centre_px: float, t: dict) -> float:
 def lens_bound_px(camera: CameraEstimate, centre_px: float = float("nan")) -> float:
     """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`
     (:func:`pitch_bound_px` of ``camera``'s marking RMS and the lens's ``centre_px``, :func:`centre_shift_px`
-    of the frame, under ``glradial/data/camera_trust.json``)."""
-    return pitch_bound_px(camera.rms_px, centre_px, camera_trust())
+    of the frame, under ``glradial/data/camera_trust.json``); ``inf`` for a camera wider than
+    ``lens_max_hfov_deg``, the widest sure camera the bound was calibrated on: beyond it no bound is
+    known (the real wide camera, 72.4 degrees with its principal point off centre, had its lens 13-16 px
+    off against a bound of 7.6 px, docs/CAMERA.md)."""
+    t = camera_trust()
+    if camera.camera is not None and camera.hfov_deg > float(t["lens_max_hfov_deg"]):
+        return float("inf")
+    return pitch_bound_px(camera.rms_px, centre_px, t)
 
 
 #: Gate (px at 1280) within which a white-line point counts as on its marking for :func:`centre_shift_px`.

@@ -300,3 +300,16 @@ def test_centre_shift_is_small_for_the_right_lens_and_large_for_a_wrong_one(view
                                         camera.camera.size, Lens(k1, manifold_k2(k1))))
     assert pl.centre_shift_px(view.frame, off) > 10.0
     assert np.isnan(pl.centre_shift_px(view.frame, CameraEstimate(None, 1280.0, True, "no_markings")))
+
+
+def test_no_lens_bound_is_stated_beyond_the_views_it_was_calibrated_on(monkeypatch):
+    """``lens_bound_px`` of a camera wider than ``lens_max_hfov_deg`` (the widest sure camera of the
+    calibration) is inf, not an extrapolated number (the real wide camera's lens was 2x outside it);
+    within, it is :func:`pitch_bound_px` of the fit's RMS."""
+    cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.2, 0.02))
+    sure = CameraEstimate(cam, 2.0, False, "ok", ("halfway",), 0.5, 300, 0.95, 0.01)
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_max_hfov_deg=sure.hfov_deg + 0.5))
+    assert pl.lens_bound_px(sure) == pytest.approx(pl.pitch_bound_px(0.5, float("nan"), pl.camera_trust()))
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_max_hfov_deg=sure.hfov_deg - 0.5))
+    assert pl.lens_bound_px(sure) == float("inf")
