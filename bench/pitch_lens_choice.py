@@ -15,13 +15,13 @@ Settings (``glradial/data/camera_trust.json``): ``lens_weight`` (the camera lens
 ``lens_manifold_pull`` (how far the fit's lens is pulled toward the manifold),
 ``lens_quantile`` (the camera lens's bound: split-conformal 90 % of its self-consistent error over
 ``max(fit RMS, lens_floor_px)``, computed on the chosen-on matches for each pull) and
-``lens_agreement`` (the camera lens is mixed in only where it lies within this many times the sum
-of the two bounds of the reading; beyond, ``lens_on_disagreement`` keeps the reading or the camera's
-lens) and ``lens_weight_floor_by_bounds`` (1: the camera weighs at least its inverse-variance share). ``lens_max_hfov_deg`` is the widest sure camera of the chosen-on matches
+``lens_agreement`` (the reading is mixed in only where it lies within this many times the camera
+lens's bound of it; beyond, the camera's lens alone; ``lens_weight_floor_by_bounds`` stays as shipped, 0). ``lens_max_hfov_deg`` is the widest sure camera of the chosen-on matches
 (beyond it the bound would be extrapolated: the camera lens is not fed back). On a set of matches the
 choice minimises the largest per-match self-consistent median (the issue's goal is per match), ties
-broken by their mean, then by the share of samples whose stated bound covers the error. Each match is
+broken by the largest p90, their mean, then by the share of samples whose stated bound covers the error. Each match is
 reported with the settings chosen on the four others; ``--ship`` writes those chosen on all five.
+Largest medians within :data:`MEDIAN_TIE_PX` of the smallest tie (noise), broken by the largest p90.
 ``PROCEDURAL``: ``bench/lines_accuracy.py --pitch --sources procedural/ --dump`` rows (rendered crops
 with exact lenses): a constraint on every choice, never a held-out match: median and p90 of their
 error within :data:`PROCEDURAL_TOLERANCE` of the estimation layer's reading alone (before the lens
@@ -45,15 +45,14 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "bench"))
 
 #: The candidate settings.
-GRID = {"lens_weight": [0.0, 0.25, 0.5, 0.75, 1.0], "lens_manifold_pull": [0.0, 0.25, 0.5],
-        "lens_agreement": [0.5, 1.0, 2.0, 1e6], "lens_on_disagreement": ["reading", "pitch"],
-        "lens_shift_weight": [0.0, 1.0], "lens_weight_floor_by_bounds": [0, 1]}
+GRID = {"lens_weight": [0.25, 0.5, 0.75, 1.0], "lens_manifold_pull": [0.0, 0.25, 0.5],
+        "lens_agreement": [0.5, 1.0, 1.5, 2.0, 3.0], "lens_shift_weight": [0.0, 1.0]}
 #: The procedural test crops' rows (``bench/lines_accuracy.py --pitch --dump``: exact truth) count as this clip:
 #: a constraint on every choice, never a match held out.
 PROCEDURAL = "procedural"
 #: How much worse (relative) than the estimation layer's reading alone the procedural crops may get, median
-#: and p90: about the sampling noise of either statistic over their 200 crops (module docstring).
-PROCEDURAL_TOLERANCE = 0.03
+#: and p90: within their sampling noise (bootstrap SD over the 200 crops: 9 % of the median, 16 % of the p90).
+PROCEDURAL_TOLERANCE = 0.05
 
 
 def samples(paths: list[Path]) -> list[dict]:
@@ -178,25 +177,32 @@ def procedural_excess(replay: Replay, errors: list) -> float:
     return float(max(0.0, excess - PROCEDURAL_TOLERANCE))
 
 
+#: Largest per-match medians within this many px of the smallest count as equal (a match's median over
+#: its 15 frames has a frame-bootstrap standard error of 0.17-0.91 px): among them the smallest largest
+#: per-match p90 wins.
+MEDIAN_TIE_PX = 0.25
+
+
 def choose(replay: Replay, base: dict, clips: set[str]) -> dict:
-    """The settings of :data:`GRID` (and ``lens_quantile``) chosen on ``clips`` (module docstring): the
-    smallest largest per-match median among those that keep the procedural crops within
-    :data:`PROCEDURAL_TOLERANCE` of the reading alone (the least excess first)."""
+    """The settings of :data:`GRID` (and ``lens_quantile``) chosen on ``clips`` (module docstring): among
+    those that keep the procedural crops within :data:`PROCEDURAL_TOLERANCE` of the reading alone (the
+    least excess first), the smallest largest per-match median (within :data:`MEDIAN_TIE_PX`), then the
+    smallest largest per-match p90, the mean median, the share of bounds that cover."""
     base = dict(base, lens_max_hfov_deg=widest(replay, base, clips))
     quantiles = {p: lens_quantile(replay, dict(base, lens_manifold_pull=p), clips) for p in GRID["lens_manifold_pull"]}
-    best = None
+    scored = []
     for values in itertools.product(*GRID.values()):
         t = dict(base, **dict(zip(GRID, values)))
-        if t["lens_agreement"] >= 1e6 and t["lens_on_disagreement"] != GRID["lens_on_disagreement"][0]:
-            continue  # no disagreement: the same setting
         t["lens_quantile"] = quantiles[t["lens_manifold_pull"]]
         errors = replay.errors(t)
         m = list(medians(errors, clips).values())
+        p90 = max(float(np.percentile([e for clip, e, *_ in errors if clip == c], 90)) for c in clips)
         covers = float(np.mean([e <= bound for clip, e, bound, *_ in errors if clip in clips]))
-        score = (procedural_excess(replay, errors), max(m), float(np.mean(m)), -covers)  # equal errors: the bound that covers more
-        if best is None or score < best[0]:
-            best = (score, t)
-    return best[1]
+        scored.append((procedural_excess(replay, errors), max(m), p90, float(np.mean(m)), -covers, len(scored), t))
+    least = min(s[0] for s in scored)
+    scored = [s for s in scored if s[0] == least]
+    best = min(s[1] for s in scored)
+    return min((s for s in scored if s[1] <= best + MEDIAN_TIE_PX), key=lambda s: s[2:6])[-1]
 
 
 def summary(errors: list, clips: list[str]) -> dict:
@@ -257,9 +263,11 @@ def main(argv: list[str] | None = None) -> int:
 
         trust = dict(base, **{k: final[k] for k in keys})
         trust["lens_choice_source"] = (
-            f"bench/pitch_lens_choice.py on bench/bundesliga_consistency.py --limit 15 --dump (five shared matches, "
-            f"{len(replay.rows)} samples): {', '.join(keys)} chosen on all five as the grid point with the smallest "
-            f"largest per-match self-consistent median (lens_quantile: split-conformal 90 % of the camera lens's "
+            f"bench/pitch_lens_choice.py on bench/bundesliga_consistency.py --limit 15 --dump (five shared matches) and "
+            f"bench/lines_accuracy.py --pitch --sources procedural/ --dump ({len(replay.rows)} samples in all): {', '.join(keys)} "
+            f"chosen on all five as the grid point with the smallest largest per-match self-consistent median (ties within "
+            f"{MEDIAN_TIE_PX} px: the smallest largest p90) among those keeping the procedural crops within "
+            f"{PROCEDURAL_TOLERANCE:.0%} of the reading alone (lens_quantile: split-conformal 90 % of the camera lens's "
             f"error / max(RMS, lens_floor_px) for that pull); each match's figure in docs/figures/"
             f"lens_consistency_lomo.json is of the settings chosen without it: {chosen}")
         atomic_write_text(CAMERA_TRUST_FILE, json.dumps(trust, indent=2) + "\n")
