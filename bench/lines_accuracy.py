@@ -88,6 +88,24 @@ def _groups(samples: list[dict]) -> dict[str, list[int]]:
     return groups
 
 
+def _report(samples: list[dict], errors: dict, pitched: list, has_fit: list, times: list) -> list[str]:
+    """Print (and return) the per-group table of :func:`main`: median and p90 of each method's error,
+    the share of frames with a line fit, the mean fit time (``auto+pitch`` columns when scored)."""
+    pitch = "auto+pitch" in errors
+    with printed_report() as lines:
+        extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if pitch else ""
+        print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
+        for name, idx in _groups(samples).items():
+            if not idx:
+                continue
+            el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
+            print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
+                  f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
+                  + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
+                     f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if pitch else ""))
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--cache", default="/tmp/lines_accuracy.pkl")
@@ -140,17 +158,7 @@ def main() -> None:
         rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else list(lines),
                      "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1],
                      **({"err_auto_pitch": errors["auto+pitch"][-1], "pitch": pitched[-1], **readings} if args.pitch else {})})
-    with printed_report() as lines:
-        extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if args.pitch else ""
-        print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
-        for name, idx in _groups(samples).items():
-            if not idx:
-                continue
-            el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
-            print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
-                  f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
-                  + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
-                     f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if args.pitch else ""))
+    lines = _report(samples, errors, pitched, has_fit, times)
     subset = "_" + args.sources.strip("/").replace("/", "_") if args.sources else ""  # a subset: its own figure
     write_figure("lines_accuracy" + ("_pitch" if args.pitch else "") + subset, {"report": lines})
     if args.dump:
