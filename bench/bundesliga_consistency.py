@@ -144,10 +144,19 @@ def _readings(estimator, frame: np.ndarray, pitch: bool) -> dict:
         out["pitch alone"] = out["auto"] if lens is None else LensEstimate(
             lens.k1, lens.k2, uncertainty_px=pl.lens_bound_px(camera), method="pitch")
         out["rms"] = camera.rms_px
-        out["camera"] = {"reason": camera.reason, "markings": len(camera.markings), "support": camera.support,
-                         "centre_shift_px": pl.centre_shift_px(frame, camera),
-                         "hfov_deg": camera.hfov_deg, "k": None if camera.lens is None else [camera.lens.k1, camera.lens.k2]}
+        out["camera"] = camera_record(frame, camera)
     return out
+
+
+def camera_record(frame: np.ndarray, camera) -> dict:
+    """What ``bench/pitch_lens_choice.py`` replays of a camera fit of ``frame`` (a ``CameraEstimate``):
+    its verdict, markings, support, :func:`glradial.camera.estimator.centre_shift_px` (px at 1920), field
+    of view (degrees) and raw lens ``k`` (width-normalised ``(k1, k2)``; None without a lens)."""
+    from glradial.camera import estimator as pl
+
+    return {"reason": camera.reason, "markings": len(camera.markings), "support": camera.support,
+            "centre_shift_px": pl.centre_shift_px(frame, camera),
+            "hfov_deg": camera.hfov_deg, "k": None if camera.lens is None else [camera.lens.k1, camera.lens.k2]}
 
 
 def _print(errors: dict) -> None:

@@ -8,7 +8,8 @@ checkerboard lens (k1 -0.6615, k2 +0.4098, centred; the camera's real principal 
 so a centred model keeps a misfit of a few px). Per frame: the camera's verdict, its lens's error
 (max displacement at 1920 wide, :func:`glradial.lens.metrics.max_displacement_px`) against the
 checkerboard lens and the camera lens's own bound (:func:`glradial.camera.estimator.lens_bound_px`, with the
-lens's :func:`~glradial.camera.estimator.centre_shift_px`),
+lens's :func:`~glradial.camera.estimator.centre_shift_px`; inf, none known, beyond ``lens_max_hfov_deg``:
+``camera_bound_known`` counts the sure frames with one),
 the focal length and field of view (a static camera: they should agree across frames), and what
 ``glradial.estimate(frame)`` (the default ``method="auto"``) reads: its error, bound and verdict.
 Nothing is fitted here.
@@ -101,9 +102,11 @@ def report(rows: list[dict]) -> dict:
     if sure:
         err = np.array([r["lens_err_px"] for r in sure])
         hfov = np.array([r["hfov_deg"] for r in sure])
+        known = [r["lens_bound_px"] for r in sure if np.isfinite(r["lens_bound_px"])]  # inf: no bound known there
         out.update(camera_lens_err_median_px=float(np.median(err)), camera_lens_err_max_px=float(err.max()),
+                   camera_bound_known=len(known),
                    camera_bound_covers=float(np.mean([r["lens_err_px"] <= r["lens_bound_px"] for r in sure])),
-                   camera_bound_median_px=float(np.median([r["lens_bound_px"] for r in sure])),
+                   camera_bound_median_px=float(np.median(known)) if known else None,
                    hfov_median_deg=float(np.median(hfov)), hfov_sd_deg=float(hfov.std()),
                    focal_rel_sd=float(np.std([r["focal"] for r in sure]) / np.mean([r["focal"] for r in sure])))
     est = np.array([r["est_err_px"] for r in rows])

@@ -1,6 +1,7 @@
 """Accuracy of the line fit (``method="lines"`` / ``"auto"``) per source, fast enough to iterate on.
 
-Usage: ``python bench/lines_accuracy.py [--cache /tmp/lines_accuracy.pkl] [--procedural 200] [--checkout DIR] [--pitch]``
+Usage: ``python bench/lines_accuracy.py [--cache /tmp/lines_accuracy.pkl] [--procedural 200] [--checkout DIR] [--pitch]
+[--sources PREFIX] [--dump FILE]``
 
 Builds the same samples as ``glradial evaluate --frames ../shared/data/real_football --procedural N
 --remove-own-lens`` (seed 0: 12 paper + 12 extended lenses per frame at ``fit="crop"``, 48 + 48 crops
@@ -14,7 +15,9 @@ frames with a line fit, and the mean fit time. Groups: real frames (all lenses),
 should be reported on the same samples without saying so (docs/LINES.md says which were used).
 ``--pitch`` also scores ``auto+pitch``, the public ``glradial.estimate(method="auto")``
 (:mod:`glradial.camera.estimator`: the pitch camera fit's lens where the template fits, ``auto``
-elsewhere), with the share of samples it answered from the pitch (``pitch %``).
+elsewhere), with the share of samples it answered from the pitch (``pitch %``); its ``--dump`` rows hold
+the camera fit (``bundesliga_consistency.camera_record``) that ``bench/pitch_lens_choice.py`` replays.
+``--sources procedural/`` scores only those samples (figure ``lines_accuracy_pitch_procedural``).
 """
 
 from __future__ import annotations
@@ -85,6 +88,24 @@ def _groups(samples: list[dict]) -> dict[str, list[int]]:
     return groups
 
 
+def _report(samples: list[dict], errors: dict, pitched: list, has_fit: list, times: list) -> list[str]:
+    """Print (and return) the per-group table of :func:`main`: median and p90 of each method's error,
+    the share of frames with a line fit, the mean fit time (``auto+pitch`` columns when scored)."""
+    pitch = "auto+pitch" in errors
+    with printed_report() as lines:
+        extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if pitch else ""
+        print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
+        for name, idx in _groups(samples).items():
+            if not idx:
+                continue
+            el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
+            print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
+                  f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
+                  + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
+                     f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if pitch else ""))
+    return lines
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--cache", default="/tmp/lines_accuracy.pkl")
@@ -93,6 +114,7 @@ def main() -> None:
     parser.add_argument("--dump", help="write per-sample results (JSON lines) here")
     parser.add_argument("--checkout", default=str(ROOT), help="the glradial checkout whose code is measured")
     parser.add_argument("--pitch", action="store_true", help="also score auto+pitch (the camera fit's lens fed back)")
+    parser.add_argument("--sources", default="", help="only the samples whose source starts with this (e.g. procedural/)")
     args = parser.parse_args()
     cache = Path(args.cache)
     if cache.is_file():
@@ -100,6 +122,7 @@ def main() -> None:
     else:
         samples = _build(Path(args.frames), args.procedural)
         cache.write_bytes(pickle.dumps(samples))
+    samples = [s for s in samples if s["source"].startswith(args.sources)]
     errors: dict = {"lines": [], "auto": [], **({"auto+pitch": []} if args.pitch else {})}
     pitched = []
     has_fit, times, rows = [], [], []
@@ -121,29 +144,23 @@ def main() -> None:
         for method in errors:
             e = judge(evidence, method.split("+")[0])
             if method == "auto+pitch":  # what glradial.estimate(method="auto") adds to the estimation layer's auto
+                from bundesliga_consistency import camera_record
+
                 from glradial.camera import estimator as pl
 
                 auto = e
                 e, camera = pl.with_pitch(frame, auto)
                 pitched.append(e.method == "pitch")
                 readings = {"k_auto": [auto.k1, auto.k2], "bound_auto": auto.uncertainty_px, "k_auto_pitch": [e.k1, e.k2],
-                            "bound_auto_pitch": e.uncertainty_px, "camera_rms_px": None if camera is None else camera.rms_px}
+                            "bound_auto_pitch": e.uncertainty_px, "camera_rms_px": None if camera is None else camera.rms_px,
+                            "camera": None if camera is None else camera_record(frame, camera)}
             errors[method].append(float(max_displacement_px(np.array([e.k1, e.k2]), truth)))
         rows.append({"source": s["source"], "truth": s["truth"], "net": s["net"], "lines": None if lines is None else list(lines),
                      "err_auto": errors["auto"][-1], "err_lines": errors["lines"][-1],
                      **({"err_auto_pitch": errors["auto+pitch"][-1], "pitch": pitched[-1], **readings} if args.pitch else {})})
-    with printed_report() as lines:
-        extra = f" {'auto+pitch':>10s} {'p90':>7s} {'pitch %':>7s}" if args.pitch else ""
-        print(f"{'group':40s} {'n':>4s} {'lines med':>9s} {'p90':>7s} {'auto med':>9s} {'p90':>7s} {'fit %':>6s} {'ms':>6s}{extra}")
-        for name, idx in _groups(samples).items():
-            if not idx:
-                continue
-            el, ea = np.array(errors["lines"])[idx], np.array(errors["auto"])[idx]
-            print(f"{name:40s} {len(idx):4d} {np.median(el):9.2f} {np.percentile(el, 90):7.2f} {np.median(ea):9.2f} "
-                  f"{np.percentile(ea, 90):7.2f} {100 * np.mean(np.array(has_fit)[idx]):6.0f} {1000 * np.mean(np.array(times)[idx]):6.1f}"
-                  + (f" {np.median(np.array(errors['auto+pitch'])[idx]):10.2f} {np.percentile(np.array(errors['auto+pitch'])[idx], 90):7.2f}"
-                     f" {100 * np.mean(np.array(pitched)[idx]):7.0f}" if args.pitch else ""))
-    write_figure("lines_accuracy" + ("_pitch" if args.pitch else ""), {"report": lines})
+    lines = _report(samples, errors, pitched, has_fit, times)
+    subset = "_" + args.sources.strip("/").replace("/", "_") if args.sources else ""  # a subset: its own figure
+    write_figure("lines_accuracy" + ("_pitch" if args.pitch else "") + subset, {"report": lines})
     if args.dump:
         import json
 

@@ -41,8 +41,9 @@ between two readings that disagree by a frame-wide offset (the line fit reads a 
 Bundesliga frames), which costs more than the bounds' per-frame information gains (measured
 self-consistently, docs/CAMERA.md, "The lens fed back"). ``lens_weight``, ``lens_manifold_pull``,
 ``lens_quantile``, ``lens_shift_weight`` (the bound's :func:`centre_shift_px` term), ``lens_agreement``
-(:func:`combine`) and ``lens_max_hfov_deg`` are chosen on the five shared matches, leave one match
-out (``bench/pitch_lens_choice.py``; docs/CAMERA.md, "The lens fed back across matches").
+(:func:`combine`: a reading outside it times the camera lens's bound is dropped) and ``lens_max_hfov_deg`` are chosen on the five shared
+matches, leave one match out, under the constraint that the procedural test crops (exact truth) get no
+worse (``bench/pitch_lens_choice.py``; docs/CAMERA.md, "The lens fed back across matches").
 
 This lives in the camera layer because it needs both layers: ``estimation`` sits below ``camera`` and
 must not import it, so the estimation layer's :class:`~glradial.estimation.net_lines.NetLinesEstimator` stays
@@ -51,7 +52,6 @@ the CNN-plus-lines estimator and this module composes the two.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Sequence
 
 import numpy as np
@@ -109,8 +109,14 @@ def pitch_bound_px(rms_px: float, centre_px: float, t: dict) -> float:
 def lens_bound_px(camera: CameraEstimate, centre_px: float = float("nan")) -> float:
     """90 % bound (px at 1920) on the max-displacement error of :func:`camera_lens`
     (:func:`pitch_bound_px` of ``camera``'s marking RMS and the lens's ``centre_px``, :func:`centre_shift_px`
-    of the frame, under ``glradial/data/camera_trust.json``)."""
-    return pitch_bound_px(camera.rms_px, centre_px, camera_trust())
+    of the frame, under ``glradial/data/camera_trust.json``); ``inf`` for a camera wider than
+    ``lens_max_hfov_deg``, the widest sure camera the bound was calibrated on: beyond it no bound is
+    known (the real wide camera, 72.4 degrees with its principal point off centre, had its lens 13-16 px
+    off against a bound of 7.6 px, docs/CAMERA.md)."""
+    t = camera_trust()
+    if camera.camera is not None and camera.hfov_deg > float(t["lens_max_hfov_deg"]):
+        return float("inf")
+    return pitch_bound_px(camera.rms_px, centre_px, t)
 
 
 #: Gate (px at 1280) within which a white-line point counts as on its marking for :func:`centre_shift_px`.
@@ -147,25 +153,26 @@ def centre_shift_px(rgb: np.ndarray, camera: CameraEstimate) -> float:
 
 def combine(pitch: tuple[float, float], pitch_bound: float, reading: tuple[float, float], reading_bound: float,
             t: dict, hfov_deg: float = 0.0) -> tuple[tuple[float, float], float, bool]:
-    """The lens fed back from the camera lens ``pitch`` (bound ``pitch_bound``) and the estimation
+    """The lens fed back from a sure camera's lens ``pitch`` (bound ``pitch_bound``) and the estimation
     layer's ``reading`` (bound ``reading_bound``): ``(k, stated bound, from the pitch)``; bounds px at
-    1920, ``t`` the thresholds (``camera_trust.json``). Where the two agree (their max-displacement
-    distance ``D`` within ``lens_agreement`` times the sum of their bounds) ``k = w k_p + (1 - w) k_a``,
-    ``w`` = ``lens_weight`` (with ``lens_weight_floor_by_bounds``, at least ``b_a² / (b_a² + b_p²)``:
-    a reading whose own bound says it is far less sure than the camera weighs less), stating
-    ``w b_p + (1 - w) b_a`` (the radial map is linear in ``(k1, k2)`` and the error a norm). Where they do not, one of the bounds
-    fails and the frame cannot tell which: the reading is kept, stating ``max(b_a, D + b_p)`` (its
-    error when either bound holds), so a lens the pitch contradicts is never stated as sure as either.
-    A camera wider than ``lens_max_hfov_deg`` (``hfov_deg``, the undistorted frame's field of view) lies
-    outside the views the camera lens's bound was calibrated on: the reading is kept as it is."""
+    1920, ``t`` the thresholds (``camera_trust.json``). Where the reading lies within ``lens_agreement``
+    times the camera lens's bound of it (max-displacement distance ``D``), ``k = w k_p + (1 - w) k_a``,
+    ``w`` = ``lens_weight`` (with ``lens_weight_floor_by_bounds``, at least ``b_a² / (b_a² + b_p²)``),
+    stating ``w b_p + (1 - w) b_a`` (the radial map is linear in ``(k1, k2)`` and the error a norm).
+    Beyond, the reading contradicts the camera's calibrated bound and is dropped: the camera's lens
+    alone, stating ``max(b_p, D + b_a)`` (its error when either bound holds). The test leaves the
+    reading's own bound out: on 121364 the line fit reads curved stand fronts and roof fascias as
+    straight lines and its bound does not know it (docs/CAMERA.md). A camera wider than
+    ``lens_max_hfov_deg`` (``hfov_deg``, the undistorted frame's field of view) lies outside the views
+    the camera lens's bound was calibrated on: the reading is kept as it is."""
     if hfov_deg > t["lens_max_hfov_deg"]:
         return tuple(reading), reading_bound, False  # type: ignore[return-value]
+    apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
+    if apart > float(t["lens_agreement"]) * pitch_bound:  # the reading outside the sure camera's bound: dropped
+        return tuple(pitch), max(pitch_bound, apart + reading_bound), True  # type: ignore[return-value]
     w = float(t["lens_weight"])
     if t["lens_weight_floor_by_bounds"]:  # at least the camera's inverse-variance share: a reading far less sure weighs less
         w = max(w, reading_bound**2 / (reading_bound**2 + pitch_bound**2))
-    apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
-    if apart > float(t["lens_agreement"]) * (pitch_bound + reading_bound):
-        return tuple(reading), max(reading_bound, apart + pitch_bound), False  # type: ignore[return-value]
     k = (w * pitch[0] + (1 - w) * reading[0], w * pitch[1] + (1 - w) * reading[1])
     return k, w * pitch_bound + (1 - w) * reading_bound, True
 
@@ -185,12 +192,8 @@ def pitch_lens(camera: CameraEstimate, fallback: LensEstimate, centre_px: float 
     lens = camera_lens(camera)
     k, stated, from_pitch = combine((lens.k1, lens.k2), lens_bound_px(camera, centre_px), (fallback.k1, fallback.k2),
                                     fallback.uncertainty_px, camera_trust(), camera.hfov_deg)
-    if not from_pitch:  # the two readings contradict each other's bounds: the reading, its bound widened
-        if stated <= fallback.uncertainty_px:
-            return fallback
-        sure = not fallback.doubtful and stated < shift_px(k)
-        return replace(fallback, uncertainty_px=stated, doubtful=not sure,
-                       reason=fallback.reason if sure or fallback.doubtful else "weak_geometry")
+    if not from_pitch:  # a camera wider than the lens bound knows: the reading as it is
+        return fallback
     sure = stated < shift_px(k)  # doubt by benefit, as the estimation layer's: the identity lens within the bound
     return LensEstimate(*k, pixel_aspect=fallback.pixel_aspect, uncertainty_px=stated, method="pitch",
                         chains=len(camera.markings), doubtful=not sure, reason="ok" if sure else "weak_geometry")

@@ -13,7 +13,8 @@ Fit (:func:`fit_shot_lens`): over the shot's sure frames (not doubtful), a robus
 squares of the lens's radial map (:func:`glradial.lens.metrics.radial_map`) at radii up to the 16:9
 corner, in px of a 1920-wide frame (the unit of :func:`glradial.lens.metrics.max_displacement_px`),
 each frame weighted by the inverse of its lens bound (:func:`glradial.camera.estimator.lens_bound_px`,
-relative to the shot's median), plain least squares first, then under a Huber loss at the scale of
+relative to the shot's median; an unknown bound, a camera wider than calibrated, as the largest known,
+all alike when none is known), plain least squares first, then under a Huber loss at the scale of
 the residuals' spread (:data:`HUBER_SPREAD`, at least :data:`ROBUST_PX` px): a frame whose own
 lens is far off (a bad fit that was still judged sure) barely moves the shot's. At least
 ``MIN_FRAMES[0]`` sure frames, else no shot model.
@@ -137,6 +138,8 @@ def fit_shot_lens(estimates: Iterable[CameraEstimate]) -> ShotLens | None:
     focal = np.array([e.focal for e in sure])
     k = np.array([[e.lens.k1, e.lens.k2] for e in sure])
     bound = np.array([lens_bound_px(e) for e in sure])
+    known = bound[np.isfinite(bound)]  # inf: wider than the views the bound knows; weighs as the least sure known
+    bound = np.where(np.isfinite(bound), bound, known.max() if len(known) else 1.0)
     weight = np.median(bound) / bound
     f_ref = float(np.median(focal))
     powers = np.log(focal / f_ref)[:, None] ** np.arange(_degree(len(sure), float(focal.max() / focal.min())) + 1)

@@ -10,6 +10,8 @@ give the estimation layer's answer unchanged; ``net`` and ``lines`` never run th
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -55,6 +57,9 @@ def test_auto_takes_the_pitch_lens_on_a_rendered_view(view):
     assert again == est and fitted.markings == camera.markings and fitted.rms_px == camera.rms_px
     bound, w = pl.lens_bound_px(camera, pl.centre_shift_px(view.frame, camera)), camera_trust()["lens_weight"]
     assert 0 < w <= 1
+    if _error_px(lens, old) > camera_trust()["lens_agreement"] * bound:  # the reading outside the camera's bound: dropped
+        w, old = 1.0, replace(old, uncertainty_px=_error_px(lens, old) + old.uncertainty_px)
+        bound = max(bound, old.uncertainty_px)
     assert est.k1 == pytest.approx(w * lens.k1 + (1 - w) * old.k1, abs=1e-12)
     assert est.k2 == pytest.approx(w * lens.k2 + (1 - w) * old.k2, abs=1e-12)
     assert est.uncertainty_px == pytest.approx(w * bound + (1 - w) * old.uncertainty_px)
@@ -119,6 +124,8 @@ def test_net_and_lines_never_fit_the_camera(view, monkeypatch):
 
 
 def test_pitch_lens_policy(monkeypatch):
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1e6))  # always mixed (dropping: below)
     fallback = LensEstimate(-0.1, 0.01, pixel_aspect=16 / 9, uncertainty_px=9.0, method="lines", chains=3)
     doubtful = CameraEstimate(None, 1280.0, True, "no_markings")
     assert pl.pitch_lens(doubtful, fallback) is fallback
@@ -136,8 +143,7 @@ def test_pitch_lens_policy(monkeypatch):
     assert (got.k1, got.k2) == pytest.approx((w * lens.k1 + (1 - w) * -0.1, w * lens.k2 + (1 - w) * 0.01), abs=1e-12)
     # a reading doubtful by benefit keeps its weight (its bound is calibrated); a combined bound that reaches
     # the identity lens makes the answer doubtful by benefit too (a weight below 1: the reading's bound counts)
-    shipped = dict(camera_trust())
-    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_weight=0.5))
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_weight=0.5, lens_agreement=1e6))
     w = 0.5
     unsure = LensEstimate(0.2, 0.0, uncertainty_px=1e6, method="lines", doubtful=True, reason="evidence_disagrees")
     got = pl.pitch_lens(sure, unsure)
@@ -212,39 +218,44 @@ def test_calibrate_started_from_a_lens_reading():
         calibrate(frame, lens=(-0.6, 0.3))
 
 
-def test_a_camera_lens_the_reading_contradicts_is_not_mixed_in(monkeypatch):
-    """combine(): where the camera lens and the reading lie further apart than ``lens_agreement`` times
-    the sum of their bounds, one of the bounds fails; the reading is kept with a bound that holds when
-    either does (max displacement is a metric: the triangle inequality is the oracle)."""
+def test_a_reading_outside_the_sure_camera_lens_bound_is_dropped(monkeypatch):
+    """combine(): where the reading lies further from the sure camera's lens than ``lens_agreement``
+    times the camera lens's bound, the camera's lens is answered alone (the estimation layer's reading
+    misread curved stands as straight lines on 121364, with a bound that did not know it), stating a
+    bound that holds when either bound does (the triangle inequality of max displacement is the
+    oracle); within it the two are mixed; through pitch_lens the answer is the camera's lens, doubtful
+    by benefit; a camera wider than the calibrated views keeps the reading as it is."""
     t = dict(camera_trust(), lens_weight=0.5, lens_agreement=1.0)
     pitch, reading = (-0.30, 0.05), (-0.10, 0.01)
     apart = float(max_displacement_px(np.array(pitch), np.array(reading)))
     assert apart > 5.0
-    k, bound, mixed = pl.combine(pitch, 2.0, reading, 3.0, t)
-    assert not mixed and k == reading and bound == pytest.approx(max(3.0, apart + 2.0))
-    for truth in (pitch, reading):  # whichever reading is right (within its bound), the stated bound covers the answer
-        assert float(max_displacement_px(np.array(k), np.array(truth))) <= bound
-    # readings that agree within their bounds are mixed as before: w k_p + (1 - w) k_a, stating w b_p + (1 - w) b_a
-    k, bound, mixed = pl.combine(pitch, apart, reading, apart, t)
-    assert mixed and k == pytest.approx((-0.2, 0.03)) and bound == pytest.approx(apart)
-    # a camera wider than the views the bound was calibrated on is not fed back: the reading as it was
+    k, bound, from_pitch = pl.combine(pitch, 2.0, reading, 3.0, t)
+    assert from_pitch and k == pitch and bound == pytest.approx(apart + 3.0)
+    rng = np.random.default_rng(0)  # lenses within either bound of its reading: the stated bound covers the answer
+    for centre, own in ((pitch, 2.0), (reading, 3.0)):
+        near = np.array(centre) + rng.normal(0.0, [0.004, 0.004], (400, 2))
+        near = near[max_displacement_px(near, np.array(centre)) <= own]
+        assert len(near) > 20 and np.all(max_displacement_px(near, np.array(k)) <= bound)
+    # the reading's own bound does not decide: a reading that says it may be far off is still dropped
+    assert pl.combine(pitch, 2.0, reading, 10 * apart, t)[0] == pitch
+    # within the camera's bound they are mixed: w k_p + (1 - w) k_a, stating w b_p + (1 - w) b_a
+    k, bound, from_pitch = pl.combine(pitch, apart, reading, 3.0, t)
+    assert from_pitch and k == pytest.approx((-0.2, 0.03)) and bound == pytest.approx(0.5 * apart + 1.5)
     wide = dict(t, lens_max_hfov_deg=70.0)
-    assert pl.combine(pitch, apart, reading, apart, wide, 72.4) == (reading, apart, False)
-    assert pl.combine(pitch, apart, reading, apart, wide, 69.0)[2]
-    # through pitch_lens: a sure camera whose lens the reading contradicts gives the reading back, its bound widened
+    assert pl.combine(pitch, apart, reading, 3.0, wide, 72.4) == (reading, 3.0, False)
+    assert pl.combine(pitch, apart, reading, 3.0, wide, 69.0)[2]
     fallback = LensEstimate(-0.1, 0.01, uncertainty_px=3.0, method="lines", chains=3)
     cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.6, 0.3))
     sure = CameraEstimate(cam, 2.0, False, "ok", ("halfway",), 0.5, 300, 0.95, 0.01)
     shipped = dict(camera_trust())
-    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1.0))
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_agreement=1.0, lens_max_hfov_deg=180.0))
     lens = pl.camera_lens(sure)
-    apart = float(max_displacement_px(np.array([lens.k1, lens.k2]), np.array([-0.1, 0.01])))
-    assert apart > pl.lens_bound_px(sure) + 3.0
     got = pl.pitch_lens(sure, fallback)
-    assert (got.k1, got.k2, got.method) == (-0.1, 0.01, "lines")
-    assert got.uncertainty_px == pytest.approx(apart + pl.lens_bound_px(sure))
-    # the widened bound reaches the identity lens here: doubtful by benefit, never a confident wrong lens
-    assert got.doubtful == (got.uncertainty_px >= float(max_displacement_px(np.array([-0.1, 0.01]), np.zeros(2))))
+    assert (got.k1, got.k2) == pytest.approx((lens.k1, lens.k2)) and got.method == "pitch"
+    apart = float(max_displacement_px(np.array([lens.k1, lens.k2]), np.array([-0.1, 0.01])))
+    assert apart > pl.lens_bound_px(sure)
+    assert got.uncertainty_px == pytest.approx(max(pl.lens_bound_px(sure), apart + 3.0))
+    assert got.doubtful == (got.uncertainty_px >= float(max_displacement_px(np.array([lens.k1, lens.k2]), np.zeros(2))))
 
 
 def test_the_camera_lens_bound_adds_the_centre_shift_in_quadrature():
@@ -268,3 +279,16 @@ def test_centre_shift_is_small_for_the_right_lens_and_large_for_a_wrong_one(view
                                         camera.camera.size, Lens(k1, manifold_k2(k1))))
     assert pl.centre_shift_px(view.frame, off) > 10.0
     assert np.isnan(pl.centre_shift_px(view.frame, CameraEstimate(None, 1280.0, True, "no_markings")))
+
+
+def test_no_lens_bound_is_stated_beyond_the_views_it_was_calibrated_on(monkeypatch):
+    """``lens_bound_px`` of a camera wider than ``lens_max_hfov_deg`` (the widest sure camera of the
+    calibration) is inf, not an extrapolated number (the real wide camera's lens was 2x outside it);
+    within, it is :func:`pitch_bound_px` of the fit's RMS."""
+    cam = Camera.look_at(np.array([0.0, -60.0, 22.0]), np.zeros(3), 40.0, (1280, 720), Lens(-0.2, 0.02))
+    sure = CameraEstimate(cam, 2.0, False, "ok", ("halfway",), 0.5, 300, 0.95, 0.01)
+    shipped = dict(camera_trust())
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_max_hfov_deg=sure.hfov_deg + 0.5))
+    assert pl.lens_bound_px(sure) == pytest.approx(pl.pitch_bound_px(0.5, float("nan"), pl.camera_trust()))
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_max_hfov_deg=sure.hfov_deg - 0.5))
+    assert pl.lens_bound_px(sure) == float("inf")

@@ -153,3 +153,23 @@ def test_calibrate_shot_rejects_what_is_not_a_frame():
         glradial.calibrate_shot(5)
     with pytest.raises(TypeError, match=r"frames must be .*shape \(36, 64, 3\)"):  # one frame, not a shot
         glradial.calibrate_shot(np.zeros((36, 64, 3), np.uint8))
+
+
+def test_a_shot_wider_than_the_lens_bound_knows_still_gets_its_lens(monkeypatch):
+    """Frames wider than ``lens_max_hfov_deg`` have no known lens bound (``lens_bound_px`` is inf); the
+    shot model weighs them alike (none known) or as the least sure known frame, and still recovers
+    the exact frames' lens."""
+    import glradial.camera.estimator as pl
+
+    cams = _zoom(12, 1.3)
+    shipped = dict(pl.camera_trust())
+    hfov = sorted(_estimate(c, c.lens).hfov_deg for c in cams)
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_max_hfov_deg=hfov[0] - 1.0))
+    assert all(pl.lens_bound_px(_estimate(c, c.lens)) == np.inf for c in cams)
+    model = fit_shot_lens([_estimate(c, c.lens) for c in cams])
+    assert max(_err(model.lens_at(c.focal), c.lens) for c in cams) < 0.1
+    monkeypatch.setattr(pl, "camera_trust", lambda: dict(shipped, lens_max_hfov_deg=hfov[6]))  # half known
+    bounds = [pl.lens_bound_px(_estimate(c, c.lens)) for c in cams]
+    assert 0 < sum(np.isinf(bounds)) < len(cams)
+    model = fit_shot_lens([_estimate(c, c.lens) for c in cams])
+    assert max(_err(model.lens_at(c.focal), c.lens) for c in cams) < 0.1
