@@ -19,7 +19,6 @@ from collections.abc import Sequence
 from functools import lru_cache
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..lens.lens import Lens
 from ..media.frames import to_rgb8
@@ -264,7 +263,7 @@ def calibrate_points(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, f
     if previous is not None:
         fine_lines = lines.thinned(FINE_POINTS)
         tracked = judge_fit(refine(_starts(lines, pitch, previous=previous)[0], fine_lines.xy, fine_lines.angle, pitch,
-                               gates=TRACK_GATES, lens_from=1, support_xy=_support(lines)), len(lines.xy))
+                               gates=TRACK_GATES, lens_from=1, support_xy=lines.tree), len(lines.xy))
         if not tracked.doubtful:
             return tracked
     judged = judge_fit(_search_fit(_starts(lines, pitch, first_guess=first_guess, rgb=rgb, lens=lens), lines, pitch), len(lines.xy))
@@ -278,11 +277,10 @@ def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -
     the :data:`FINE_STARTS` best of them refined with the lens free, best first, stopping at the first
     fine fit the doubt rule passes (the others are only refined while none does)."""
     fine_lines, coarse_lines = lines.thinned(FINE_POINTS), lines.thinned(COARSE_POINTS)
-    support = _support(lines)
     coarse = []
     for cam in starts:
         fit = refine(cam, coarse_lines.xy, coarse_lines.angle, pitch, fit_lens=False, gates=COARSE_GATES,
-                     support_xy=support, hold_position=1, max_nfev=COARSE_NFEV)
+                     support_xy=lines.tree, hold_position=1, max_nfev=COARSE_NFEV)
         if fit is not None:
             coarse.append(fit)
             if fit.support >= EARLY_SUPPORT and fit.share >= EARLY_SHARE:
@@ -291,17 +289,12 @@ def _search_fit(starts: list[Camera], lines: LinePoints, pitch: PitchTemplate) -
     fits = []
     for start in sorted(coarse, key=_score, reverse=True)[:FINE_STARTS]:
         fit = refine(start.camera, fine_lines.xy, fine_lines.angle, pitch, gates=FINE_GATES, lens_from=1,
-                     support_xy=support)
+                     support_xy=lines.tree)
         if fit is not None:
             if doubt_reason(doubt_features(fit), camera_trust()) == "ok":
                 return fit
             fits.append(fit)
     return max(fits, key=_score) if fits else None
-
-
-def _support(lines: LinePoints) -> cKDTree:
-    """A k-d tree of all of ``lines``' points, built once for every refinement's support measure."""
-    return cKDTree(lines.xy)
 
 
 def _strong_lens_retry(rgb: np.ndarray, lines: LinePoints, pitch: PitchTemplate, judged: CameraEstimate) -> CameraEstimate:

@@ -27,9 +27,11 @@ boards of other greens and yellows are not grass; for the work copy's mask judge
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import cv2
 import numpy as np
+from scipy.spatial import cKDTree
 
 from ..estimation.lines import BORDER_MARGIN, bright_ridges, content_box, gray_copy
 from ..estimation.trust import pitch_green
@@ -103,6 +105,11 @@ class LinePoints:
     xy: np.ndarray
     angle: np.ndarray
     size: tuple[int, int]
+
+    @cached_property
+    def tree(self) -> cKDTree:
+        """A k-d tree of :attr:`xy`, built once for every fit of this frame that measures support on it."""
+        return cKDTree(self.xy)
 
     def thinned(self, count: int) -> "LinePoints":
         """At most ``count`` of the points, evenly spread over the list (a bounded fitting cost)."""
