@@ -259,13 +259,9 @@ def _status_printer(quiet: bool):
 
 def run(args: argparse.Namespace) -> int:
     """SIGINT/SIGTERM/SIGHUP end the stream (the CLI makes SIGINT stop it even when inherited ignored), its outputs closed playable."""
-    _check_options(args)
-    return _run(args)
-
-
-def _run(args: argparse.Namespace) -> int:
     from ..video.live_stream import run_live
 
+    _check_options(args)
     opened: list = []  # what to close if the set-up fails: (object, how)
     try:
         online = _online_lens(args) if args.auto else None
