@@ -76,20 +76,28 @@ def match_of(name: str) -> str:
     raise ValueError(f"frame {name!r} belongs to none of the matches {sorted(MATCHES)}")
 
 
-def homography_floor(kp_m: np.ndarray, labels: np.ndarray) -> float:
-    """RMS (px) a plain homography fitted to the frame's own labels (N x 2, NaN where unlabelled)
-    leaves at the template keypoints ``kp_m`` (N x 2+ metres); NaN with fewer than 4 labels."""
+def _labels_homography(kp_m: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray | None, np.ndarray, float]:
+    """``(H, labelled, floor)``: the plain homography fitted to the frame's own labels (N x 2, NaN where
+    unlabelled) from the template keypoints ``kp_m`` (N x 2+ metres; ``None`` with fewer than 4 labels or
+    degenerate ones), which keypoints are labelled, and the RMS (px) it leaves at them (NaN with fewer
+    than 4 labels, inf for degenerate ones)."""
     import cv2
 
     ok = np.isfinite(labels).all(1)
     if ok.sum() < 4:
-        return float("nan")
+        return None, ok, float("nan")
     h, _ = cv2.findHomography(kp_m[ok, :2], labels[ok], 0)
     if h is None:  # degenerate (e.g. collinear) labels: no homography
-        return float("inf")
+        return None, ok, float("inf")
     p = np.column_stack([kp_m[ok, :2], np.ones(ok.sum())]) @ h.T
     with np.errstate(divide="ignore", invalid="ignore"):  # a label on the fitted horizon: infinitely far
-        return float(np.sqrt(np.mean(np.sum((p[:, :2] / p[:, 2:] - labels[ok]) ** 2, 1))))
+        return h, ok, float(np.sqrt(np.mean(np.sum((p[:, :2] / p[:, 2:] - labels[ok]) ** 2, 1))))
+
+
+def homography_floor(kp_m: np.ndarray, labels: np.ndarray) -> float:
+    """RMS (px) a plain homography fitted to the frame's own labels (N x 2, NaN where unlabelled)
+    leaves at the template keypoints ``kp_m`` (N x 2+ metres); NaN with fewer than 4 labels."""
+    return _labels_homography(kp_m, labels)[2]
 
 
 def label_verdict(kp_m: np.ndarray, labels: np.ndarray) -> str:
@@ -101,19 +109,16 @@ def label_verdict(kp_m: np.ndarray, labels: np.ndarray) -> str:
     turn keeps the sign); ``"inconsistent"`` when no homography fits them within :data:`CONSISTENT_PX`
     (:func:`homography_floor`) or the one fitted folds some labels through the horizon (mixed signs);
     ``"too_few"`` under 4 labels."""
-    import cv2
-
-    ok = np.isfinite(labels).all(1)
+    h, ok, floor = _labels_homography(kp_m, labels)
     if ok.sum() < 4:
         return "too_few"
-    h, _ = cv2.findHomography(kp_m[ok, :2], labels[ok], 0)
     if h is None:  # degenerate labels
         return "inconsistent"
     w = np.column_stack([kp_m[ok, :2], np.ones(ok.sum())]) @ h[2]
     sign = np.sign(np.linalg.det(h) * w ** 3)
     if np.all(sign > 0):
         return "mirrored"
-    if np.any(sign > 0) or not homography_floor(kp_m, labels) <= CONSISTENT_PX:
+    if np.any(sign > 0) or not floor <= CONSISTENT_PX:
         return "inconsistent"
     return "consistent"
 
@@ -136,15 +141,15 @@ def repair_labels(kp_m: np.ndarray, labels: np.ndarray) -> tuple[np.ndarray | No
     for drops in range(1, REPAIR_DROPS + 1):
         if len(labelled) - drops < REPAIR_KEEP:
             break
-        best = None
+        candidates = []  # (floor, dropped, kept) of each removal that leaves consistent labels
         for dropped in itertools.combinations(labelled.tolist(), drops):
             kept = labels.copy()
             kept[list(dropped)] = np.nan
             if label_verdict(kp_m, kept) == "consistent":
-                floor = homography_floor(kp_m, kept)
-                best = min(best or (floor, dropped, kept), (floor, dropped, kept), key=lambda b: b[0])
-        if best is not None:
-            return best[2], best[1]
+                candidates.append((homography_floor(kp_m, kept), dropped, kept))
+        if candidates:
+            _, dropped, kept = min(candidates, key=lambda c: c[0])
+            return kept, dropped
     return None, ()
 
 
