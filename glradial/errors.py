@@ -1,7 +1,10 @@
 """glradial's errors: every error glradial defines is a :class:`Error`, and also the built-in
-exception it was before (``except ValueError`` and ``except RuntimeError`` keep working)."""
+exception it was before (``except ValueError`` and ``except RuntimeError`` keep working); and
+:func:`check_count`, the one check of the counts glradial takes."""
 
 from __future__ import annotations
+
+import numbers
 
 
 class Error(Exception):
@@ -98,3 +101,37 @@ class LensTrackError(Error, ValueError):
         >>> issubclass(glradial.LensTrackError, ValueError)
         True
     """
+
+
+def check_count(name: str, value: object, *, minimum: int = 1, unit: str = "", optional: bool = False) -> int | None:
+    """``value`` as an ``int`` when it is an integer (Python or NumPy, not a bool) ``>= minimum``
+    (``None`` passes where ``optional``), else ``ValueError`` naming ``name``, the rule and the value:
+    the one check of every count, stride and thread number glradial takes.
+
+    Args:
+        name: the argument's name, as the caller spells it.
+        value: what was passed.
+        minimum: the smallest value allowed (1: "a positive integer", 0: "a non-negative integer").
+        unit: what the count counts (e.g. "frames"), said in the message.
+        optional: whether ``None`` is allowed (and returned).
+
+    Returns:
+        ``int(value)``, or ``None`` for an allowed ``None``.
+
+    Raises:
+        ValueError: ``value`` is not an integer ``>= minimum`` (nor an allowed ``None``).
+
+    Example:
+        >>> check_count("every", 3)
+        3
+        >>> check_count("every", 0, unit="frames")
+        Traceback (most recent call last):
+        ...
+        ValueError: every must be a positive integer (frames), got 0
+    """
+    if optional and value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < minimum:
+        rule = {1: "a positive integer", 0: "a non-negative integer"}.get(minimum, f"an integer >= {minimum}")
+        raise ValueError(f"{name} must be {rule}{f' ({unit})' if unit else ''}{' or None' if optional else ''}, got {value!r}")
+    return int(value)

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import os
 
+from .errors import check_count
+
 __all__ = ["THREAD_VARIABLES", "set_thread_budget", "thread_budget", "cores", "share_of_cores"]
 
 #: the environment variables that size native pools not reachable through an API
@@ -31,8 +33,7 @@ def cores() -> int:
 
 def share_of_cores(workers: int, total: int | None = None) -> int:
     """The threads each of ``workers`` workers gets: ``total`` (default :func:`cores`) // workers, at least 1."""
-    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-        raise ValueError(f"workers must be a positive integer, got {workers!r}")
+    check_count("workers", workers)
     return max(1, (cores() if total is None else int(total)) // workers)
 
 
@@ -40,8 +41,7 @@ def set_thread_budget(threads: int) -> None:
     """Size this process's native thread pools to ``threads`` (a positive integer). Call it before
     the process makes its first GL context (llvmpipe reads ``LP_NUM_THREADS`` then) and, for
     OpenMP/BLAS, before NumPy is imported (a spawned worker's first act)."""
-    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
-        raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    check_count("threads", threads)
     for name in THREAD_VARIABLES:
         os.environ[name] = str(threads)
     import cv2

@@ -41,6 +41,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..errors import check_count
 from ..lens.lens import Lens
 from ..lens.options import Method
 from ..media.frames import to_rgb8
@@ -131,8 +132,7 @@ class NetLinesEstimator:
         import onnxruntime as ort
 
         path = Path(model_path) if model_path is not None else default_model_path()
-        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-            raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
+        check_count("threads", threads, optional=True)
         if not isinstance(mirror_average, (bool, np.bool_)):
             raise TypeError(f"mirror_average must be a bool, got {mirror_average!r}")
         self.mirror_average = bool(mirror_average)

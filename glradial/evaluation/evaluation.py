@@ -42,6 +42,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..errors import check_count
 from ..lens.metrics import PAPER_SIZE, distortion_loss, manifold_k2, max_displacement_px, median_interval
 from ..synthesis.crops import PAPER_RANGES
 
@@ -188,11 +189,8 @@ class EvaluationSettings:
         if self.split not in ("test", "val"):
             raise ValueError(f"split must be 'test' or 'val', got {self.split!r}")
         for name in ("n", "panoramas"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if isinstance(self.ood_n, bool) or not isinstance(self.ood_n, int) or self.ood_n < 0:
-            raise ValueError(f"ood_n must be a non-negative integer, got {self.ood_n!r}")
+            check_count(name, getattr(self, name))
+        check_count("ood_n", self.ood_n, minimum=0)
         if self.field_panorama is not None and not Path(self.field_panorama).is_file():
             raise FileNotFoundError(f"field panorama {str(self.field_panorama)!r} does not exist")
 

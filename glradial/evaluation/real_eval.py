@@ -34,7 +34,7 @@ from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
-from ..errors import Error
+from ..errors import Error, check_count
 from ..estimation.lens_estimate import LensEstimate, judge
 from ..estimation.net_lines import view_box
 from ..estimation.trust import FrameEvidence
@@ -435,10 +435,8 @@ def evaluate_folder(frames_dir: str | Path | None, out: str | Path, *, calibrate
     squashed broadcast frames scored self-consistently per clip (:func:`broadcast_samples`)."""
     from ..media.atomic import atomic_write_text
 
-    if isinstance(lenses, bool) or not isinstance(lenses, int) or lenses < 1:
-        raise ValueError(f"lenses must be a positive integer, got {lenses!r}")
-    if isinstance(procedural, bool) or not isinstance(procedural, int) or procedural < 0:
-        raise ValueError(f"procedural must be a non-negative integer, got {procedural!r}")
+    check_count("lenses", lenses)
+    check_count("procedural", procedural, minimum=0)
     cams = [load_calibrated(c) for c in calibrated]
     sources: dict[str, Iterable] = {}
     own: dict[str, dict] = {}

@@ -14,6 +14,7 @@ import signal
 from multiprocessing.connection import Connection, wait
 from typing import Callable
 
+from ..errors import check_count
 from ..threads import share_of_cores
 from .worker import JobWorker, Result, Task
 
@@ -51,12 +52,10 @@ class ProcessRunner:
     label = "processes"
 
     def __init__(self, work: Callable, workers: int, threads: int | None = None) -> None:
-        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
-            raise ValueError(f"workers must be a positive integer, got {workers!r}")
+        check_count("workers", workers)
         self._context = multiprocessing.get_context("spawn")
         self._work = work
-        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int) or threads < 1):
-            raise ValueError(f"threads must be a positive integer or None, got {threads!r}")
+        check_count("threads", threads, optional=True)
         self._threads = threads or share_of_cores(workers)
         self.slots = [_Slot(self._context, work, self._threads) for _ in range(workers)]
 

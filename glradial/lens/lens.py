@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import check_count
 from . import lensfuncs
 from .options import (  # noqa: F401  (re-exported: the lens's option types)
     DIRECTIONS,
@@ -121,8 +122,7 @@ class Plane:
     def __post_init__(self) -> None:
         for name in ("width", "height"):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"plane {name} must be a positive integer (samples), got {value!r}")
+            check_count(f"plane {name}", value, unit="samples")
         for name in ("x0", "y0"):
             real_number(name, getattr(self, name))
         for name in ("step_x", "step_y"):

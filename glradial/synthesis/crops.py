@@ -29,6 +29,7 @@ from typing import Literal, Mapping, Sequence
 import moderngl
 import numpy as np
 
+from ..errors import check_count
 from ..gl.shaderlib import TEXTURE_FORMATS
 from ..lens import lensfuncs
 from ..lens.inverse_series import SERIES_DEGREE, fit_inverse_series
@@ -741,8 +742,7 @@ class PanoramaRenderers:
     """
 
     def __init__(self, panoramas: Sequence[object], *, cache: int = 1, **renderer_options: object) -> None:
-        if isinstance(cache, bool) or not isinstance(cache, (numbers.Integral, np.integer)) or cache < 1:
-            raise ValueError(f"cache must be an integer >= 1, got {cache!r}")
+        check_count("cache", cache)
         self.panoramas = list(panoramas)
         self.cache = int(cache)
         self.options = renderer_options
@@ -808,8 +808,7 @@ def render_crop_set(
     of each crop, in order."""
     if not panoramas:
         raise ValueError("panoramas must not be empty")
-    if isinstance(n, bool) or not isinstance(n, (numbers.Integral, np.integer)) or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n!r}")
+    check_count("n", n)
     counts = [n // len(panoramas) + (1 if i < n % len(panoramas) else 0) for i in range(len(panoramas))]
     params: list[CropParams] = []
     which: list[int] = []

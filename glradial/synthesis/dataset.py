@@ -33,6 +33,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..errors import check_count
 from ..lens.lens import frame_size
 from ..lens.metrics import PAPER_SIZE
 from ..lens.options import INVERSES, InverseMethod
@@ -183,10 +184,8 @@ def _manifest(seed: int, count: int, size: tuple[int, int], out_size: tuple[int,
 
 
 def _check_settings(count: object, seed: object, image_format: object, inverse: object) -> None:
-    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
-        raise ValueError(f"count must be a positive integer, got {count!r}")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    check_count("count", count)
+    check_count("seed", seed, minimum=0)
     if image_format not in FORMATS:
         raise ValueError(f"image_format must be one of {FORMATS}, got {image_format!r}")
     if inverse not in INVERSES:

@@ -53,6 +53,7 @@ import numpy as np
 from ..camera.estimate import CameraEstimate
 from ..camera.model import Camera
 from ..camera.white_lines import DETECT_WIDTH
+from ..errors import check_count
 from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 from ..lens.options import LIVE_WORKERS, check_choice
@@ -253,10 +254,8 @@ class LiveCameraTracker(WarmWorker):
     def __init__(self, size: tuple[int, int] | None = None, rate: float | Fraction | None = None, *,
                  worker: str = "process", every: int = 1, max_carry: int | None = None, duty: float = 1.0) -> None:
         self.worker = check_choice("worker", worker, LIVE_WORKERS + ("inline",))
-        if isinstance(every, bool) or not isinstance(every, int) or every < 1:
-            raise ValueError(f"every must be an integer >= 1 (frames), got {every!r}")
-        if max_carry is not None and (isinstance(max_carry, bool) or not isinstance(max_carry, int) or max_carry < 1):
-            raise ValueError(f"max_carry must be an integer >= 1 (frames), got {max_carry!r}")
+        check_count("every", every, unit="frames")
+        check_count("max_carry", max_carry, unit="frames", optional=True)
         if not 0 < duty <= 1:
             raise ValueError(f"duty must lie in (0, 1] (a share of one core), got {duty!r}")
         self.every, self._max_carry, self.duty = every, max_carry, float(duty)

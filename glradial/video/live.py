@@ -65,6 +65,7 @@ import av
 import cv2
 import numpy as np
 
+from ..errors import check_count
 from ..lens.lens import Lens, as_lens
 from ..media.frames import to_rgb8
 from ..media.video_io import VideoInfo, frame_planes, yuv_layout
@@ -285,8 +286,7 @@ class LiveCorrector:
                  rate: float | Fraction, *, max_delay: int = DEFAULT_MAX_DELAY, camera=None, model: str | None = None,
                  fit: str = "same", interpolation: str = "linear", backend: str = "cpu", codec: str = "", frames=None,
                  estimator: Callable | None = None, auto: dict | None = None, tracker=None) -> None:
-        if isinstance(max_delay, bool) or not isinstance(max_delay, (int, np.integer)) or max_delay < 1:
-            raise ValueError(f"max_delay must be an integer >= 1 (frames), got {max_delay!r}")
+        check_count("max_delay", max_delay, unit="frames")
         info = VideoInfo.of(size, rate, codec=codec)
         self.size, self.rate, self.max_delay = info.size, info.rate, int(max_delay)
         self.camera, self.model, self.codec, self.frames = camera, model, codec, frames

@@ -39,6 +39,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..errors import check_count
 from ..lens import doubt
 from ..lens.lens import Lens, corner_radius
 from ..lens.options import LIVE_WORKERS, UNTIL_SURE, check_choice
@@ -215,8 +216,7 @@ class OnlineShotLens(WarmWorker):
                  until_sure: str = "pass", duty: float = DUTY, worker: str = "process",
                  detector: ShotDetector | None = None) -> None:
         for name, value in (("every", every), ("estimate_every", estimate_every)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+            check_count(name, value)
         if not doubtful_px > 0:
             raise ValueError(f"doubtful_px must be > 0 (px at 1920), got {doubtful_px!r}")
         if not 0 < duty <= 1:

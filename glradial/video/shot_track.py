@@ -38,6 +38,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..errors import check_count
 from ..lens import doubt
 from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
@@ -140,9 +141,8 @@ class _Shots:
         """Samples taken of the open shot so far (their evidence found or pending)."""
         return self._queued
 
-    @property
-    def fits(self) -> list[FittedShotLens]:
-        """The shots' fits (waiting for those still running)."""
+    def wait_for_fits(self) -> list[FittedShotLens]:
+        """The shots' fits, once those still running on the fit worker have ended."""
         self._fits = [fit.result() if isinstance(fit, Future) else fit for fit in self._fits]
         return self._fits
 
@@ -177,8 +177,7 @@ def track_shots(
     and the shots' fits on another: :class:`_Shots`; the same track; not where the process's
     thread budget is one core, :func:`glradial.threads.thread_budget`: a job's worker)."""
     for name, value in (("every", every), ("estimate_every", estimate_every)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-            raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        check_count(name, value)
     if not doubtful_px > 0:
         raise ValueError(f"doubtful_px must be > 0 (px at 1920), got {doubtful_px!r}")
     for name, value in (("sparse", sparse), ("ahead", ahead)):
@@ -194,7 +193,7 @@ def track_shots(
         check = CutCheck(path, order, detector, rate=rate) if order is not None else None
         try:
             stamps = _scan(reader, order, detector, shots, every, progress, check)
-            shots.fits  # noqa: B018 -- waits for the last fits before the workers end
+            shots.wait_for_fits()  # before the workers end
         except _Unnumbered:  # the decoder's timestamps do not match the packets': decode every frame
             return track_shots(path, estimator, every=every, estimate_every=estimate_every, detector=fresh,
                                progress=progress, doubtful_px=doubtful_px, apply_doubtful=apply_doubtful, rate=rate,
@@ -327,7 +326,7 @@ def _track(info, stamps: np.ndarray, shots: _Shots, apply_doubtful: bool, doubtf
     sure = np.empty(n)
     doubtful = np.zeros(n, bool)
     reason = [""] * n
-    for s, (first, end, fit, (frames, zooms)) in enumerate(zip(shots.starts, bounds, shots.fits, shots.sampled)):
+    for s, (first, end, fit, (frames, zooms)) in enumerate(zip(shots.starts, bounds, shots.wait_for_fits(), shots.sampled)):
         here = np.arange(first, end)
         shot[here] = s
         lens[here] = fit.lens_at(_log_zoom_at(here, frames, zooms))

@@ -280,7 +280,7 @@ def test_shot_fit_input_errors(tmp_path):
     from glradial.video.video_pipeline import track_video
 
     for name, value in (("every", 0), ("estimate_every", 1.5)):
-        with pytest.raises(ValueError, match=f"{name} must be an integer >= 1, got {value}"):
+        with pytest.raises(ValueError, match=f"{name} must be a positive integer, got {value}"):
             track_video(tmp_path / "never-opened.mp4", guess, **{name: value})
     with pytest.raises(ValueError, match="doubtful_px must be > 0"):
         track_video(tmp_path / "never-opened.mp4", guess, doubtful_px=0)
