@@ -100,7 +100,7 @@ class _Shots:
         self._run = estimator
         self.estimator = estimator if not ahead else lambda frame: self._workers[0].submit(estimator, frame).result()
         self.starts: list[int] = []
-        self._fits: list[Future | FittedShotLens] = []
+        self.fits: list[Future | FittedShotLens] = []
         self.sampled: list[tuple[np.ndarray, np.ndarray]] = []
         self.estimates: list[tuple[int, Lens]] = []
         self.collector: ShotCollector | None = None
@@ -131,7 +131,7 @@ class _Shots:
             self.collector.add(*self._pending.popleft(), motion=self._workers[2])
         evidence = self.collector.finish()
         fit = dict(doubtful_px=self.doubtful_px, radius=self.radius)
-        self._fits.append(fit_shot(evidence, **fit) if self._workers is None else self._workers[1].submit(fit_shot, evidence, **fit))
+        self.fits.append(fit_shot(evidence, **fit) if self._workers is None else self._workers[1].submit(fit_shot, evidence, **fit))
         self.sampled.append((np.array([s.frame for s in evidence.samples]), np.asarray(evidence.zoom, np.float64)))
         self.estimates.extend(self.collector.estimates)
         self.collector = None
@@ -141,10 +141,9 @@ class _Shots:
         """Samples taken of the open shot so far (their evidence found or pending)."""
         return self._queued
 
-    def wait_for_fits(self) -> list[FittedShotLens]:
-        """The shots' fits, once those still running on the fit worker have ended."""
-        self._fits = [fit.result() if isinstance(fit, Future) else fit for fit in self._fits]
-        return self._fits
+    def wait_for_fits(self) -> None:
+        """Wait for the fits still running on the fit worker: :attr:`fits` then holds each shot's."""
+        self.fits = [fit.result() if isinstance(fit, Future) else fit for fit in self.fits]
 
     def stop(self) -> None:
         """End the workers (what is queued and not started is dropped)."""
@@ -326,7 +325,7 @@ def _track(info, stamps: np.ndarray, shots: _Shots, apply_doubtful: bool, doubtf
     sure = np.empty(n)
     doubtful = np.zeros(n, bool)
     reason = [""] * n
-    for s, (first, end, fit, (frames, zooms)) in enumerate(zip(shots.starts, bounds, shots.wait_for_fits(), shots.sampled)):
+    for s, (first, end, fit, (frames, zooms)) in enumerate(zip(shots.starts, bounds, shots.fits, shots.sampled)):
         here = np.arange(first, end)
         shot[here] = s
         lens[here] = fit.lens_at(_log_zoom_at(here, frames, zooms))
