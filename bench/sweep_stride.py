@@ -146,8 +146,12 @@ def main() -> None:
                         help="then time pass 1 alone on the first folder, the settings in turn, ROUNDS times")
     parser.add_argument("--samples-per-stride", type=int, default=shot_track.SAMPLES_PER_STRIDE,
                         help="samples after which a shot's stride doubles (shot_track.SAMPLES_PER_STRIDE)")
+    parser.add_argument("--first-samples", type=int, default=shot_track.FIRST_SAMPLES,
+                        help="samples a shot takes at the first stride (shot_track.FIRST_SAMPLES)")
+    parser.add_argument("--figure", default="sweep_stride", help="the figure's name (docs/figures/NAME.json)")
     args = parser.parse_args()
-    shot_track.SAMPLES_PER_STRIDE = args.samples_per_stride  # read by pass 1 at each sample
+    # read by pass 1 at each sample (shot_track.stride)
+    shot_track.SAMPLES_PER_STRIDE, shot_track.FIRST_SAMPLES = args.samples_per_stride, args.first_samples
     estimator = default_estimator()
     settings = [(int(e), int(s)) for e in args.every.split(",") for s in args.estimate_every.split(",")]
     first = json.loads((args.clips[0] / "manifest.json").read_text())
@@ -158,10 +162,10 @@ def main() -> None:
         for key, values in cpu.items():
             results["settings (EVERY/ESTIMATE_EVERY)"][key]["pass1_cpu_ms_per_frame_interleaved"] = values
             print(f"{key}: median {np.median(values):.2f} ms CPU/frame over {len(values)} rounds")
-    results["samples_per_stride"] = args.samples_per_stride
+    results["samples_per_stride"], results["first_samples"] = args.samples_per_stride, args.first_samples
     results["note"] = ("CPU: process_time of pass 1 (all its threads) per frame, less eval_shots' extra joint fit; "
                        "the interleaved figures run the settings in turn on the first folder, pass 1 alone")
-    write_figure("sweep_stride", results)
+    write_figure(args.figure, results)
 
 
 if __name__ == "__main__":

@@ -2,8 +2,8 @@
 
 Causal counterpart of :mod:`glradial.video.shot_track`: every frame's 64 px thumbnail goes to the
 cut detector (:class:`glradial.video.cuts.ShotDetector`, causal by design); a cut opens a new shot.
-Within a shot, a frame every ``every`` frames (the stride doubling each
-:data:`~glradial.video.shot_track.SAMPLES_PER_STRIDE` samples, as for files) is handed, at most
+Within a shot, a frame every ``every`` frames (later ones further apart:
+:func:`~glradial.video.shot_track.stride`, as for files) is handed, at most
 :data:`SAMPLE_WIDTH` px wide, to a worker thread that adds it to the shot's
 :class:`~glradial.video.shot_evidence.ShotCollector` (line chains, frame-to-frame matches, the
 per-frame estimate on every ``estimate_every``-th sample) and refits the shot
@@ -47,7 +47,7 @@ from .cuts import ShotDetector
 from .lens_track import DOUBTFUL_PX
 from .shot_evidence import ShotCollector
 from .shot_fit import fit_shot, load_solver
-from .shot_track import ESTIMATE_EVERY, EVERY, SAMPLES_PER_STRIDE
+from .shot_track import ESTIMATE_EVERY, EVERY, stride
 
 __all__ = ["LensState", "OnlineShotLens", "BundledEstimator", "SAMPLE_WIDTH", "DUTY", "worker_reply", "serve_jobs",
            "WarmWorker", "READY_TIMEOUT_S"]
@@ -254,8 +254,7 @@ class OnlineShotLens(WarmWorker):
         if self.detector.update(thumbnail, max(1, advance)):
             self.shot += 1
             self._sampled, self._in_shot = -1, 0
-        stride = self.every * 2 ** (self._in_shot // SAMPLES_PER_STRIDE)
-        if self._sampled < 0 or index - self._sampled >= stride:
+        if self._sampled < 0 or index - self._sampled >= stride(self.every, self._in_shot):
             if self._ready and not self._busy and time.monotonic() >= self._rest_until:
                 self._connection.send((self.shot, index, sample()))
                 self._busy = True

@@ -374,3 +374,17 @@ def test_a_shot_is_judged_by_benefit_like_a_frame():
     assert judged_by_benefit(shot(strong, shift_strong + 1.0), no_samples).doubtful
     assert judged_by_benefit(shot(weak, 15.0), no_samples).doubtful
     assert judged_by_benefit(shot(strong, 15.0, "fold_over"), no_samples).reason == "fold_over"
+
+
+def test_a_long_shot_is_sampled_ever_more_sparsely():
+    """Pass 1's schedule (shot_track.stride), frame by frame as _scan applies it: a 2-s shot (50
+    frames at 25 fps) is sampled every 10 frames as before the schedule changed, a longer one every
+    20, then 40 frames (docs/EXPERIMENTS.md, figure sweep_stride_long)."""
+    from glradial.video.shot_track import stride
+
+    at = [0]
+    for frame in range(1, 400):
+        if frame - at[-1] >= stride(10, len(at)):
+            at.append(frame)
+    assert [f for f in at if f < 50] == [0, 10, 20, 30, 40]
+    assert at == [0, 10, 20, 30, 40, 60, 80, 100, 120, 160, 200, 240, 280, 360]
