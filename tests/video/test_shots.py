@@ -329,8 +329,13 @@ def test_batched_evaluation_equals_the_per_pair_definition():
         q = np.c_[ua, np.ones(len(ua))] @ homography_of(ua, ub).T
         weight = math.sqrt(min(1.0, MATCH_CAP / len(m))) * m.width / MATCH_SIGMA
         expected.append(((q[:, :2] / q[:, 2:3] - ub) * weight).ravel())
-    got = _Pairs(pairs).residuals(lenses)
-    assert np.array_equal(got, np.concatenate(expected))
+    got, expected = _Pairs(pairs).residuals(lenses), np.concatenate(expected)
+    # OpenCV's Levenberg-Marquardt stops a little short of the least-squares homography the batched
+    # solve reaches: the residuals (units of MATCH_SIGMA, noise here ~2) agree to 1e-3, and the
+    # batched ones are never the worse fit
+    assert np.allclose(got, expected, rtol=0, atol=1e-3) and got @ got <= expected @ expected * (1 + 1e-9)
+    stacked = _Pairs(pairs).residuals(np.stack([lenses, lenses[::-1]]))  # K lens sets in one evaluation
+    assert np.allclose(stacked[0], got, rtol=0, atol=1e-9) and np.allclose(stacked[1], _Pairs(pairs).residuals(lenses[::-1]), rtol=0, atol=1e-9)
     assert len(_Pairs([]).residuals(lenses)) == 0
 
 
