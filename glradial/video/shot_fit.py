@@ -9,7 +9,8 @@ lenses, :func:`glradial.lens.metrics.manifold_k2`; ``z`` centred on the shot's m
 focal length corrects broadcast zooms as well as per-frame models (Alvarez, Gomez & Henriquez, JMIV
 2012); ``a2`` is held loosely to 0 (:data:`ZOOM_CURVE_SIGMA`).
 
-Residuals (``scipy.optimize.least_squares``, Cauchy loss of scale ``sqrt(ROBUST_T)`` chi, so a chain
+Residuals (their squares summed, minimised by damped Newton steps on the cost's curvature,
+:meth:`_Problem.solve`; Cauchy loss of scale ``sqrt(ROBUST_T)`` chi, so a chain
 or match that no lens explains costs at most logarithmically):
 
 * **lines** -- one per chain, as in :mod:`glradial.estimation.line_fit`: the chain undistorted with its frame's
@@ -116,8 +117,9 @@ MAX_CHAIN_POINTS = 32
 INFORMATIVE_RMS = 1.0
 #: typical size of each parameter (a0, a1, a2, b0; static: a0, b0) for the solver's steps
 PARAMETER_SCALE = (0.05, 0.2, 0.5, 0.02)
-#: relative step of the solver's forward-difference Jacobian (:meth:`_Problem.jacobian`)
-DIFF_STEP = 1e-4
+#: the solver (:meth:`_Problem.solve`) stops when a step gains less than this fraction of the cost,
+#: or moves less than SOLVE_XTOL (units of PARAMETER_SCALE), or after SOLVE_MAX_STEPS trial steps
+SOLVE_FTOL, SOLVE_XTOL, SOLVE_MAX_STEPS = 1e-9, 1e-5, 60
 #: finite-difference step of the cost's curvature (:func:`_hessian`), in units of PARAMETER_SCALE
 HESSIAN_STEP = 0.02
 #: grid of k1 (on the manifold) for screening chains and seeding the fit
@@ -376,6 +378,16 @@ class _Pairs:
         return out[..., self.mask, :].reshape(out.shape[:-3] + (-1,))
 
 
+@dataclass(frozen=True)
+class _Solution:
+    """A solved fit: its parameters, cost (half the sum of squared residuals) and the cost's
+    curvature there (:func:`_stencil`)."""
+
+    x: np.ndarray
+    cost: float
+    hessian: np.ndarray
+
+
 class _Problem:
     """The residuals of one shot for a parameter vector, or for ``(K, n)`` of them at once (one
     vectorised evaluation: the solver's finite differences, the seed's grid, the curvature's
@@ -424,26 +436,32 @@ class _Problem:
             self.residuals(x0)
         return self._last[1], self._last[2]
 
-    def jacobian(self, theta: np.ndarray) -> np.ndarray:
-        """Forward differences of :meth:`residuals`, the steps and arithmetic of SciPy's "2-point"
-        scheme at ``diff_step`` :data:`DIFF_STEP` (relative; where that step vanishes, at 0, the
-        square root of the float64 epsilon), ``theta`` and the n shifted vectors evaluated at
-        once, their homographies all refined by one step from those at ``theta`` (the same smooth
-        function of the lens on both sides of each difference)."""
-        x0 = np.asarray(theta, np.float64)
-        sign = np.where(x0 >= 0.0, 1.0, -1.0)
-        step = DIFF_STEP * sign * np.abs(x0)
-        step = np.where((x0 + step) - x0 == 0.0, math.sqrt(np.finfo(np.float64).eps) * sign * np.maximum(1.0, np.abs(x0)), step)
-        near = self.at(x0)[1]
-        shifted = self.residuals(np.vstack([x0, x0 + np.diag(step)]), near)
-        dx = (x0 + step) - x0
-        return ((shifted[1:] - shifted[0]) / dx[:, None]).T
-
-    def solve(self, theta: np.ndarray):
-        scale = PARAMETER_SCALE[: len(theta) - 1] + PARAMETER_SCALE[-1:]
-        from scipy.optimize import least_squares  # the solver's import (~0.5 s): load_solver
-
-        return least_squares(self.residuals, theta, jac=self.jacobian, x_scale=np.asarray(scale), max_nfev=100)
+    def solve(self, theta: np.ndarray) -> "_Solution":
+        """The cost's minimum from ``theta``: damped Newton steps (Levenberg-Marquardt on the
+        curvature, :func:`_stencil`, in units of PARAMETER_SCALE), until a step gains less than
+        :data:`SOLVE_FTOL` of the cost or moves less than :data:`SOLVE_XTOL`."""
+        theta = np.asarray(theta, np.float64)
+        scale = np.asarray(PARAMETER_SCALE[: len(theta) - 1] + PARAMETER_SCALE[-1:])
+        cost, gradient, hessian = _stencil(self, theta)
+        damping, evaluations = 0.0, 0
+        while evaluations < SOLVE_MAX_STEPS:
+            g, h = gradient * scale, hessian * np.outer(scale, scale)
+            floor = max(0.0, -float(np.linalg.eigvalsh(h)[0])) * 1.01 + 1e-9 * float(np.abs(h).max() or 1.0)
+            step = -np.linalg.solve(h + (floor + damping) * np.eye(len(theta)), g)
+            trial = theta + step * scale
+            r = self.residuals(trial)
+            trial_cost, evaluations = 0.5 * float(r @ r), evaluations + 1
+            if trial_cost < cost:
+                gain, theta = cost - trial_cost, trial
+                cost, gradient, hessian = _stencil(self, theta)
+                damping /= 4.0
+                if gain <= SOLVE_FTOL * cost or np.max(np.abs(step)) <= SOLVE_XTOL:
+                    break
+            else:
+                damping = max(4.0 * damping, 1e-3 * float(np.abs(h).max() or 1.0))
+                if np.max(np.abs(step)) <= SOLVE_XTOL:
+                    break
+        return _Solution(theta, cost, hessian)
 
 
 def _screen(chains: _Chains) -> np.ndarray:
@@ -458,10 +476,14 @@ def _screen(chains: _Chains) -> np.ndarray:
 
 
 def _seed(problem: _Problem) -> np.ndarray:
-    """Best static lens on the manifold grid (robust cost + prior), as ``[a0, b0]``: the grid in one
-    evaluation."""
-    r = problem.residuals(np.stack([K1_GRID, np.zeros_like(K1_GRID)], axis=1))
-    return np.array([K1_GRID[int(np.argmin(np.sum(r * r, axis=1)))], 0.0])
+    """Best static lens on the manifold grid (robust cost + prior), as ``[a0, b0]``: every other
+    grid point in one evaluation, then the two between which its best lies."""
+    def best(index: np.ndarray) -> int:
+        r = problem.residuals(np.stack([K1_GRID[index], np.zeros(len(index))], axis=1))
+        return int(index[np.argmin(np.sum(r * r, axis=1))])
+
+    coarse = best(np.arange(0, len(K1_GRID), 2))
+    return np.array([K1_GRID[best(np.array([i for i in (coarse - 1, coarse, coarse + 1) if 0 <= i < len(K1_GRID)]))], 0.0])
 
 
 def _solve_zoom(problem: _Problem, static: np.ndarray, evidence: ShotEvidence):
@@ -477,25 +499,34 @@ def _solve_zoom(problem: _Problem, static: np.ndarray, evidence: ShotEvidence):
     return min(results, key=lambda r: r.cost)
 
 
-def _hessian(problem: _Problem, theta: np.ndarray) -> np.ndarray:
-    """The curvature of the fit's cost (half the sum of its squared residuals) at ``theta``, by
-    central differences of steps :data:`HESSIAN_STEP` x the parameters' typical size. Not the
-    Gauss-Newton ``J^T J``: a chain's residual is the square root of its chi^2, whose slope vanishes
-    at the chain's own best lens, so ``J^T J`` misses the information of every chain that no lens
-    straightens exactly (real lines, most of them) and overstates a line fit's spread many times."""
+def _stencil(problem: _Problem, theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """The fit's cost (half the sum of its squared residuals) at ``theta``, its gradient and its
+    curvature, by central differences of steps ``h`` = :data:`HESSIAN_STEP` x the parameters'
+    typical size, every point in one evaluation: ``theta``, ``theta +- 2 h_i`` (gradient, and the
+    diagonal over ``4 h_i^2``) and ``theta +- h_i +- h_j`` (the cross terms over ``4 h_i h_j``).
+    The curvature, not the Gauss-Newton ``J^T J``: a chain's residual is the square root of its
+    chi^2, whose slope vanishes at the chain's own best lens, so ``J^T J`` misses the information of
+    every chain that no lens straightens exactly (real lines, most of them), overstates a line
+    fit's spread many times and sends a Gauss-Newton solver creeping along the valley it leaves."""
     n = len(theta)
     step = HESSIAN_STEP * np.asarray(PARAMETER_SCALE[: n - 1] + PARAMETER_SCALE[-1:])
-    pairs = [(i, j) for i in range(n) for j in range(i, n)]
-    stencil = []
-    for i, j in pairs:
-        a, b = np.eye(n)[i] * step[i], np.eye(n)[j] * step[j]
-        stencil += [theta + a + b, theta + a - b, theta - a + b, theta - a - b]
-    r = problem.residuals(np.array(stencil), problem.at(theta)[1])  # the whole stencil in one evaluation
-    cost = (0.5 * np.sum(r * r, axis=1)).reshape(-1, 4)
-    hessian = np.empty((n, n))
-    for (i, j), (pp, pm, mp, mm) in zip(pairs, cost):
+    unit = np.eye(n) * step
+    cross = [(i, j) for i in range(n) for j in range(i + 1, n)]
+    points = [theta] + [theta + sign * 2.0 * unit[i] for i in range(n) for sign in (1.0, -1.0)]
+    points += [theta + si * unit[i] + sj * unit[j] for i, j in cross for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+    r = problem.residuals(np.array(points), problem.at(theta)[1])
+    cost = 0.5 * np.sum(r * r, axis=1)
+    plus, minus = cost[1 : 2 * n + 1 : 2], cost[2 : 2 * n + 1 : 2]
+    gradient = (plus - minus) / (4.0 * step)
+    hessian = np.diag((plus - 2.0 * cost[0] + minus) / (4.0 * step**2))
+    for (i, j), (pp, pm, mp, mm) in zip(cross, cost[2 * n + 1 :].reshape(-1, 4)):
         hessian[i, j] = hessian[j, i] = (pp - pm - mp + mm) / (4.0 * step[i] * step[j])
-    return hessian
+    return float(cost[0]), gradient, hessian
+
+
+def _hessian(problem: _Problem, theta: np.ndarray) -> np.ndarray:
+    """The curvature of the fit's cost at ``theta`` (:func:`_stencil`)."""
+    return _stencil(problem, np.asarray(theta, np.float64))[2]
 
 
 def _sigma_px(problem: _Problem, result, radius: float) -> float:
@@ -505,7 +536,7 @@ def _sigma_px(problem: _Problem, result, radius: float) -> float:
     # the chains' own scatter sets the noise level (frame pairs of a still camera fit exactly and
     # would pretend to a precision the lines do not have)
     reduced = float(np.mean(np.minimum(np.nan_to_num(chi2, nan=4.0 * ROBUST_T), 4.0 * ROBUST_T))) if len(chi2) >= MIN_CHAINS else 1.0
-    values, vectors = np.linalg.eigh(_hessian(problem, np.asarray(result.x, np.float64)))
+    values, vectors = np.linalg.eigh(result.hessian)
     if not values.max() > 0:
         return math.inf
     cov = (vectors / np.maximum(values, 1e-12 * values.max())) @ vectors.T * reduced
