@@ -386,12 +386,10 @@ class _Pairs:
 
 @dataclass(frozen=True)
 class _Solution:
-    """A solved fit: its parameters, cost (half the sum of squared residuals) and the cost's
-    curvature there (:func:`_stencil`)."""
+    """A solved fit: its parameters and cost (half the sum of squared residuals)."""
 
     x: np.ndarray
     cost: float
-    hessian: np.ndarray
 
 
 class _Problem:
@@ -463,13 +461,17 @@ class _Problem:
             trial_cost, evaluations = 0.5 * float(r @ r), evaluations + 1
             if trial_cost < cost:
                 gain, theta, cost = cost - trial_cost, theta + step * scale, trial_cost
-                gradient, hessian = _stencil(self, theta)[1:]
+                moved, change = step * scale, _stencil(self, theta, curvature=False)[1] - gradient
+                gradient = gradient + change
+                if change @ moved > 0.0:  # BFGS: the curvature along the step, as the gradient saw it
+                    seen = hessian @ moved
+                    hessian = hessian + np.outer(change, change) / (change @ moved) - np.outer(seen, seen) / (moved @ seen)
                 damping /= 4.0
                 if gain <= SOLVE_FTOL * cost:
                     break
             else:
                 damping = max(4.0 * damping, 1e-3 * float(np.abs(h).max() or 1.0))
-        return _Solution(theta, cost, hessian)
+        return _Solution(theta, cost)
 
 
 def _screen(chains: _Chains) -> np.ndarray:
@@ -514,7 +516,7 @@ def _solve_zoom(problem: _Problem, static: np.ndarray, evidence: ShotEvidence):
     return min(results, key=lambda r: r.cost)
 
 
-def _stencil(problem: _Problem, theta: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+def _stencil(problem: _Problem, theta: np.ndarray, curvature: bool = True) -> tuple[float, np.ndarray, np.ndarray | None]:
     """The fit's cost (half the sum of its squared residuals) at ``theta``, its gradient and its
     curvature, by central differences of steps ``h`` = :data:`HESSIAN_STEP` x the parameters'
     typical size, every point in one evaluation: ``theta``, ``theta +- 2 h_i`` (gradient, and the
@@ -522,15 +524,21 @@ def _stencil(problem: _Problem, theta: np.ndarray) -> tuple[float, np.ndarray, n
     The curvature, not the Gauss-Newton ``J^T J``: a chain's residual is the square root of its
     chi^2, whose slope vanishes at the chain's own best lens, so ``J^T J`` misses the information of
     every chain that no lens straightens exactly (real lines, most of them), overstates a line
-    fit's spread many times and sends a Gauss-Newton solver creeping along the valley it leaves."""
+    fit's spread many times and sends a Gauss-Newton solver creeping along the valley it leaves.
+    Without ``curvature``: the gradient alone (the cost and the curvature NaN, None)."""
     n = len(theta)
     step = HESSIAN_STEP * np.asarray(PARAMETER_SCALE[: n - 1] + PARAMETER_SCALE[-1:])
     unit = np.eye(n) * step
     cross = [(i, j) for i in range(n) for j in range(i + 1, n)]
     points = [theta] + [theta + sign * 2.0 * unit[i] for i in range(n) for sign in (1.0, -1.0)]
-    points += [theta + si * unit[i] + sj * unit[j] for i, j in cross for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+    if curvature:
+        points += [theta + si * unit[i] + sj * unit[j] for i, j in cross for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1))]
+    else:
+        points = points[1:]
     r = problem.residuals(np.array(points), problem.at(theta)[1])
     cost = 0.5 * np.sum(r * r, axis=1)
+    if not curvature:
+        return math.nan, (cost[0::2] - cost[1::2]) / (4.0 * step), None
     plus, minus = cost[1 : 2 * n + 1 : 2], cost[2 : 2 * n + 1 : 2]
     gradient = (plus - minus) / (4.0 * step)
     hessian = np.diag((plus - 2.0 * cost[0] + minus) / (4.0 * step**2))
@@ -551,7 +559,7 @@ def _sigma_px(problem: _Problem, result, radius: float) -> float:
     # the chains' own scatter sets the noise level (frame pairs of a still camera fit exactly and
     # would pretend to a precision the lines do not have)
     reduced = float(np.mean(np.minimum(np.nan_to_num(chi2, nan=4.0 * ROBUST_T), 4.0 * ROBUST_T))) if len(chi2) >= MIN_CHAINS else 1.0
-    values, vectors = np.linalg.eigh(result.hessian)
+    values, vectors = np.linalg.eigh(_hessian(problem, np.asarray(result.x, np.float64)))
     if not values.max() > 0:
         return math.inf
     cov = (vectors / np.maximum(values, 1e-12 * values.max())) @ vectors.T * reduced
