@@ -406,10 +406,10 @@ class _Problem:
     def lenses(self, theta: np.ndarray) -> np.ndarray:
         return _lens(theta, self.z)
 
-    def data(self, theta: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+    def data(self, theta: np.ndarray, near: np.ndarray | None = None, pairs: bool = True) -> np.ndarray:
         lenses = self.lenses(theta)
         chi2 = self.chains.chi2(lenses)
-        pairs = self.matches.residuals(lenses, near)
+        pairs = self.matches.residuals(lenses, near) if pairs else np.zeros(chi2.shape[:-1] + (0,))
         return np.concatenate([np.sqrt(np.where(np.isfinite(chi2), chi2, 1e6)), pairs], axis=-1)
 
     def priors(self, theta: np.ndarray) -> np.ndarray:
@@ -419,16 +419,17 @@ class _Problem:
             out.append(theta[..., 2] / ZOOM_CURVE_SIGMA)
         return np.stack(out, axis=-1)
 
-    def residuals(self, theta: np.ndarray, near: np.ndarray | None = None) -> np.ndarray:
+    def residuals(self, theta: np.ndarray, near: np.ndarray | None = None, pairs: bool = True) -> np.ndarray:
         """Data residuals through the robust loss (``sign(r) sqrt(T log(1 + r^2 / T))``, so the
         solver's squares are the Cauchy cost, divided by the shot's redundancy: S sampled frames
         that show V independent views weigh as V frames against the priors) and the priors, kept
         quadratic. ``theta`` ``(n,)`` or ``(K, n)`` (-> ``(K, residuals)``); ``near``: the frame
-        pairs' homographies at a ``theta`` close by (:meth:`_Pairs.residuals`)."""
-        data = self.data(theta, near)
+        pairs' homographies at a ``theta`` close by (:meth:`_Pairs.residuals`); without ``pairs``,
+        the chains' and the priors' alone."""
+        data = self.data(theta, near, pairs)
         robust = np.sign(data) * np.sqrt(ROBUST_T * np.log1p(data * data / ROBUST_T) / self.redundancy)
         out = np.concatenate([robust, self.priors(theta)], axis=-1)
-        if np.ndim(theta) == 1 and near is None:
+        if np.ndim(theta) == 1 and near is None and pairs:
             self._last = (np.array(theta, np.float64), out, getattr(self.matches, "homographies", None))
         return out
 
@@ -486,11 +487,17 @@ def _screen(chains: _Chains) -> np.ndarray:
 
 
 def _seed(problem: _Problem) -> np.ndarray:
-    """Best static lens on the manifold grid (robust cost + prior), as ``[a0, b0]``: every other
-    grid point in one evaluation, then the two between which its best lies."""
-    def best(index: np.ndarray) -> int:
-        r = problem.residuals(np.stack([K1_GRID[index], np.zeros(len(index))], axis=1))
+    """Best static lens on the manifold grid (robust cost + prior), as ``[a0, b0]``. With
+    :data:`MIN_CHAINS` chains or more, of the chains and priors alone, the whole grid in one
+    evaluation (the frame pairs move the minimum, not its basin: the same fits on all 47 shots of
+    the eval clips); else of every residual, every other grid point, then the two between which
+    its best lies."""
+    def best(index: np.ndarray, pairs: bool = True) -> int:
+        r = problem.residuals(np.stack([K1_GRID[index], np.zeros(len(index))], axis=1), pairs=pairs)
         return int(index[np.argmin(np.sum(r * r, axis=1))])
+
+    if problem.chains.n >= MIN_CHAINS:
+        return np.array([K1_GRID[best(np.arange(len(K1_GRID)), pairs=False)], 0.0])
 
     coarse = best(np.arange(0, len(K1_GRID), 2))
     return np.array([K1_GRID[best(np.array([i for i in (coarse - 1, coarse, coarse + 1) if 0 <= i < len(K1_GRID)]))], 0.0])
