@@ -82,11 +82,20 @@ def compare(name: str, evidence, ref, new, cpu: dict) -> dict:
     lens = [np.atleast_2d(s.lens_at(z if s.zooming else np.zeros(1))) for s in (ref, new)]
     if len(lens[0]) != len(lens[1]):
         lens = [np.atleast_2d(s.lens_at(z)) for s in (ref, new)]
-    return {"shot": name, "samples": len(evidence.samples), "pairs": len(evidence.pairs),
+    return {"shot": name, "camera": evidence.camera(), "samples": len(evidence.samples), "pairs": len(evidence.pairs),
             "ref_cpu_ms": float(np.median(cpu["ref"])), "new_cpu_ms": float(np.median(cpu["new"])),
             "lens_apart_px": float(np.max(max_displacement_px(lens[0], lens[1]))),
             "ref_bound_px": ref.uncertainty_px, "new_bound_px": new.uncertainty_px,
             "ref": [ref.source, ref.doubtful, ref.reason], "new": [new.source, new.doubtful, new.reason]}
+
+
+def summary(rows: list[dict]) -> dict:
+    """Both fits' total CPU (ms) over ``rows``, its ratio, and the largest differences of answers."""
+    ref, new = (sum(r[f"{k}_cpu_ms"] for r in rows) for k in ("ref", "new"))
+    return {"shots": len(rows), "ref_cpu_ms": ref, "new_cpu_ms": new, "ref_over_new": ref / new,
+            "lens_apart_px_max": max(r["lens_apart_px"] for r in rows),
+            "bound_apart_px_max": max(abs(r["ref_bound_px"] - r["new_bound_px"]) for r in rows),
+            "verdicts_differ": [r["shot"] for r in rows if r["ref"] != r["new"]]}
 
 
 def run(shots: list, ref_module, rounds: int) -> list[dict]:
@@ -124,14 +133,14 @@ def main() -> None:
             args.cache.write_bytes(pickle.dumps(shots))
     shot_fit.load_solver()
     rows = run(shots, reference(args.ref), args.rounds)
-    ref, new = (sum(r[f"{k}_cpu_ms"] for r in rows) for k in ("ref", "new"))
-    summary = {"shots": len(rows), "ref_cpu_ms": ref, "new_cpu_ms": new, "speedup": ref / new,
-               "lens_apart_px_max": max(r["lens_apart_px"] for r in rows),
-               "bound_apart_px_max": max(abs(r["ref_bound_px"] - r["new_bound_px"]) for r in rows),
-               "verdicts_differ": [r["shot"] for r in rows if r["ref"] != r["new"]]}
-    print(json.dumps(summary))
-    write_figure(args.name, {"ref": args.ref, "rounds": args.rounds, "summary": summary, "shots": rows})
-
+    commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.ref], capture_output=True, text=True).stdout.strip()
+    results = {"ref": f"{args.ref} ({commit})", "rounds": args.rounds, "all": summary(rows),
+               **{camera: summary([r for r in rows if r["camera"] == camera]) for camera in ("static", "pan", "zoom")
+                  if any(r["camera"] == camera for r in rows)},
+               "report": [f"{r['shot']} {r['camera']}: {r['ref_cpu_ms']:.0f} -> {r['new_cpu_ms']:.0f} ms, lens apart "
+                          f"{r['lens_apart_px']:.2f} px, bound {r['ref_bound_px']:.2f} -> {r['new_bound_px']:.2f} px" for r in rows]}
+    print(json.dumps(results["all"]))
+    write_figure(args.name, results)
 
 if __name__ == "__main__":
     main()
