@@ -134,13 +134,14 @@ def main() -> None:
     shot_fit.load_solver()
     rows = run(shots, reference(args.ref), args.rounds)
     commit = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.ref], capture_output=True, text=True).stdout.strip()
-    results = {"ref": f"{args.ref} ({commit})", "rounds": args.rounds, "all": summary(rows),
-               **{camera: summary([r for r in rows if r["camera"] == camera]) for camera in ("static", "pan", "zoom")
-                  if any(r["camera"] == camera for r in rows)},
-               "report": [f"{r['shot']} {r['camera']}: {r['ref_cpu_ms']:.0f} -> {r['new_cpu_ms']:.0f} ms, lens apart "
-                          f"{r['lens_apart_px']:.2f} px, bound {r['ref_bound_px']:.2f} -> {r['new_bound_px']:.2f} px" for r in rows]}
-    print(json.dumps(results["all"]))
+    groups = {"all": rows, **{camera: [r for r in rows if r["camera"] == camera] for camera in ("static", "pan", "zoom")}}
+    results = {"ref": f"{args.ref} ({commit})", "rounds": args.rounds,  # flat: one row of docs/FIGURES.md
+               **{f"{name} {key}": value for name, group in groups.items() if group for key, value in summary(group).items()},
+               "shots": [f"{r['shot']} {r['camera']}: {r['ref_cpu_ms']:.0f} -> {r['new_cpu_ms']:.0f} ms, lens apart "
+                         f"{r['lens_apart_px']:.2f} px, bound {r['ref_bound_px']:.2f} -> {r['new_bound_px']:.2f} px" for r in rows]}
+    print(json.dumps(summary(rows)))
     write_figure(args.name, results)
+
 
 if __name__ == "__main__":
     main()
