@@ -8,9 +8,9 @@ thread time of the extra joint fit :mod:`eval_shots` runs for its calibration on
 otherwise; divided by the clip's frames. Wall-clock time is not used (the machine is shared).
 
 Run: ``python bench/sweep_stride.py CLIPS STATIC CHECK --calibrate CLIPS,STATIC [--every 10,16,20,25]
-[--estimate-every 3,2] [--timing ROUNDS]`` (clip folders from ``scripts/make_clips.py``, each scored as
+[--estimate-every 3,2] [--timing ROUNDS] [--name NAME]`` (clip folders from ``scripts/make_clips.py``, each scored as
 a set; the bound's scales as ``bench/eval_shots.py --calibrate`` reads them, pooled over the
-``--calibrate`` folders); writes ``docs/figures/sweep_stride.json``.
+``--calibrate`` folders, named as folders); writes ``docs/figures/sweep_stride.json`` (``NAME.json``).
 """
 
 from __future__ import annotations
@@ -148,7 +148,7 @@ def main() -> None:
                         help="samples after which a shot's stride doubles (shot_track.SAMPLES_PER_STRIDE)")
     parser.add_argument("--first-samples", type=int, default=shot_track.FIRST_SAMPLES,
                         help="samples a shot takes at the first stride (shot_track.FIRST_SAMPLES)")
-    parser.add_argument("--figure", default="sweep_stride", help="the figure's name (docs/figures/NAME.json)")
+    parser.add_argument("--name", default="sweep_stride", help="figure name (docs/figures/NAME.json)")
     args = parser.parse_args()
     # read by pass 1 at each sample (shot_track.stride)
     shot_track.SAMPLES_PER_STRIDE, shot_track.FIRST_SAMPLES = args.samples_per_stride, args.first_samples
@@ -165,7 +165,7 @@ def main() -> None:
     results["samples_per_stride"], results["first_samples"] = args.samples_per_stride, args.first_samples
     results["note"] = ("CPU: process_time of pass 1 (all its threads) per frame, less eval_shots' extra joint fit; "
                        "the interleaved figures run the settings in turn on the first folder, pass 1 alone")
-    write_figure(args.figure, results)
+    write_figure(args.name, results)
 
 
 if __name__ == "__main__":

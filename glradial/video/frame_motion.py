@@ -26,7 +26,7 @@ import numpy as np
 from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 
-__all__ = ["MOTION_WIDTH", "Matches", "motion_gray", "match_frames", "zoom_of", "homography_of"]
+__all__ = ["MOTION_WIDTH", "Matches", "motion_gray", "match_frames", "zoom_of", "homography_of", "homographies_of"]
 
 #: gray copies for matching are at most this wide (px): corners are located to ~0.1 px there, i.e.
 #: ~0.3 px of a 1920-wide frame, below the displacement errors the lens fit aims at
@@ -159,3 +159,112 @@ def zoom_of(homography: np.ndarray) -> float:
     jacobian = h[:2, :2] - np.outer(h[:2, 2], h[2, :2])
     det = float(np.linalg.det(jacobian))
     return math.sqrt(det) if det > 0 else math.nan
+
+
+
+
+#: Gauss-Newton steps :func:`homographies_of` takes from the normalised DLT on the transfer error
+HOMOGRAPHY_REFINE_STEPS = 2
+
+
+def homographies_of(a: np.ndarray, b: np.ndarray, mask: np.ndarray | None = None,
+                    start: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`homography_of` for many point sets at once: ``a``, ``b`` ``(..., N, 2)`` (lens units),
+    ``mask`` ``(..., N)`` the points that count (``None``: all). Returns ``(H, ok)``: ``H``
+    ``(..., 3, 3)`` with ``H[2, 2] = 1`` and ``ok`` ``(...)``, False where the points fix no
+    homography (fewer than 4, or degenerate; ``H`` is then meaningless).
+
+    As OpenCV's ``findHomography(a, b, 0)``: a normalised direct linear transform (each set's points
+    centred and scaled to unit RMS distance, the smallest eigenvector of ``A^T A``), then refined on
+    the transfer error ``|H a - b|^2`` (:data:`HOMOGRAPHY_REFINE_STEPS` Gauss-Newton steps where
+    OpenCV takes Levenberg-Marquardt ones: the same minimum), every set in one vectorised solve
+    whose sums over the points are matrix products. ``start`` (``(..., 3, 3)``, ``H[2, 2] = 1``):
+    homographies of nearly the same points (a finite-difference neighbour), refined by one step
+    instead (its error, quadratic in theirs, is far below such a difference's)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    w = np.ones(a.shape[:-1]) if mask is None else np.asarray(mask, np.float64)
+    x, y, u, v = (np.ascontiguousarray(c) for c in (a[..., 0], a[..., 1], b[..., 0], b[..., 1]))
+    count = w.sum(axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        h = _dlt(x, y, u, v, w, np.maximum(count, 1.0)) if start is None else np.broadcast_to(start, x.shape[:-1] + (3, 3))
+        for _ in range(HOMOGRAPHY_REFINE_STEPS if start is None else 1):
+            h = _refine(h, x, y, u, v, w)
+    ok = (count >= 4) & np.all(np.isfinite(h), axis=(-2, -1))
+    return h, ok
+
+
+def _normaliser(x: np.ndarray, y: np.ndarray, w: np.ndarray, count: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Centre and scale (``(...)`` each) taking the weighted points to centroid 0, RMS distance 1."""
+    cx, cy = np.sum(w * x, axis=-1) / count, np.sum(w * y, axis=-1) / count
+    spread = np.sum(w * (x * x + y * y), axis=-1) / count - cx * cx - cy * cy
+    return cx, cy, 1.0 / np.sqrt(np.maximum(spread, 1e-24))
+
+
+def _similarity(cx: np.ndarray, cy: np.ndarray, s: np.ndarray, inverse: bool = False) -> np.ndarray:
+    t = np.zeros(np.shape(s) + (3, 3))
+    t[..., 2, 2] = 1.0
+    if inverse:
+        t[..., 0, 0] = t[..., 1, 1] = 1.0 / s
+        t[..., 0, 2], t[..., 1, 2] = cx, cy
+    else:
+        t[..., 0, 0] = t[..., 1, 1] = s
+        t[..., 0, 2], t[..., 1, 2] = -s * cx, -s * cy
+    return t
+
+
+def _dlt(x: np.ndarray, y: np.ndarray, u: np.ndarray, v: np.ndarray, w: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """The normalised DLT of :func:`homographies_of` (``H[2, 2] = 1``): on the normalised points,
+    the smallest eigenvector of ``A^T A``, whose 3x3 blocks are the moments ``sum w c X X^T`` (``X =
+    (x, y, 1)``, ``c`` one of ``1, u, v, u^2 + v^2``), taken as one matrix product."""
+    ax, ay, sa = _normaliser(x, y, w, count)
+    bx, by, sb = _normaliser(u, v, w, count)
+    px, py = (x - ax[..., None]) * sa[..., None], (y - ay[..., None]) * sa[..., None]
+    qx, qy = (u - bx[..., None]) * sb[..., None], (v - by[..., None]) * sb[..., None]
+    one = np.ones_like(px)
+    big = np.stack([px, py, one], axis=-2)  # (..., 3, N)
+    c = [w, qx * w, qy * w, (qx * qx + qy * qy) * w]
+    m = big @ np.swapaxes(np.concatenate([big * k[..., None, :] for k in c], axis=-2), -1, -2)  # (..., 3, 12)
+    xx, ux, vx, rr = m[..., 0:3], m[..., 3:6], m[..., 6:9], m[..., 9:12]
+    zero = np.zeros_like(xx)
+    ata = np.concatenate([np.concatenate([xx, zero, -ux], axis=-1), np.concatenate([zero, xx, -vx], axis=-1),
+                          np.concatenate([-ux, -vx, rr], axis=-1)], axis=-2)
+    _, vectors = np.linalg.eigh(np.nan_to_num(ata))
+    hn = vectors[..., :, 0].reshape(vectors.shape[:-2] + (3, 3))
+    h = _similarity(bx, by, sb, inverse=True) @ hn @ _similarity(ax, ay, sa)
+    return h / h[..., 2:3, 2:3]
+
+
+def _refine(h: np.ndarray, x: np.ndarray, y: np.ndarray, u: np.ndarray, v: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """One Gauss-Newton step of the 8 free entries of ``h`` (``H[2, 2] = 1``) on the weighted
+    transfer error ``r = (u, v) - p`` (``p`` the projection of ``(x, y)``). With ``Y = d (x, y, 1)``
+    (``d`` the inverse depth) a point's rows of the Jacobian are ``[Y, 0, -p_x Y2]`` and ``[0, Y,
+    -p_y Y2]`` (``Y2`` its first two entries), so the normal equations' blocks are sums of ``Y Y^T``
+    times ``1``, ``p_x``, ``p_y``, ``|p|^2`` and the gradient sums of ``Y`` times ``r``: one product."""
+    e = h[..., None]
+    d = 1.0 / (e[..., 2, 0, :] * x + e[..., 2, 1, :] * y + 1.0)
+    px = (e[..., 0, 0, :] * x + e[..., 0, 1, :] * y + e[..., 0, 2, :]) * d
+    py = (e[..., 1, 0, :] * x + e[..., 1, 1, :] * y + e[..., 1, 2, :]) * d
+    rx, ry = u - px, v - py
+    xd, yd, wd = x * d, y * d, w * d
+    left = np.stack([xd, yd, d], axis=-2)  # (..., 3, N)
+    pp = px * px + py * py
+    right = np.empty(x.shape[:-1] + (12,) + x.shape[-1:])
+    xw, yw = np.multiply(xd, w, out=right[..., 0, :]), np.multiply(yd, w, out=right[..., 1, :])
+    right[..., 2, :] = wd
+    for k, (f, g) in enumerate(((px, xw), (px, yw), (py, xw), (py, yw), (pp, xw), (pp, yw)), start=3):
+        np.multiply(f, g, out=right[..., k, :])
+    np.multiply(rx, w, out=right[..., 9, :])
+    np.multiply(ry, w, out=right[..., 10, :])
+    right[..., 11, :] = (rx * px + ry * py) * w
+    m = left @ np.swapaxes(right, -1, -2)  # (..., 3, 12)
+    yy, sx, sy, spp = m[..., 0:3], m[..., 3:5], m[..., 5:7], m[..., :2, 7:9]
+    zero = np.zeros_like(yy)
+    normal = np.concatenate([np.concatenate([yy, zero, -sx], axis=-1), np.concatenate([zero, yy, -sy], axis=-1),
+                             np.concatenate([-np.swapaxes(sx, -1, -2), -np.swapaxes(sy, -1, -2), spp], axis=-1)], axis=-2)
+    gradient = np.concatenate([m[..., :, 9], m[..., :, 10], -m[..., :2, 11]], axis=-1)
+    normal += np.eye(8) * (1e-12 * np.trace(normal, axis1=-2, axis2=-1)[..., None, None] + 1e-300)
+    step = np.linalg.solve(np.nan_to_num(normal), np.nan_to_num(gradient)[..., None])[..., 0]
+    out = h.copy()
+    out[..., :2, :] += step[..., :6].reshape(step.shape[:-1] + (2, 3))
+    out[..., 2, :2] += step[..., 6:]
+    return out
