@@ -98,6 +98,7 @@ def track_corners(gray: np.ndarray) -> np.ndarray | None:
 
 #: pyramidal Lucas-Kanade settings of :func:`match_frames` (both directions)
 LK_PARAMS = dict(winSize=(21, 21), maxLevel=4, criteria=(cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30, 0.01))
+BACK_LK_PARAMS = dict(LK_PARAMS)
 
 
 def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0, 0.0),
@@ -151,7 +152,7 @@ def _tracked(a: np.ndarray, b: np.ndarray, start: np.ndarray, hint: tuple[float,
     if len(found) < MIN_MATCHES:
         return p[:0], q[:0]
     back, ok_back, _ = cv2.calcOpticalFlowPyrLK(b, a, end[found], start[found].copy(),
-                                                flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **LK_PARAMS)
+                                                flags=cv2.OPTFLOW_USE_INITIAL_FLOW, **BACK_LK_PARAMS)
     fb = np.linalg.norm((back - start[found]).reshape(-1, 2), axis=1)
     keep = found[(ok_back.ravel() == 1) & (fb <= FB_MAX_PX)]
     return p[keep], q[keep]
