@@ -133,9 +133,14 @@ def main() -> int:
             bench_video.make_clip(clips[0], (960, 540), 150, "pan", bench_video.bundled_frame_path())
         rows = measure(clips, args.samples, args.rounds, base_package(args.base, Path(tmp)))
     head, base = (sum(r[f"{s}_cpu_ms_per_sample"] * r["samples"] for r in rows) for s in ("head", "base"))
-    total = {"base_over_head": round(base / head, 2)}
-    print("all clips:", total)
-    write_figure("bench_evidence", {"base": args.base, "rounds": args.rounds, "clips": rows, "all": total})
+    print("all clips: base / head", round(base / head, 2))
+    by_clip = lambda key: {Path(r["clip"]).stem: r[key] for r in rows}  # noqa: E731
+    write_figure("bench_evidence", {
+        "base": args.base, "rounds": args.rounds, "samples_per_clip": args.samples,
+        "base_over_head": {**by_clip("base_over_head"), "all": round(base / head, 2)},
+        "base_cpu_ms_per_sample": by_clip("base_cpu_ms_per_sample"), "head_cpu_ms_per_sample": by_clip("head_cpu_ms_per_sample"),
+        **{f"{name}_{side}": {Path(r["clip"]).stem: r[side][name] for r in rows}
+           for side in ("head_vs_base", "base_vs_base") for name in ("same_chains", "same_matches", "max_k1_diff")}})
     return 0
 
 
