@@ -29,6 +29,7 @@ curved stand) is decided by :mod:`glradial.estimation.line_fit`, which owns the 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -152,21 +153,40 @@ def _area_resize(gray: np.ndarray, size: tuple[int, int]) -> np.ndarray | None:
     return np.rint(out.reshape(out_h, out_w), out=out.reshape(out_h, out_w))
 
 
+#: Border rows (columns) :func:`content_box` tests at a time: most frames stop at the first, a
+#: letterboxed one after a few blocks instead of one call per row.
+CONTENT_BLOCK = 16
+
+
 def content_box(gray: np.ndarray) -> tuple[int, int, int, int]:
     """``(x0, y0, x1, y1)`` of the frame without letterbox/pillarbox bands: border rows (columns)
-    that are uniform (standard deviation below :data:`LETTERBOX_STD`) are peeled off."""
+    that are uniform (standard deviation below :data:`LETTERBOX_STD`) are peeled off, at most a
+    third of the frame from each side."""
     height, width = gray.shape
-    # only the border rows/columns are tested (most frames stop at the first): no full-frame std
-    y0, y1, x0, x1 = 0, height, 0, width
-    while y0 < height // 3 and gray[y0].std() < LETTERBOX_STD:
-        y0 += 1
-    while y1 > 2 * height // 3 and gray[y1 - 1].std() < LETTERBOX_STD:
-        y1 -= 1
-    while x0 < width // 3 and gray[:, x0].std() < LETTERBOX_STD:
-        x0 += 1
-    while x1 > 2 * width // 3 and gray[:, x1 - 1].std() < LETTERBOX_STD:
-        x1 -= 1
+    # only the border rows/columns are tested (most frames stop at the first block): no full-frame std
+    rows = lambda a, b: gray[a:b]  # noqa: E731
+    columns = lambda a, b: np.ascontiguousarray(gray[:, a:b].T)  # noqa: E731 -- each column contiguous, as gray[:, x]
+    y0 = _uniform_run(rows, 0, height // 3, 1)
+    y1 = height - _uniform_run(rows, height - 1, 2 * height // 3 - 1, -1)
+    x0 = _uniform_run(columns, 0, width // 3, 1)
+    x1 = width - _uniform_run(columns, width - 1, 2 * width // 3 - 1, -1)
     return x0, y0, x1, y1
+
+
+def _uniform_run(lines, first: int, stop: int, step: int) -> int:
+    """How many of the lines ``first``, ``first + step``, ... (before ``stop``) are uniform (std
+    below :data:`LETTERBOX_STD`) before the first that is not; ``lines(a, b)``: the lines ``a`` to
+    ``b - 1`` as the rows of an array. :data:`CONTENT_BLOCK` lines are tested at a time."""
+    done, todo = 0, abs(stop - first)
+    while done < todo:
+        n = min(CONTENT_BLOCK, todo - done)
+        a = first + step * done
+        block = lines(a, a + n) if step > 0 else lines(a - n + 1, a + 1)[::-1]
+        busy = np.flatnonzero(block.std(axis=1) >= LETTERBOX_STD)
+        if len(busy):
+            return done + int(busy[0])
+        done += n
+    return done
 
 
 def _derivatives(g: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -279,9 +299,41 @@ def _piece_keys(points: _Points, bins: int, shape: tuple[int, int]) -> np.ndarra
     return key
 
 
+@dataclass(frozen=True)
+class _Found:
+    """What a gray detection copy shows whatever the lens hint: its line points, their pieces
+    (:func:`_grouped`: ``order``, ``group``, ``pieces``), the Canny edge density and the copy's ``(H, W)``."""
+
+    points: _Points
+    order: np.ndarray
+    group: np.ndarray
+    pieces: int
+    density: float
+    shape: tuple[int, int]
+
+
+def _grouped(points: _Points, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, int]:
+    """The points' connected pieces (:func:`_piece_keys`) of at least :data:`MIN_PIECE_POINTS`:
+    ``(order, group, n)``, the indices of their points grouped by piece, each one's piece index and
+    the number of pieces."""
+    if len(points.x) == 0:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp), 0
+    key = _piece_keys(points, ORIENTATION_BINS, shape)
+    small = key.max() < 1 << 16  # then a 16-bit copy sorts the same, by numpy's radix sort
+    order = np.argsort(key.astype(np.uint16) if small else key, kind="stable")
+    key_sorted = key[order]
+    starts = np.flatnonzero(np.r_[True, key_sorted[1:] != key_sorted[:-1]])
+    counts = np.diff(np.r_[starts, len(key_sorted)])
+    big = counts >= MIN_PIECE_POINTS
+    group = np.repeat(np.cumsum(big) - 1, counts)  # piece index per sorted point (-1..)
+    keep = np.repeat(big, counts)
+    return order[keep], group[keep], int(big.sum())
+
+
 class _Pieces:
     """Connected same-orientation, same-kind pieces: per-piece centre, unit axis, extent along it
-    (``lo``, ``hi``, px), kind (0 ridge, 1 edge) and the point indices of each piece.
+    (``lo``, ``hi``, px), kind (0 ridge, 1 edge) and the point indices of each piece, from the
+    :class:`_Found` of a detection copy.
 
     Ridge and edge points never touch (edges within 2 px of a ridge were dropped), so each
     orientation bin takes one connected-components pass for both kinds.
@@ -290,30 +342,19 @@ class _Pieces:
     with it, ``x``, ``y`` (px; only the points of kept pieces are undistorted, the others are
     the input's)."""
 
-    def __init__(self, points: _Points, bins: int, shape: tuple[int, int],
-                 lens: tuple[float, float] | None = None) -> None:
+    def __init__(self, found: _Found, lens: tuple[float, float] | None = None) -> None:
         empty = np.zeros(0)
+        points, order, group, n = found.points, found.order, found.group, found.pieces
         self.x, self.y = points.x, points.y
         self.centre, self.axis, self.lo, self.hi = np.zeros((0, 2)), np.zeros((0, 2)), empty, empty
         self.kind = np.zeros(0, np.intp)
         self.members: list[np.ndarray] = []
-        if len(points.x) == 0:
-            return
-        key = _piece_keys(points, bins, shape)
-        small = key.max() < 1 << 16  # then a 16-bit copy sorts the same, by numpy's radix sort
-        order = np.argsort(key.astype(np.uint16) if small else key, kind="stable")
-        key_sorted = key[order]
-        starts = np.flatnonzero(np.r_[True, key_sorted[1:] != key_sorted[:-1]])
-        counts = np.diff(np.r_[starts, len(key_sorted)])
-        big = counts >= MIN_PIECE_POINTS
-        group = np.repeat(np.cumsum(big) - 1, counts)  # piece index per sorted point (-1..)
-        keep = np.repeat(big, counts)
-        order, group = order[keep], group[keep]
         if lens is not None and len(order):
+            height, width = found.shape
             self.x, self.y = points.x.copy(), points.y.copy()
-            self.x[order], self.y[order] = _undistorted(points.x[order], points.y[order], (shape[1], shape[0]), lens)
-        if int(big.sum()):
-            self._measure(points, order, group, int(big.sum()))
+            self.x[order], self.y[order] = _undistorted(points.x[order], points.y[order], (width, height), lens)
+        if n:
+            self._measure(points, order, group, n)
 
     def _measure(self, points: _Points, order: np.ndarray, group: np.ndarray, n: int) -> None:
         """Centre, axis (total least squares), extent and members of the ``n`` pieces; ``order``
@@ -410,16 +451,15 @@ def _undistorted(x: np.ndarray, y: np.ndarray, size: tuple[int, int], lens: tupl
     return q[:, 0], q[:, 1]
 
 
-def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
-                  lens_hint: tuple[float, float] | None = None) -> LineEvidence:
-    """Find the chains of a uint8 RGB/gray frame (see the module docstring), detecting on a copy at
-    most ``max_width`` pixels wide.
+#: Frames whose line points :func:`detect_chains` keeps (:class:`_PointsMemo`): pass 1 of a video
+#: detects each sampled frame's chains twice, in the per-frame estimate's line fit (hinted with the
+#: CNN's lens) and for the shot's joint fit (hinted with the surest estimate so far), on a worker
+#: thread and the caller's, up to ``shot_track.LOOKAHEAD`` samples apart.
+POINTS_MEMO_SIZE = 4
 
-    ``lens_hint``: a rough ``(k1, k2)`` (e.g. the CNN's). Pieces are then linked where they continue
-    each other once undistorted with it, so strongly curved lines (k1 near -0.7 at the frame edge)
-    still form long chains; the chains' points stay those of the frame."""
-    height_full, width_full = frame.shape[:2]
-    gray = gray_copy(frame, max_width)
+
+def _find_points(gray: np.ndarray) -> _Found:
+    """The hint-free part of :func:`detect_chains` on its float32 gray detection copy."""
     height, width = gray.shape
     g = cv2.GaussianBlur(gray, (0, 0), SMOOTH_SIGMA)
     gx, gy, gxx, gyy, gxy = _derivatives(g)
@@ -432,13 +472,55 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
     ridge_mask[riy, rix] = 1
     near_ridge = cv2.dilate(ridge_mask, np.ones((5, 5), np.uint8))
     ex, ey, edir, eiy, eix, density = _edge_points(g, gx, gy, valid, near_ridge)
+    kinds = np.r_[np.zeros(len(rx), np.intp), np.ones(len(ex), np.intp)]
+    points = _Points(np.concatenate([rx, ex]), np.concatenate([ry, ey]), np.concatenate([rangle, np.mod(edir, np.pi)]),
+                     kinds, np.concatenate([riy, eiy]), np.concatenate([rix, eix]))
+    for array in vars(points).values():  # shared by every later detection of this copy
+        array.setflags(write=False)
+    return _Found(points, *_grouped(points, (height, width)), density, (height, width))
+
+
+class _PointsMemo:
+    """The last :data:`POINTS_MEMO_SIZE` gray copies and their :class:`_Found`: a copy equal to a kept
+    one (same shape, same values: detection is a function of the copy alone) gets the kept answer.
+    Thread-safe; the detection itself runs outside the lock."""
+
+    def __init__(self, size: int = POINTS_MEMO_SIZE) -> None:
+        self._kept: list[tuple[np.ndarray, _Found]] = []
+        self._size = size
+        self._lock = threading.Lock()
+
+    def find(self, gray: np.ndarray) -> _Found:
+        """:func:`_find_points` of ``gray``, kept or found now."""
+        with self._lock:
+            kept = list(self._kept)
+        for copy, found in kept:
+            if copy.shape == gray.shape and np.array_equal(copy, gray):
+                return found
+        found = _find_points(gray)
+        with self._lock:
+            self._kept = (self._kept + [(gray, found)])[-self._size:]
+        return found
+
+
+_MEMO = _PointsMemo()
+
+
+def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
+                  lens_hint: tuple[float, float] | None = None) -> LineEvidence:
+    """Find the chains of a uint8 RGB/gray frame (see the module docstring), detecting on a copy at
+    most ``max_width`` pixels wide.
+
+    ``lens_hint``: a rough ``(k1, k2)`` (e.g. the CNN's). Pieces are then linked where they continue
+    each other once undistorted with it, so strongly curved lines (k1 near -0.7 at the frame edge)
+    still form long chains; the chains' points stay those of the frame. The line points of the last
+    few frames are kept (:class:`_PointsMemo`): detecting a frame again, with another hint, links them anew."""
+    height_full, width_full = frame.shape[:2]
+    found = _MEMO.find(gray_copy(frame, max_width))
+    (height, width), xs, ys = found.shape, found.points.x, found.points.y
     chains: list[Chain] = []
     overlays = 0
-    xs, ys = np.concatenate([rx, ex]), np.concatenate([ry, ey])
-    kinds = np.r_[np.zeros(len(rx), np.intp), np.ones(len(ex), np.intp)]
-    points = _Points(xs, ys, np.concatenate([rangle, np.mod(edir, np.pi)]), kinds,
-                     np.concatenate([riy, eiy]), np.concatenate([rix, eix]))
-    pieces = _Pieces(points, ORIENTATION_BINS, (height, width), lens_hint)
+    pieces = _Pieces(found, lens_hint)
     lx, ly = pieces.x, pieces.y
     extent = pieces.hi - pieces.lo
     for group in _link(pieces):  # an edge may change polarity along a line (boards, chessboards)
@@ -453,11 +535,11 @@ def detect_chains(frame: np.ndarray, max_width: int = DETECT_WIDTH,
         idx = np.concatenate([pieces.members[k] for k in group])
         kind = "edge" if pieces.kind[group[0]] else "ridge"
         for part, axis in _one_line_parts(idx, xs, ys, lx, ly):  # a chain round a corner is cut there
-            found = _chain(part, xs, ys, kind, (height, width), (width_full, height_full), axis)
-            overlays += found is _OVERLAY
-            if isinstance(found, Chain):
-                chains.append(found)
-    return LineEvidence(chains, (width_full, height_full), width, overlays, density)
+            found_chain = _chain(part, xs, ys, kind, (height, width), (width_full, height_full), axis)
+            overlays += found_chain is _OVERLAY
+            if isinstance(found_chain, Chain):
+                chains.append(found_chain)
+    return LineEvidence(chains, (width_full, height_full), width, overlays, found.density)
 
 
 def bright_ridges(gray: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..estimation.lines import detect_chains
 from ..lens.lens import Lens, as_lens
-from .frame_motion import match_frames, motion_gray, zoom_of
+from .frame_motion import SAMPLE_CORNERS, SAMPLE_WINDOW, match_frames, motion_gray, track_corners, zoom_of
 from .shot_fit import ShotEvidence, ShotSample
 
 __all__ = ["ShotCollector", "ANCHOR_TRAVEL", "ANCHOR_REACH", "MAX_ANCHORS", "FEW_CHAINS"]
@@ -70,6 +70,7 @@ class ShotCollector:
         self._hint: tuple[float, float] = (0.0, 0.0)
         self._hint_px = math.inf
         self._anchors: list[_Anchor] = []
+        self._corners: dict[int, np.ndarray | None] = {}  # sample -> its track_corners, once found
         self._moving: list[Future] = []
 
     def due(self, n: int) -> bool:
@@ -115,6 +116,8 @@ class ShotCollector:
         self._previous = gray
         if not self._anchors or self._anchors[-1].travel >= ANCHOR_TRAVEL:
             self._anchors = (self._anchors + [_Anchor(n, gray)])[-MAX_ANCHORS:]
+        kept = {n} | {a.sample for a in self._anchors}  # the samples later ones are matched with
+        self._corners = {i: c for i, c in self._corners.items() if i in kept}
 
     def _estimate(self, index: int, frame: np.ndarray, estimated: Callable[[], Lens] | None = None) -> Lens:
         """The per-frame estimate of sample ``index`` (``estimated()`` where given), kept; the
@@ -149,7 +152,9 @@ class ShotCollector:
               hint: tuple[float, float]) -> np.ndarray | None:
         """Match samples ``i`` and ``j``, keep the pair as evidence and return its homography
         (``hint``-undistorted lens units), or ``None`` (no match or no usable homography)."""
-        matches = match_frames(a, b, hint, guess)
+        if i not in self._corners:
+            self._corners[i] = track_corners(a, SAMPLE_CORNERS)
+        matches = match_frames(a, b, hint, guess, self._corners[i], SAMPLE_WINDOW)
         if matches is None:
             return None
         h = matches.homography

@@ -208,3 +208,33 @@ def test_gray_copy_halving_is_the_exact_area_mean():
     assert fast.dtype == np.float32 and fast.shape == (540, 960)
     np.testing.assert_array_equal(fast, oracle)
     np.testing.assert_array_equal(fast, _area_resize(gray, (960, 540)))
+
+
+def _chains_of(evidence) -> list[np.ndarray]:
+    return [c.points for c in evidence.chains]
+
+
+def _fresh(frame, hint, monkeypatch) -> list[np.ndarray]:
+    """The chains of a detection that keeps nothing from earlier ones."""
+    from glradial.estimation import lines
+
+    with monkeypatch.context() as patch:
+        patch.setattr(lines, "_MEMO", lines._PointsMemo())
+        return _chains_of(detect_chains(frame, lens_hint=hint))
+
+
+def test_kept_line_points_give_the_chains_of_a_fresh_detection(monkeypatch):
+    """A frame detected again with another hint (pass 1: the estimate's line fit, then the shot's
+    chains) reuses its line points: the chains must be those a detection from scratch finds, and a
+    frame changed in place must be detected anew, not answered from the kept points."""
+    frame = distorted(pitch(3), -0.3, 0.02)
+    hints = [(-0.3, 0.02), (0.0, 0.0), None]
+    kept = [_chains_of(detect_chains(frame, lens_hint=h)) for h in hints]  # the 2nd and 3rd reuse the 1st's points
+    for hint, chains in zip(hints, kept):
+        fresh = _fresh(frame, hint, monkeypatch)
+        assert len(chains) == len(fresh) > 5 and all(np.array_equal(a, b) for a, b in zip(chains, fresh))
+    before = _chains_of(detect_chains(frame))
+    frame[:, : W // 2] = (40, 110, 40)  # the left half's lines painted over, in place
+    after = _chains_of(detect_chains(frame))
+    fresh = _fresh(frame, None, monkeypatch)
+    assert len(after) == len(fresh) < len(before) and all(np.array_equal(a, b) for a, b in zip(after, fresh))
