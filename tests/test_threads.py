@@ -24,8 +24,14 @@ import cv2, numpy as np
 from glradial import Estimator
 from glradial.media.video_io import VideoInfo, VideoReader, VideoWriter
 
-def names():
-    return [(t / "comm").read_text().strip() for t in Path("/proc/self/task").iterdir()]
+def names():  # a thread may end between the listing and the read of its name: skipped
+    out = []
+    for t in Path("/proc/self/task").iterdir():
+        try:
+            out.append((t / "comm").read_text().strip())
+        except FileNotFoundError:
+            pass
+    return out
 
 base, started, decoders = len(names()), 0, set()
 with VideoWriter(folder / f"c{budget}.mp4", VideoInfo.of((320, 180), 25, codec="h264", pix_fmt="yuv420p")) as writer:

@@ -194,8 +194,6 @@ def zoom_of(homography: np.ndarray) -> float:
     return math.sqrt(det) if det > 0 else math.nan
 
 
-
-
 #: Gauss-Newton steps :func:`homographies_of` takes from the normalised DLT on the transfer error
 HOMOGRAPHY_REFINE_STEPS = 2
 
