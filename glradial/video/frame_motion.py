@@ -26,21 +26,16 @@ import numpy as np
 from ..lens.lens import lens_to_pixels, pixels_to_lens
 from ..lens.lensfuncs import undistort_point_exact
 
-__all__ = ["MOTION_WIDTH", "SAMPLE_CORNERS", "SAMPLE_WINDOW", "Matches", "motion_gray", "track_corners", "match_frames",
+__all__ = ["MOTION_WIDTH", "Matches", "motion_gray", "track_corners", "match_frames",
            "zoom_of", "homography_of", "homographies_of"]
 
 #: gray copies for matching are at most this wide (px): corners are located to ~0.1 px there, i.e.
 #: ~0.3 px of a 1920-wide frame, below the displacement errors the lens fit aims at
 MOTION_WIDTH = 640
-#: corners tracked per pair of frames (default of :func:`track_corners`)
+#: corners tracked per pair of frames
 MAX_CORNERS = 400
-#: Lucas-Kanade window (px of the gray copy, square; default of :func:`match_frames`)
+#: Lucas-Kanade window (px of the gray copy, square)
 LK_WINDOW = 21
-#: pass 1's pairs (:class:`glradial.video.shot_evidence.ShotCollector`): 300 corners in 15-px windows,
-#: 0.74x the CPU time of 400 in 21-px ones for as many matches (137 against 140 a pair, the same 2 of 196
-#: pairs unmatched) and the same residual under the true lens (p90 0.33 against 0.39 px), on 98 pairs of
-#: 7 clips; the shots' accuracy within the spread of an equivalent corner set (docs/EXPERIMENTS.md)
-SAMPLE_CORNERS, SAMPLE_WINDOW = 300, 15
 #: matches kept per pair (evenly thinned): the lens fit weighs a pair as at most
 #: :data:`glradial.video.shot_fit.MATCH_CAP` points anyway, and evaluates every kept one at each step
 MAX_MATCHES = 150
@@ -91,13 +86,13 @@ def motion_gray(frame: np.ndarray, max_width: int = MOTION_WIDTH) -> np.ndarray:
     return np.ascontiguousarray(gray)
 
 
-def track_corners(gray: np.ndarray, max_corners: int = MAX_CORNERS) -> np.ndarray | None:
+def track_corners(gray: np.ndarray) -> np.ndarray | None:
     """The corners :func:`match_frames` tracks from a gray copy (:func:`motion_gray`): float32 ``N x
-    1 x 2`` sub-pixel positions (px of the copy), strongest first, ``max_corners`` at most; ``None``
+    1 x 2`` sub-pixel positions (px of the copy), strongest first, :data:`MAX_CORNERS` at most; ``None``
     when it has none. A frame matched with several others (a shot's anchors) is given them once."""
     mask = np.zeros_like(gray)
     mask[BORDER_PX:-BORDER_PX, BORDER_PX:-BORDER_PX] = 255
-    corners = cv2.goodFeaturesToTrack(gray, max_corners, 0.005, MIN_CORNER_DISTANCE, mask=mask, blockSize=7)
+    corners = cv2.goodFeaturesToTrack(gray, MAX_CORNERS, 0.005, MIN_CORNER_DISTANCE, mask=mask, blockSize=7)
     if corners is None:
         return None
     return cv2.cornerSubPix(gray, corners.astype(np.float32), (4, 4), (-1, -1),
@@ -109,21 +104,19 @@ LK_LEVELS, LK_CRITERIA = 4, (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 30
 
 
 def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0, 0.0),
-                 guess: np.ndarray | None = None, corners: np.ndarray | None = None,
-                 window: int = LK_WINDOW) -> Matches | None:
+                 guess: np.ndarray | None = None, corners: np.ndarray | None = None) -> Matches | None:
     """Matched points of two gray copies (:func:`motion_gray`, same size) of frames of one shot;
     ``None`` when fewer than :data:`MIN_MATCHES` survive (no texture, no overlap, a cut). ``hint``
     is a rough lens, used only to reject points that move against the camera. ``guess``: a
     homography (lens units, of points undistorted with ``hint``) predicting where the points of
     ``a`` lie in ``b``: the tracker then starts there, so frames far apart in a pan or zoom match.
-    ``corners``: :func:`track_corners` of ``a``, where already found; ``window``: the tracker's
-    window (px of the copies)."""
+    ``corners``: :func:`track_corners` of ``a``, where already found."""
     if a.shape != b.shape:
         raise ValueError(f"frames to match must have one size, got {a.shape[::-1]} and {b.shape[::-1]}")
     start = track_corners(a) if corners is None else corners
     if start is None or len(start) < MIN_MATCHES:
         return None
-    p, q = _tracked(a, b, start, hint, guess, window)
+    p, q = _tracked(a, b, start, hint, guess)
     if len(p) < MIN_MATCHES:
         return None
     height, width = a.shape
@@ -144,13 +137,13 @@ def match_frames(a: np.ndarray, b: np.ndarray, hint: tuple[float, float] = (0.0,
 
 
 def _tracked(a: np.ndarray, b: np.ndarray, start: np.ndarray, hint: tuple[float, float],
-             guess: np.ndarray | None, window: int) -> tuple[np.ndarray, np.ndarray]:
+             guess: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """The corners ``start`` of ``a`` tracked into ``b`` and back (pixels of the copies, float64 ``N
     x 2`` each, in ``start``'s order): those found both ways, back within :data:`FB_MAX_PX` of where
     they started and inside the border of ``b``. Only the points found forwards are tracked back (each
     point is tracked on its own: the same answer as tracking them all)."""
     height, width = a.shape
-    lk = dict(winSize=(window, window), maxLevel=LK_LEVELS, criteria=LK_CRITERIA)
+    lk = dict(winSize=(LK_WINDOW, LK_WINDOW), maxLevel=LK_LEVELS, criteria=LK_CRITERIA)
     if guess is None:
         end, ok, _ = cv2.calcOpticalFlowPyrLK(a, b, start, None, **lk)
     else:

@@ -17,7 +17,7 @@ import numpy as np
 
 from ..estimation.lines import detect_chains
 from ..lens.lens import Lens, as_lens
-from .frame_motion import SAMPLE_CORNERS, SAMPLE_WINDOW, match_frames, motion_gray, track_corners, zoom_of
+from .frame_motion import match_frames, motion_gray, track_corners, zoom_of
 from .shot_fit import ShotEvidence, ShotSample
 
 __all__ = ["ShotCollector", "ANCHOR_TRAVEL", "ANCHOR_REACH", "MAX_ANCHORS", "FEW_CHAINS"]
@@ -153,8 +153,8 @@ class ShotCollector:
         """Match samples ``i`` and ``j``, keep the pair as evidence and return its homography
         (``hint``-undistorted lens units), or ``None`` (no match or no usable homography)."""
         if i not in self._corners:
-            self._corners[i] = track_corners(a, SAMPLE_CORNERS)
-        matches = match_frames(a, b, hint, guess, self._corners[i], SAMPLE_WINDOW)
+            self._corners[i] = track_corners(a)
+        matches = match_frames(a, b, hint, guess, self._corners[i])
         if matches is None:
             return None
         h = matches.homography
