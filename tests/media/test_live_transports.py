@@ -73,8 +73,11 @@ def _check_corrected(clip: Path, out: Path) -> None:
     source, written = _luma(clip), _luma(out)
     assert len(written) >= 0.9 * len(source), (len(written), len(source))
     # the first frames may pass through uncorrected while the lens's maps are built (flagged "pending",
-    # at most 5: tests/video/test_live.py); pts may be shifted by the relays: match by picture
-    sampled = list(written.values())[PENDING_AT_MOST::10]
+    # at most 5: tests/video/test_live.py), and on a loaded machine the first ones received over SRT may
+    # be damaged (SRT drops the packets that arrive later than its latency while the relay starts: one
+    # frame at 24 dB, then 53-54, seen twice in whole-suite runs): sampled from 10 frames after those;
+    # pts may be shifted by the relays: match by picture
+    sampled = list(written.values())[PENDING_AT_MOST + 10::10]
     best = [max(_psnr(image, _undistorted(s)) for s in source.values()) for image in sampled]
     assert sampled and min(best) >= 30.0, (best, len(written), len(source))
 
