@@ -1,10 +1,12 @@
 """glradial's errors: every error glradial defines is a :class:`Error`, and also the built-in
 exception it was before (``except ValueError`` and ``except RuntimeError`` keep working); and
-:func:`check_count`, the one check of the counts glradial takes."""
+:func:`check_count` and :func:`check_flag`, the one checks of the counts and switches glradial takes."""
 
 from __future__ import annotations
 
 import numbers
+
+import numpy as np
 
 
 class Error(Exception):
@@ -135,3 +137,30 @@ def check_count(name: str, value: object, *, minimum: int = 1, unit: str = "", o
         rule = {1: "a positive integer", 0: "a non-negative integer"}.get(minimum, f"an integer >= {minimum}")
         raise ValueError(f"{name} must be {rule}{f' ({unit})' if unit else ''}{' or None' if optional else ''}, got {value!r}")
     return int(value)
+
+
+def check_flag(name: str, value: object) -> bool:
+    """``value`` as a ``bool`` when it is one (Python's or NumPy's), else ``TypeError`` naming ``name``
+    and the value: the one check of every on/off argument glradial takes (``1`` or ``"yes"`` is not one).
+
+    Args:
+        name: the argument's name, as the caller spells it.
+        value: what was passed.
+
+    Returns:
+        ``bool(value)``.
+
+    Raises:
+        TypeError: ``value`` is not a bool.
+
+    Example:
+        >>> check_flag("sparse", True)
+        True
+        >>> check_flag("sparse", 1)
+        Traceback (most recent call last):
+        ...
+        TypeError: sparse must be a bool, got 1
+    """
+    if not isinstance(value, (bool, np.bool_)):
+        raise TypeError(f"{name} must be a bool, got {value!r}")
+    return bool(value)

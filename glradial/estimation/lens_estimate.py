@@ -22,6 +22,7 @@ from dataclasses import KW_ONLY, dataclass
 
 import numpy as np
 
+from ..errors import check_flag
 from ..lens.lens import Lens, real_number
 from ..lens.options import METHODS, SOURCES
 from .trust import REASONS, FrameEvidence, TrustModel, ViewFeatures, shipped_trust
@@ -77,8 +78,7 @@ class LensEstimate(Lens):
         if isinstance(self.chains, bool) or not isinstance(self.chains, (numbers.Integral, np.integer)) or self.chains < 0:
             raise ValueError(f"chains must be a non-negative integer, got {self.chains!r}")
         object.__setattr__(self, "chains", int(self.chains))
-        if not isinstance(self.doubtful, (bool, np.bool_)):
-            raise TypeError(f"doubtful must be a bool, got {self.doubtful!r}")
+        check_flag("doubtful", self.doubtful)
         object.__setattr__(self, "doubtful", bool(self.doubtful))
         if self.reason not in REASONS or (self.reason == "ok") == self.doubtful:
             raise ValueError(f"reason must be one of {REASONS} ('ok' exactly when not doubtful), got {self.reason!r} "

@@ -41,7 +41,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ..errors import check_count
+from ..errors import check_count, check_flag
 from ..lens.lens import Lens
 from ..lens.options import Method
 from ..media.frames import to_rgb8
@@ -133,8 +133,7 @@ class NetLinesEstimator:
 
         path = Path(model_path) if model_path is not None else default_model_path()
         check_count("threads", threads, optional=True)
-        if not isinstance(mirror_average, (bool, np.bool_)):
-            raise TypeError(f"mirror_average must be a bool, got {mirror_average!r}")
+        check_flag("mirror_average", mirror_average)
         self.mirror_average = bool(mirror_average)
         if not path.is_file():
             hint = " (the bundled model is missing: reinstall glradial or pass model_path)" if model_path is None else ""

@@ -12,7 +12,7 @@ of a video (:mod:`glradial.video.shot_track`) and the live corrector's lens
 
 from __future__ import annotations
 
-import numpy as np
+from ..errors import check_flag
 
 #: The reason that forbids applying a lens even when doubtful lenses are asked for.
 FOLD_OVER = "fold_over"
@@ -39,6 +39,5 @@ def applies(doubtful: bool, reason: str, apply_doubtful: bool) -> bool:
         >>> applies(True, "fold_over", True)
         False
     """
-    if not isinstance(apply_doubtful, (bool, np.bool_)):
-        raise TypeError(f"apply_doubtful must be a bool, got {apply_doubtful!r}")
+    check_flag("apply_doubtful", apply_doubtful)
     return not doubtful or (bool(apply_doubtful) and reason != FOLD_OVER)

@@ -49,6 +49,7 @@ from typing import Any, Iterator, Mapping, NamedTuple, Sequence
 
 import numpy as np
 
+from ..errors import check_flag
 from ..lens.lens import frame_size
 from ..lens.lensfuncs import LENS_NEWTON_STEPS
 from ..lens.metrics import PAPER_SIZE
@@ -414,8 +415,7 @@ def crop_batches(
         raise ValueError(f"inverse must be 'exact' or 'drap', got {inverse!r}")
     if lp_num_threads is not None and (not isinstance(lp_num_threads, int) or lp_num_threads < 0):
         raise ValueError(f"lp_num_threads must be a non-negative integer, got {lp_num_threads!r}")
-    if not isinstance(paired, (bool, np.bool_)):
-        raise TypeError(f"paired must be a bool, got {paired!r}")
+    check_flag("paired", paired)
     if paired and batch_size % 2:
         raise ValueError(f"batch_size must be even for pairs, got {batch_size}")
     items = [os.path.abspath(item) if isinstance(item, (str, os.PathLike)) else load_panorama(item) for item in items]

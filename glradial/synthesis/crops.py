@@ -29,7 +29,7 @@ from typing import Literal, Mapping, Sequence
 import moderngl
 import numpy as np
 
-from ..errors import check_count
+from ..errors import check_count, check_flag
 from ..gl.shaderlib import TEXTURE_FORMATS
 from ..lens import lensfuncs
 from ..lens.inverse_series import SERIES_DEGREE, fit_inverse_series
@@ -443,8 +443,7 @@ class CropRenderer:
         if isinstance(newton_steps, bool) or not isinstance(newton_steps, (numbers.Integral, np.integer)) or not 1 <= newton_steps <= 16:
             raise ValueError(f"newton_steps must be an integer in 1..16, got {newton_steps!r}")
         self.newton_steps = int(newton_steps)
-        if not isinstance(series_inverse, (bool, np.bool_)):
-            raise TypeError(f"series_inverse must be a bool, got {series_inverse!r}")
+        check_flag("series_inverse", series_inverse)
         self.series_inverse = bool(series_inverse) and inverse == "exact"
         self._corner = corner_radius(self.size)
         if anisotropy is None:

@@ -38,7 +38,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import check_count
+from ..errors import check_count, check_flag
 from ..lens import doubt
 from ..lens.lens import Lens, corner_radius
 from ..media.frames import to_rgb8
@@ -184,8 +184,7 @@ def track_shots(
     if not doubtful_px > 0:
         raise ValueError(f"doubtful_px must be > 0 (px at 1920), got {doubtful_px!r}")
     for name, value in (("sparse", sparse), ("ahead", ahead)):
-        if not isinstance(value, (bool, np.bool_)):
-            raise TypeError(f"{name} must be a bool, got {value!r}")
+        check_flag(name, value)
     ahead = bool(ahead) and thread_budget() != 1  # one core: the workers would only take turns
     detector = detector or ShotDetector()
     fresh = copy.deepcopy(detector)
