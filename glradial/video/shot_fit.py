@@ -727,6 +727,11 @@ def _read_by_frames(evidence: ShotEvidence, doubtful_px: float, why: str) -> Fit
     return _fallback(evidence, doubtful_px, why)
 
 
+def _bounded(estimates: list) -> bool:
+    """Whether there are per-frame estimates and each states its own bound (``uncertainty_px``)."""
+    return bool(estimates) and all(hasattr(e, "uncertainty_px") for e in estimates)
+
+
 def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> FittedShotLens:
     """The joint fit or the frames' median (:func:`fit_shot`), before the benefit verdict. The joint
     fit is not run where it would be set aside unread (a static shot whose frames are sure)."""
@@ -734,7 +739,7 @@ def _chosen(evidence: ShotEvidence, doubtful_px: float, radius: float) -> Fitted
     if geometry is None:
         return _read_by_frames(evidence, doubtful_px, "no_geometry")
     estimates = _estimates(evidence.samples)
-    bounded = bool(estimates) and all(hasattr(e, "uncertainty_px") for e in estimates)
+    bounded = _bounded(estimates)
     if bounded and evidence.camera() == "static":  # never worse than its frames: their median, when sure enough
         frames = _fallback(evidence, doubtful_px, "uncertain", static=True)
         if not frames.doubtful:
@@ -764,7 +769,7 @@ def judged_by_benefit(shot: FittedShotLens, evidence: ShotEvidence) -> FittedSho
     if not shot.doubtful or shot.reason not in ("uncertain", "no_geometry"):
         return shot
     estimates = _estimates(evidence.samples)
-    if shot.source == "frames" and not (estimates and all(hasattr(e, "uncertainty_px") for e in estimates)):
+    if shot.source == "frames" and not _bounded(estimates):
         return shot
     if shot.source == "frames" and evidence.camera() == "zoom" and not shot.zooming:
         return shot
