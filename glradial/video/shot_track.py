@@ -13,7 +13,7 @@ consecutive ones); :class:`CutCheck` then decodes every frame of the stretch bef
 the detector's own test frame by frame, so that the cuts found, and where they are placed, are
 those of a decode of every frame. A cheap subsample of each shot -- its first decoded frame, then one every
 ``every`` frames (:func:`stride`: after :data:`FIRST_SAMPLES` samples the stride doubles each
-:data:`SAMPLES_PER_STRIDE` samples, so a long shot costs no more than a log factor) -- is converted at most
+:data:`SAMPLES_PER_STRIDE` samples, up to :data:`MAX_STRIDE` ``every``) -- is converted at most
 :data:`ESTIMATE_WIDTH` px wide and handed to a
 :class:`~glradial.video.shot_evidence.ShotCollector` (line chains, frame-to-frame matches, the per-frame
 estimate on every ``estimate_every``-th sample). When a cut (or the end) closes the shot, its
@@ -51,7 +51,7 @@ from .pipelined import Pipelined
 from .shot_evidence import ShotCollector
 from .shot_fit import FittedShotLens, fit_shot, load_solver
 
-__all__ = ["track_shots", "CutCheck", "stride", "FIRST_SAMPLES", "SAMPLES_PER_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO",
+__all__ = ["track_shots", "CutCheck", "stride", "FIRST_SAMPLES", "SAMPLES_PER_STRIDE", "MAX_STRIDE", "EVERY", "ESTIMATE_EVERY", "CANDIDATE_RATIO",
            "ESTIMATE_WIDTH"]
 
 #: pass 1 converts the estimated frames at most this wide (px): the CNN looks at 384 px, the line
@@ -65,10 +65,14 @@ EVERY = 10
 ESTIMATE_EVERY = 3
 #: a shot's first this many samples lie ``every`` frames apart (its first 2 s at 25 fps)
 FIRST_SAMPLES = 5
-#: after :data:`FIRST_SAMPLES`, a shot's sampling stride doubles after each this many samples: on
-#: 6-s shots it costs 34 % less CPU than doubling only after 32, with the same accuracy (chosen on
-#: scripts/make_clips.py's main set, held out on --set check and static; figure sweep_stride_long)
-SAMPLES_PER_STRIDE = 4
+#: after :data:`FIRST_SAMPLES`, a shot's sampling stride doubles after each this many samples, up
+#: to :data:`MAX_STRIDE` ``every``: a 6-s shot is sampled 7 times (0, 10, ... 40, 60, 100), not 9
+#: with 4, 22 % less CPU in pass 1 and the same accuracy (chosen on scripts/make_clips.py's main
+#: set of 6-s shots, held out on --set check and static; figure sweep_stride_cap)
+SAMPLES_PER_STRIDE = 1
+#: the longest stride, in ``every``: a long shot is sampled every 80 frames (3.2 s at 25 fps) once
+#: its stride reaches it, so its zoom is followed at that pace however long it lasts
+MAX_STRIDE = 8
 #: frames of the decoded stream converted for the cut detector (px wide)
 DETECT_WIDTH = 64
 #: the sparse decode flags a candidate cut at this fraction of the detector's ratio (its frames lie
@@ -124,15 +128,20 @@ class _Shots:
             self.collector.add(index, frame)
             return
         due = self.collector.due(self._queued - 1)
-        self._pending.append((index, frame, self._workers[0].submit(self._run, frame).result if due else None))
-        while len(self._pending) > LOOKAHEAD:
-            self.collector.add(*self._pending.popleft(), motion=self._workers[2])
+        self._pending.append((index, frame, self._workers[0].submit(self._run, frame) if due else None))
+        while self._pending and (len(self._pending) > LOOKAHEAD or self._pending[0][2] is None or self._pending[0][2].done()):
+            self._collect()
+
+    def _collect(self) -> None:
+        """Find the evidence of the first pending sample (its estimate read, waited for if it runs)."""
+        index, frame, estimate = self._pending.popleft()
+        self.collector.add(index, frame, None if estimate is None else estimate.result, motion=self._workers[2])
 
     def close(self) -> None:
         if self.collector is None:
             return
         while self._pending:
-            self.collector.add(*self._pending.popleft(), motion=self._workers[2])
+            self._collect()
         evidence = self.collector.finish()
         fit = dict(doubtful_px=self.doubtful_px, radius=self.radius)
         self.fits.append(fit_shot(evidence, **fit) if self._workers is None else self._workers[1].submit(fit_shot, evidence, **fit))
@@ -249,10 +258,11 @@ def _scan(reader: VideoReader, order: np.ndarray | None, detector: ShotDetector,
 
 def stride(every: int, taken: int) -> int:
     """Frames from a shot's sample to its next once ``taken`` samples are taken: ``every`` for the
-    first :data:`FIRST_SAMPLES`, then doubling after each :data:`SAMPLES_PER_STRIDE`."""
+    first :data:`FIRST_SAMPLES`, then doubling after each :data:`SAMPLES_PER_STRIDE`, up to
+    :data:`MAX_STRIDE` ``every``."""
     if taken < FIRST_SAMPLES:
         return every
-    return every * 2 ** (1 + (taken - FIRST_SAMPLES) // SAMPLES_PER_STRIDE)
+    return every * min(2 ** (1 + (taken - FIRST_SAMPLES) // SAMPLES_PER_STRIDE), MAX_STRIDE)
 
 
 def _number(order: np.ndarray, pts: int | None) -> int:

@@ -124,6 +124,30 @@ def test_round_trip_keeps_audio_depth_rate_timecode_and_count(tmp_path, kind):
     assert _names(tmp_path) == sorted([source.name, out.name, reference.name])
 
 
+def test_colour_tags_are_read_once_per_version_of_a_file(tmp_path):
+    """A command opens its input several times (correct --auto: the check, pass 1, pass 2): the
+    first frame's colour tags are decoded once and kept, and a file written again in its place
+    (other tags: the ffprobe oracle says which) is read anew, never answered from the old one."""
+    from glradial.media import video_io
+
+    path = tmp_path / "in.mp4"
+    tagged = {"bt709": ["-color_primaries", "bt709", "-color_trc", "bt709", "-colorspace", "bt709"],
+              "smpte170m": ["-color_primaries", "smpte170m", "-color_trc", "smpte170m", "-colorspace", "smpte170m"]}
+    video_io._read_first_frame_tags.cache_clear()
+    seen = []
+    for name in ("bt709", "smpte170m"):
+        _clip(path, ["-c:v", "libx264", "-pix_fmt", "yuv420p", *tagged[name]], timecode=None)
+        assert _stream(_probe(path), "video")["color_space"] == name
+        infos = []
+        for _ in range(3):
+            with VideoReader(path) as reader:
+                infos.append(reader.info)
+        assert infos[0] == infos[1] == infos[2]
+        seen.append(infos[0].colorspace)
+    assert seen == [1, 6]  # FFmpeg's AVCOL_SPC_BT709, AVCOL_SPC_SMPTE170M
+    assert video_io._read_first_frame_tags.cache_info().misses == 2  # one decode per version
+
+
 def test_ten_bit_stays_ten_bit_and_lossless_is_exact(tmp_path):
     """FFV1 (lossless) in planar RGB: 8-bit frames come out exactly as glradial.correct() makes them
     in memory; 10-bit frames within one 10-bit level (the 16-bit result is rounded to 10 bits:

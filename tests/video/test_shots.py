@@ -381,18 +381,20 @@ def test_a_shot_is_judged_by_benefit_like_a_frame():
     assert judged_by_benefit(shot(strong, 15.0, "fold_over"), no_samples).reason == "fold_over"
 
 
-def test_a_long_shot_is_sampled_ever_more_sparsely():
+def test_a_long_shot_is_sampled_ever_more_sparsely_down_to_a_floor():
     """Pass 1's schedule (shot_track.stride), frame by frame as _scan applies it: a 2-s shot (50
-    frames at 25 fps) is sampled every 10 frames as before the schedule changed, a longer one every
-    20, then 40 frames (docs/EXPERIMENTS.md, figure sweep_stride_long)."""
+    frames at 25 fps) is sampled every 10 frames as before the schedule changed, a longer one 20,
+    then 40 frames later, then every 80 frames however long it lasts (docs/EXPERIMENTS.md, figure
+    sweep_stride_cap)."""
     from glradial.video.shot_track import stride
 
     at = [0]
-    for frame in range(1, 400):
+    for frame in range(1, 600):
         if frame - at[-1] >= stride(10, len(at)):
             at.append(frame)
     assert [f for f in at if f < 50] == [0, 10, 20, 30, 40]
-    assert at == [0, 10, 20, 30, 40, 60, 80, 100, 120, 160, 200, 240, 280, 360]
+    assert [f for f in at if f < 150] == [0, 10, 20, 30, 40, 60, 100]
+    assert at == [0, 10, 20, 30, 40, 60, 100, 180, 260, 340, 420, 500, 580]
 
 
 def test_the_solver_reaches_the_minimum_an_independent_optimiser_finds(stadium):
