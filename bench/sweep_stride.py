@@ -8,7 +8,7 @@ thread time of the extra joint fit :mod:`eval_shots` runs for its calibration on
 otherwise; divided by the clip's frames. Wall-clock time is not used (the machine is shared).
 
 Run: ``python bench/sweep_stride.py CLIPS STATIC CHECK --calibrate CLIPS,STATIC [--every 10,16,20,25]
-[--estimate-every 3,2] [--timing ROUNDS] [--name NAME]`` (clip folders from ``scripts/make_clips.py``, each scored as
+[--estimate-every 3,2] [--timing ROUNDS] [--first-samples F] [--samples-per-stride S] [--max-stride M] [--name NAME]`` (clip folders from ``scripts/make_clips.py``, each scored as
 a set; the bound's scales as ``bench/eval_shots.py --calibrate`` reads them, pooled over the
 ``--calibrate`` folders, named as folders); writes ``docs/figures/sweep_stride.json`` (``NAME.json``).
 """
@@ -148,10 +148,13 @@ def main() -> None:
                         help="samples after which a shot's stride doubles (shot_track.SAMPLES_PER_STRIDE)")
     parser.add_argument("--first-samples", type=int, default=shot_track.FIRST_SAMPLES,
                         help="samples a shot takes at the first stride (shot_track.FIRST_SAMPLES)")
+    parser.add_argument("--max-stride", type=int, default=shot_track.MAX_STRIDE,
+                        help="the longest stride, in EVERY (shot_track.MAX_STRIDE; 1024: the schedule before it)")
     parser.add_argument("--name", default="sweep_stride", help="figure name (docs/figures/NAME.json)")
     args = parser.parse_args()
     # read by pass 1 at each sample (shot_track.stride)
     shot_track.SAMPLES_PER_STRIDE, shot_track.FIRST_SAMPLES = args.samples_per_stride, args.first_samples
+    shot_track.MAX_STRIDE = args.max_stride
     estimator = default_estimator()
     settings = [(int(e), int(s)) for e in args.every.split(",") for s in args.estimate_every.split(",")]
     first = json.loads((args.clips[0] / "manifest.json").read_text())
@@ -163,6 +166,7 @@ def main() -> None:
             results["settings (EVERY/ESTIMATE_EVERY)"][key]["pass1_cpu_ms_per_frame_interleaved"] = values
             print(f"{key}: median {np.median(values):.2f} ms CPU/frame over {len(values)} rounds")
     results["samples_per_stride"], results["first_samples"] = args.samples_per_stride, args.first_samples
+    results["max_stride"] = args.max_stride
     results["note"] = ("CPU: process_time of pass 1 (all its threads) per frame, less eval_shots' extra joint fit; "
                        "the interleaved figures run the settings in turn on the first folder, pass 1 alone")
     write_figure(args.name, results)

@@ -67,8 +67,9 @@ ESTIMATE_EVERY = 3
 FIRST_SAMPLES = 5
 #: after :data:`FIRST_SAMPLES`, a shot's sampling stride doubles after each this many samples, up
 #: to :data:`MAX_STRIDE` ``every``: a 6-s shot is sampled 7 times (0, 10, ... 40, 60, 100), not 9
-#: with 4, 22 % less CPU in pass 1 and the same accuracy (chosen on scripts/make_clips.py's main
-#: set of 6-s shots, held out on --set check and static; figure sweep_stride_cap)
+#: with 4 (pass 1's CPU 15 % less on scripts/make_clips.py's main set of 6-s shots, where it was
+#: chosen; the same accuracy there and held out on --set check, static and 20-s shots; figure
+#: sweep_stride_cap)
 SAMPLES_PER_STRIDE = 1
 #: the longest stride, in ``every``: a long shot is sampled every 80 frames (3.2 s at 25 fps) once
 #: its stride reaches it, so its zoom is followed at that pace however long it lasts
@@ -79,9 +80,11 @@ DETECT_WIDTH = 64
 #: 1-3 apart, so a camera's own motion scores higher than from frame to frame: 1.3x on a panning
 #: held-out clip, proc_5 of scripts/make_clips.py --set check), then :class:`CutCheck` decides
 CANDIDATE_RATIO = 0.5
-#: samples whose estimate runs ahead on a worker thread before their chains and matches are found
-#: (:class:`_Shots`): the estimator of one sample overlaps the line detection and matching of the
-#: ones before it
+#: samples at most waiting for an estimate that runs ahead on a worker thread before their chains
+#: and matches are found (:class:`_Shots`): the estimator of one sample overlaps the line detection
+#: and matching of the ones before it; a sample is taken up as soon as the samples before it are
+#: and its estimate (if due) is in, not held until this many more are sampled (when the stride
+#: grows, that held a sample's evidence until the decode had gone 2 strides further)
 LOOKAHEAD = 2
 
 
@@ -91,7 +94,7 @@ class _Shots:
     With ``ahead``, pass 1's work runs on three worker threads beside the caller's (which decodes,
     detects cuts and finds each sample's line chains): the estimator (every call of it, so one
     thread uses it), started on a sample due for an estimate (:meth:`ShotCollector.due`) as soon
-    as it is sampled and read :data:`LOOKAHEAD` samples later; each sample's matches and zoom,
+    as it is sampled and read once it is in (at most :data:`LOOKAHEAD` samples later); each sample's matches and zoom,
     found with the hint of the moment its chains were found; each closed shot's joint fit, while
     the next shot is scanned. Every step gets the inputs it gets in turn (the estimator and the
     fit are functions of their input), so the track is the same; only the estimator's calls may
@@ -122,7 +125,7 @@ class _Shots:
         self._queued = 0
 
     def add(self, index: int, frame: np.ndarray) -> None:
-        """Sample frame ``index`` of the open shot (its evidence found now, or :data:`LOOKAHEAD` samples on)."""
+        """Sample frame ``index`` of the open shot (its evidence found now, or once its estimate is in)."""
         self._queued += 1
         if self._workers is None:
             self.collector.add(index, frame)
