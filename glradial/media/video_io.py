@@ -82,12 +82,12 @@ _LIBRARY_PRESETS = {"libx264": X26X_PRESETS, "libx264rgb": X26X_PRESETS, "libx26
 
 _PATTERN = re.compile(r"%(0?\d*)d")
 
-# AVColorSpace (stream tag) -> libswscale matrix; BT470BG and SMPTE170M are both BT.601
 #: a conversion whose output has at most this many pixels (a cut detector's thumbnail, a 640 x 360
 #: copy) runs on the calling thread alone: FFmpeg's slice threads cost it more CPU than they save
 #: (a 960 x 540 frame to 64 x 36 RGB: 0.41 ms of CPU on one thread, 0.68 with the automatic count)
 SINGLE_THREAD_PIXELS = 640 * 360
 
+# AVColorSpace (stream tag) -> libswscale matrix; BT470BG and SMPTE170M are both BT.601
 _SWS_MATRIX = {1: 1, 4: 4, 5: 5, 6: 5, 7: 7, 9: 9, 10: 9}
 _UNSPECIFIED = 2
 

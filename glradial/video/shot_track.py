@@ -94,11 +94,12 @@ class _Shots:
     With ``ahead``, pass 1's work runs on three worker threads beside the caller's (which decodes,
     detects cuts and finds each sample's line chains): the estimator (every call of it, so one
     thread uses it), started on a sample due for an estimate (:meth:`ShotCollector.due`) as soon
-    as it is sampled and read once it is in (at most :data:`LOOKAHEAD` samples later); each sample's matches and zoom,
-    found with the hint of the moment its chains were found; each closed shot's joint fit, while
-    the next shot is scanned. Every step gets the inputs it gets in turn (the estimator and the
-    fit are functions of their input), so the track is the same; only the estimator's calls may
-    come in another order (a sample's own estimate, when it has few chains, after the next due one)."""
+    as it is sampled and read once it is in (at most :data:`LOOKAHEAD` samples later); each
+    sample's matches and zoom, found with the hint of the moment its chains were found; each closed
+    shot's joint fit, while the next shot is scanned. Every step gets the inputs it gets in turn
+    (the estimator and the fit are functions of their input), so the track is the same; only the
+    estimator's calls may come in another order (a sample's own estimate, when it has few chains,
+    after the next due one)."""
 
     def __init__(self, estimator: Callable, estimate_every: int, doubtful_px: float, radius: float,
                  ahead: bool = True) -> None:

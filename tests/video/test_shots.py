@@ -381,7 +381,7 @@ def test_a_shot_is_judged_by_benefit_like_a_frame():
     assert judged_by_benefit(shot(strong, 15.0, "fold_over"), no_samples).reason == "fold_over"
 
 
-def test_a_long_shot_is_sampled_ever_more_sparsely_down_to_a_floor():
+def test_a_long_shot_is_sampled_ever_more_sparsely_up_to_the_longest_stride():
     """Pass 1's schedule (shot_track.stride), frame by frame as _scan applies it: a 2-s shot (50
     frames at 25 fps) is sampled every 10 frames as before the schedule changed, a longer one 20,
     then 40 frames later, then every 80 frames however long it lasts (docs/EXPERIMENTS.md, figure
