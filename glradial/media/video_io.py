@@ -892,10 +892,15 @@ class VideoWriter:
             frame.pts = round(Fraction(self.frames_written) / self.info.rate / self.info.time_base)
             frame.time_base = self.info.time_base
         try:
-            self._container.mux(self._stream.encode(frame))
+            packets = self._stream.encode(frame)
         except av.FFmpegError as err:
             raise OSError(f"cannot write {ffmpeg_error(self.path, err)}") from None
-        self.frames_written += 1
+        try:  # the encoder has the frame, and close() writes it out: counted even if a signal stops us here
+            self._container.mux(packets)
+        except av.FFmpegError as err:
+            raise OSError(f"cannot write {ffmpeg_error(self.path, err)}") from None
+        finally:
+            self.frames_written += 1
 
     def mux(self, item: CopiedPacket) -> None:
         """Copy a packet of a copied stream into the output."""
