@@ -157,7 +157,7 @@ def test_correct_auto_checks_the_encoder_before_estimating(tmp_path, capfd, monk
 def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, monkeypatch):
     """--auto on a small lossless clip with a cut, with a stand-in estimator keyed on the frame
     index stored in pixel (0, 0): the cut is found, the estimator runs on the shots' sampled frames
-    only (every 2nd frame), once each, on every 3rd sample at least (and on samples with few line
+    only (every 2nd frame), once each, on every 4th sample at least (and on samples with few line
     chains: these 160 px frames show few), the sidecar has one row per frame with the shot, its
     doubt, reason and whether it was applied; a doubtful shot passes through untouched (lossless:
     identical pixels), and with --apply-doubtful every frame is corrected with its track lens."""
@@ -184,7 +184,7 @@ def test_correct_video_auto_per_shot_and_doubt_policy(tmp_path, field_panorama, 
         sampled = set(range(0, cut, 2)) | set(range(cut, n, 2))
         # once each; not in frame order: a due sample's estimate runs ahead of an earlier sample's own
         # (few chains), on pass 1's estimator thread (glradial.video.shot_track._Shots)
-        assert len(calls) == len(set(calls)) and {0, 6, 12, 14, 20} <= set(calls) <= sampled, calls
+        assert len(calls) == len(set(calls)) and {0, 8, 14, 22} <= set(calls) <= sampled, calls
         rows = np.genfromtxt(f"{out}.lens.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
         assert len(rows) == n
         assert np.all(rows["shot"][:cut] == 0) and np.all(rows["shot"][cut:] == 1)
@@ -443,11 +443,12 @@ def test_estimate_video_per_shot_with_an_onnx_model(tmp_path, field_panorama):
     document = json.loads(track_report(track, "cut.mp4", per_frame=True, as_json=True))
     assert len(document["frames"]) == 20 and document["fps"] == pytest.approx(25)
     # samples at least 3 frames apart in each shot (0, 3, 6, 9 | 12, ...: the sparse decode numbers
-    # what it decodes); the estimator runs on every 3rd sample of a shot
-    # (glradial.video.shot_track.ESTIMATE_EVERY): frames 0, 9 and 12, and on the samples whose line
-    # detection finds few chains (shot_evidence.FEW_CHAINS), on no other frame
+    # what it decodes); the estimator runs on every 4th sample of a shot
+    # (glradial.video.shot_track.ESTIMATE_EVERY): frames 0 and 12 (shot 0 ends before its 5th
+    # sample), and on the samples whose line detection finds few chains (shot_evidence.FEW_CHAINS),
+    # on no other frame
     estimated = sorted(r["frame"] for r in document["frames"] if r["k1_raw"] is not None)
-    assert {0, 9, 12} <= set(estimated) and len(estimated) <= 7, estimated
+    assert {0, 12} <= set(estimated) and len(estimated) <= 7, estimated
     assert all(b - a >= 3 for shot in ([f for f in estimated if f < 12], [f for f in estimated if f >= 12])
                for a, b in zip(shot, shot[1:])), estimated
     track.save(tmp_path / "t.json")

@@ -96,6 +96,38 @@ def test_workers_give_the_sequential_track(name, frames, shots, request):
     assert len(ahead.threads) == 1 and threading.get_ident() not in ahead.threads  # one worker thread uses it
 
 
+def test_the_last_shot_is_fitted_while_the_frames_after_its_last_sample_decode(clip, monkeypatch):
+    """Once the last shot has its last sample (no frame left a stride on), it is closed and its fit
+    starts while the frames after that sample still decode; the track is the one of a fit started
+    at the end of the video (the oracle: the same run with the early close switched off)."""
+    from test_sparse_pass import Counting
+
+    closed_at: list[int] = []  # frames the cut detector had seen when each shot was closed
+    close = shot_track._Shots.close
+
+    def spy(self):
+        if self.collector is not None:
+            closed_at.append(Counting.seen)
+        close(self)
+
+    monkeypatch.setattr(shot_track._Shots, "close", spy)
+
+    def run():
+        Counting.seen = 0
+        closed_at.clear()
+        track = shot_track.track_shots(clip, Estimator(), every=4, progress=False, detector=Counting())
+        return track, list(closed_at), Counting.seen
+
+    early, at, seen = run()
+    assert len(at) == 3 and at[-1] < seen  # the last shot closed before the decode ended
+    monkeypatch.setattr(shot_track, "_last_sample", lambda *args: False)
+    late, at_end, _ = run()
+    assert at_end[-1] == seen and at_end[:2] == at[:2]  # closed at the end; the others at their cuts
+    for name, value in vars(early).items():
+        other = getattr(late, name)
+        assert np.array_equal(value, other, equal_nan=True) if isinstance(value, np.ndarray) else value == other, name
+
+
 def test_an_estimator_error_reaches_the_caller_and_ends_the_workers(clip):
     with pytest.raises(RuntimeError, match="estimator failed"):
         shot_track.track_shots(clip, Estimator(fail_at=3), every=4, progress=False, ahead=True)
