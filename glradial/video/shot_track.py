@@ -73,9 +73,11 @@ FIRST_SAMPLES = 5
 #: chosen; the same accuracy there and held out on --set check, static and 20-s shots; figure
 #: sweep_stride_cap)
 SAMPLES_PER_STRIDE = 1
-#: the longest stride, in ``every``: a long shot is sampled every 80 frames (3.2 s at 25 fps) once
-#: its stride reaches it, so its zoom is followed at that pace however long it lasts
-MAX_STRIDE = 8
+#: the longest stride, in ``every``: a long shot is sampled every 320 frames (12.8 s at 25 fps) once
+#: its stride reaches it (after about 40 s), so its zoom is still followed however long it lasts, at
+#: a cost that grows with its length (a 45-min continuous camera: ~220 samples; with no cap, 16); not
+#: reached on the validation sets' 20-s shots (figure sweep_estimate_every)
+MAX_STRIDE = 32
 #: frames of the decoded stream converted for the cut detector (px wide)
 DETECT_WIDTH = 64
 #: the sparse decode flags a candidate cut at this fraction of the detector's ratio (its frames lie

@@ -384,17 +384,17 @@ def test_a_shot_is_judged_by_benefit_like_a_frame():
 def test_a_long_shot_is_sampled_ever_more_sparsely_up_to_the_longest_stride():
     """Pass 1's schedule (shot_track.stride), frame by frame as _scan applies it: a 2-s shot (50
     frames at 25 fps) is sampled every 10 frames as before the schedule changed, a longer one 20,
-    then 40 frames later, then every 80 frames however long it lasts (docs/EXPERIMENTS.md, figure
-    sweep_stride_cap)."""
+    then 40 frames later and so on, doubling, up to every 320 frames however long it lasts
+    (docs/EXPERIMENTS.md, figures sweep_stride_cap and sweep_estimate_every)."""
     from glradial.video.shot_track import stride
 
     at = [0]
-    for frame in range(1, 600):
+    for frame in range(1, 2000):
         if frame - at[-1] >= stride(10, len(at)):
             at.append(frame)
     assert [f for f in at if f < 50] == [0, 10, 20, 30, 40]
     assert [f for f in at if f < 150] == [0, 10, 20, 30, 40, 60, 100]
-    assert at == [0, 10, 20, 30, 40, 60, 100, 180, 260, 340, 420, 500, 580]
+    assert at == [0, 10, 20, 30, 40, 60, 100, 180, 340, 660, 980, 1300, 1620, 1940]
 
 
 def test_the_solver_reaches_the_minimum_an_independent_optimiser_finds(stadium):
