@@ -30,6 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # this checkout's 
 import eval_shots  # noqa: E402
 from figures import write_figure  # noqa: E402
 
+from glradial.errors import check_count  # noqa: E402
 from glradial.video import shot_track  # noqa: E402
 from glradial.video.shot_fit import fit_shot, joint_fit  # noqa: E402
 from glradial.video.video_pipeline import default_estimator  # noqa: E402
@@ -152,6 +153,8 @@ def main() -> None:
                         help="the longest stride, in EVERY (shot_track.MAX_STRIDE; 1024: the schedule before it)")
     parser.add_argument("--name", default="sweep_stride", help="figure name (docs/figures/NAME.json)")
     args = parser.parse_args()
+    for name in ("samples_per_stride", "first_samples", "max_stride"):
+        check_count(f"--{name.replace('_', '-')}", getattr(args, name))
     # read by pass 1 at each sample (shot_track.stride)
     shot_track.SAMPLES_PER_STRIDE, shot_track.FIRST_SAMPLES = args.samples_per_stride, args.first_samples
     shot_track.MAX_STRIDE = args.max_stride
