@@ -78,8 +78,7 @@ class LensEstimate(Lens):
         if isinstance(self.chains, bool) or not isinstance(self.chains, (numbers.Integral, np.integer)) or self.chains < 0:
             raise ValueError(f"chains must be a non-negative integer, got {self.chains!r}")
         object.__setattr__(self, "chains", int(self.chains))
-        check_flag("doubtful", self.doubtful)
-        object.__setattr__(self, "doubtful", bool(self.doubtful))
+        object.__setattr__(self, "doubtful", check_flag("doubtful", self.doubtful))
         if self.reason not in REASONS or (self.reason == "ok") == self.doubtful:
             raise ValueError(f"reason must be one of {REASONS} ('ok' exactly when not doubtful), got {self.reason!r} "
                              f"with doubtful={self.doubtful}")

@@ -133,8 +133,7 @@ class NetLinesEstimator:
 
         path = Path(model_path) if model_path is not None else default_model_path()
         check_count("threads", threads, optional=True)
-        check_flag("mirror_average", mirror_average)
-        self.mirror_average = bool(mirror_average)
+        self.mirror_average = check_flag("mirror_average", mirror_average)
         if not path.is_file():
             hint = " (the bundled model is missing: reinstall glradial or pass model_path)" if model_path is None else ""
             raise FileNotFoundError(f"model file not found: {path}{hint}")

@@ -443,8 +443,7 @@ class CropRenderer:
         if isinstance(newton_steps, bool) or not isinstance(newton_steps, (numbers.Integral, np.integer)) or not 1 <= newton_steps <= 16:
             raise ValueError(f"newton_steps must be an integer in 1..16, got {newton_steps!r}")
         self.newton_steps = int(newton_steps)
-        check_flag("series_inverse", series_inverse)
-        self.series_inverse = bool(series_inverse) and inverse == "exact"
+        self.series_inverse = check_flag("series_inverse", series_inverse) and inverse == "exact"
         self._corner = corner_radius(self.size)
         if anisotropy is None:
             anisotropy = ANISOTROPY
