@@ -232,8 +232,10 @@ class FittedShotLens:
 
 
 def load_solver() -> None:
-    """Import the fit's solver (``scipy.optimize``: about half a second of CPU the first time) now,
-    e.g. on a worker thread while the first frames decode, rather than at the first shot's fit."""
+    """Import ``scipy.optimize`` (the bounded 1-D search of a zoom read by its frames,
+    :func:`_slope_of_pairs`; about half a second of CPU the first time) now, e.g. on a worker thread
+    while the first frames decode, rather than at the first such shot's fit. (The joint fit's own
+    solver is :meth:`_Problem.solve`, no import.)"""
     import scipy.optimize  # noqa: F401
 
 
