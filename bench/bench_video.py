@@ -6,7 +6,8 @@ Makes one clip in a temporary folder (``--size``, ``--frames`` at 25 fps, H.264 
 common case; ``--clip zoom`` the same frame zooming in (hfov -25 %) while the lens goes from
 k1 -0.30 to -0.18, so the shot's lens, and the maps, change on every frame; ``--clip cuts`` what users
 bring, several shots cut together (:data:`CUT_SHOTS`, 6 s each; ``--frames 750``: 30 s, five shots). Then it times, each ``--repeats`` times taking turns (so that load
-from other processes on a shared machine falls on all alike), keeping the best run of each:
+from other processes on a shared machine falls on all alike; the order reversed every other round), keeping the best run of each
+and every round's time (the target ratios are also given round by round, :func:`per_round`: their median and range):
 
 * ``ffmpeg``       the ffmpeg command transcoding the clip with the same codec settings and no
                    filter (``-c:v libx264 -crf C -preset P -c:a copy``)
@@ -44,6 +45,7 @@ import math
 import os
 import resource
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -247,10 +249,12 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     return args
 
 
-def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip: Path) -> tuple[dict, dict, dict, dict]:
-    """``(best, passes, stages, cpu)``: the best time (s) of each path over ``args.repeats`` turns,
-    the best times of ``--auto``'s two passes (s), the correction stage alone (ms/frame) and the
-    least CPU time (s, :func:`cpu_seconds`) of each path and pass."""
+def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip: Path) -> tuple[dict, dict, dict, dict, dict]:
+    """``(best, passes, stages, cpu, turns)``: the best time (s) of each path over ``args.repeats``
+    rounds, the best times of ``--auto``'s two passes (s), the correction stage alone (ms/frame),
+    the least CPU time (s, :func:`cpu_seconds`) of each path and pass, and every round's time (s)
+    of each path (:func:`per_round`). Each round runs every path once, in the order given on even
+    rounds and reversed on odd ones, so that neither of two neighbours always goes first."""
     options = EncodeOptions(codec="libx264", crf=args.crf, preset=args.preset)
     estimator = default_estimator()
 
@@ -307,13 +311,27 @@ def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip
         paths = {name: run for name, run in paths.items() if name in wanted}
     best = {name: float("inf") for name in paths}
     cpu = dict(best)
-    for _ in range(args.repeats):
-        for name, run in paths.items():
+    turns: dict[str, list[float]] = {name: [] for name in paths}
+    for round_ in range(args.repeats):
+        for name, run in list(paths.items())[:: 1 if round_ % 2 == 0 else -1]:
             start, start_cpu = time.perf_counter(), cpu_seconds()
             run()
-            best[name] = min(best[name], time.perf_counter() - start)
+            turns[name].append(time.perf_counter() - start)
+            best[name] = min(best[name], turns[name][-1])
             cpu[name] = min(cpu[name], cpu_seconds() - start_cpu)
-    return best, passes, stages, {**cpu, **passes_cpu}
+    return best, passes, stages, {**cpu, **passes_cpu}, turns
+
+
+#: the ratios the issue sets targets for (>= 0.8), as (faster path, peer): the peer's time over the path's
+TARGETS = {"fixed / ffmpeg": ("fixed lens", "ffmpeg"), "--auto / fixed": ("--auto", "fixed lens")}
+
+
+def per_round(turns: dict[str, list[float]]) -> dict[str, list[float]]:
+    """Each target ratio (:data:`TARGETS`) round by round: the two paths' times of one round, run
+    next to each other (the best-of ratios compare each path's best round, which a machine whose
+    speed drifts may give to the two at different speeds)."""
+    return {name: [t_peer / t_path for t_path, t_peer in zip(turns[path], turns[peer])]
+            for name, (path, peer) in TARGETS.items() if path in turns and peer in turns}
 
 
 def cpu_seconds() -> float:
@@ -323,13 +341,13 @@ def cpu_seconds() -> float:
     return time.process_time() + children.ru_utime + children.ru_stime
 
 
-def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict, cpu: dict) -> dict:
+def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict, cpu: dict, turns: dict) -> dict:
     """Print the figures and return them (frames/s, ms/frame and the ratios the targets name, in
-    wall-clock time and in CPU time: ``cpu`` (s) per path and pass, :func:`cpu_seconds`)."""
+    wall-clock time and in CPU time: ``cpu`` (s) per path and pass, :func:`cpu_seconds`; and the
+    target ratios round by round, :func:`per_round` of ``turns``: their median and range)."""
     fps = {name: args.frames / seconds for name, seconds in best.items()}
     ms = {name: 1e3 * seconds / args.frames for name, seconds in {**best, **passes}.items()}
-    pairs = {"fixed / ffmpeg": ("fixed lens", "ffmpeg"), "fixed / pyav": ("fixed lens", "pyav"),
-             "--auto / fixed": ("--auto", "fixed lens"), "fixed RGB / ffmpeg": ("fixed, RGB", "ffmpeg"),
+    pairs = {**TARGETS, "fixed / pyav": ("fixed lens", "pyav"), "fixed RGB / ffmpeg": ("fixed, RGB", "ffmpeg"),
              "fixed YUV / fixed RGB": ("fixed lens", "fixed, RGB")}
     times = {"fixed / fixed 1/32-px maps (time)": ("fixed lens", "fixed, 1/32-px maps"),
              "pass 2 / fixed (time)": ("pass 2", "fixed lens")}
@@ -349,10 +367,15 @@ def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict, cpu
           + ", ".join(f"{name} {value:.1f}" for name, value in cpu_ms.items()))
     print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
           f"YUV {stages['YUV']:.1f} ms/frame, YUV from 1/32-px maps {stages['YUV 1/32']:.1f} ms/frame")
+    rounds = per_round(turns)
+    spread = {}
+    for name, values in rounds.items():
+        ratios[f"{name} (median of rounds)"] = statistics.median(values)
+        spread[f"{name} (median of rounds)"] = f", rounds {min(values):.2f}-{max(values):.2f}"
     for name, value in ratios.items():
-        target = "  (target >= 0.8)" if name.split(" (")[0] in ("fixed / ffmpeg", "--auto / fixed") else ""
+        target = f"  (target >= 0.8{spread.get(name, '')})" if name.split(" (")[0] in TARGETS and "(CPU)" not in name else ""
         print(f"{name:34s}: {value:.2f}{target}")
-    return {"fps": fps, "ms_per_frame": ms, "cpu_ms_per_frame": cpu_ms, "correction_stage_ms_per_frame": stages, "ratios": ratios,
+    return {"per_round_ratios": rounds, "fps": fps, "ms_per_frame": ms, "cpu_ms_per_frame": cpu_ms, "correction_stage_ms_per_frame": stages, "ratios": ratios,
             "clip": args.clip, "size": args.size, "frames": args.frames, "preset": args.preset, "crf": args.crf,
             "backend": args.backend, "repeats": args.repeats, "paths": list(best),
             "load_average_1_5_15": [round(v, 1) for v in os.getloadavg()]}
@@ -369,8 +392,8 @@ def main() -> int:
     with tempfile.TemporaryDirectory() as folder:
         clip = Path(folder) / "clip.mp4"
         make_clip(clip, size, args.frames, args.clip, args.frame)
-        best, passes, stages, cpu = timed_paths(args, size, Path(folder), clip)
-    results = report(args, best, passes, stages, cpu)
+        best, passes, stages, cpu, turns = timed_paths(args, size, Path(folder), clip)
+    results = report(args, best, passes, stages, cpu, turns)
     write_figure(f"bench_video_{args.clip}_{args.size}", {**results, "new_lens_maps_ms": maps})
     return 0
 
