@@ -322,7 +322,7 @@ def timed_paths(args: argparse.Namespace, size: tuple[int, int], tmp: Path, clip
     return best, passes, stages, {**cpu, **passes_cpu}, turns
 
 
-#: the ratios the issue sets targets for (>= 0.8), as (faster path, peer): the peer's time over the path's
+#: the ratios the issue sets targets for (>= 0.8), as (path, peer): the peer's time over the path's
 TARGETS = {"fixed / ffmpeg": ("fixed lens", "ffmpeg"), "--auto / fixed": ("--auto", "fixed lens")}
 
 
