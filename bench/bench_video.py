@@ -368,12 +368,11 @@ def report(args: argparse.Namespace, best: dict, passes: dict, stages: dict, cpu
     print(f"  pass 2 correction stage alone (taking turns per frame): RGB {stages['RGB']:.1f} ms/frame, "
           f"YUV {stages['YUV']:.1f} ms/frame, YUV from 1/32-px maps {stages['YUV 1/32']:.1f} ms/frame")
     rounds = per_round(turns)
-    spread = {}
-    for name, values in rounds.items():
-        ratios[f"{name} (median of rounds)"] = statistics.median(values)
-        spread[f"{name} (median of rounds)"] = f", rounds {min(values):.2f}-{max(values):.2f}"
+    ratios.update({f"{name} (median of rounds)": statistics.median(values) for name, values in rounds.items()})
     for name, value in ratios.items():
-        target = f"  (target >= 0.8{spread.get(name, '')})" if name.split(" (")[0] in TARGETS and "(CPU)" not in name else ""
+        pair, _, kind = name.partition(" (")
+        spread = f", rounds {min(rounds[pair]):.2f}-{max(rounds[pair]):.2f}" if kind == "median of rounds)" else ""
+        target = f"  (target >= 0.8{spread})" if pair in TARGETS else ""
         print(f"{name:34s}: {value:.2f}{target}")
     return {"per_round_ratios": rounds, "fps": fps, "ms_per_frame": ms, "cpu_ms_per_frame": cpu_ms, "correction_stage_ms_per_frame": stages, "ratios": ratios,
             "clip": args.clip, "size": args.size, "frames": args.frames, "preset": args.preset, "crf": args.crf,
