@@ -39,5 +39,5 @@ def applies(doubtful: bool, reason: str, apply_doubtful: bool) -> bool:
         >>> applies(True, "fold_over", True)
         False
     """
-    check_flag("apply_doubtful", apply_doubtful)
-    return not doubtful or (bool(apply_doubtful) and reason != FOLD_OVER)
+    apply_doubtful = check_flag("apply_doubtful", apply_doubtful)
+    return not doubtful or (apply_doubtful and reason != FOLD_OVER)
